@@ -1,0 +1,491 @@
+"""The ``fdbench`` command line. Rendering with rich happens here only; heavy imports are made
+inside the commands so that ``fdbench --help`` is instant.
+
+Contract: results on stdout (or ``--output FILE``), progress and messages on stderr; exit code 0
+when a result was produced, 2 for bad usage or input (one line on stderr), 1 for anything else,
+130 on Ctrl-C.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from typer.core import TyperGroup
+
+from . import __version__
+
+_STARTED = time.perf_counter()
+
+FORMATS = ("table", "json", "csv")
+KINEMATICS_HELP = "Desired motion: 'paper' (eq. 5 as printed; reproduces the paper) or 'exact' (chain rule through t*)."
+INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
+
+
+class BadInput(Exception):
+    """Bad usage or input: exit code 2 with this one-line message."""
+
+
+class FdbenchGroup(TyperGroup):
+    """Routes every error to one line on stderr with the contract's exit codes."""
+
+    def main(self, args=None, prog_name=None, **extra):
+        extra.pop("standalone_mode", None)
+        code = 0
+        try:
+            returned = super().main(args=args, prog_name=prog_name or "fdbench", standalone_mode=False, **extra)
+            code = returned if isinstance(returned, int) else 0
+            if code == 130:
+                _error("interrupted")
+        except BadInput as exc:
+            code = _error(str(exc), 2)
+        except KeyboardInterrupt:
+            code = _error("interrupted", 130)
+        except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback
+            if hasattr(exc, "exit_code") and hasattr(exc, "format_message"):  # click usage errors
+                context = getattr(exc, "ctx", None)
+                where = f"{context.command_path}: " if context is not None else ""
+                code = _error(where + exc.format_message().replace("\n", " "), exc.exit_code)
+            elif os.environ.get("FDBENCH_DEBUG"):
+                raise
+            else:
+                code = _error(f"{type(exc).__name__}: {exc}".replace("\n", " "), 1)
+        sys.exit(code)
+
+
+def _error(message: str, code: int = 1) -> int:
+    sys.stderr.write(f"fdbench: error: {message}\n")
+    sys.stderr.flush()
+    return code
+
+
+app = typer.Typer(
+    cls=FdbenchGroup,
+    help="Benchmark of trajectory-tracking methods for the forward dynamic simulation of a 1-DOF forearm: "
+    "PD control with computed feedforward against optimised torque histories (ANN, cubic spline, "
+    "parametric function) by CMA-ES, BFGS and more. Run 'fdbench report' for the paper's whole comparison.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool):
+    if value:
+        typer.echo(f"fdbench {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")] = False,
+):
+    """fdbench: trajectory tracking in forward dynamics, benchmarked."""
+
+
+# ---- options shared by several commands ------------------------------------------------------
+
+Kinematics = Annotated[str, typer.Option("--kinematics", help=KINEMATICS_HELP)]
+Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
+Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in (0, 0.1].")]
+Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators).")]
+Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators).")]
+Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12.")]
+Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12.")]
+Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
+Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
+Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Write the run's time history (1001 rows) as CSV to FILE.")]
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
+Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
+
+
+def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega) -> dict:
+    return dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi, omega=omega)
+
+
+def _check_choice(option: str, value: str, valid) -> str:
+    if value not in valid:
+        from .registry import unknown_name_message
+
+        raise BadInput(f"{option}: " + unknown_name_message("value", value, list(valid)))
+    return value
+
+
+def _check_outputs(fmt: str, valid=FORMATS, **paths) -> None:
+    """Validate --format and every output path before any work starts."""
+    from .files import BadFile, check_writable
+
+    _check_choice("--format", fmt, valid)
+    for option, path in paths.items():
+        if path is not None:
+            try:
+                check_writable(path, "--" + option.replace("_", "-"))
+            except BadFile as exc:
+                raise BadInput(str(exc)) from None
+
+
+def _validated(spec):
+    try:
+        return spec.validate()
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+
+
+def _with_option(message: str) -> str:
+    """Messages from the library name parameters plainly (dt, kp); name them as options."""
+    for name in ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd"):
+        if message.startswith(name + " "):
+            return f"--{name}: " + message[len(name) + 1 :]
+    for name in ("kinematics", "integrator", "torque", "optimizer"):
+        if message.startswith(f"unknown {name} "):
+            option = "--opt" if name == "optimizer" else f"--{name}"
+            return f"{option}: {message}"
+    return message
+
+
+def _console(stderr: bool = True):
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False)
+
+
+def _say(quiet: bool, text: str) -> None:
+    if not quiet:
+        _console().print(text)
+
+
+def _jsonable(record: dict) -> dict:
+    from .files import finite_or_none
+
+    return {k: finite_or_none(float(v)) if isinstance(v, float) else v for k, v in record.items()}
+
+
+def _render(record: dict, fmt: str, title: str) -> str:
+    if fmt == "json":
+        return json.dumps(_jsonable(record), indent=2) + "\n"
+    if fmt == "csv":
+        from .files import csv_text
+
+        return csv_text(list(record), [["" if v is None else v for v in record.values()]])
+    from rich.table import Table
+
+    table = Table(title=title, show_header=True)
+    table.add_column("field")
+    table.add_column("value", overflow="fold")
+    for key, value in record.items():
+        if value is None or value == "":
+            continue
+        table.add_row(key, _format_value(value))
+    console = _console(stderr=False)
+    with console.capture() as capture:
+        console.print(table)
+    return capture.get()
+
+
+def _format_value(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def _emit(text: str, output: Optional[Path]) -> None:
+    if output is None:
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    else:
+        from .files import write_atomic
+
+        write_atomic(output, text)
+
+
+def _finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
+    record["command_time_s"] = time.perf_counter() - _STARTED
+    _emit(_render(record, fmt, title), output)
+    if output is not None:
+        _say(quiet, f"wrote {output}")
+    if record.get("status") not in (None, "success"):
+        _say(quiet, f"[yellow]warning:[/] {record['message']}")
+
+
+def _history_text(outcome) -> str:
+    import numpy as np
+
+    from .files import csv_text
+
+    r, inv = outcome.result, outcome.inverse
+    columns = [r.t, r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]]
+    rows = np.column_stack(columns)
+    header = ["t", "theta", "theta_desired", "theta_dot", "theta_dot_desired", "torque", "torque_inverse", "x2", "y2"]
+    return csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
+
+
+def _save_history(outcome, path) -> None:
+    if path is not None:
+        from .files import write_atomic
+
+        write_atomic(path, _history_text(outcome), "--save-history")
+
+
+def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
+    if db is None:
+        return
+    from .store import open_store
+
+    with open_store(db) as store:
+        store.add(spec, outcome)
+    _say(quiet, f"stored in {db}")
+
+
+# ---- commands ---------------------------------------------------------------------------------
+
+
+@app.command()
+def inverse(
+    kinematics: Kinematics = "paper",
+    fmt: Format = "table",
+    output: Output = None,
+    quiet: Quiet = False,
+):
+    """Inverse dynamics (eq. 3): the elbow torque that should produce the desired motion.
+
+    The table and JSON give a summary; --format csv gives the whole history (t, theta,
+    theta_dot, theta_ddot, torque; 1001 rows, SI units)."""
+    _check_outputs(fmt, output=output)
+    try:
+        from .motion import check_kinematics
+
+        check_kinematics(kinematics)
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+    import numpy as np
+
+    from .inverse import inverse_dynamics
+
+    start = time.perf_counter()
+    inv = inverse_dynamics(None, kinematics=kinematics)
+    runtime = time.perf_counter() - start
+    if fmt == "csv":
+        from .files import csv_text
+
+        rows = np.column_stack([inv.t, inv.theta, inv.theta_dot, inv.theta_ddot, inv.torque])
+        text = csv_text(["t", "theta", "theta_dot", "theta_ddot", "torque"], ([f"{v:.10g}" for v in row] for row in rows))
+        _emit(text, output)
+        return
+    record = {
+        "command": "inverse", "kinematics": kinematics, "samples": len(inv.t),
+        "theta_start_deg": float(np.degrees(inv.theta[0])), "theta_end_deg": float(np.degrees(inv.theta[-1])),
+        "torque_min_nm": float(inv.torque.min()), "torque_max_nm": float(inv.torque.max()),
+        "torque_start_nm": float(inv.torque[0]), "torque_end_nm": float(inv.torque[-1]),
+        "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
+        "fdbench_version": __version__,
+    }
+    _finish(record, fmt, output, "fdbench inverse", quiet)
+
+
+@app.command()
+def simulate(
+    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and torque (N m) covering [0, 1] s, linearly interpolated. Default: the inverse-dynamics torque.")] = None,
+    params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    quiet: Quiet = False,
+):
+    """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the
+    inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
+    from .experiment import RunSpec
+
+    _check_outputs(fmt, output=output, save_history=save_history)
+    if torque_file is not None and params is not None:
+        raise BadInput("--torque-file and --params: give one of them, not both")
+    spec = _validated(RunSpec(command="simulate", **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    from .experiment import run_simulation
+    from .files import BadFile
+
+    try:
+        outcome = run_simulation(spec, torque_file=torque_file, params_file=params)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    _save_history(outcome, save_history)
+    _finish(outcome.record, fmt, output, "fdbench simulate", quiet)
+
+
+@app.command()
+def control(
+    kp: Annotated[float, typer.Option("--kp", help="Proportional gain, N m/rad (paper: 80).")] = 80.0,
+    kd: Annotated[float, typer.Option("--kd", help="Derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    db: Db = None,
+    quiet: Quiet = False,
+):
+    """PD control with computed feedforward (eqs. 13-14): the inverse-dynamics torque plus PD
+    feedback on the elbow rotation."""
+    from .experiment import control_spec, run
+
+    _check_outputs(fmt, output=output, save_history=save_history, db=db)
+    spec = _validated(control_spec(kp, kd, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    outcome = run(spec)
+    _save_history(outcome, save_history)
+    _store(outcome, spec, db, quiet)
+    _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _parse_hidden(hidden: str):
+    if hidden == "auto":
+        return "auto"
+    try:
+        value = int(hidden)
+    except ValueError:
+        raise BadInput(f"--hidden must be an integer >= 1 or 'auto', got {hidden!r}") from None
+    if value < 1:
+        raise BadInput(f"--hidden must be an integer >= 1 or 'auto', got {value}")
+    return value
+
+
+def _methods_text() -> str:
+    from .optimizers import OPTIMIZERS
+    from .torques import TORQUES
+
+    lines = ["torques (--torque):"]
+    lines += [f"  {name:<12} {cls.summary}" for name, cls in TORQUES.items()]
+    lines += ["optimizers (--opt):"]
+    lines += [f"  {name:<12} {cls.summary}" for name, cls in OPTIMIZERS.items()]
+    return "\n".join(lines) + "\n"
+
+
+@app.command()
+def methods():
+    """List the registered torque parameterisations and optimisers, one line each."""
+    _emit(_methods_text(), None)
+
+
+@app.command()
+def optimize(
+    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation: ann, cs, pf (see 'fdbench methods').")] = "cs",
+    opt: Annotated[str, typer.Option("--opt", help="Optimiser: cmaes, bfgs, nelder-mead, lbfgsb (see 'fdbench methods').")] = "bfgs",
+    feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
+    budget: Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) allowed, gradient evaluations included.")] = 200,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
+    hidden: Annotated[str, typer.Option("--hidden", help="ANN hidden neurons, or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")] = "4",
+    knots: Annotated[int, typer.Option("--knots", help="Cubic-spline knots, equally spaced over [0, 1] s (>= 4).")] = 11,
+    terms: Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps), 3 parameters each.")] = 4,
+    sigma0: Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")] = 0.1,
+    popsize: Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size (default: cma's 4 + 3 ln n).")] = None,
+    penalty_weight: Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")] = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    history: Annotated[Optional[Path], typer.Option("--history", help="Write the best-so-far objective per evaluation as CSV to FILE.")] = None,
+    save_params: Annotated[Optional[Path], typer.Option("--save-params", help="Write the best parameters as JSON to FILE (reusable by 'fdbench simulate --params').")] = None,
+    list_methods: Annotated[bool, typer.Option("--list", help="List the registered torques and optimisers and exit.")] = False,
+    db: Db = None,
+    quiet: Quiet = False,
+):
+    """Forward dynamic optimisation (section 4): tune a parameterised torque history so the
+    simulated rotation tracks the desired one (objective of eq. 18)."""
+    if list_methods:
+        _emit(_methods_text(), None)
+        return
+    from .experiment import optimize_spec, run
+
+    _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db)
+    for option, value in (("--sigma0", sigma0), ("--penalty-weight", penalty_weight)):
+        if not math.isfinite(value):
+            raise BadInput(f"{option} must be a finite number, got {value}")
+    spec = _validated(optimize_spec(
+        torque, opt, feedforward, seed, budget,
+        torque_options={"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms},
+        optimizer_options={"sigma0": sigma0, "popsize": popsize},
+        penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
+    ))
+    with _progress(quiet, f"{torque} + {opt}") as progress:
+        outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)
+    if "hidden_fits" in outcome.extra:
+        fits = ", ".join(f"{n}: {err:.2e}" for n, err in outcome.extra["hidden_fits"])
+        _say(quiet, f"--hidden auto: fit RMSE / torque range by neurons: {fits}")
+    _save_history(outcome, save_history)
+    if history is not None:
+        from .files import csv_text, write_atomic
+
+        write_atomic(history, csv_text(["evaluation", "best_objective"], enumerate(outcome.history, start=1)), "--history")
+    if save_params is not None:
+        from .files import write_atomic
+        from .params_file import params_json
+
+        write_atomic(save_params, params_json(spec, outcome), "--save-params")
+    _store(outcome, spec, db, quiet)
+    _finish(outcome.record, fmt, output, "fdbench optimize", quiet)
+
+
+class _progress:
+    """A rich progress bar on stderr: evaluations done and the best objective so far."""
+
+    def __init__(self, quiet: bool, label: str):
+        self.quiet, self.label = quiet, label
+        self.bar = self.task = None
+
+    def __enter__(self):
+        return self
+
+    def start(self, total: int) -> None:
+        if self.quiet:
+            return
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                            TextColumn("best {task.fields[best]}"), TimeElapsedColumn(),
+                            console=_console(), transient=True)
+        self.task = self.bar.add_task(self.label, total=total, best="-")
+        self.bar.start()
+
+    def update(self, count: int, best: float) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=count, best=f"{best:.4g}")
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.stop()
+        return False
+
+
+def main() -> None:
+    """Console-script entry point."""
+    typer.main.get_command(app).main(prog_name="fdbench")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

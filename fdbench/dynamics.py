@@ -1,0 +1,131 @@
+"""Forward dynamics by the penalty formulation (eq. 12), as compiled kernels.
+
+The leading matrix M + alpha Phi_q^T Phi_q is solved in closed form: with point 1 at the origin,
+elimination of the theta row leaves a 2x2 system in (x2'', y2'') whose determinant
+a^2 + 4 alpha a (x2^2 + y2^2) never vanishes, so the only singularity is cos(theta) = 0.
+
+Constants travel as one float64 array ``consts`` (see ``kernel_constants``) so that a kernel
+compiles once for every model and penalty setting.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .model import Forearm, Penalty
+
+# status codes shared by the kernels and integrate.py
+OK, NONFINITE, SINGULAR, CONSTRAINT = 0, 1, 2, 3
+
+# defaults for failure detection
+COS_TOL = 1e-3  # |cos(theta)| below this: the leading matrix is numerically singular
+VIOLATION_TOL = 1e-3  # m (or m^2): constraint violation beyond this stops a simulation
+
+
+def kernel_constants(model: Forearm, penalty: Penalty, cos_tol=COS_TOL, violation_tol=VIOLATION_TOL):
+    """Pack the constants the kernels need, shape (8,)."""
+    return np.array(
+        [
+            model.point_mass,
+            model.L12,
+            model.load_y,
+            penalty.alpha,
+            2 * penalty.xi * penalty.omega,
+            penalty.omega**2,
+            cos_tol,
+            violation_tol,
+        ]
+    )
+
+
+@njit(cache=True)
+def accelerations(x, y, th, vx, vy, w, tau, consts):
+    """q'' of eq. 12 for the state (q, q') and elbow torque tau (N m).
+
+    Returns (x2'', y2'', theta'', ok); ok is False where cos(theta) is below the tolerance.
+    """
+    a, L, load_y, alpha, two_xi_omega, omega2 = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
+    s, c = math.sin(th), math.cos(th)
+    lc = L * c
+    if abs(c) < consts[6]:
+        return 0.0, 0.0, 0.0, False
+    # c = Phi_q' q' + 2 xi omega Phi' + omega^2 Phi, one entry per constraint
+    c1 = 2 * vx * vx + 2 * vy * vy + two_xi_omega * (2 * x * vx + 2 * y * vy) + omega2 * (x * x + y * y - L * L)
+    c2 = L * s * w * w + two_xi_omega * (vy - lc * w) + omega2 * (y - L * s)
+    # right-hand side after eliminating theta'' (the alpha c2 terms cancel exactly)
+    b1 = -2 * alpha * x * c1
+    b2 = load_y + tau / lc - 2 * alpha * y * c1
+    det = a * a + 4 * alpha * a * (x * x + y * y)
+    ax = ((a + 4 * alpha * y * y) * b1 - 4 * alpha * x * y * b2) / det
+    ay = ((a + 4 * alpha * x * x) * b2 - 4 * alpha * x * y * b1) / det
+    ath = tau / (alpha * lc * lc) + (c2 + ay) / lc
+    return ax, ay, ath, True
+
+
+@njit(cache=True)
+def constraint_violation(x, y, th, L):
+    """max |Phi_i| of eq. 9 (m^2 and m)."""
+    return max(abs(x * x + y * y - L * L), abs(y - L * math.sin(th)))
+
+
+@njit(cache=True)
+def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, out):
+    """State derivative for state = [q, q'] with PD torque added; returns ok."""
+    total = tau + kp * (ref_th - state[2]) + kd * (ref_w - state[5])
+    ax, ay, ath, ok = accelerations(state[0], state[1], state[2], state[3], state[4], state[5], total, consts)
+    out[0], out[1], out[2] = state[3], state[4], state[5]
+    out[3], out[4], out[5] = ax, ay, ath
+    return ok
+
+
+@njit(cache=True)
+def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, states, qdd, applied):
+    """Classical RK4 over n_steps steps of dt (s).
+
+    tau_half, ref_th_half, ref_w_half: shape (2 n_steps + 1,), the open-loop torque (N m) and the
+    reference rotation (rad) and velocity (rad/s) on the half-step grid t_k = k dt / 2.
+    The applied torque is tau + kp (ref_th - theta) + kd (ref_w - theta').
+    Fills states (n+1, 6), qdd (n+1, 3) and applied (n+1,) up to the last step reached.
+    Returns (status, steps_done, max constraint violation).
+    """
+    L, viol_tol = consts[1], consts[7]
+    y = y0.copy()
+    k1, k2, k3, k4, tmp = np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6)
+    max_viol = constraint_violation(y[0], y[1], y[2], L)
+    for i in range(n_steps + 1):
+        j = 2 * i
+        ok = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp, kd, consts, k1)
+        for m in range(6):
+            states[i, m] = y[m]
+        qdd[i, 0], qdd[i, 1], qdd[i, 2] = k1[3], k1[4], k1[5]
+        applied[i] = tau_half[j] + kp * (ref_th_half[j] - y[2]) + kd * (ref_w_half[j] - y[5])
+        if not ok:
+            return SINGULAR, i, max_viol
+        if i == n_steps:
+            break
+        for m in range(6):
+            tmp[m] = y[m] + 0.5 * dt * k1[m]
+        ok = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k2)
+        for m in range(6):
+            tmp[m] = y[m] + 0.5 * dt * k2[m]
+        ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k3)
+        for m in range(6):
+            tmp[m] = y[m] + dt * k3[m]
+        ok = ok and _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, k4)
+        if not ok:
+            return SINGULAR, i, max_viol
+        finite = True
+        for m in range(6):
+            tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+            finite = finite and math.isfinite(tmp[m])
+        if not finite:
+            return NONFINITE, i, max_viol
+        viol = constraint_violation(tmp[0], tmp[1], tmp[2], L)
+        if viol > viol_tol:
+            return CONSTRAINT, i, max(max_viol, viol)
+        max_viol = max(max_viol, viol)
+        y[:] = tmp
+    return OK, n_steps, max_viol

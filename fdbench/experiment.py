@@ -1,0 +1,251 @@
+"""A run's full specification and ``run(spec)``: the one place where a control, simulation or
+optimisation run is carried out and turned into a flat record (the command-line contract)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from . import __version__
+from .integrate import Settings, SimulationResult, check_integrator
+from .model import Forearm, Penalty
+from .motion import check_kinematics
+
+COMMANDS = ("control", "optimize", "simulate")
+
+# The keys of every record, in this order (JSON keys and CSV header).
+RECORD_FIELDS = (
+    "command", "kinematics", "integrator", "dt", "torque", "optimizer", "feedforward",
+    "kp", "kd", "seed", "budget", "rmse_rot_deg", "rmse_torque_nm", "runtime_s", "evaluations",
+    "best_objective", "initial_objective", "t_end", "status", "message", "stop_reason", "max_violation", "n_params",
+    "torque_options", "optimizer_options", "alpha", "xi", "omega", "penalty_weight", "spec_hash",
+    "fdbench_version",
+)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that determines a run's numbers (the seed included, the runtime excluded)."""
+
+    command: str = "control"
+    kinematics: str = "paper"
+    integrator: str = "rk4"
+    dt: float = 1e-3
+    rtol: float = 1e-6
+    atol: float = 1e-9
+    alpha: float = 1e7
+    xi: float = 1.0
+    omega: float = 10.0
+    kp: float | None = None  # control
+    kd: float | None = None
+    torque: str | None = None  # optimize
+    optimizer: str | None = None
+    feedforward: bool = False
+    seed: int | None = None
+    budget: int | None = None
+    penalty_weight: float = 1.0
+    torque_options: tuple = ()  # sorted (name, value) pairs, e.g. (("hidden", 4),)
+    optimizer_options: tuple = ()
+
+    def settings(self) -> Settings:
+        return Settings(Forearm(), Penalty(self.alpha, self.xi, self.omega), self.kinematics,
+                        self.integrator, self.dt, self.rtol, self.atol)
+
+    def validate(self) -> "RunSpec":
+        """Raise ValueError with a one-line message for anything out of range; no work done."""
+        if self.command not in COMMANDS:
+            raise ValueError(f"unknown command {self.command!r}; valid: {', '.join(COMMANDS)}")
+        check_kinematics(self.kinematics)
+        check_integrator(self.integrator)
+        self.settings()
+        if self.command == "control":
+            from .control import check_gain
+
+            check_gain("--kp", self.kp)
+            check_gain("--kd", self.kd)
+        if self.command == "optimize":
+            from .optimizers import make_optimizer
+            from .torques import make_torque
+
+            if not isinstance(self.seed, int) or self.seed < 0:
+                raise ValueError(f"--seed must be a non-negative integer, got {self.seed}")
+            if not isinstance(self.budget, int) or self.budget < 1:
+                raise ValueError(f"--budget must be an integer >= 1, got {self.budget}")
+            if not (math.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
+                raise ValueError(f"--penalty-weight must be a non-negative finite number, got {self.penalty_weight}")
+            options = dict(self.torque_options)
+            if options.get("hidden") == "auto":
+                options.pop("hidden")
+            make_torque(self.torque, **options)
+            make_optimizer(self.optimizer, **dict(self.optimizer_options))
+        return self
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def hash(self) -> str:
+        """A digest of the settings (stable across runs and machines), 16 hex digits."""
+        text = json.dumps(self.as_dict(), sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def control_spec(kp=80.0, kd=0.3, **common) -> RunSpec:
+    return RunSpec(command="control", kp=kp, kd=kd, feedforward=True, **common)
+
+
+def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
+                  torque_options=None, optimizer_options=None, **common) -> RunSpec:
+    """An optimisation spec keeping only the options its torque and optimiser accept, so that
+    the same run has the same hash whichever command asks for it."""
+    from .optimizers import OPTIMIZERS
+    from .torques import TORQUES
+
+    return RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
+                   seed=seed, budget=budget, torque_options=_accepted(TORQUES, torque, torque_options),
+                   optimizer_options=_accepted(OPTIMIZERS, optimizer, optimizer_options), **common)
+
+
+def _accepted(registry, name, options) -> tuple:
+    import inspect
+
+    options = {k: v for k, v in (options or {}).items() if v is not None}
+    if name in registry:
+        accepted = inspect.signature(registry[name]).parameters
+        options = {k: v for k, v in options.items() if k in accepted}
+    return tuple(sorted(options.items()))
+
+
+@dataclass
+class RunOutcome:
+    record: dict
+    result: SimulationResult
+    inverse: object  # InverseResult on the 1 ms samples
+    history: list = field(default_factory=list)  # best-so-far objective per evaluation
+    params: np.ndarray | None = None  # best parameters (optimize)
+    extra: dict = field(default_factory=dict)
+
+
+def _options_text(pairs) -> str:
+    return " ".join(f"{k}={v}" for k, v in pairs)
+
+
+def base_record(spec: RunSpec) -> dict:
+    record = dict.fromkeys(RECORD_FIELDS)
+    record.update(
+        command=spec.command, kinematics=spec.kinematics, integrator=spec.integrator, dt=spec.dt,
+        feedforward=spec.feedforward, alpha=spec.alpha, xi=spec.xi, omega=spec.omega,
+        spec_hash=spec.hash(), fdbench_version=__version__,
+    )
+    return record
+
+
+def fill_result(record: dict, result: SimulationResult, inverse) -> dict:
+    from .indicators import rmse_rot_deg, rmse_torque_nm
+
+    record.update(
+        rmse_rot_deg=rmse_rot_deg(result, inverse.theta),
+        rmse_torque_nm=rmse_torque_nm(result, inverse.torque),
+        t_end=result.t_end, status=result.status.code, message=result.message,
+        max_violation=result.max_violation,
+    )
+    return record
+
+
+def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
+    """Carry out a control or optimisation run. ``on_evaluation(count, best)`` reports progress;
+    ``on_start(budget)`` is called once compilation and imports are done."""
+    spec.validate()
+    if spec.command == "control":
+        return _run_control(spec)
+    if spec.command == "optimize":
+        return _run_optimize(spec, on_evaluation, on_start)
+    raise ValueError("simulate runs are carried out by run_simulation")
+
+
+def _run_control(spec: RunSpec) -> RunOutcome:
+    from .control import feedforward
+    from .integrate import simulate, warm_up
+    from .inverse import inverse_dynamics
+
+    settings = spec.settings()
+    warm_up()
+    start = time.perf_counter()
+    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    result = simulate(feedforward(settings), settings, spec.kp, spec.kd)
+    runtime = time.perf_counter() - start
+    record = fill_result(base_record(spec), result, inverse)
+    record.update(torque="id", kp=spec.kp, kd=spec.kd, evaluations=1, runtime_s=runtime)
+    return RunOutcome(record, result, inverse)
+
+
+def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
+    from .integrate import warm_up
+    from .optimizers import make_optimizer
+    from .problem import TrackingProblem
+    from .torques import make_torque
+
+    settings = spec.settings()
+    optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
+    warm_up()
+    optimizer.warm_up()
+    if on_start:
+        on_start(spec.budget)
+    start = time.perf_counter()
+    torque_options = dict(spec.torque_options)
+    extra = {}
+    if torque_options.get("hidden") == "auto":
+        from .inverse import inverse_dynamics
+        from .torques.ann import select_hidden
+
+        inv = inverse_dynamics(None, settings.model, settings.kinematics)
+        torque_options["hidden"], extra["hidden_fits"] = select_hidden(inv.t, inv.torque)
+    torque = make_torque(spec.torque, **torque_options)
+    problem = TrackingProblem(torque, settings, spec.feedforward, spec.penalty_weight)
+    opt = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation)
+    params = opt.x * problem.scale
+    result = problem.simulate(params)
+    runtime = time.perf_counter() - start
+    record = fill_result(base_record(spec), result, problem.inverse)
+    record.update(
+        torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
+        evaluations=opt.evaluations, best_objective=opt.fun, stop_reason=opt.stop_reason,
+        n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
+        torque_options=_options_text(sorted(torque_options.items())),
+        optimizer_options=_options_text(spec.optimizer_options),
+    )
+    record["initial_objective"] = problem.objective(problem.p0)
+    return RunOutcome(record, result, problem.inverse, opt.history, params, extra)
+
+
+
+def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutcome:
+    """Open-loop forward dynamics driven by the inverse-dynamics torque, a CSV torque history
+    or saved optimisation parameters. Bad files raise ``files.BadFile``."""
+    from .integrate import simulate, warm_up
+    from .inverse import Feedforward, inverse_dynamics
+
+    settings = spec.settings()
+    if torque_file is not None:
+        from .files import read_torque_csv
+
+        t_file, q_file = read_torque_csv(torque_file)
+        torque, label = (lambda t: np.interp(t, t_file, q_file)), f"file:{torque_file}"
+    elif params_file is not None:
+        from .params_file import load_torque
+
+        torque, label = load_torque(params_file, settings.model)
+    else:
+        torque, label = Feedforward(settings.model, settings.kinematics), "id"
+    warm_up()
+    start = time.perf_counter()
+    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    result = simulate(torque, settings)
+    runtime = time.perf_counter() - start
+    record = fill_result(base_record(spec), result, inverse)
+    record.update(torque=label, evaluations=1, runtime_s=runtime)
+    return RunOutcome(record, result, inverse)

@@ -1,0 +1,296 @@
+"""Time integration of the penalty formulation: compiled fixed-step RK4 (default) or scipy's
+adaptive ``solve_ivp`` methods. Both return a ``SimulationResult`` on the 1 ms sample grid.
+
+A simulation never raises on a physical failure: it stops where it cannot go on and says why in
+``status`` and ``message``; ``t_end`` is the time reached.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from enum import Enum
+from functools import lru_cache
+from typing import Callable
+
+import numpy as np
+
+from .model import Forearm, Penalty
+from .motion import T_FINAL, check_kinematics, desired_motion, sample_times
+
+TorqueFunction = Callable[[np.ndarray], np.ndarray]
+"""An open-loop elbow torque history: times (s), shape (n,) -> torque (N m), shape (n,)."""
+
+SCIPY_METHODS = {"rk45": "RK45", "dop853": "DOP853", "lsoda": "LSODA", "radau": "Radau", "bdf": "BDF"}
+INTEGRATORS = ("rk4",) + tuple(SCIPY_METHODS)
+MAX_DT = 0.1  # s
+
+
+class Status(str, Enum):
+    """How a simulation ended; the value is the message for the user."""
+
+    SUCCESS = "reached t = 1 s"
+    NONFINITE = "the state became non-finite: the torque drives the model unstable; try a smaller --dt"
+    SINGULAR = "theta reached +-pi/2, where the mixed coordinate theta is undefined (singular leading matrix)"
+    CONSTRAINT = "the constraint violation exceeded its tolerance; try a larger --alpha or a smaller --dt"
+    SOLVER = "the integrator failed"
+
+    @property
+    def code(self) -> str:
+        return self.name.lower()
+
+
+
+@dataclass
+class SimulationResult:
+    """A forward simulation sampled every 1 ms. Histories have shape (1001,) or (1001, 3);
+    samples after ``t_end`` are NaN."""
+
+    t: np.ndarray  # s
+    q: np.ndarray  # [x2 (m), y2 (m), theta (rad)]
+    qd: np.ndarray  # [x2', y2' (m/s), theta' (rad/s)]
+    torque: np.ndarray  # total applied elbow torque, N m
+    t_end: float  # s
+    status: Status
+    max_violation: float  # max |Phi_i| reached, m^2 or m
+    integrator: str
+    runtime_s: float = 0.0
+    detail: str = ""
+    rhs_evaluations: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.q[:, 2]
+
+    @property
+    def reached(self) -> np.ndarray:
+        """Boolean mask of the samples reached, shape (1001,)."""
+        return np.isfinite(self.q[:, 2])
+
+    @property
+    def message(self) -> str:
+        text = self.status.value
+        if self.status is not Status.SUCCESS:
+            text += f" (stopped at t = {self.t_end:.4g} s)"
+        return text + (f": {self.detail}" if self.detail else "")
+
+    @property
+    def success(self) -> bool:
+        return self.status is Status.SUCCESS
+
+
+@dataclass(frozen=True)
+class Settings:
+    """How to simulate: model, penalty parameters, kinematics variant and integrator."""
+
+    model: Forearm = Forearm()
+    penalty: Penalty = Penalty()
+    kinematics: str = "paper"
+    integrator: str = "rk4"
+    dt: float = 1e-3  # s, RK4 step
+    rtol: float = 1e-6  # solve_ivp only
+    atol: float = 1e-9  # solve_ivp only
+
+    def __post_init__(self):
+        check_kinematics(self.kinematics)
+        check_integrator(self.integrator)
+        if not (0 < self.dt <= MAX_DT):
+            raise ValueError(f"dt must be in (0, {MAX_DT}] s, got {self.dt}")
+        for name in ("rtol", "atol"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive and finite, got {value}")
+        for name in ("alpha", "omega"):
+            value = getattr(self.penalty, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be positive and finite, got {value}")
+        if not (math.isfinite(self.penalty.xi) and self.penalty.xi >= 0):
+            raise ValueError(f"xi must be non-negative and finite, got {self.penalty.xi}")
+
+
+def check_integrator(name: str) -> str:
+    if name not in INTEGRATORS:
+        from .registry import unknown_name_message
+
+        raise ValueError(unknown_name_message("integrator", name, list(INTEGRATORS)))
+    return name
+
+
+@lru_cache(maxsize=16)
+def _constants(settings: Settings) -> np.ndarray:
+    from . import dynamics
+
+    return dynamics.kernel_constants(settings.model, settings.penalty)
+
+
+@lru_cache(maxsize=16)
+def initial_state(kinematics: str, model: Forearm) -> np.ndarray:
+    """[q, q'] on the desired motion at t = 0, shape (6,)."""
+    theta, w, dw = desired_motion(0.0, kinematics)
+    q, qd, _ = model.coordinates(theta, w, dw)
+    state = np.concatenate([q, qd])
+    state.flags.writeable = False
+    return state
+
+
+def simulate(torque: TorqueFunction, settings: Settings = Settings(), kp: float = 0.0, kd: float = 0.0) -> SimulationResult:
+    """Forward dynamics over [0, 1] s driven by ``torque`` plus PD feedback on theta with gains
+    kp (N m/rad) and kd (N m s/rad) towards the desired motion (zero gains: open loop)."""
+    start = time.perf_counter()
+    if settings.integrator == "rk4":
+        result = _simulate_rk4(torque, settings, kp, kd)
+    else:
+        result = _simulate_scipy(torque, settings, kp, kd)
+    result.runtime_s = time.perf_counter() - start
+    return result
+
+
+def steps(dt: float) -> int:
+    """Number of RK4 steps over [0, 1] s for a requested step dt (s)."""
+    return max(1, int(round(T_FINAL / dt)))
+
+
+@lru_cache(maxsize=16)
+def half_step_reference(n: int, kinematics: str):
+    """The half-step grid t_k = k dt / 2 (s) of n steps and the desired theta (rad) and
+    theta' (rad/s) on it; read-only arrays of shape (2 n + 1,)."""
+    half = np.linspace(0.0, T_FINAL, 2 * n + 1)
+    theta, w, _ = desired_motion(half, kinematics)
+    for array in (half, theta, w):
+        array.flags.writeable = False
+    return half, theta, w
+
+
+def _simulate_rk4(torque, settings: Settings, kp, kd) -> SimulationResult:
+    half, _, _ = half_step_reference(steps(settings.dt), settings.kinematics)
+    return simulate_rk4_on_grid(torque(half), settings, kp, kd)
+
+
+def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, kd: float = 0.0) -> SimulationResult:
+    """RK4 with the open-loop torque tau (N m) given on the half-step grid of ``settings.dt``,
+    shape (2 n + 1,) (see ``half_step_reference``)."""
+    from . import dynamics
+
+    n = steps(settings.dt)
+    dt = T_FINAL / n
+    _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+    tau = np.array(tau, dtype=float)  # a writable copy: one compiled signature for every caller
+    if tau.shape != ref_th.shape:
+        raise ValueError(f"torque on the half-step grid must have shape {ref_th.shape}, got {tau.shape}")
+    states = np.full((n + 1, 6), np.nan)
+    qdd = np.full((n + 1, 3), np.nan)
+    applied = np.full(n + 1, np.nan)
+    consts = _constants(settings)
+    code, done, max_viol = dynamics.rk4(
+        initial_state(settings.kinematics, settings.model), dt, n, tau, ref_th, ref_w,
+        float(kp), float(kd), consts, states, qdd, applied,
+    )
+    status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
+    t_end = done * dt
+    grid = np.linspace(0.0, T_FINAL, n + 1)
+    q, qd, applied_s = _resample(grid, states, qdd, applied, done)
+    return SimulationResult(sample_times(), q, qd, applied_s, t_end, status, float(max_viol), "rk4",
+                            rhs_evaluations=4 * done + 1)
+
+
+def _resample(grid, states, qdd, applied, done):
+    """States on the integrator grid -> the 1 ms samples (cubic Hermite between steps)."""
+    ts = sample_times()
+    n = len(grid) - 1
+    if n % (len(ts) - 1) == 0:
+        every = n // (len(ts) - 1)
+        return states[::every, :3].copy(), states[::every, 3:].copy(), applied[::every].copy()
+    q = np.full((len(ts), 3), np.nan)
+    qd = np.full((len(ts), 3), np.nan)
+    tau = np.full(len(ts), np.nan)
+    inside = ts <= grid[done] + 1e-12
+    i = np.minimum(np.searchsorted(grid, ts[inside], side="right") - 1, max(done - 1, 0))
+    h = grid[1] - grid[0]
+    s = ((ts[inside] - grid[i]) / h)[:, None]
+    j = np.minimum(i + 1, done)
+    y0, y1 = states[i, :3], states[j, :3]
+    v0, v1 = states[i, 3:], states[j, 3:]
+    a0, a1 = qdd[i], qdd[j]
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    q[inside] = h00 * y0 + h10 * h * v0 + h01 * y1 + h11 * h * v1
+    qd[inside] = h00 * v0 + h10 * h * a0 + h01 * v1 + h11 * h * a1
+    tau[inside] = (1 - s[:, 0]) * applied[i] + s[:, 0] * applied[j]
+    return q, qd, tau
+
+
+def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
+    from scipy.integrate import solve_ivp
+
+    from . import dynamics
+
+    consts = _constants(settings)
+    accel = dynamics.accelerations
+    kinematics = settings.kinematics
+    closed_loop = kp != 0 or kd != 0
+    nonfinite = []
+
+    def applied_torque(t, th, w):
+        total = float(torque(np.array([t]))[0])
+        if closed_loop:
+            ref_th, ref_w, _ = desired_motion(t, kinematics)
+            total += kp * (float(ref_th) - th) + kd * (float(ref_w) - w)
+        return total
+
+    def rhs(t, y):
+        ax, ay, ath, _ = accel(y[0], y[1], y[2], y[3], y[4], y[5], applied_torque(t, y[2], y[5]), consts)
+        out = np.array([y[3], y[4], y[5], ax, ay, ath])
+        if not np.all(np.isfinite(out)) and not nonfinite:
+            nonfinite.append(t)
+        return out
+
+    def singular(t, y):
+        return abs(math.cos(y[2])) - consts[6]
+
+    def violated(t, y):
+        return consts[7] - dynamics.constraint_violation(y[0], y[1], y[2], consts[1])
+
+    singular.terminal = violated.terminal = True
+    ts = sample_times()
+    try:
+        sol = solve_ivp(rhs, (0.0, T_FINAL), initial_state(kinematics, settings.model),
+                        method=SCIPY_METHODS[settings.integrator], t_eval=ts,
+                        rtol=settings.rtol, atol=settings.atol, events=(singular, violated))
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a solver that breaks down
+        return _empty_result(settings, Status.SOLVER, str(exc))
+    k = len(sol.t)
+    q = np.full((len(ts), 3), np.nan)
+    qd = np.full((len(ts), 3), np.nan)
+    q[:k], qd[:k] = sol.y[:3].T, sol.y[3:].T
+    detail = ""
+    if sol.status == 1:
+        status = Status.SINGULAR if len(sol.t_events[0]) else Status.CONSTRAINT
+        t_end = float((sol.t_events[0] if len(sol.t_events[0]) else sol.t_events[1])[0])
+    elif sol.status == 0 and not nonfinite:
+        status, t_end = Status.SUCCESS, T_FINAL
+    else:
+        status = Status.NONFINITE if nonfinite else Status.SOLVER
+        detail = sol.message if status is Status.SOLVER else ""
+        t_end = float(sol.t[-1]) if k else 0.0
+    bad = ~np.all(np.isfinite(np.hstack([q, qd])), axis=1)
+    q[bad], qd[bad] = np.nan, np.nan
+    applied = np.full(len(ts), np.nan)
+    for i in np.flatnonzero(~bad):
+        applied[i] = applied_torque(ts[i], q[i, 2], qd[i, 2])
+    viol = settings.model.constraints(q[~bad])
+    max_viol = float(np.max(np.abs(viol))) if viol.size else 0.0
+    return SimulationResult(ts, q, qd, applied, t_end, status, max_viol, settings.integrator,
+                            detail=detail, rhs_evaluations=int(sol.nfev))
+
+
+def _empty_result(settings, status, detail):
+    ts = sample_times()
+    nan3 = np.full((len(ts), 3), np.nan)
+    return SimulationResult(ts, nan3, nan3.copy(), np.full(len(ts), np.nan), 0.0, status, 0.0,
+                            settings.integrator, detail=detail)
+
+
+def warm_up() -> None:
+    """Load (or compile) the RK4 kernels so that later timings exclude compilation."""
+    simulate(lambda t: np.zeros_like(t), Settings(dt=0.1))

@@ -1,0 +1,81 @@
+"""The forearm model of Table 1 in mixed coordinates q = [x2, y2, theta] (eqs. 1, 4, 9-11).
+
+Point 1 (the elbow) is fixed at the origin; point 2 is the far end of the forearm. SI units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Forearm:
+    """Constants of Table 1. Override any of them: ``Forearm(F_ext=0.0)``."""
+
+    L12: float = 0.33  # forearm length, m
+    L1G: float = 0.11  # elbow to centre of mass, m
+    m: float = 1.0  # mass, kg
+    I1: float = 0.04  # moment of inertia about the elbow, kg m^2
+    F_ext: float = 15.0  # vertical load at point 2 (downwards), N
+    g: float = 9.81  # gravity, m/s^2
+
+    @property
+    def point_mass(self) -> float:
+        """Diagonal entry I1 / L12^2 of the mass matrix, kg."""
+        return self.I1 / self.L12**2
+
+    @property
+    def load_y(self) -> float:
+        """y component of Q_ext (eq. 4): -F_ext - m g L1G / L12, N."""
+        return -self.F_ext - self.m * self.g * self.L1G / self.L12
+
+    def mass_matrix(self) -> np.ndarray:
+        """M of eq. 4, shape (3, 3)."""
+        return np.diag([self.point_mass, self.point_mass, 0.0])
+
+    def external_forces(self) -> np.ndarray:
+        """Q_ext of eq. 4 (external load plus gravity through C_G), shape (3,)."""
+        c_g = self.L1G / self.L12 * np.diag([1.0, 1.0, 0.0])
+        return np.array([0.0, -self.F_ext, 0.0]) + c_g.T @ np.array([0.0, -self.m * self.g, 0.0])
+
+    def coordinates(self, theta, theta_dot, theta_ddot):
+        """q, q', q'' from the independent coordinate (eq. 7); each of shape (..., 3)."""
+        theta, w, dw = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (theta, theta_dot, theta_ddot)))
+        c, s, L = np.cos(theta), np.sin(theta), self.L12
+        q = np.stack([L * c, L * s, theta], axis=-1)
+        qd = np.stack([-L * s * w, L * c * w, w], axis=-1)
+        qdd = np.stack([-L * (c * w**2 + s * dw), L * (-s * w**2 + c * dw), dw], axis=-1)
+        return q, qd, qdd
+
+    def velocity_transform(self, theta) -> np.ndarray:
+        """R = dq/dz (eq. 4), shape (..., 3)."""
+        theta = np.asarray(theta, dtype=float)
+        return np.stack([-self.L12 * np.sin(theta), self.L12 * np.cos(theta), np.ones_like(theta)], axis=-1)
+
+    def constraints(self, q) -> np.ndarray:
+        """Phi(q) of eq. 9, shape (..., 2); point 1 at the origin."""
+        q = np.asarray(q, dtype=float)
+        x, y, th = q[..., 0], q[..., 1], q[..., 2]
+        return np.stack([x**2 + y**2 - self.L12**2, y - self.L12 * np.sin(th)], axis=-1)
+
+    def jacobian(self, q) -> np.ndarray:
+        """Phi_q(q) of eq. 10, shape (2, 3)."""
+        x, y, th = q
+        return np.array([[2 * x, 2 * y, 0.0], [0.0, 1.0, -self.L12 * np.cos(th)]])
+
+    def jacobian_dot_qdot(self, q, qd) -> np.ndarray:
+        """Phi_q' q' (eq. 11 times q'), shape (2,)."""
+        vx, vy, w = qd
+        return np.array([2 * vx**2 + 2 * vy**2, self.L12 * np.sin(q[2]) * w**2])
+
+
+@dataclass(frozen=True)
+class Penalty:
+    """Penalty-formulation parameters of eq. 12: penalty factor alpha, damping ratio xi,
+    natural frequency omega (rad/s)."""
+
+    alpha: float = 1e7
+    xi: float = 1.0
+    omega: float = 10.0

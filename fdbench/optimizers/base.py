@@ -1,0 +1,118 @@
+"""The optimiser interface, its registry, and the evaluation budget every optimiser obeys.
+
+An optimiser sees only an objective f(x) -> float, a start x0 (shape (n,)), a budget of
+objective evaluations, a seed and its own options. ``Budgeted`` counts every call, gradient
+evaluations by finite differences included, stops the optimiser by raising ``BudgetExhausted``
+when the budget is spent, and remembers the best point evaluated, which is the result whatever
+the optimiser itself reports.
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..registry import Registry
+
+Objective = Callable[[np.ndarray], float]
+
+
+class BudgetExhausted(Exception):
+    """Raised inside the objective when the evaluation budget is spent."""
+
+
+@dataclass
+class OptimizationResult:
+    x: np.ndarray  # best point evaluated, shape (n,)
+    fun: float  # its objective value
+    evaluations: int
+    stop_reason: str
+    history: list[float] = field(default_factory=list)  # best-so-far objective per evaluation
+
+
+class Budgeted:
+    """Wraps an objective: counts evaluations, enforces the budget, keeps the best point.
+
+    ``on_evaluation(count, best)`` is called after every evaluation (progress display)."""
+
+    def __init__(self, objective: Objective, budget: int, on_evaluation=None):
+        self.objective, self.budget, self.on_evaluation = objective, budget, on_evaluation
+        self.count = 0
+        self.best_x: np.ndarray | None = None
+        self.best_f = math.inf
+        self.history: list[float] = []
+
+    @property
+    def remaining(self) -> int:
+        return self.budget - self.count
+
+    def __call__(self, x) -> float:
+        if self.count >= self.budget:
+            raise BudgetExhausted
+        x = np.array(x, dtype=float)
+        f = float(self.objective(x))
+        if not math.isfinite(f):
+            f = math.inf
+        self.count += 1
+        if f < self.best_f or self.best_x is None:
+            self.best_f, self.best_x = f, x
+        self.history.append(self.best_f)
+        if self.on_evaluation is not None:
+            self.on_evaluation(self.count, self.best_f)
+        return f
+
+    def result(self, stop_reason: str) -> OptimizationResult:
+        if self.count >= self.budget:
+            stop_reason = f"budget of {self.budget} evaluations spent"
+        return OptimizationResult(self.best_x, self.best_f, self.count, stop_reason, list(self.history))
+
+
+class Optimizer(ABC):
+    """Base class. Subclasses take their options (``sigma0``, ``popsize``, ...) as keyword
+    arguments and implement ``run``."""
+
+    name: str = ""
+    summary: str = ""
+
+    @abstractmethod
+    def run(self, f: Budgeted, x0: np.ndarray, seed: int) -> str:
+        """Minimise f from x0 until it converges or raises BudgetExhausted; return a stop reason
+        (used when the budget is not spent)."""
+
+    def minimize(self, objective: Objective, x0, budget: int, seed: int = 0, on_evaluation=None) -> OptimizationResult:
+        if budget < 1:
+            raise ValueError(f"budget must be >= 1, got {budget}")
+        f = Budgeted(objective, budget, on_evaluation)
+        x0 = np.asarray(x0, dtype=float)
+        try:
+            reason = self.run(f, x0, seed)
+        except BudgetExhausted:
+            reason = "budget spent"
+        if f.count == 0:  # an optimiser that never evaluated still reports its start
+            try:
+                f(x0)
+            except BudgetExhausted:  # pragma: no cover - budget >= 1
+                pass
+        return f.result(reason)
+
+    def warm_up(self) -> None:
+        """Import what the optimiser needs, so that its timing excludes start-up costs."""
+
+    def describe(self) -> str:
+        return f"{self.name}: {self.summary}"
+
+
+OPTIMIZERS: Registry[type[Optimizer]] = Registry("optimizer")
+
+
+def make_optimizer(name: str, **options) -> Optimizer:
+    """An instance of the registered optimiser ``name``, given the options its class accepts."""
+    import inspect
+
+    cls = OPTIMIZERS[name]
+    accepted = inspect.signature(cls).parameters
+    return cls(**{k: v for k, v in options.items() if k in accepted and v is not None})

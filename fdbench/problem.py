@@ -1,0 +1,76 @@
+"""The tracking problem of section 4: parameters -> torque history -> forward simulation ->
+objective f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end)  (eq. 18)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .indicators import rmse_rot_deg, rmse_torque_nm
+from .integrate import Settings, SimulationResult, half_step_reference, simulate, simulate_rk4_on_grid, steps
+from .inverse import Feedforward, inverse_dynamics
+from .motion import T_FINAL
+from .torques import TorqueParameterisation
+
+
+class TrackingProblem:
+    """Optimise the parameters of ``torque`` so the simulated rotation tracks the desired one.
+
+    With ``feedforward`` the parameterised torque is added to the inverse-dynamics torque
+    (eq. 19); without, it is the whole drive torque (eq. 15). Optimisers work on scaled
+    parameters x = p / scale (``x0``, ``objective_scaled``), which puts every parameter on a
+    comparable footing."""
+
+    def __init__(self, torque: TorqueParameterisation, settings: Settings = Settings(),
+                 feedforward: bool = False, penalty_weight: float = 1.0):
+        if not (math.isfinite(penalty_weight) and penalty_weight >= 0):
+            raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
+        self.torque, self.settings = torque, settings
+        self.feedforward, self.penalty_weight = feedforward, penalty_weight
+        self.inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+        self._ff = Feedforward(settings.model, settings.kinematics)
+        self.p0 = np.asarray(torque.prepare(self.inverse.t, self.inverse.torque, feedforward), dtype=float)
+        self.scale = np.asarray(torque.scale(), dtype=float)
+        self.x0 = self.p0 / self.scale
+        if settings.integrator == "rk4":
+            half, _, _ = half_step_reference(steps(settings.dt), settings.kinematics)
+            self._on_grid = torque.on_grid(half)
+            self._ff_half = np.array(self._ff(half)) if feedforward else np.zeros_like(half)
+
+    @property
+    def n_params(self) -> int:
+        return self.torque.n_params
+
+    def torque_function(self, p):
+        """The open-loop drive torque for parameters p, as a function of time (s) -> N m."""
+        if self.feedforward:
+            return lambda t: self._ff(t) + self.torque.evaluate(p, t)
+        return lambda t: self.torque.evaluate(p, t)
+
+    def simulate(self, p) -> SimulationResult:
+        p = np.asarray(p, dtype=float)
+        if self.settings.integrator == "rk4":
+            with np.errstate(all="ignore"):
+                tau = self._ff_half + self._on_grid(p)
+            return simulate_rk4_on_grid(tau, self.settings)
+        return simulate(self.torque_function(p), self.settings)
+
+    def objective_of(self, result: SimulationResult) -> float:
+        """Eq. 18 for a finished simulation."""
+        rmse = rmse_rot_deg(result, self.inverse.theta)
+        if not math.isfinite(rmse):
+            rmse = 0.0  # nothing reached beyond t = 0: the penalty term says it all
+        return rmse + self.penalty_weight * (T_FINAL - result.t_end)
+
+    def objective(self, p) -> float:
+        return self.objective_of(self.simulate(p))
+
+    def objective_scaled(self, x) -> float:
+        return self.objective(np.asarray(x) * self.scale)
+
+    def indicators(self, result: SimulationResult) -> dict:
+        return {
+            "rmse_rot_deg": rmse_rot_deg(result, self.inverse.theta),
+            "rmse_torque_nm": rmse_torque_nm(result, self.inverse.torque),
+        }

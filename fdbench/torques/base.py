@@ -1,0 +1,64 @@
+"""The interface of a torque parameterisation and its registry.
+
+A parameterisation maps a parameter vector p, shape (n_params,), to an elbow torque history
+evaluated over an array of times t (s), shape (n,) -> (n,) N m. ``prepare`` is called once per
+problem with the target (inverse-dynamics) torque and returns the initial guess.
+"""
+
+from __future__ import annotations
+
+import inspect
+from abc import ABC, abstractmethod
+from typing import Callable
+
+import numpy as np
+
+from ..registry import Registry
+
+
+class TorqueParameterisation(ABC):
+    """Base class. Subclasses take their options (``hidden``, ``knots``, ...) as keyword
+    arguments, validate them in ``__init__`` (ValueError with a one-line message) and set
+    ``n_params``."""
+
+    name: str = ""
+    summary: str = ""
+    n_params: int
+
+    @abstractmethod
+    def prepare(self, t: np.ndarray, target: np.ndarray, feedforward: bool) -> np.ndarray:
+        """Fit to the target torque (N m) on times t (s) and return the initial guess, shape
+        (n_params,). With feedforward the parameterisation describes an additional torque whose
+        initial guess is zero torque."""
+
+    @abstractmethod
+    def evaluate(self, p: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """Torque (N m) at times t (s), shape (n,), for parameters p."""
+
+    def scale(self) -> np.ndarray:
+        """A typical magnitude of each parameter, shape (n_params,): optimisers work on p / scale."""
+        return np.ones(self.n_params)
+
+    def on_grid(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """A fast evaluator p -> torque on the fixed times t (override to precompute)."""
+        return lambda p: self.evaluate(p, t)
+
+    def describe(self) -> str:
+        return f"{self.name}: {self.summary}"
+
+
+TORQUES: Registry[type[TorqueParameterisation]] = Registry("torque")
+
+
+def make_torque(name: str, **options) -> TorqueParameterisation:
+    """An instance of the registered torque ``name``, given the options its class accepts
+    (others are ignored, so one set of command-line options serves every torque)."""
+    cls = TORQUES[name]
+    accepted = inspect.signature(cls).parameters
+    return cls(**{k: v for k, v in options.items() if k in accepted and v is not None})
+
+
+def check_count(option: str, value: int, minimum: int) -> int:
+    if not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{option} must be an integer >= {minimum}, got {value}")
+    return int(value)

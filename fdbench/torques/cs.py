@@ -1,0 +1,46 @@
+"""Cubic spline through torque values at equally spaced knots (paper section 4.1, Figure 4)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import TORQUES, TorqueParameterisation, check_count
+
+
+@TORQUES.register("cs")
+class CubicSplineTorque(TorqueParameterisation):
+    """Parameters: the torque (N m) at ``knots`` equally spaced instants of [0, 1] s; a
+    not-a-knot cubic spline (as MATLAB's ``spline``) in between."""
+
+    name = "cs"
+    summary = "cubic spline through the torque at --knots equally spaced instants (default 11)"
+
+    def __init__(self, knots: int = 11):
+        self.knots = check_count("--knots", knots, 4)
+        self.n_params = self.knots
+        self.t_knots = np.linspace(0.0, 1.0, self.knots)
+        self._scale = 1.0
+
+    def prepare(self, t, target, feedforward):
+        self._scale = max(float(np.ptp(target)) / 2, 1e-9)
+        if feedforward:
+            return np.zeros(self.n_params)
+        return np.interp(self.t_knots, t, target)
+
+    def basis(self, t) -> np.ndarray:
+        """The spline is linear in its knot values: torque(t) = basis(t) @ p, shape (n, knots)."""
+        from scipy.interpolate import CubicSpline
+
+        return CubicSpline(self.t_knots, np.eye(self.knots))(np.asarray(t, dtype=float))
+
+    def evaluate(self, p, t):
+        from scipy.interpolate import CubicSpline
+
+        return CubicSpline(self.t_knots, np.asarray(p, dtype=float))(np.asarray(t, dtype=float))
+
+    def on_grid(self, t):
+        basis = np.ascontiguousarray(self.basis(t))
+        return lambda p: basis @ p
+
+    def scale(self):
+        return np.full(self.n_params, self._scale)

@@ -1,0 +1,50 @@
+"""Parametric function of eq. 20 as its source intends: a sum of Gaussian bumps,
+PF(t) = sum_i A_i exp(-C_i (t - T_i)^2). The form printed in the paper, A e^{-C (t - T)},
+makes A and T redundant (A e^{CT} is one constant), so it cannot be what was meant.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import TORQUES, TorqueParameterisation, check_count
+
+
+@TORQUES.register("pf")
+class GaussianSumTorque(TorqueParameterisation):
+    """Parameters [A_1, C_1, T_1, A_2, ...]: amplitude (N m), sharpness C (1/s^2), centre (s)."""
+
+    name = "pf"
+    summary = "sum of --terms Gaussian bumps A exp(-C (t - T)^2), 3 parameters each (default 4)"
+
+    def __init__(self, terms: int = 4):
+        self.terms = check_count("--terms", terms, 1)
+        self.n_params = 3 * self.terms
+        self._amplitude = 1.0
+
+    def default_shape(self) -> np.ndarray:
+        """Bumps of zero amplitude, centred in equal slices of [0, 1] s, about as wide as one."""
+        n = self.terms
+        centres = (np.arange(n) + 0.5) / n
+        sharpness = np.full(n, 2.0 * n**2)  # standard deviation 1 / (2 n) s
+        return np.column_stack([np.zeros(n), sharpness, centres]).ravel()
+
+    def prepare(self, t, target, feedforward):
+        self._amplitude = max(float(np.max(np.abs(target))), 1e-9)
+        p = self.default_shape()
+        if feedforward:
+            return p
+        from scipy.optimize import least_squares
+
+        fit = least_squares(lambda p: self.evaluate(p, t) - target, p, method="lm", max_nfev=2000)
+        return fit.x
+
+    def evaluate(self, p, t):
+        p = np.asarray(p, dtype=float).reshape(-1, 3)
+        t = np.asarray(t, dtype=float)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return np.exp(-p[:, 1] * (t[..., None] - p[:, 2]) ** 2) @ p[:, 0]
+
+    def scale(self):
+        n = self.terms
+        return np.tile([self._amplitude, 2.0 * n**2, 1.0 / n], n)
