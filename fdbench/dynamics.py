@@ -106,14 +106,19 @@ def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, stat
             return SINGULAR, i, max_viol
         if i == n_steps:
             break
+        # a step may jump over cos(theta) = 0: a sign change of cos(theta) is the singularity too
+        c0 = math.cos(y[2])
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        ok = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k2)
+        ok = math.cos(tmp[2]) * c0 > 0.0
+        ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k2)
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k2[m]
+        ok = ok and math.cos(tmp[2]) * c0 > 0.0
         ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k3)
         for m in range(6):
             tmp[m] = y[m] + dt * k3[m]
+        ok = ok and math.cos(tmp[2]) * c0 > 0.0
         ok = ok and _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, k4)
         if not ok:
             return SINGULAR, i, max_viol
@@ -123,6 +128,8 @@ def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, stat
             finite = finite and math.isfinite(tmp[m])
         if not finite:
             return NONFINITE, i, max_viol
+        if math.cos(tmp[2]) * c0 <= 0.0:
+            return SINGULAR, i, max_viol
         viol = constraint_violation(tmp[0], tmp[1], tmp[2], L)
         if viol > viol_tol:
             return CONSTRAINT, i, max(max_viol, viol)

@@ -192,12 +192,6 @@ def test_large_torque_stops_the_simulation(integrator):
     assert np.nanmax(result.theta) > 1.0
 
 
-@pytest.mark.xfail(
-    reason="fdbench/dynamics.py rk4 only detects the singularity when |cos(theta)| < 1e-3 at a "
-    "stage point; a fixed step jumps over theta = pi/2, so the run continues past pi/2 and ends "
-    "with status CONSTRAINT instead of SINGULAR (and a later t_end than the adaptive solvers)",
-    strict=False,
-)
 @pytest.mark.parametrize("torque", [10.0, 50.0, 200.0])
 def test_rk4_stops_at_the_singularity_like_adaptive_solvers(torque):
     rk4 = simulate(constant_torque(torque), Settings())

@@ -1,0 +1,202 @@
+"""The benchmark matrix of the paper (PD control, Tables 2 and 3) and its execution: stored runs
+are reused by settings hash, missing ones are computed in parallel worker processes and stored
+one by one as they finish, so an interrupted benchmark resumes where it stopped."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .experiment import RunSpec, control_spec, optimize_spec
+
+# The paper's published figures: (RMSE_rot deg, RMSE_torque N m, runtime s).
+PAPER_INVERSE_RUNTIME_S = 0.12
+PAPER_CONTROL = (0.116, 0.149, 0.075)
+PAPER_CELLS = {
+    ("ann", "cmaes", False): (1.250, 0.149, 411.56),
+    ("ann", "bfgs", False): (0.310, 0.121, 449.37),
+    ("cs", "cmaes", False): (0.558, 0.118, 29.03),
+    ("cs", "bfgs", False): (0.197, 0.116, 41.59),
+    ("ann", "cmaes", True): (27.383, 0.366, 2439.15),
+    ("ann", "bfgs", True): (2.079, 0.009, 1482.89),
+    ("cs", "cmaes", True): (1.284, 0.105, 35.53),
+    ("cs", "bfgs", True): (0.696, 0.046, 35.67),
+    ("pf", "cmaes", True): (1.829, 0.012, 24.11),
+    ("pf", "bfgs", True): (1.816, 0.095, 17.09),
+}
+PAPER_TORQUES = ("ann", "cs", "pf")
+PAPER_OPTIMIZERS = ("cmaes", "bfgs")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One cell of the comparison: a torque parameterisation, an optimiser, feedforward or not."""
+
+    torque: str
+    optimizer: str
+    feedforward: bool
+
+    @property
+    def key(self):
+        return (self.torque, self.optimizer, self.feedforward)
+
+    @property
+    def in_paper(self) -> bool:
+        return self.key in PAPER_CELLS
+
+    @property
+    def table(self) -> int:
+        return 3 if self.feedforward else 2
+
+    @property
+    def paper(self):
+        return PAPER_CELLS.get(self.key)
+
+
+def default_cells(torques=None, optimizers=None, feedforward=None, all_cells=False) -> list[Cell]:
+    """The cells of Tables 2 and 3 (PF without feedforward only on request: ``all_cells`` or
+    asking for pf without feedforward explicitly)."""
+    torques = list(torques or PAPER_TORQUES)
+    optimizers = list(optimizers or PAPER_OPTIMIZERS)
+    modes = [False, True] if feedforward is None else [feedforward]
+    explicit_pf = "pf" in torques and torques != list(PAPER_TORQUES) and feedforward is False
+    cells = []
+    for ff in modes:
+        for torque in torques:
+            for opt in optimizers:
+                cell = Cell(torque, opt, ff)
+                known = torque in PAPER_TORQUES and opt in PAPER_OPTIMIZERS
+                if known and not cell.in_paper and not (all_cells or explicit_pf):
+                    continue
+                cells.append(cell)
+    return cells
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a benchmark runs: the control run (or None) and every cell with its seeds."""
+
+    control: RunSpec | None
+    cells: tuple
+    specs: dict  # Cell -> tuple of RunSpec, one per seed
+
+    def all_specs(self) -> list[RunSpec]:
+        out = [self.control] if self.control is not None else []
+        for cell in self.cells:
+            out.extend(self.specs[cell])
+        return out
+
+
+def make_plan(cells, seeds=5, budget=200, control=True, kp=80.0, kd=0.3, torque_options=None,
+              optimizer_options=None, penalty_weight=1.0, **common) -> Plan:
+    control_run = control_spec(kp, kd, **common) if control else None
+    specs = {
+        cell: tuple(
+            optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
+                          optimizer_options, penalty_weight=penalty_weight, **common)
+            for seed in range(seeds)
+        )
+        for cell in cells
+    }
+    return Plan(control_run, tuple(cells), specs)
+
+
+def _work(spec: RunSpec):
+    """Run one spec in a worker process; return what the store needs (picklable)."""
+    from .experiment import run
+
+    outcome = run(spec)
+    params = None if outcome.params is None else [float(v) for v in outcome.params]
+    return outcome.record, outcome.history, params
+
+
+def execute(plan: Plan, store, jobs: int | None = None, rerun: bool = False, on_done=None) -> dict:
+    """Make sure every run of the plan is in the store; return {spec hash: stored run}.
+
+    ``on_done(finished, total)`` reports progress. Runs already stored are reused unless
+    ``rerun``; each new run is stored as soon as it finishes."""
+    specs = plan.all_specs()
+    stored = set() if rerun else store.hashes()
+    missing = [s for s in specs if s.hash() not in stored]
+    jobs = max(1, min(jobs or os.cpu_count() or 1, len(missing) or 1))
+    done = len(specs) - len(missing)
+    if on_done:
+        on_done(done, len(specs))
+    if missing:
+        _prepare_parent(missing)
+        if jobs == 1:
+            for spec in missing:
+                store.add_record(spec, *_work(spec), jobs=1, replace=rerun)
+                done += 1
+                if on_done:
+                    on_done(done, len(specs))
+        else:
+            done = _execute_parallel(missing, store, jobs, rerun, done, len(specs), on_done)
+    return {s.hash(): store.get(s.hash()) for s in specs}
+
+
+def _prepare_parent(specs) -> None:
+    """Compile/load the kernels (and import cma) once, before worker processes fork."""
+    from .integrate import warm_up
+
+    warm_up()
+    if any(s.optimizer == "cmaes" for s in specs):
+        import cma  # noqa: F401
+
+
+def _execute_parallel(missing, store, jobs, rerun, done, total, on_done) -> int:
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    context = multiprocessing.get_context("fork") if hasattr(os, "fork") else None
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        futures = {pool.submit(_work, spec): spec for spec in missing}
+        try:
+            pending = set(futures)
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    store.add_record(futures[future], *future.result(), jobs=jobs, replace=rerun)
+                    done += 1
+                    if on_done:
+                        on_done(done, total)
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+    return done
+
+
+# ---- statistics ------------------------------------------------------------------------------
+
+INDICATORS = ("rmse_rot_deg", "rmse_torque_nm", "runtime_s")
+
+
+def succeeded(record: dict) -> bool:
+    """A run that reached t = 1 s and (for an optimisation) beat its unoptimised initial guess."""
+    if record.get("status") != "success":
+        return False
+    best, initial = record.get("best_objective"), record.get("initial_objective")
+    return best is None or initial is None or best < initial
+
+
+def summarise(records: list[dict]) -> dict:
+    """Median and interquartile range of each indicator, and the success rate."""
+    out = {"runs": len(records)}
+    for name in INDICATORS:
+        values = np.array([r.get(name) if r.get(name) is not None else np.nan for r in records], dtype=float)
+        values = values[np.isfinite(values)]
+        if values.size:
+            q1, med, q3 = np.percentile(values, [25, 50, 75])
+            out[f"{name}_median"], out[f"{name}_iqr"] = float(med), float(q3 - q1)
+        else:
+            out[f"{name}_median"] = out[f"{name}_iqr"] = float("nan")
+    out["success_rate"] = sum(succeeded(r) for r in records) / len(records) if records else float("nan")
+    return out
+
+
+def with_settings(plan: Plan, **changes) -> Plan:  # pragma: no cover - convenience for scripts
+    control = replace(plan.control, **changes) if plan.control else None
+    specs = {c: tuple(replace(s, **changes) for s in ss) for c, ss in plan.specs.items()}
+    return Plan(control, plan.cells, specs)

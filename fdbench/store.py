@@ -1,0 +1,211 @@
+"""The results store: an embedded SQLite database, one row per run.
+
+A row holds the run's full settings and their hash (the seed included), the indicators, the
+convergence history, the best parameters, the fdbench and dependency versions, the git commit if
+any, the machine and a timestamp. Every write is one transaction, so a process killed at any
+moment leaves every stored run intact; WAL journaling and a busy timeout let several processes
+write to one database. A file that is not an fdbench database is refused and never overwritten.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import sqlite3
+import subprocess
+from contextlib import contextmanager
+from datetime import datetime, timezone
+from functools import lru_cache
+from pathlib import Path
+
+DEFAULT_DB = "fdbench-results.sqlite"
+SCHEMA_NAME = "fdbench-results"
+SCHEMA_VERSION = "1"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS fdbench_meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS runs (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    spec_hash TEXT NOT NULL UNIQUE,
+    command TEXT NOT NULL,
+    seed INTEGER,
+    spec_json TEXT NOT NULL,
+    record_json TEXT NOT NULL,
+    history_json TEXT NOT NULL,
+    params_json TEXT,
+    rmse_rot_deg REAL,
+    rmse_torque_nm REAL,
+    runtime_s REAL,
+    t_end REAL,
+    status TEXT,
+    jobs INTEGER,
+    fdbench_version TEXT,
+    versions_json TEXT,
+    git_commit TEXT,
+    machine TEXT,
+    created_at TEXT NOT NULL
+);
+"""
+
+
+class StoreError(Exception):
+    """The database cannot be used; the message says which file and why."""
+
+
+def default_path() -> Path:
+    return Path(os.environ.get("FDBENCH_DB") or DEFAULT_DB)
+
+
+@contextmanager
+def open_store(path=None):
+    store = Store(path if path is not None else default_path())
+    try:
+        yield store
+    finally:
+        store.close()
+
+
+class Store:
+    def __init__(self, path):
+        self.path = Path(path)
+        if self.path.is_dir():
+            raise StoreError(f"{self.path} is a directory, not a results database")
+        if not self.path.parent.is_dir():
+            raise StoreError(f"directory {self.path.parent} of the results database does not exist")
+        existed = self.path.exists() and self.path.stat().st_size > 0
+        if existed:
+            _check_header(self.path)
+        try:
+            self.db = sqlite3.connect(self.path, timeout=60, isolation_level=None)
+            self.db.execute("PRAGMA busy_timeout = 60000")
+            tables = {row[0] for row in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path} is not an fdbench results database ({exc}); it was left untouched") from None
+        if existed and tables and "fdbench_meta" not in tables:
+            self.db.close()
+            raise StoreError(f"{self.path} is an SQLite database of something else (tables: "
+                             f"{', '.join(sorted(tables))}); it was left untouched")
+        if "fdbench_meta" in tables:
+            self._check_meta()
+        else:
+            self._create()
+
+    def _create(self):
+        try:
+            self.db.execute("PRAGMA journal_mode = WAL")
+            self.db.execute("BEGIN IMMEDIATE")
+            for statement in _SCHEMA.split(";"):
+                if statement.strip():
+                    self.db.execute(statement)
+            self.db.execute("INSERT OR IGNORE INTO fdbench_meta VALUES ('schema', ?), ('version', ?)",
+                            (SCHEMA_NAME, SCHEMA_VERSION))
+            self.db.execute("COMMIT")
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot create the results database {self.path}: {exc}") from None
+
+    def _check_meta(self):
+        meta = dict(self.db.execute("SELECT key, value FROM fdbench_meta"))
+        if meta.get("schema") != SCHEMA_NAME:
+            raise StoreError(f"{self.path} is not an fdbench results database; it was left untouched")
+        if meta.get("version") != SCHEMA_VERSION:
+            raise StoreError(f"{self.path} has results schema version {meta.get('version')}; this fdbench "
+                             f"reads version {SCHEMA_VERSION}: use another --db")
+
+    def close(self):
+        self.db.close()
+
+    # ---- reading -----------------------------------------------------------------------------
+
+    def get(self, spec_hash: str) -> dict | None:
+        """The stored run with this settings hash, or None."""
+        row = self.db.execute(
+            "SELECT record_json, history_json, params_json FROM runs WHERE spec_hash = ?", (spec_hash,)
+        ).fetchone()
+        if row is None:
+            return None
+        return {"record": json.loads(row[0]), "history": json.loads(row[1]),
+                "params": json.loads(row[2]) if row[2] else None}
+
+    def hashes(self) -> set[str]:
+        return {row[0] for row in self.db.execute("SELECT spec_hash FROM runs")}
+
+    def count(self) -> int:
+        return self.db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+
+    def records(self) -> list[dict]:
+        return [json.loads(row[0]) for row in self.db.execute("SELECT record_json FROM runs ORDER BY id")]
+
+    # ---- writing -----------------------------------------------------------------------------
+
+    def add(self, spec, outcome, jobs: int = 1, replace: bool = False) -> bool:
+        """Store one run (a RunSpec and its RunOutcome); True if written. An existing run with
+        the same settings hash is kept unless ``replace``."""
+        return self.add_record(spec, outcome.record, outcome.history, outcome.params, jobs, replace)
+
+    def add_record(self, spec, record: dict, history, params=None, jobs: int = 1, replace: bool = False) -> bool:
+        record = dict(record, jobs=jobs)
+        record.pop("command_time_s", None)
+        values = (
+            spec.hash(), spec.command, spec.seed, json.dumps(spec.as_dict(), sort_keys=True),
+            json.dumps(record, default=_json_default), json.dumps([float(v) for v in history]),
+            json.dumps([float(v) for v in params]) if params is not None else None,
+            record.get("rmse_rot_deg"), record.get("rmse_torque_nm"), record.get("runtime_s"),
+            record.get("t_end"), record.get("status"), jobs, record.get("fdbench_version"),
+            json.dumps(dependency_versions()), git_commit(), machine(),
+            datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        )
+        verb = "INSERT OR REPLACE" if replace else "INSERT OR IGNORE"
+        try:
+            cursor = self.db.execute(f"{verb} INTO runs (spec_hash, command, seed, spec_json, record_json, "
+                                     "history_json, params_json, rmse_rot_deg, rmse_torque_nm, runtime_s, t_end, "
+                                     "status, jobs, fdbench_version, versions_json, git_commit, machine, created_at) "
+                                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", values)
+        except sqlite3.Error as exc:
+            raise StoreError(f"cannot write to the results database {self.path}: {exc}") from None
+        return cursor.rowcount == 1
+
+
+def _check_header(path: Path) -> None:
+    try:
+        with open(path, "rb") as handle:
+            header = handle.read(16)
+    except OSError as exc:
+        raise StoreError(f"cannot read the results database {path}: {exc}") from None
+    if header != b"SQLite format 3\x00":
+        raise StoreError(f"{path} is not an fdbench results database (not SQLite); it was left untouched")
+
+
+def _json_default(value):
+    if hasattr(value, "item"):
+        return value.item()
+    return str(value)
+
+
+@lru_cache(maxsize=1)
+def dependency_versions() -> dict:
+    from importlib.metadata import PackageNotFoundError, version
+
+    versions = {"python": platform.python_version()}
+    for name in ("fdbench", "numpy", "scipy", "numba", "cma", "typer", "rich", "pandas", "matplotlib"):
+        try:
+            versions[name] = version(name)
+        except PackageNotFoundError:
+            versions[name] = None
+    return versions
+
+
+@lru_cache(maxsize=1)
+def git_commit() -> str | None:
+    """The commit of the fdbench source tree, if it is a git checkout."""
+    here = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+@lru_cache(maxsize=1)
+def machine() -> str:
+    return f"{platform.node()} {platform.system()} {platform.machine()} {os.cpu_count()} cores"
