@@ -451,6 +451,165 @@ def optimize(
     _finish(outcome.record, fmt, output, "fdbench optimize", quiet)
 
 
+@app.command()
+def report(
+    torque: Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")] = None,
+    opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
+    feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only Table 3 (with) or Table 2 (without); default both.", show_default=False)] = None,
+    control: Annotated[bool, typer.Option("--control/--no-control", help="Include the PD control run.")] = True,
+    all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, seeds 0..N-1; medians and IQRs over them.")] = 5,
+    budget: Annotated[int, typer.Option("--budget", help="Objective evaluations per optimisation.")] = 200,
+    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes (default: the number of cores).", show_default=False)] = None,
+    db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
+    rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
+    figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
+    kp: Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")] = 80.0,
+    kd: Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")] = 0.3,
+    hidden: Annotated[str, typer.Option("--hidden", help="ANN hidden neurons, or 'auto'.")] = "4",
+    knots: Annotated[int, typer.Option("--knots", help="Cubic-spline knots (>= 4).")] = 11,
+    terms: Annotated[int, typer.Option("--terms", help="Parametric-function terms.")] = 4,
+    sigma0: Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size (scaled units).")] = 0.1,
+    popsize: Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size.")] = None,
+    penalty_weight: Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18.")] = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown) or csv (one row per cell).")] = "md",
+    output: Output = None,
+    quiet: Quiet = False,
+):
+    """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the
+    published ones, as Markdown or CSV.
+
+    Every run is stored in the results database; stored runs are reused, so an interrupted
+    report resumes and a repeated one returns at once."""
+    from .benchmark import default_cells, make_plan
+
+    _check_outputs(fmt, ("md", "csv"), output=output, db=db)
+    if seeds < 1:
+        raise BadInput(f"--seeds must be an integer >= 1, got {seeds}")
+    if jobs is not None and jobs < 1:
+        raise BadInput(f"--jobs must be an integer >= 1, got {jobs}")
+    if figures is not None and not (figures.is_dir() or figures.parent.is_dir()):
+        raise BadInput(f"--figures: directory {figures.parent} does not exist")
+    for option, value in (("--sigma0", sigma0), ("--penalty-weight", penalty_weight)):
+        if not math.isfinite(value):
+            raise BadInput(f"--{option} must be a finite number, got {value}")
+    _check_names(torque, opt)
+    cells = default_cells(torque, opt, feedforward, all_cells)
+    if not cells and not control:
+        raise BadInput("nothing to run: the options select no cell and --no-control")
+    plan = make_plan(
+        cells, seeds, budget, control, kp, kd,
+        torque_options={"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms},
+        optimizer_options={"sigma0": sigma0, "popsize": popsize}, penalty_weight=penalty_weight,
+        **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
+    )
+    for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
+        _validated(spec)
+    from .store import StoreError, default_path, open_store
+
+    db_path = db if db is not None else default_path()
+    jobs = jobs or os.cpu_count() or 1
+    try:
+        with open_store(db_path) as store:
+            with _progress(quiet, "runs") as progress:
+                from .benchmark import execute
+
+                def on_done(done, total):
+                    if progress.bar is None:
+                        progress.start(total, show_best=False)
+                    progress.update(done)
+
+                runs = execute(plan, store, jobs, rerun, on_done)
+    except StoreError as exc:
+        raise BadInput(f"--db: {exc}") from None
+    from .inverse import inverse_dynamics
+    from .report import build_rows
+
+    start = time.perf_counter()
+    inverse = inverse_dynamics(None, kinematics=kinematics)
+    inverse_runtime = time.perf_counter() - start
+    rows = build_rows(plan, runs)
+    if fmt == "csv":
+        from .files import csv_text
+        from .report import CSV_COLUMNS, csv_rows
+
+        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows)), output)
+    else:
+        from .report import markdown, settings_table
+
+        links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
+        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
+    if output is not None:
+        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+def _check_names(torques, optimizers) -> None:
+    from .optimizers import OPTIMIZERS
+    from .registry import UnknownName
+    from .torques import TORQUES
+
+    try:
+        for name in torques or ():
+            TORQUES[name]
+        for name in optimizers or ():
+            OPTIMIZERS[name]
+    except UnknownName as exc:
+        raise BadInput(_with_option(str(exc))) from None
+
+
+def _write_figures(plan, runs, rows, inverse, directory: Path, output, quiet) -> dict:
+    """Write the report's figures; return {title: path relative to the report}."""
+    import numpy as np
+
+    from . import figures as fig
+    from .experiment import replay, run
+
+    directory.mkdir(exist_ok=True)
+    base = output.parent if output is not None else Path(".")
+    written = {}
+
+    def link(name, path):
+        written[name] = os.path.relpath(path, base)
+
+    path = directory / "figure2_inverse_dynamics.png"
+    fig.inverse_figure(inverse, path)
+    link("Figure 2: desired rotation and inverse-dynamics torque", path)
+    control_curve = []
+    if plan.control is not None:
+        control_curve = [("PD control + feedforward", run(plan.control).result.theta)]
+    for table, title in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
+        curves = list(control_curve)
+        series = []
+        for row in rows:
+            if row.table != table:
+                continue
+            specs = plan.specs[row.cell]
+            stored = [runs[s.hash()] for s in specs]
+            values = np.array([r["record"]["rmse_rot_deg"] if r["record"]["rmse_rot_deg"] is not None else np.inf for r in stored])
+            median_seed = int(np.argsort(values)[len(values) // 2])
+            if stored[median_seed]["params"] is not None:
+                curves.append((row.name, replay(specs[median_seed], stored[median_seed]["params"]).theta))
+            series.append((row.name, [r["history"] for r in stored if r["history"]]))
+        if len(curves) > len(control_curve):
+            path = directory / f"figure{5 if table == 2 else 6}_tracking.png"
+            fig.tracking_figure(inverse, curves, path, f"{title}: desired rotation and the median run of each method")
+            link(title, path)
+        if series:
+            path = directory / f"convergence_table{table}.png"
+            fig.convergence_figure(series, path, f"Convergence, Table {table} (median over seeds, IQR band)")
+            link(f"Convergence, Table {table}", path)
+    _say(quiet, f"wrote {len(written)} figures to {directory}")
+    return written
+
+
 class _progress:
     """A rich progress bar on stderr: evaluations done and the best objective so far."""
 
@@ -461,20 +620,21 @@ class _progress:
     def __enter__(self):
         return self
 
-    def start(self, total: int) -> None:
+    def start(self, total: int, show_best: bool = True) -> None:
         if self.quiet:
             return
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                            TextColumn("best {task.fields[best]}"), TimeElapsedColumn(),
-                            console=_console(), transient=True)
+        columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn()]
+        if show_best:
+            columns.append(TextColumn("best {task.fields[best]}"))
+        self.bar = Progress(*columns, TimeElapsedColumn(), console=_console(), transient=True)
         self.task = self.bar.add_task(self.label, total=total, best="-")
         self.bar.start()
 
-    def update(self, count: int, best: float) -> None:
+    def update(self, count: int, best: float | None = None) -> None:
         if self.bar is not None:
-            self.bar.update(self.task, completed=count, best=f"{best:.4g}")
+            self.bar.update(self.task, completed=count, best="-" if best is None else f"{best:.4g}")
 
     def __exit__(self, *exc):
         if self.bar is not None:

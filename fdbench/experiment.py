@@ -249,3 +249,16 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     record = fill_result(base_record(spec), result, inverse)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
     return RunOutcome(record, result, inverse)
+
+
+def replay(spec: RunSpec, params) -> SimulationResult:
+    """The simulation of a stored optimisation run's best parameters (for figures)."""
+    from .problem import TrackingProblem
+    from .torques import make_torque
+
+    settings = spec.settings()
+    options = dict(spec.torque_options)
+    if options.get("hidden") == "auto":
+        options["hidden"] = (len(params) - 1) // 3
+    problem = TrackingProblem(make_torque(spec.torque, **options), settings, spec.feedforward, spec.penalty_weight)
+    return problem.simulate(np.asarray(params, dtype=float))
