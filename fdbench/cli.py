@@ -105,6 +105,13 @@ Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write th
 SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Write the run's time history (1001 rows) as CSV to FILE.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
+Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, gradient evaluations included.")]
+Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons, or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
+Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots, equally spaced over [0, 1] s (>= 4).")]
+Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps), 3 parameters each.")]
+Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
+Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size (default: cma's 4 + 3 ln n).")]
+PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")]
 
 
 def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega) -> dict:
@@ -256,8 +263,7 @@ def inverse(
 ):
     """Inverse dynamics (eq. 3): the elbow torque that should produce the desired motion.
 
-    The table and JSON give a summary; --format csv gives the whole history (t, theta,
-    theta_dot, theta_ddot, torque; 1001 rows, SI units)."""
+    The table and JSON give a summary; --format csv gives the whole history (t, theta, theta_dot, theta_ddot, torque; 1001 rows, SI units)."""
     _check_outputs(fmt, output=output)
     try:
         from .motion import check_kinematics
@@ -307,8 +313,7 @@ def simulate(
     save_history: SaveHistory = None,
     quiet: Quiet = False,
 ):
-    """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the
-    inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
+    """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from .experiment import RunSpec
 
     _check_outputs(fmt, output=output, save_history=save_history)
@@ -344,8 +349,7 @@ def control(
     db: Db = None,
     quiet: Quiet = False,
 ):
-    """PD control with computed feedforward (eqs. 13-14): the inverse-dynamics torque plus PD
-    feedback on the elbow rotation."""
+    """PD control with computed feedforward (eqs. 13-14): the inverse-dynamics torque plus PD feedback on the elbow rotation."""
     from .experiment import control_spec, run
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db)
@@ -354,6 +358,12 @@ def control(
     _save_history(outcome, save_history)
     _store(outcome, spec, db, quiet)
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _check_finite(**values) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise BadInput(f"--{name.replace('_', '-')} must be a finite number, got {value}")
 
 
 def _parse_hidden(hidden: str):
@@ -390,14 +400,14 @@ def optimize(
     torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation: ann, cs, pf (see 'fdbench methods').")] = "cs",
     opt: Annotated[str, typer.Option("--opt", help="Optimiser: cmaes, bfgs, nelder-mead, lbfgsb (see 'fdbench methods').")] = "bfgs",
     feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
-    budget: Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) allowed, gradient evaluations included.")] = 200,
+    budget: Budget = 200,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
-    hidden: Annotated[str, typer.Option("--hidden", help="ANN hidden neurons, or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")] = "4",
-    knots: Annotated[int, typer.Option("--knots", help="Cubic-spline knots, equally spaced over [0, 1] s (>= 4).")] = 11,
-    terms: Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps), 3 parameters each.")] = 4,
-    sigma0: Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")] = 0.1,
-    popsize: Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size (default: cma's 4 + 3 ln n).")] = None,
-    penalty_weight: Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")] = 1.0,
+    hidden: Hidden = "4",
+    knots: Knots = 11,
+    terms: Terms = 4,
+    sigma0: Sigma0 = 0.1,
+    popsize: Popsize = None,
+    penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
@@ -415,17 +425,14 @@ def optimize(
     db: Db = None,
     quiet: Quiet = False,
 ):
-    """Forward dynamic optimisation (section 4): tune a parameterised torque history so the
-    simulated rotation tracks the desired one (objective of eq. 18)."""
+    """Forward dynamic optimisation (section 4): tune a parameterised torque history so the simulated rotation tracks the desired one (objective of eq. 18)."""
     if list_methods:
         _emit(_methods_text(), None)
         return
     from .experiment import optimize_spec, run
 
     _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db)
-    for option, value in (("--sigma0", sigma0), ("--penalty-weight", penalty_weight)):
-        if not math.isfinite(value):
-            raise BadInput(f"{option} must be a finite number, got {value}")
+    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget,
         torque_options={"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms},
@@ -459,19 +466,19 @@ def report(
     control: Annotated[bool, typer.Option("--control/--no-control", help="Include the PD control run.")] = True,
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, seeds 0..N-1; medians and IQRs over them.")] = 5,
-    budget: Annotated[int, typer.Option("--budget", help="Objective evaluations per optimisation.")] = 200,
+    budget: Budget = 200,
     jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes (default: the number of cores).", show_default=False)] = None,
     db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
     rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
     kp: Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")] = 80.0,
     kd: Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")] = 0.3,
-    hidden: Annotated[str, typer.Option("--hidden", help="ANN hidden neurons, or 'auto'.")] = "4",
-    knots: Annotated[int, typer.Option("--knots", help="Cubic-spline knots (>= 4).")] = 11,
-    terms: Annotated[int, typer.Option("--terms", help="Parametric-function terms.")] = 4,
-    sigma0: Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size (scaled units).")] = 0.1,
-    popsize: Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size.")] = None,
-    penalty_weight: Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18.")] = 1.0,
+    hidden: Hidden = "4",
+    knots: Knots = 11,
+    terms: Terms = 4,
+    sigma0: Sigma0 = 0.1,
+    popsize: Popsize = None,
+    penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
@@ -484,11 +491,9 @@ def report(
     output: Output = None,
     quiet: Quiet = False,
 ):
-    """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the
-    published ones, as Markdown or CSV.
+    """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown or CSV.
 
-    Every run is stored in the results database; stored runs are reused, so an interrupted
-    report resumes and a repeated one returns at once."""
+    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
     from .benchmark import default_cells, make_plan
 
     _check_outputs(fmt, ("md", "csv"), output=output, db=db)
@@ -498,9 +503,7 @@ def report(
         raise BadInput(f"--jobs must be an integer >= 1, got {jobs}")
     if figures is not None and not (figures.is_dir() or figures.parent.is_dir()):
         raise BadInput(f"--figures: directory {figures.parent} does not exist")
-    for option, value in (("--sigma0", sigma0), ("--penalty-weight", penalty_weight)):
-        if not math.isfinite(value):
-            raise BadInput(f"--{option} must be a finite number, got {value}")
+    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
