@@ -49,9 +49,12 @@ class FdbenchGroup(TyperGroup):
             code = _error("interrupted", 130)
         except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback
             if hasattr(exc, "exit_code") and hasattr(exc, "format_message"):  # click usage errors
+                message = exc.format_message().strip()
+                if not message:  # no arguments: the help was shown, nothing more to say
+                    sys.exit(exc.exit_code)
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
-                code = _error(where + exc.format_message().replace("\n", " "), exc.exit_code)
+                code = _error(where + message.replace("\n", " "), exc.exit_code)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:
@@ -360,6 +363,25 @@ def control(
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
 
 
+def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
+    """Reject an out-of-range method option even when the chosen method does not use it
+    (``--terms 0`` with ``--torque cs``): every registered class that takes it checks it."""
+    import inspect
+
+    from .optimizers import OPTIMIZERS
+    from .torques import TORQUES
+
+    for registry, options in ((TORQUES, torque_options), (OPTIMIZERS, optimizer_options)):
+        for _, cls in registry.items():
+            accepted = inspect.signature(cls).parameters
+            given = {k: v for k, v in options.items() if k in accepted and v is not None and v != "auto"}
+            if given:
+                try:
+                    cls(**given)
+                except ValueError as exc:
+                    raise BadInput(str(exc)) from None
+
+
 def _check_finite(**values) -> None:
     for name, value in values.items():
         if not math.isfinite(value):
@@ -433,10 +455,11 @@ def optimize(
 
     _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db)
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
+    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
+    _check_method_options(torque_options, optimizer_options)
     spec = _validated(optimize_spec(
-        torque, opt, feedforward, seed, budget,
-        torque_options={"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms},
-        optimizer_options={"sigma0": sigma0, "popsize": popsize},
+        torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
         penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
     ))
     with _progress(quiet, f"{torque} + {opt}") as progress:
@@ -508,10 +531,12 @@ def report(
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
+    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
+    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
+    _check_method_options(torque_options, optimizer_options)
     plan = make_plan(
-        cells, seeds, budget, control, kp, kd,
-        torque_options={"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms},
-        optimizer_options={"sigma0": sigma0, "popsize": popsize}, penalty_weight=penalty_weight,
+        cells, seeds, budget, control, kp, kd, torque_options=torque_options,
+        optimizer_options=optimizer_options, penalty_weight=penalty_weight,
         **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
     )
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
@@ -624,7 +649,7 @@ class _progress:
         return self
 
     def start(self, total: int, show_best: bool = True) -> None:
-        if self.quiet:
+        if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
             return
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 

@@ -17,6 +17,7 @@ from .model import Forearm, Penalty
 from .motion import check_kinematics
 
 COMMANDS = ("control", "optimize", "simulate")
+MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
 
 # The keys of every record, in this order (JSON keys and CSV header).
 RECORD_FIELDS = (
@@ -72,8 +73,8 @@ class RunSpec:
             from .optimizers import make_optimizer
             from .torques import make_torque
 
-            if not isinstance(self.seed, int) or self.seed < 0:
-                raise ValueError(f"--seed must be a non-negative integer, got {self.seed}")
+            if not isinstance(self.seed, int) or not 0 <= self.seed < MAX_SEED:
+                raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {self.seed}")
             if not isinstance(self.budget, int) or self.budget < 1:
                 raise ValueError(f"--budget must be an integer >= 1, got {self.budget}")
             if not (math.isfinite(self.penalty_weight) and self.penalty_weight >= 0):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import lru_cache
@@ -25,6 +26,8 @@ TorqueFunction = Callable[[np.ndarray], np.ndarray]
 SCIPY_METHODS = {"rk45": "RK45", "dop853": "DOP853", "lsoda": "LSODA", "radau": "Radau", "bdf": "BDF"}
 INTEGRATORS = ("rk4",) + tuple(SCIPY_METHODS)
 MAX_DT = 0.1  # s
+MIN_RTOL = 100 * np.finfo(float).eps  # scipy's own floor for rtol
+MAX_RHS_EVALUATIONS = 100_000  # an adaptive integrator that needs more has met a stiff or broken problem
 
 
 class Status(str, Enum):
@@ -98,10 +101,10 @@ class Settings:
         check_integrator(self.integrator)
         if not (0 < self.dt <= MAX_DT):
             raise ValueError(f"dt must be in (0, {MAX_DT}] s, got {self.dt}")
-        for name in ("rtol", "atol"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be positive and finite, got {value}")
+        if not (math.isfinite(self.rtol) and MIN_RTOL <= self.rtol < 1):
+            raise ValueError(f"rtol must be in [{MIN_RTOL:.2g}, 1), got {self.rtol}")
+        if not (math.isfinite(self.atol) and self.atol > 0):
+            raise ValueError(f"atol must be positive and finite, got {self.atol}")
         for name in ("alpha", "omega"):
             value = getattr(self.penalty, name)
             if not (math.isfinite(value) and value > 0):
@@ -230,6 +233,7 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
     kinematics = settings.kinematics
     closed_loop = kp != 0 or kd != 0
     nonfinite = []
+    evaluations = [0]
 
     def applied_torque(t, th, w):
         total = float(torque(np.array([t]))[0])
@@ -239,6 +243,9 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
         return total
 
     def rhs(t, y):
+        evaluations[0] += 1
+        if evaluations[0] > MAX_RHS_EVALUATIONS:
+            raise _TooManyEvaluations(t)
         ax, ay, ath, _ = accel(y[0], y[1], y[2], y[3], y[4], y[5], applied_torque(t, y[2], y[5]), consts)
         out = np.array([y[3], y[4], y[5], ax, ay, ath])
         if not np.all(np.isfinite(out)) and not nonfinite:
@@ -254,9 +261,14 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
     singular.terminal = violated.terminal = True
     ts = sample_times()
     try:
-        sol = solve_ivp(rhs, (0.0, T_FINAL), initial_state(kinematics, settings.model),
-                        method=SCIPY_METHODS[settings.integrator], t_eval=ts,
-                        rtol=settings.rtol, atol=settings.atol, events=(singular, violated))
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")  # the status reports what went wrong, once
+            sol = solve_ivp(rhs, (0.0, T_FINAL), initial_state(kinematics, settings.model),
+                            method=SCIPY_METHODS[settings.integrator], t_eval=ts,
+                            rtol=settings.rtol, atol=settings.atol, events=(singular, violated))
+    except _TooManyEvaluations as exc:
+        return _empty_result(settings, Status.SOLVER, f"more than {MAX_RHS_EVALUATIONS} right-hand side "
+                             f"evaluations before t = {exc.args[0]:.4g} s (a stiff problem: try rk4, radau or bdf)")
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a solver that breaks down
         return _empty_result(settings, Status.SOLVER, str(exc))
     k = len(sol.t)
@@ -282,6 +294,10 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
     max_viol = float(np.max(np.abs(viol))) if viol.size else 0.0
     return SimulationResult(ts, q, qd, applied, t_end, status, max_viol, settings.integrator,
                             detail=detail, rhs_evaluations=int(sol.nfev))
+
+
+class _TooManyEvaluations(Exception):
+    """Raised in the right-hand side to stop an adaptive integrator that no longer advances."""
 
 
 def _empty_result(settings, status, detail):

@@ -14,6 +14,7 @@ import os
 import platform
 import sqlite3
 import subprocess
+import time
 from contextlib import contextmanager
 from datetime import datetime, timezone
 from functools import lru_cache
@@ -93,7 +94,7 @@ class Store:
 
     def _create(self):
         try:
-            self.db.execute("PRAGMA journal_mode = WAL")
+            self._set_wal()
             self.db.execute("BEGIN IMMEDIATE")
             for statement in _SCHEMA.split(";"):
                 if statement.strip():
@@ -103,6 +104,19 @@ class Store:
             self.db.execute("COMMIT")
         except sqlite3.Error as exc:
             raise StoreError(f"cannot create the results database {self.path}: {exc}") from None
+
+    def _set_wal(self, patience_s: float = 60.0):
+        """WAL journaling lets several processes write; the pragma does not wait on a lock held
+        by another process creating the same database, so retry it."""
+        deadline = time.monotonic() + patience_s
+        while True:
+            try:
+                self.db.execute("PRAGMA journal_mode = WAL")
+                return
+            except sqlite3.OperationalError as exc:
+                if "locked" not in str(exc) or time.monotonic() > deadline:
+                    raise
+                time.sleep(0.02)
 
     def _check_meta(self):
         meta = dict(self.db.execute("SELECT key, value FROM fdbench_meta"))
