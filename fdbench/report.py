@@ -70,6 +70,10 @@ def _num(value, digits=3) -> str:
     return f"{value:.{digits}f}"
 
 
+def _paper_runtime(value) -> str:
+    return "-" if value is None else f"{value:g}"  # as published: 0.075, 41.59, 2439.15
+
+
 def _median_iqr(summary: dict, name: str, digits=3) -> str:
     med, iqr = summary.get(f"{name}_median"), summary.get(f"{name}_iqr")
     if summary.get("runs", 0) <= 1:
@@ -138,7 +142,7 @@ def _table(rows: list[Row], with_success: bool) -> list[str]:
         speedup = f"{row.speedup:,.0f}x" if math.isfinite(row.speedup) else "-"
         line = (f"| {row.name}{star} | {_median_iqr(row.summary, 'rmse_rot_deg')} | {_num(paper[0])} "
                 f"| {_median_iqr(row.summary, 'rmse_torque_nm')} | {_num(paper[1])} "
-                f"| {_median_iqr(row.summary, 'runtime_s', 4)} | {_num(paper[2], 2)} | {speedup} |")
+                f"| {_median_iqr(row.summary, 'runtime_s', 4)} | {_paper_runtime(paper[2])} | {speedup} |")
         if with_success:
             line += f" {row.summary['success_rate']:.0%} ({row.summary['runs']} runs) |"
         lines.append(line)

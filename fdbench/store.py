@@ -77,20 +77,25 @@ class Store:
         existed = self.path.exists() and self.path.stat().st_size > 0
         if existed:
             _check_header(self.path)
+        self.db = None
         try:
             self.db = sqlite3.connect(self.path, timeout=60, isolation_level=None)
             self.db.execute("PRAGMA busy_timeout = 60000")
             tables = {row[0] for row in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         except sqlite3.DatabaseError as exc:
+            self.close()
             raise StoreError(f"{self.path} is not an fdbench results database ({exc}); it was left untouched") from None
-        if existed and tables and "fdbench_meta" not in tables:
-            self.db.close()
-            raise StoreError(f"{self.path} is an SQLite database of something else (tables: "
-                             f"{', '.join(sorted(tables))}); it was left untouched")
-        if "fdbench_meta" in tables:
-            self._check_meta()
-        else:
-            self._create()
+        try:
+            if existed and tables and "fdbench_meta" not in tables:
+                raise StoreError(f"{self.path} is an SQLite database of something else (tables: "
+                                 f"{', '.join(sorted(tables))}); it was left untouched")
+            if "fdbench_meta" in tables:
+                self._check_meta()
+            else:
+                self._create()
+        except BaseException:
+            self.close()
+            raise
 
     def _create(self):
         try:
@@ -127,7 +132,9 @@ class Store:
                              f"reads version {SCHEMA_VERSION}: use another --db")
 
     def close(self):
-        self.db.close()
+        if getattr(self, "db", None) is not None:
+            self.db.close()
+            self.db = None
 
     # ---- reading -----------------------------------------------------------------------------
 

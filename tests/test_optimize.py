@@ -473,9 +473,6 @@ def test_bad_input_one_line_exit_2(args):
     check_one_line_error(result, option)
 
 
-@pytest.mark.xfail(reason="fdbench bug: an out-of-range --knots/--terms/--sigma0/--popsize is silently ignored "
-                          "(exit 0, a full run) unless the chosen --torque/--opt uses it, while --hidden 0 and "
-                          "--sigma0 nan are rejected whatever the method; see the report", strict=False)
 @pytest.mark.parametrize("args", [
     ["--torque", "cs", "--terms", "0"],
     ["--torque", "ann", "--knots", "3"],

@@ -288,11 +288,6 @@ def test_concurrent_writer_processes_all_succeed(tmp_path):
             assert store.get(spec.hash())["params"] == [float(w)]
 
 
-@pytest.mark.xfail(strict=False, reason=(
-    "fdbench/store.py Store._create: 'PRAGMA journal_mode = WAL' on a database that another process is "
-    "creating at the same moment fails at once with 'database is locked' (SQLite does not call the busy "
-    "handler for this journal-mode change), giving StoreError 'cannot create the results database'; "
-    "fix: retry the pragma until the busy timeout"))
 def test_concurrent_writers_creating_a_fresh_database(tmp_path):
     # several rounds make the race likely; every process must succeed
     n_proc, rounds = 6, 10
@@ -380,10 +375,6 @@ def test_foreign_file_is_refused_and_left_untouched(tmp_path, kind):
         assert _snapshot(tmp_path) == before  # and no file created beside it
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "fdbench/store.py Store.__init__ leaves its sqlite3 connection open when it refuses a database "
-    "(_check_meta raising, or sqlite3.DatabaseError on the first query): on an fdbench database in WAL "
-    "mode the -wal/-shm files stay while the exception lives; fix: close self.db before raising"))
 def test_refused_store_closes_its_connection(tmp_path):
     path = tmp_path / "results.sqlite"
     _future_version(path)

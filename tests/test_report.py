@@ -1,0 +1,500 @@
+"""``fdbench report``: the CSV and Markdown reports against the paper's published figures, the
+numbers of single ``optimize``/``control`` runs and the stored runs; resuming from the store (also
+after SIGKILL); the statistics; and bad usage. Every database lives in tmp_path."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import re
+import signal
+import sqlite3
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+import fdbench.benchmark
+from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
+from fdbench.cli import app
+from fdbench.report import CSV_COLUMNS
+
+# The paper's published figures, typed in from its text (section 5, Tables 2 and 3):
+# (RMSE_rot deg, RMSE_torque N m, runtime s).
+PAPER_PD = (0.116, 0.149, 0.075)
+PAPER_TABLE2 = {("ann", "cmaes"): (1.250, 0.149, 411.56), ("ann", "bfgs"): (0.310, 0.121, 449.37),
+                ("cs", "cmaes"): (0.558, 0.118, 29.03), ("cs", "bfgs"): (0.197, 0.116, 41.59)}
+PAPER_TABLE3 = {("ann", "cmaes"): (27.383, 0.366, 2439.15), ("ann", "bfgs"): (2.079, 0.009, 1482.89),
+                ("cs", "cmaes"): (1.284, 0.105, 35.53), ("cs", "bfgs"): (0.696, 0.046, 35.67),
+                ("pf", "cmaes"): (1.829, 0.012, 24.11), ("pf", "bfgs"): (1.816, 0.095, 17.09)}
+
+INDICATOR_COLUMNS = ["rmse_rot_deg_median", "rmse_rot_deg_iqr", "rmse_torque_nm_median", "rmse_torque_nm_iqr",
+                     "runtime_s_median", "runtime_s_iqr", "success_rate"]
+PAPER_COLUMNS = ["paper_rmse_rot_deg", "paper_rmse_torque_nm", "paper_runtime_s"]
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def invoke(*args, code=0):
+    result = CliRunner().invoke(app, [str(a) for a in args])
+    assert result.exit_code == code, result.stderr
+    return result
+
+
+def read_csv(text: str) -> pd.DataFrame:
+    """Parse exactly: pandas >= 3 round-trips floats by default (and deprecates the option)."""
+    exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+    return pd.read_csv(io.StringIO(text), **exact)
+
+
+def db_rows(path: Path, columns="id, spec_hash, seed, created_at, record_json, rmse_rot_deg, rmse_torque_nm"):
+    con = sqlite3.connect(path)
+    try:
+        return con.execute(f"SELECT {columns} FROM runs ORDER BY id").fetchall()
+    finally:
+        con.close()
+
+
+def db_count(path: Path) -> int:
+    con = sqlite3.connect(path)
+    try:
+        return con.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+    finally:
+        con.close()
+
+
+def stored_values(path: Path, torque, optimizer, feedforward, column="rmse_rot_deg") -> dict:
+    """{seed: value} of the stored optimisation runs of one cell, straight from SQLite."""
+    out = {}
+    for seed, spec_json, value in db_rows(path, f"seed, spec_json, {column}"):
+        spec = json.loads(spec_json)
+        if (spec["command"], spec["torque"], spec["optimizer"], spec["feedforward"]) == \
+                ("optimize", torque, optimizer, feedforward):
+            out[seed] = value
+    return out
+
+
+def cell_row(frame: pd.DataFrame, torque, optimizer, feedforward) -> pd.Series:
+    match = frame[(frame.torque == torque) & (frame.optimizer == optimizer) & (frame.feedforward == feedforward)]
+    assert len(match) == 1
+    return match.iloc[0]
+
+
+def control_row(frame: pd.DataFrame) -> pd.Series:
+    match = frame[frame.table.astype(str) == "control"]
+    assert len(match) == 1
+    return match.iloc[0]
+
+
+CS_BFGS = ["--torque", "cs", "--opt", "bfgs"]
+
+
+# ----------------------------------------------------------------------------- CSV
+
+
+def test_csv_report_one_row_per_cell_with_the_papers_values(tmp_path):
+    db = tmp_path / "r.sqlite"
+    result = invoke("report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1, "--format", "csv", "-q")
+    assert result.stdout.splitlines()[0] == ",".join(CSV_COLUMNS)
+    frame = read_csv(result.stdout)
+    assert list(frame.columns) == list(CSV_COLUMNS)
+    assert len(frame) == 3  # PD control, CS + BFGS without and with feedforward
+    for column in INDICATOR_COLUMNS + PAPER_COLUMNS + ["speedup_vs_paper", "dt"]:
+        assert pd.api.types.is_float_dtype(frame[column]), column
+    assert np.isfinite(frame[INDICATOR_COLUMNS + PAPER_COLUMNS + ["speedup_vs_paper"]].to_numpy()).all()
+    assert (frame.rmse_rot_deg_median > 0).all() and (frame.rmse_torque_nm_median > 0).all()
+    assert (frame.runtime_s_median > 0).all()
+    assert ((frame.success_rate >= 0) & (frame.success_rate <= 1)).all()
+    assert (frame.in_paper == True).all()  # noqa: E712
+    assert (frame.kinematics == "paper").all() and (frame.integrator == "rk4").all() and (frame.dt == 1e-3).all()
+
+    control = control_row(frame)
+    assert (control.runs, control.seeds) == (1, 1)
+    assert (control.paper_rmse_rot_deg, control.paper_rmse_torque_nm, control.paper_runtime_s) == PAPER_PD
+    assert PAPER_CONTROL == PAPER_PD
+    assert control.rmse_rot_deg_iqr == 0 and control.runtime_s_iqr == 0
+
+    for feedforward, table, paper in ((False, 2, PAPER_TABLE2), (True, 3, PAPER_TABLE3)):
+        row = cell_row(frame, "cs", "bfgs", feedforward)
+        assert str(row.table) == str(table)
+        assert (row.runs, row.seeds, row.budget) == (2, 2, 15)
+        published = (row.paper_rmse_rot_deg, row.paper_rmse_torque_nm, row.paper_runtime_s)
+        assert published == paper[("cs", "bfgs")] == PAPER_CELLS[("cs", "bfgs", feedforward)]
+        assert row.speedup_vs_paper == pytest.approx(row.paper_runtime_s / row.runtime_s_median, rel=1e-12)
+        # medians and IQRs are those of the stored runs of the cell
+        for name in ("rmse_rot_deg", "rmse_torque_nm", "runtime_s"):
+            values = list(stored_values(db, "cs", "bfgs", feedforward, name).values())
+            assert len(values) == 2
+            q1, q3 = np.percentile(values, [25, 75])
+            assert row[f"{name}_median"] == pytest.approx(statistics.median(values), rel=1e-12, abs=1e-15)
+            assert row[f"{name}_iqr"] == pytest.approx(q3 - q1, rel=1e-12, abs=1e-15)
+    assert db_count(db) == 5
+
+
+def test_every_paper_cell_of_the_default_matrix_carries_its_published_figures():
+    from fdbench.benchmark import default_cells
+
+    cells = default_cells()
+    assert {c.key for c in cells} == {(t, o, False) for t, o in PAPER_TABLE2} | {(t, o, True) for t, o in PAPER_TABLE3}
+    for cell in cells:
+        assert cell.paper == (PAPER_TABLE3 if cell.feedforward else PAPER_TABLE2)[(cell.torque, cell.optimizer)]
+
+
+def test_cell_outside_the_paper_has_no_paper_values(tmp_path):
+    db = tmp_path / "pf.sqlite"
+    args = ["report", "--db", db, "--torque", "pf", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", 1,
+            "--budget", 10, "--jobs", 1, "-q"]
+    frame = read_csv(invoke(*args, "--format", "csv").stdout)
+    assert len(frame) == 1
+    row = frame.iloc[0]
+    assert (row.torque, row.optimizer, bool(row.feedforward), bool(row.in_paper)) == ("pf", "bfgs", False, False)
+    assert all(math.isnan(row[c]) for c in PAPER_COLUMNS + ["speedup_vs_paper"])
+    text = invoke(*args, "--format", "md").stdout
+    assert "PF (4 terms) + BFGS quasi-Newton*" in text
+    assert "Cells marked * are not in the paper." in text
+    assert "## Table 3" not in text and "## PD control" not in text
+
+
+# ----------------------------------------------------------------------------- Markdown
+
+
+def _section(text: str, heading: str) -> str:
+    start = text.index(heading)
+    end = text.find("\n## ", start + 1)
+    return text[start:] if end < 0 else text[start:end]
+
+
+def _table_line(section: str, name: str) -> list[str]:
+    lines = [line for line in section.splitlines() if line.startswith(f"| {name} ")]
+    assert len(lines) == 1, section
+    return [cell.strip() for cell in lines[0].strip("|").split("|")]
+
+
+def test_markdown_sections_tables_and_figures(tmp_path):
+    db = tmp_path / "md.sqlite"
+    out = tmp_path / "out" / "report.md"
+    out.parent.mkdir()
+    figures = tmp_path / "figs"
+    result = invoke("report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+                    "--figures", figures, "--output", out, "-q")
+    assert result.stdout == ""
+    text = out.read_text()
+    headings = [line for line in text.splitlines() if line.startswith("## ")]
+    expected = ["## Settings", "## Inverse dynamics", "## PD control", "## Table 2", "## Table 3", "## Comparison",
+                "## Figures"]
+    assert [next(h for h in headings if h.startswith(e)) for e in expected] == \
+        [h for h in headings if any(h.startswith(e) for e in expected)]
+    assert len(headings) == len(expected)
+
+    settings = _section(text, "## Settings")
+    assert "| budget | 15 evaluations per optimisation |" in settings
+    assert "| seeds | 2 per cell (0 to 1) |" in settings
+    assert "| kinematics | paper |" in settings
+
+    pd_section = _section(text, "## PD control")
+    assert "Kp = 80.0" in pd_section and "Kd = 0.3" in pd_section
+    header = [c.strip() for c in pd_section.splitlines()[4].strip("|").split("|")]
+    assert header[:3] == ["method", "RMSE_rot (deg)", "paper"] and header.count("paper") == 3
+    pd_cells = _table_line(pd_section, "PD control + feedforward")
+    assert (pd_cells[2], pd_cells[4]) == ("0.116", "0.149")
+
+    for heading, paper in (("## Table 2", PAPER_TABLE2), ("## Table 3", PAPER_TABLE3)):
+        section = _section(text, heading)
+        assert "| method | RMSE_rot (deg) | paper |" in section and "success |" in section
+        cells = _table_line(section, "CS (11 points) + BFGS quasi-Newton")
+        rot, torque, runtime = paper[("cs", "bfgs")]
+        assert (cells[2], cells[4], cells[6]) == (f"{rot:.3f}", f"{torque:.3f}", f"{runtime:.2f}")
+        assert cells[-1].endswith("(2 runs)")
+        assert "±" in cells[1]  # median ± half IQR over 2 seeds
+
+    comparison = _section(text, "## Comparison")
+    assert "Most accurate:" in comparison and "Fastest:" in comparison
+
+    # one link per figure, each to a non-empty PNG, relative to the report's directory
+    links = re.findall(r"!\[([^\]]+)\]\(([^)]+)\)", _section(text, "## Figures"))
+    assert len(links) == 5
+    linked = set()
+    for _, target in links:
+        path = (out.parent / target).resolve()
+        assert not Path(target).is_absolute()
+        assert path.parent == figures.resolve()
+        assert path.stat().st_size > 1000 and path.read_bytes()[:8] == PNG_MAGIC
+        linked.add(path.name)
+    assert linked == {p.name for p in figures.iterdir()} == {
+        "figure2_inverse_dynamics.png", "figure5_tracking.png", "figure6_tracking.png",
+        "convergence_table2.png", "convergence_table3.png"}
+
+    # the same runs, Table 2 only: no Table 3 section, nothing computed
+    text2 = invoke("report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+                   "--no-feedforward", "--no-control", "-q").stdout
+    assert "## Table 2" in text2 and "## Table 3" not in text2 and "## PD control" not in text2
+    assert "## Figures" not in text2
+    assert db_count(db) == 5
+
+
+def test_markdown_shows_the_published_pd_runtime(tmp_path):
+    text = invoke("report", "--db", tmp_path / "pd.sqlite", *CS_BFGS, "--no-feedforward", "--seeds", 1,
+                  "--budget", 5, "--jobs", 1, "-q").stdout
+    cells = _table_line(_section(text, "## PD control"), "PD control + feedforward")
+    assert float(cells[6]) == PAPER_PD[2]
+
+
+def test_figures_without_output_are_linked_relative_to_the_working_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    text = invoke("report", "--db", "fig.sqlite", *CS_BFGS, "--no-feedforward", "--no-control", "--seeds", 1,
+                  "--budget", 5, "--jobs", 1, "--figures", "figs", "-q").stdout
+    links = re.findall(r"!\[[^\]]+\]\(([^)]+)\)", text)
+    assert links and all((tmp_path / link).is_file() and (tmp_path / link).stat().st_size > 0 for link in links)
+    assert all(Path(link).parts[0] == "figs" for link in links)
+
+
+# ----------------------------------------------------------------------------- resume and --rerun
+
+
+def test_resume_computes_nothing_and_rerun_recomputes(tmp_path, monkeypatch):
+    db = tmp_path / "resume.sqlite"
+    args = ["report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 2, "--format", "csv", "-q"]
+    first = invoke(*args).stdout
+    before = db_rows(db)
+    assert len(before) == 5 and len({r[1] for r in before}) == 5
+
+    def no_work(spec):
+        raise AssertionError(f"run {spec.hash()} recomputed")
+
+    monkeypatch.setattr(fdbench.benchmark, "_work", no_work)
+    second = invoke(*args).stdout
+    assert second == first
+    assert db_rows(db) == before  # same ids, timestamps and records
+
+    monkeypatch.undo()
+    third = invoke(*args, "--rerun").stdout
+    after = db_rows(db)
+    assert len(after) == 5
+    assert {r[1] for r in after} == {r[1] for r in before}
+    assert min(r[0] for r in after) > max(r[0] for r in before)  # every row replaced
+    frames = read_csv(first), read_csv(third)
+    for column in ("rmse_rot_deg_median", "rmse_rot_deg_iqr", "rmse_torque_nm_median", "success_rate"):
+        assert frames[1][column].tolist() == frames[0][column].tolist()  # deterministic runs, same numbers
+
+
+# ----------------------------------------------------------------------------- agreement with single runs
+
+
+def _json_run(*args) -> dict:
+    return json.loads(invoke(*args, "--format", "json", "-q").stdout)
+
+
+def test_report_numbers_equal_single_optimize_and_control_runs(tmp_path):
+    db = tmp_path / "same.sqlite"
+    frame = read_csv(invoke("report", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 2, "--budget", 15,
+                            "--jobs", 2, "--format", "csv", "-q").stdout)
+    alone = [_json_run("optimize", *CS_BFGS, "--seed", s, "--budget", 15) for s in (0, 1)]
+    pd_alone = _json_run("control")
+    for run in alone:
+        assert run["status"] == "success" and run["budget"] == 15
+
+    # each stored run equals the run made alone with its seed (worker processes change nothing)
+    stored = stored_values(db, "cs", "bfgs", False)
+    stored_torque = stored_values(db, "cs", "bfgs", False, "rmse_torque_nm")
+    for seed, run in enumerate(alone):
+        assert stored[seed] == run["rmse_rot_deg"]
+        assert stored_torque[seed] == run["rmse_torque_nm"]
+
+    row = cell_row(frame, "cs", "bfgs", False)
+    assert row.rmse_rot_deg_median == pytest.approx(statistics.median(r["rmse_rot_deg"] for r in alone), rel=1e-12)
+    assert row.rmse_torque_nm_median == pytest.approx(statistics.median(r["rmse_torque_nm"] for r in alone), rel=1e-12)
+    control = control_row(frame)
+    assert control.rmse_rot_deg_median == pd_alone["rmse_rot_deg"]
+    assert control.rmse_torque_nm_median == pd_alone["rmse_torque_nm"]
+
+
+def test_one_seed_cell_median_is_the_single_run(tmp_path):
+    frame = read_csv(invoke("report", "--db", tmp_path / "one.sqlite", *CS_BFGS, "--feedforward", "--no-control",
+                            "--seeds", 1, "--budget", 15, "--jobs", 1, "--format", "csv", "-q").stdout)
+    alone = _json_run("optimize", *CS_BFGS, "--feedforward", "--seed", 0, "--budget", 15)
+    row = cell_row(frame, "cs", "bfgs", True)
+    assert row.rmse_rot_deg_median == alone["rmse_rot_deg"]
+    assert row.rmse_torque_nm_median == alone["rmse_torque_nm"]
+    assert row.rmse_rot_deg_iqr == 0 and row.runs == 1
+
+
+def test_runs_stored_by_optimize_and_control_are_reused_by_report(tmp_path, monkeypatch):
+    db = tmp_path / "shared.sqlite"
+    single = _json_run("optimize", *CS_BFGS, "--seed", 0, "--budget", 15, "--db", db)
+    _json_run("control", "--db", db)
+    assert db_count(db) == 2
+
+    def no_work(spec):
+        raise AssertionError(f"run {spec.hash()} recomputed")
+
+    monkeypatch.setattr(fdbench.benchmark, "_work", no_work)
+    frame = read_csv(invoke("report", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 1, "--budget", 15,
+                            "--format", "csv", "-q").stdout)
+    assert db_count(db) == 2
+    assert cell_row(frame, "cs", "bfgs", False).rmse_rot_deg_median == single["rmse_rot_deg"]
+
+
+def test_seeded_cell_statistics_across_seeds(tmp_path):
+    # CMA-ES depends on its seed, so the median and IQR over seeds are not trivial
+    db = tmp_path / "cma.sqlite"
+    frame = read_csv(invoke("report", "--db", db, "--torque", "cs", "--opt", "cmaes", "--no-feedforward",
+                            "--no-control", "--seeds", 3, "--budget", 12, "--jobs", 1, "--format", "csv", "-q").stdout)
+    values = stored_values(db, "cs", "cmaes", False)
+    assert sorted(values) == [0, 1, 2]
+    assert len(set(values.values())) > 1
+    row = cell_row(frame, "cs", "cmaes", False)
+    q1, q3 = np.percentile(list(values.values()), [25, 75])
+    assert row.rmse_rot_deg_median == statistics.median(values.values())
+    assert row.rmse_rot_deg_iqr == pytest.approx(q3 - q1, rel=1e-12)
+    assert row.rmse_rot_deg_iqr > 0
+    alone = _json_run("optimize", "--torque", "cs", "--opt", "cmaes", "--seed", 2, "--budget", 12)
+    assert values[2] == alone["rmse_rot_deg"]
+
+
+# ----------------------------------------------------------------------------- SIGKILL and resume
+
+
+def _count_or_zero(db: Path) -> int:
+    if not db.exists():
+        return 0
+    try:
+        con = sqlite3.connect(db, timeout=5)
+        try:
+            return con.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+        finally:
+            con.close()
+    except sqlite3.OperationalError:  # the table is not created yet
+        return 0
+
+
+def test_sigkill_then_resume_stores_each_run_once(tmp_path):
+    db = tmp_path / "killed.sqlite"
+    seeds = 16
+    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--db", str(db), *CS_BFGS, "--no-feedforward",
+           "--no-control", "--seeds", str(seeds), "--budget", "400", "--jobs", "1", "--format", "csv", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline and _count_or_zero(db) < 2:
+            time.sleep(0.005)
+        assert proc.poll() is None, "the report finished before it could be killed: give it more work"
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    before = db_rows(db)
+    assert 2 <= len(before) < seeds, "killed too late to test resuming"
+    max_id = max(r[0] for r in before)
+
+    out = tmp_path / "report.csv"
+    done = subprocess.run(cmd + ["--output", str(out)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    after = db_rows(db)
+    con = sqlite3.connect(db)
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    con.close()
+    assert len(after) == len({r[1] for r in after}) == seeds
+    assert sorted(r[2] for r in after) == list(range(seeds))
+    new = [r for r in after if r[0] > max_id]
+    assert len(before) + len(new) == seeds  # only the missing runs were computed
+    assert [r for r in after if r[0] <= max_id] == before  # the runs stored before the kill are untouched
+    frame = read_csv(out.read_text())
+    assert len(frame) == 1 and frame.iloc[0].runs == seeds
+
+
+# ----------------------------------------------------------------------------- summarise
+
+
+def _records(values, **extra):
+    return [dict({"rmse_rot_deg": v, "rmse_torque_nm": v, "runtime_s": v, "status": "success"}, **extra)
+            for v in values]
+
+
+def test_summarise_median_and_iqr_by_hand_and_numpy():
+    # [1, 2, 3, 4]: median 2.5; quartiles by linear interpolation 1.75 and 3.25, IQR 1.5
+    s = summarise(_records([4.0, 1.0, 3.0, 2.0]))
+    assert s["runs"] == 4
+    for name in ("rmse_rot_deg", "rmse_torque_nm", "runtime_s"):
+        assert s[f"{name}_median"] == 2.5 and s[f"{name}_iqr"] == 1.5
+    s = summarise(_records([3.0, 1.0, 2.0]))
+    assert (s["rmse_rot_deg_median"], s["rmse_rot_deg_iqr"]) == (2.0, 1.0)
+    s = summarise(_records([0.7]))
+    assert (s["rmse_rot_deg_median"], s["rmse_rot_deg_iqr"]) == (0.7, 0.0)
+    rng = np.random.default_rng(7)
+    for n in (2, 5, 10, 11):
+        values = rng.lognormal(size=n)
+        s = summarise(_records(values.tolist()))
+        assert s["rmse_rot_deg_median"] == pytest.approx(np.median(values), rel=1e-15)
+        assert s["rmse_rot_deg_iqr"] == pytest.approx(np.subtract(*np.percentile(values, [75, 25])), rel=1e-12)
+
+
+def test_summarise_ignores_missing_and_non_finite_values():
+    s = summarise(_records([1.0, None, 3.0, float("nan"), float("inf")]))
+    assert s["runs"] == 5
+    assert s["rmse_rot_deg_median"] == 2.0 and s["rmse_rot_deg_iqr"] == 1.0
+    s = summarise(_records([None, None]))
+    assert math.isnan(s["rmse_rot_deg_median"]) and math.isnan(s["rmse_rot_deg_iqr"])
+    s = summarise([])
+    assert s["runs"] == 0 and math.isnan(s["success_rate"])
+
+
+def test_success_rate_counts_successful_runs_that_beat_the_initial_guess():
+    records = [
+        {"status": "success", "best_objective": 1.0, "initial_objective": 2.0},  # yes
+        {"status": "success", "best_objective": 0.5, "initial_objective": 0.6},  # yes
+        {"status": "success", "best_objective": 2.0, "initial_objective": 2.0},  # no improvement
+        {"status": "success", "best_objective": 3.0, "initial_objective": 2.0},  # worse
+        {"status": "penalty", "best_objective": 1.0, "initial_objective": 2.0},  # did not reach t = 1 s
+        {"status": "solver", "best_objective": 1.0, "initial_objective": 2.0},
+        {"status": None, "best_objective": 1.0, "initial_objective": 2.0},
+        {"status": "success"},  # a control run: nothing to beat
+    ]
+    expected = [True, True, False, False, False, False, False, True]
+    assert [succeeded(r) for r in records] == expected
+    assert summarise(records)["success_rate"] == 3 / 8
+    assert summarise(records[:2])["success_rate"] == 1.0
+    assert summarise(records[2:7])["success_rate"] == 0.0
+
+
+# ----------------------------------------------------------------------------- bad usage
+
+
+BAD = {
+    "seeds-0": (["--seeds", "0"], "--seeds"),
+    "seeds-negative": (["--seeds", "-3"], "--seeds"),
+    "jobs-0": (["--jobs", "0"], "--jobs"),
+    "unknown-torque": (["--torque", "spline"], "--torque"),
+    "unknown-opt": (["--opt", "adam"], "--opt"),
+    "format-xml": (["--format", "xml"], "--format"),
+    "budget-0": (["--budget", "0"], "--budget"),
+    "figures-missing-parent": (["--figures", "{tmp}/missing/figs"], "--figures"),
+    "output-missing-parent": (["--output", "{tmp}/missing/report.md"], "--output"),
+    "db-missing-parent": (["--db", "{tmp}/missing/r.sqlite"], "--db"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_usage_exits_2_with_one_line(tmp_path, case, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    extra, option = BAD[case]
+    extra = [a.replace("{tmp}", str(tmp_path)) for a in extra]
+    args = ["report", *CS_BFGS, "--seeds", "1", "--budget", "5", "--jobs", "1", "-q"]
+    if "--db" not in extra:
+        args += ["--db", str(tmp_path / "bad.sqlite")]
+    result = CliRunner().invoke(app, args + extra)
+    assert result.exit_code == 2, result.stderr
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error: ")
+    assert option in lines[0]
+    assert result.stdout == ""
+    assert list(tmp_path.iterdir()) == []  # nothing created: no database, no report, no figures
