@@ -63,6 +63,7 @@ class FdbenchGroup(TyperGroup):
 
 
 def _error(message: str, code: int = 1) -> int:
+    message = " ".join(message.split())  # one line, whatever a path or a library put in it
     sys.stderr.write(f"fdbench: error: {message}\n")
     sys.stderr.flush()
     return code
@@ -97,7 +98,7 @@ def _root(
 
 Kinematics = Annotated[str, typer.Option("--kinematics", help=KINEMATICS_HELP)]
 Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
-Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in (0, 0.1].")]
+Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in [1e-6, 0.1].")]
 Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators).")]
 Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators).")]
 Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12.")]
@@ -244,13 +245,28 @@ def _save_history(outcome, path) -> None:
         write_atomic(path, _history_text(outcome), "--save-history")
 
 
+def _check_store(db: Optional[Path]) -> None:
+    """Refuse an unusable --db before any work starts."""
+    if db is not None:
+        from .store import StoreError, open_store
+
+        try:
+            with open_store(db):
+                pass
+        except StoreError as exc:
+            raise BadInput(f"--db: {exc}") from None
+
+
 def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
     if db is None:
         return
-    from .store import open_store
+    from .store import StoreError, open_store
 
-    with open_store(db) as store:
-        store.add(spec, outcome)
+    try:
+        with open_store(db) as store:
+            store.add(spec, outcome)
+    except StoreError as exc:
+        raise BadInput(f"--db: {exc}") from None
     _say(quiet, f"stored in {db}")
 
 
@@ -357,6 +373,7 @@ def control(
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db)
     spec = _validated(control_spec(kp, kd, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    _check_store(db)
     outcome = run(spec)
     _save_history(outcome, save_history)
     _store(outcome, spec, db, quiet)
@@ -462,6 +479,7 @@ def optimize(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
         penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
     ))
+    _check_store(db)
     with _progress(quiet, f"{torque} + {opt}") as progress:
         outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)
     if "hidden_fits" in outcome.extra:

@@ -26,6 +26,8 @@ TorqueFunction = Callable[[np.ndarray], np.ndarray]
 SCIPY_METHODS = {"rk45": "RK45", "dop853": "DOP853", "lsoda": "LSODA", "radau": "Radau", "bdf": "BDF"}
 INTEGRATORS = ("rk4",) + tuple(SCIPY_METHODS)
 MAX_DT = 0.1  # s
+MIN_DT = 1e-6  # s: a million steps per simulation
+PENALTY_RANGES = {"alpha": (1.0, 1e15), "xi": (0.0, 1e6), "omega": (1e-6, 1e6)}  # sensible, and no overflow
 MIN_RTOL = 100 * np.finfo(float).eps  # scipy's own floor for rtol
 MAX_RHS_EVALUATIONS = 100_000  # an adaptive integrator that needs more has met a stiff or broken problem
 
@@ -99,18 +101,16 @@ class Settings:
     def __post_init__(self):
         check_kinematics(self.kinematics)
         check_integrator(self.integrator)
-        if not (0 < self.dt <= MAX_DT):
-            raise ValueError(f"dt must be in (0, {MAX_DT}] s, got {self.dt}")
+        if not (MIN_DT <= self.dt <= MAX_DT):
+            raise ValueError(f"dt must be in [{MIN_DT:g}, {MAX_DT:g}] s, got {self.dt}")
         if not (math.isfinite(self.rtol) and MIN_RTOL <= self.rtol < 1):
             raise ValueError(f"rtol must be in [{MIN_RTOL:.2g}, 1), got {self.rtol}")
         if not (math.isfinite(self.atol) and self.atol > 0):
             raise ValueError(f"atol must be positive and finite, got {self.atol}")
-        for name in ("alpha", "omega"):
+        for name, (low, high) in PENALTY_RANGES.items():
             value = getattr(self.penalty, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be positive and finite, got {value}")
-        if not (math.isfinite(self.penalty.xi) and self.penalty.xi >= 0):
-            raise ValueError(f"xi must be non-negative and finite, got {self.penalty.xi}")
+            if not (math.isfinite(value) and low <= value <= high):
+                raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value}")
 
 
 def check_integrator(name: str) -> str:

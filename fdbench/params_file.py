@@ -9,6 +9,7 @@ import numpy as np
 
 from . import __version__
 from .files import BadFile
+from .motion import check_kinematics
 
 
 def params_json(spec, outcome) -> str:
@@ -37,7 +38,10 @@ def load_torque(path, model, option: str = "--params"):
     try:
         data = json.loads(path.read_text())
         name, params = data["torque"], np.asarray(data["params"], dtype=float)
-        options, ff, kinematics = dict(data.get("torque_options", {})), bool(data["feedforward"]), data["kinematics"]
+        options, ff, kinematics = dict(data.get("torque_options", {})), data["feedforward"], data["kinematics"]
+        if not isinstance(ff, bool):
+            raise ValueError("feedforward (true or false)")
+        check_kinematics(kinematics)
     except FileNotFoundError:
         raise BadFile(f"{option}: {path} does not exist") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:

@@ -17,7 +17,7 @@ from fdbench.cli import app
 from fdbench.experiment import optimize_spec, run
 from fdbench.integrate import Settings, simulate
 from fdbench.inverse import Feedforward, inverse_dynamics
-from fdbench.optimizers import OPTIMIZERS, BudgetExhausted, Optimizer, make_optimizer
+from fdbench.optimizers import OPTIMIZERS, Optimizer, make_optimizer
 from fdbench.problem import TrackingProblem
 from fdbench.torques import TORQUES, TorqueParameterisation, make_torque
 

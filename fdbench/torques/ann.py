@@ -81,7 +81,7 @@ class AnnTorque(TorqueParameterisation):
     summary = "neural network, one hidden layer of --hidden tanh neurons (default 4), 3N+1 parameters"
 
     def __init__(self, hidden: int = 4):
-        self.hidden = check_count("--hidden", hidden, 1)
+        self.hidden = check_count("--hidden", hidden, 1, 50)
         self.n_params = 3 * self.hidden + 1
         self.offset, self.span = 0.0, 1.0
         self.fit_rmse = float("nan")  # of the pre-training, scaled units

@@ -58,7 +58,7 @@ def make_torque(name: str, **options) -> TorqueParameterisation:
     return cls(**{k: v for k, v in options.items() if k in accepted and v is not None})
 
 
-def check_count(option: str, value: int, minimum: int) -> int:
-    if not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{option} must be an integer >= {minimum}, got {value}")
+def check_count(option: str, value: int, minimum: int, maximum: int = 10**6) -> int:
+    if not isinstance(value, (int, np.integer)) or not minimum <= value <= maximum:
+        raise ValueError(f"{option} must be an integer in [{minimum}, {maximum}], got {value}")
     return int(value)

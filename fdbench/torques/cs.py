@@ -16,7 +16,7 @@ class CubicSplineTorque(TorqueParameterisation):
     summary = "cubic spline through the torque at --knots equally spaced instants (default 11)"
 
     def __init__(self, knots: int = 11):
-        self.knots = check_count("--knots", knots, 4)
+        self.knots = check_count("--knots", knots, 4, 1000)
         self.n_params = self.knots
         self.t_knots = np.linspace(0.0, 1.0, self.knots)
         self._scale = 1.0

@@ -18,7 +18,7 @@ class GaussianSumTorque(TorqueParameterisation):
     summary = "sum of --terms Gaussian bumps A exp(-C (t - T)^2), 3 parameters each (default 4)"
 
     def __init__(self, terms: int = 4):
-        self.terms = check_count("--terms", terms, 1)
+        self.terms = check_count("--terms", terms, 1, 100)
         self.n_params = 3 * self.terms
         self._amplitude = 1.0
 
