@@ -45,13 +45,14 @@ def kernel_constants(model: Forearm, penalty: Penalty, cos_tol=COS_TOL, violatio
 def accelerations(x, y, th, vx, vy, w, tau, consts):
     """q'' of eq. 12 for the state (q, q') and elbow torque tau (N m).
 
-    Returns (x2'', y2'', theta'', ok); ok is False where cos(theta) is below the tolerance.
+    Returns (x2'', y2'', theta'', cos(theta)); the accelerations are zero where |cos(theta)| is
+    below the tolerance consts[6] (the singular leading matrix).
     """
     a, L, load_y, alpha, two_xi_omega, omega2 = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
     s, c = math.sin(th), math.cos(th)
     lc = L * c
     if abs(c) < consts[6]:
-        return 0.0, 0.0, 0.0, False
+        return 0.0, 0.0, 0.0, c
     # c = Phi_q' q' + 2 xi omega Phi' + omega^2 Phi, one entry per constraint
     c1 = 2 * vx * vx + 2 * vy * vy + two_xi_omega * (2 * x * vx + 2 * y * vy) + omega2 * (x * x + y * y - L * L)
     c2 = L * s * w * w + two_xi_omega * (vy - lc * w) + omega2 * (y - L * s)
@@ -62,7 +63,7 @@ def accelerations(x, y, th, vx, vy, w, tau, consts):
     ax = ((a + 4 * alpha * y * y) * b1 - 4 * alpha * x * y * b2) / det
     ay = ((a + 4 * alpha * x * x) * b2 - 4 * alpha * x * y * b1) / det
     ath = tau / (alpha * lc * lc) + (c2 + ay) / lc
-    return ax, ay, ath, True
+    return ax, ay, ath, c
 
 
 @njit(cache=True)
@@ -72,13 +73,15 @@ def constraint_violation(x, y, th, L):
 
 
 @njit(cache=True)
-def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, out):
-    """State derivative for state = [q, q'] with PD torque added; returns ok."""
+def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
+    """State derivative for state = [q, q'] with PD torque added. Returns False where theta is
+    at the singularity: |cos(theta)| below tolerance, or cos(theta) of another sign than c0
+    (a step that jumped over cos(theta) = 0)."""
     total = tau + kp * (ref_th - state[2]) + kd * (ref_w - state[5])
-    ax, ay, ath, ok = accelerations(state[0], state[1], state[2], state[3], state[4], state[5], total, consts)
+    ax, ay, ath, c = accelerations(state[0], state[1], state[2], state[3], state[4], state[5], total, consts)
     out[0], out[1], out[2] = state[3], state[4], state[5]
     out[3], out[4], out[5] = ax, ay, ath
-    return ok
+    return abs(c) >= consts[6] and c * c0 > 0.0
 
 
 @njit(cache=True)
@@ -97,7 +100,8 @@ def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, stat
     max_viol = constraint_violation(y[0], y[1], y[2], L)
     for i in range(n_steps + 1):
         j = 2 * i
-        ok = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp, kd, consts, k1)
+        c0 = math.cos(y[2])
+        ok = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp, kd, consts, c0, k1)
         for m in range(6):
             states[i, m] = y[m]
         qdd[i, 0], qdd[i, 1], qdd[i, 2] = k1[3], k1[4], k1[5]
@@ -106,20 +110,15 @@ def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, stat
             return SINGULAR, i, max_viol
         if i == n_steps:
             break
-        # a step may jump over cos(theta) = 0: a sign change of cos(theta) is the singularity too
-        c0 = math.cos(y[2])
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        ok = math.cos(tmp[2]) * c0 > 0.0
-        ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k2)
+        ok = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k2)
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k2[m]
-        ok = ok and math.cos(tmp[2]) * c0 > 0.0
-        ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, k3)
+        ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k3)
         for m in range(6):
             tmp[m] = y[m] + dt * k3[m]
-        ok = ok and math.cos(tmp[2]) * c0 > 0.0
-        ok = ok and _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, k4)
+        ok = ok and _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, c0, k4)
         if not ok:
             return SINGULAR, i, max_viol
         finite = True
@@ -128,7 +127,7 @@ def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, stat
             finite = finite and math.isfinite(tmp[m])
         if not finite:
             return NONFINITE, i, max_viol
-        if math.cos(tmp[2]) * c0 <= 0.0:
+        if math.cos(tmp[2]) * c0 <= 0.0:  # the step itself jumped over cos(theta) = 0
             return SINGULAR, i, max_viol
         viol = constraint_violation(tmp[0], tmp[1], tmp[2], L)
         if viol > viol_tol:

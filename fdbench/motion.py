@@ -17,8 +17,12 @@ KINEMATICS = ("paper", "exact")
 
 
 def sample_times() -> np.ndarray:
-    """The 1001 sample instants 0, 1 ms, ..., 1 s."""
-    return np.linspace(0.0, T_FINAL, int(round(T_FINAL / SAMPLE_DT)) + 1)
+    """The 1001 sample instants 0, 1 ms, ..., 1 s (a read-only array)."""
+    return _SAMPLES
+
+
+_SAMPLES = np.linspace(0.0, T_FINAL, int(round(T_FINAL / SAMPLE_DT)) + 1)
+_SAMPLES.flags.writeable = False
 
 
 def check_kinematics(kinematics: str) -> str:

@@ -79,8 +79,8 @@ def test_compiled_accelerations_match_dense_solve(theta, dx, dy, v, tau, log_alp
     q = np.array([model.L12 * math.cos(theta) + dx, model.L12 * math.sin(theta) + dy, theta])
     qd = np.array(v)
     expected = numpy_accelerations(model, penalty, q, qd, tau)
-    ax, ay, ath, ok = accelerations(*q, *qd, tau, kernel_constants(model, penalty))
-    assert ok
+    ax, ay, ath, cos_theta = accelerations(*q, *qd, tau, kernel_constants(model, penalty))
+    assert cos_theta == pytest.approx(math.cos(theta), rel=1e-12)
     got = np.array([ax, ay, ath])
     scale = np.max(np.abs(expected))
     np.testing.assert_allclose(got, expected, rtol=1e-7, atol=1e-9 * scale)
@@ -89,10 +89,9 @@ def test_compiled_accelerations_match_dense_solve(theta, dx, dy, v, tau, log_alp
 def test_accelerations_flag_singular_theta():
     consts = kernel_constants(Forearm(), Penalty())
     L = Forearm().L12
-    *_, ok = accelerations(0.0, L, math.pi / 2, 0.0, 0.0, 0.0, 1.0, consts)
-    assert not ok
-    *_, ok = accelerations(0.0, -L, -math.pi / 2 + 1e-5, 0.0, 0.0, 0.0, 1.0, consts)
-    assert not ok
+    for theta in (math.pi / 2, -math.pi / 2 + 1e-5):
+        *_, cos_theta = accelerations(0.0, L * math.sin(theta), theta, 0.0, 0.0, 0.0, 1.0, consts)
+        assert abs(cos_theta) < consts[6]  # the caller's test for the singular leading matrix
 
 
 # ----------------------------------------------------------------------------- open loop
