@@ -45,6 +45,12 @@ class FdbenchGroup(TyperGroup):
                 _error("interrupted")
         except BadInput as exc:
             code = _error(str(exc), 2)
+        except ImportError as exc:
+            from .registry import PluginError
+
+            if not isinstance(exc, PluginError):
+                raise
+            code = _error(str(exc), 2)
         except KeyboardInterrupt:
             code = _error("interrupted", 130)
         except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback

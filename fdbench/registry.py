@@ -55,3 +55,38 @@ def unknown_name_message(kind: str, name: str, valid: list[str]) -> str:
     text = f"unknown {kind} {name!r}; valid: {', '.join(valid)}"
     close = difflib.get_close_matches(str(name), valid, n=1)
     return text + (f" (did you mean {close[0]!r}?)" if close else "")
+
+
+PLUGINS_VARIABLE = "FDBENCH_PLUGINS"
+ENTRY_POINT_GROUP = "fdbench.plugins"
+_plugins_loaded = False
+
+
+class PluginError(ImportError):
+    """A plugin module that cannot be imported; the message names it."""
+
+
+def load_plugins() -> None:
+    """Import, once, the modules that register extra torques or optimisers: those named in
+    $FDBENCH_PLUGINS (comma-separated module names) and the entry points of the group
+    ``fdbench.plugins`` of installed packages."""
+    global _plugins_loaded
+    if _plugins_loaded:
+        return
+    _plugins_loaded = True
+    import importlib
+    import os
+
+    names = [n.strip() for n in os.environ.get(PLUGINS_VARIABLE, "").split(",") if n.strip()]
+    for name in names:
+        try:
+            importlib.import_module(name)
+        except Exception as exc:  # noqa: BLE001 - any failure of a plugin is reported the same way
+            raise PluginError(f"{PLUGINS_VARIABLE}: cannot import {name!r}: {exc}") from None
+    from importlib.metadata import entry_points
+
+    for entry in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            entry.load()
+        except Exception as exc:  # noqa: BLE001
+            raise PluginError(f"plugin {entry.name!r} ({entry.value}): cannot load: {exc}") from None
