@@ -176,7 +176,7 @@ def _console(stderr: bool = True):
 
 def _say(quiet: bool, text: str) -> None:
     if not quiet:
-        _console().print(text)
+        _console().print(text, soft_wrap=True)
 
 
 def _jsonable(record: dict) -> dict:
