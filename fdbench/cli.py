@@ -20,6 +20,7 @@ import typer
 from typer.core import TyperGroup
 
 from . import __version__
+from .registry import PluginError
 
 _STARTED = time.perf_counter()
 
@@ -45,11 +46,7 @@ class FdbenchGroup(TyperGroup):
                 _error("interrupted")
         except BadInput as exc:
             code = _error(str(exc), 2)
-        except ImportError as exc:
-            from .registry import PluginError
-
-            if not isinstance(exc, PluginError):
-                raise
+        except PluginError as exc:
             code = _error(str(exc), 2)
         except KeyboardInterrupt:
             code = _error("interrupted", 130)
@@ -60,11 +57,11 @@ class FdbenchGroup(TyperGroup):
                     sys.exit(exc.exit_code)
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
-                code = _error(where + message.replace("\n", " "), exc.exit_code)
+                code = _error(where + message, exc.exit_code)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:
-                code = _error(f"{type(exc).__name__}: {exc}".replace("\n", " "), 1)
+                code = _error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(code)
 
 
@@ -107,7 +104,7 @@ Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
 Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in [1e-6, 0.1].")]
 Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators).")]
 Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators).")]
-Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12.")]
+Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12, in [1, 1e15].")]
 Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12.")]
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
 Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
@@ -116,9 +113,9 @@ SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Wri
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
 Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, gradient evaluations included.")]
-Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons, or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
-Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots, equally spaced over [0, 1] s (>= 4).")]
-Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps), 3 parameters each.")]
+Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
+Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over [0, 1] s.")]
+Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
 Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size (default: cma's 4 + 3 ln n).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")]
