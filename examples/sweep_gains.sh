@@ -38,37 +38,4 @@ for kp in "${kp_values[@]}"; do
 done
 mv "$tmp" "$out"
 
-# a short summary on stderr: RMSE of rotation (deg) by Kp (rows) and Kd (columns)
-awk -v kps="${kp_values[*]}" -v kds="${kd_values[*]}" '
-function parse_csv(line, fields,    n, i, c, field, inq) {   # RFC 4180 fields, no embedded newlines
-    n = 0; field = ""; inq = 0
-    for (i = 1; i <= length(line); i++) {
-        c = substr(line, i, 1)
-        if (inq) {
-            if (c == "\"") {
-                if (substr(line, i + 1, 1) == "\"") { field = field "\""; i++ } else inq = 0
-            } else field = field c
-        } else if (c == "\"") inq = 1
-        else if (c == ",") { fields[++n] = field; field = "" }
-        else field = field c
-    }
-    fields[++n] = field
-    return n
-}
-NR == 1 { n = parse_csv($0, h); for (i = 1; i <= n; i++) col[h[i]] = i; next }
-{ parse_csv($0, f); rmse[f[col["kp"]] + 0, f[col["kd"]] + 0] = f[col["rmse_rot_deg"]]; status[f[col["kp"]] + 0, f[col["kd"]] + 0] = f[col["status"]] }
-END {
-    nkp = split(kps, kp, " "); nkd = split(kds, kd, " ")
-    printf "RMSE of rotation, deg (rows: Kp, N m/rad; columns: Kd, N m s/rad)\n%8s", "Kp \\ Kd"
-    for (j = 1; j <= nkd; j++) printf " %10s", kd[j]
-    printf "\n"
-    for (i = 1; i <= nkp; i++) {
-        printf "%8s", kp[i]
-        for (j = 1; j <= nkd; j++) {
-            v = rmse[kp[i] + 0, kd[j] + 0]; s = status[kp[i] + 0, kd[j] + 0]
-            printf " %10s", (s == "success" ? sprintf("%.4g", v) : s)
-        }
-        printf "\n"
-    }
-}' "$out" >&2
 echo "wrote $out ($runs runs)" >&2
