@@ -411,6 +411,35 @@ def test_sigkill_then_resume_stores_each_run_once(tmp_path):
     assert len(frame) == 1 and frame.iloc[0].runs == seeds
 
 
+def test_ctrl_c_stops_with_130_and_keeps_every_stored_run(tmp_path):
+    db = tmp_path / "interrupted.sqlite"
+    seeds = 24
+    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--db", str(db), *CS_BFGS, "--no-feedforward",
+           "--no-control", "--seeds", str(seeds), "--budget", "400", "--jobs", "2", "--format", "csv"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline and _count_or_zero(db) < 2:
+            time.sleep(0.005)
+        assert proc.poll() is None, "the report finished before it could be interrupted: give it more work"
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130
+    assert stdout == "" and stderr.strip().splitlines()[-1] == "fdbench: error: interrupted"
+    assert "Traceback" not in stderr
+    kept = db_rows(db)
+    assert 2 <= len(kept) < seeds
+    done = subprocess.run(cmd + ["-q"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    after = db_rows(db)
+    assert len(after) == len({r[1] for r in after}) == seeds
+    assert [r for r in after if r[0] <= max(r[0] for r in kept)] == kept  # nothing stored was lost or redone
+
+
 # ----------------------------------------------------------------------------- summarise
 
 
