@@ -5,7 +5,7 @@ one by one as they finish, so an interrupted benchmark resumes where it stopped.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -195,8 +195,3 @@ def summarise(records: list[dict]) -> dict:
     out["success_rate"] = sum(succeeded(r) for r in records) / len(records) if records else float("nan")
     return out
 
-
-def with_settings(plan: Plan, **changes) -> Plan:  # pragma: no cover - convenience for scripts
-    control = replace(plan.control, **changes) if plan.control else None
-    specs = {c: tuple(replace(s, **changes) for s in ss) for c, ss in plan.specs.items()}
-    return Plan(control, plan.cells, specs)

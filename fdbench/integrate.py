@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
 from typing import Callable
@@ -63,7 +63,6 @@ class SimulationResult:
     runtime_s: float = 0.0
     detail: str = ""
     rhs_evaluations: int = 0
-    extra: dict = field(default_factory=dict)
 
     @property
     def theta(self) -> np.ndarray:
@@ -122,7 +121,8 @@ def check_integrator(name: str) -> str:
 
 
 @lru_cache(maxsize=16)
-def _constants(settings: Settings) -> np.ndarray:
+def constants(settings: Settings) -> np.ndarray:
+    """The kernels' constants for these settings (cached), shape (8,)."""
     from . import dynamics
 
     return dynamics.kernel_constants(settings.model, settings.penalty)
@@ -185,7 +185,7 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     states = np.full((n + 1, 6), np.nan)
     qdd = np.full((n + 1, 3), np.nan)
     applied = np.full(n + 1, np.nan)
-    consts = _constants(settings)
+    consts = constants(settings)
     code, done, max_viol = dynamics.rk4(
         initial_state(settings.kinematics, settings.model), dt, n, tau, ref_th, ref_w,
         float(kp), float(kd), consts, states, qdd, applied,
@@ -228,7 +228,7 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
 
     from . import dynamics
 
-    consts = _constants(settings)
+    consts = constants(settings)
     accel = dynamics.accelerations
     kinematics = settings.kinematics
     closed_loop = kp != 0 or kd != 0

@@ -8,7 +8,8 @@ import math
 import numpy as np
 
 from .indicators import rmse_rot_deg, rmse_torque_nm
-from .integrate import Settings, SimulationResult, half_step_reference, simulate, simulate_rk4_on_grid, steps
+from .integrate import (Settings, SimulationResult, constants, half_step_reference, initial_state, simulate,
+                        simulate_rk4_on_grid, steps)
 from .inverse import Feedforward, inverse_dynamics
 from .motion import T_FINAL
 from .torques import TorqueParameterisation
@@ -78,7 +79,6 @@ class TrackingProblem:
         """Eq. 18 straight from the kernel's buffers (the same numbers as ``objective_of``
         of ``simulate``, without building a SimulationResult)."""
         from . import dynamics
-        from .integrate import _constants, initial_state
 
         settings = self.settings
         _, ref_th, ref_w = half_step_reference(self._n, settings.kinematics)
@@ -86,7 +86,7 @@ class TrackingProblem:
             tau = self._ff_half + self._on_grid(p)
         states, qdd, applied = self._buffers
         _, done, _ = dynamics.rk4(initial_state(settings.kinematics, settings.model), T_FINAL / self._n, self._n,
-                                  tau, ref_th, ref_w, 0.0, 0.0, _constants(settings), states, qdd, applied)
+                                  tau, ref_th, ref_w, 0.0, 0.0, constants(settings), states, qdd, applied)
         theta = states[: done + 1 : self._every, 2]
         error = np.degrees(theta - self.inverse.theta[: len(theta)])
         rmse = float(np.sqrt(np.mean(error**2)))

@@ -102,9 +102,6 @@ class Optimizer(ABC):
     def warm_up(self) -> None:
         """Import what the optimiser needs, so that its timing excludes start-up costs."""
 
-    def describe(self) -> str:
-        return f"{self.name}: {self.summary}"
-
 
 OPTIMIZERS: Registry[type[Optimizer]] = Registry("optimizer")
 

@@ -43,9 +43,6 @@ class TorqueParameterisation(ABC):
         """A fast evaluator p -> torque on the fixed times t (override to precompute)."""
         return lambda p: self.evaluate(p, t)
 
-    def describe(self) -> str:
-        return f"{self.name}: {self.summary}"
-
 
 TORQUES: Registry[type[TorqueParameterisation]] = Registry("torque")
 
