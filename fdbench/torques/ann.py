@@ -107,3 +107,14 @@ class AnnTorque(TorqueParameterisation):
     def evaluate(self, p, t):
         t = np.asarray(t, dtype=float)
         return self.offset + self.span * network(np.asarray(p, dtype=float), 2 * t - 1, self.hidden)
+
+    def on_grid(self, t):
+        # [x, 1] @ [w; b] is one small matrix product, several times faster than np.outer + b
+        inputs = np.column_stack([2 * np.asarray(t, dtype=float) - 1, np.ones(len(t))])
+        n_h = self.hidden
+
+        def evaluate(p):
+            hidden = np.tanh(inputs @ p[: 2 * n_h].reshape(2, n_h))
+            return self.offset + self.span * (hidden @ p[2 * n_h : 3 * n_h] + p[3 * n_h])
+
+        return evaluate
