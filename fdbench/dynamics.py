@@ -17,6 +17,10 @@ from numba import njit
 
 from .model import Forearm, Penalty
 
+# floating-point licences for the kernels: reassociation, contraction and reciprocals, but
+# not 'no NaN / no infinity', which would let the compiler drop the failure checks
+FAST = {"reassoc", "contract", "arcp", "nsz"}
+
 # status codes shared by the kernels and integrate.py
 OK, NONFINITE, SINGULAR, CONSTRAINT = 0, 1, 2, 3
 
@@ -41,7 +45,7 @@ def kernel_constants(model: Forearm, penalty: Penalty, cos_tol=COS_TOL, violatio
     )
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def accelerations(x, y, th, vx, vy, w, tau, consts):
     """q'' of eq. 12 for the state (q, q') and elbow torque tau (N m).
 
@@ -66,25 +70,29 @@ def accelerations(x, y, th, vx, vy, w, tau, consts):
     return ax, ay, ath, c
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def constraint_violation(x, y, th, L):
     """max |Phi_i| of eq. 9 (m^2 and m)."""
     return max(abs(x * x + y * y - L * L), abs(y - L * math.sin(th)))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
-    """State derivative for state = [q, q'] with PD torque added. Returns False where theta is
-    at the singularity: |cos(theta)| below tolerance, or cos(theta) of another sign than c0
-    (a step that jumped over cos(theta) = 0)."""
+    """State derivative for state = [q, q'] with PD torque added. Returns a status: NONFINITE
+    for a non-finite theta, SINGULAR where |cos(theta)| is below tolerance or of another sign
+    than c0 (a step that jumped over cos(theta) = 0), else OK."""
     total = tau + kp * (ref_th - state[2]) + kd * (ref_w - state[5])
     ax, ay, ath, c = accelerations(state[0], state[1], state[2], state[3], state[4], state[5], total, consts)
     out[0], out[1], out[2] = state[3], state[4], state[5]
     out[3], out[4], out[5] = ax, ay, ath
-    return abs(c) >= consts[6] and c * c0 > 0.0
+    if not math.isfinite(c):
+        return NONFINITE
+    if abs(c) < consts[6] or c * c0 <= 0.0:
+        return SINGULAR
+    return OK
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, states, qdd, applied):
     """Classical RK4 over n_steps steps of dt (s).
 
@@ -101,26 +109,28 @@ def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, stat
     for i in range(n_steps + 1):
         j = 2 * i
         c0 = math.cos(y[2])
-        ok = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp, kd, consts, c0, k1)
+        code = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp, kd, consts, c0, k1)
         for m in range(6):
             states[i, m] = y[m]
         qdd[i, 0], qdd[i, 1], qdd[i, 2] = k1[3], k1[4], k1[5]
         applied[i] = tau_half[j] + kp * (ref_th_half[j] - y[2]) + kd * (ref_w_half[j] - y[5])
-        if not ok:
-            return SINGULAR, i, max_viol
+        if code != OK:
+            return code, i, max_viol
         if i == n_steps:
             break
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        ok = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k2)
-        for m in range(6):
-            tmp[m] = y[m] + 0.5 * dt * k2[m]
-        ok = ok and _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k3)
-        for m in range(6):
-            tmp[m] = y[m] + dt * k3[m]
-        ok = ok and _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, c0, k4)
-        if not ok:
-            return SINGULAR, i, max_viol
+        code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k2)
+        if code == OK:
+            for m in range(6):
+                tmp[m] = y[m] + 0.5 * dt * k2[m]
+            code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k3)
+        if code == OK:
+            for m in range(6):
+                tmp[m] = y[m] + dt * k3[m]
+            code = _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, c0, k4)
+        if code != OK:
+            return code, i, max_viol
         finite = True
         for m in range(6):
             tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])

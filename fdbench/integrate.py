@@ -36,9 +36,9 @@ class Status(str, Enum):
     """How a simulation ended; the value is the message for the user."""
 
     SUCCESS = "reached t = 1 s"
-    NONFINITE = "the state became non-finite: the torque drives the model unstable; try a smaller --dt"
+    NONFINITE = "the state or the applied torque became non-finite: the model was driven unstable"
     SINGULAR = "theta reached +-pi/2, where the mixed coordinate theta is undefined (singular leading matrix)"
-    CONSTRAINT = "the constraint violation exceeded its tolerance; try a larger --alpha or a smaller --dt"
+    CONSTRAINT = "the constraint violation exceeded its tolerance; try a larger --alpha (or a smaller --dt with rk4)"
     SOLVER = "the integrator failed"
 
     @property
@@ -224,15 +224,18 @@ def _resample(grid, states, qdd, applied, done):
 
 
 def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
-    from scipy.integrate import solve_ivp
+    """One of scipy's adaptive methods, stepped here so that a failure keeps the steps accepted
+    before it: a non-finite torque or state, theta reaching +-pi/2, a constraint violation, a
+    solver failure, or more than MAX_RHS_EVALUATIONS right-hand side evaluations."""
+    import scipy.integrate
+    from scipy.optimize import brentq
 
     from . import dynamics
 
     consts = constants(settings)
-    accel = dynamics.accelerations
+    accel, violation = dynamics.accelerations, dynamics.constraint_violation
     kinematics = settings.kinematics
     closed_loop = kp != 0 or kd != 0
-    nonfinite = []
     evaluations = [0]
 
     def applied_torque(t, th, w):
@@ -245,66 +248,101 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
     def rhs(t, y):
         evaluations[0] += 1
         if evaluations[0] > MAX_RHS_EVALUATIONS:
-            raise _TooManyEvaluations(t)
-        ax, ay, ath, _ = accel(y[0], y[1], y[2], y[3], y[4], y[5], applied_torque(t, y[2], y[5]), consts)
-        out = np.array([y[3], y[4], y[5], ax, ay, ath])
-        if not np.all(np.isfinite(out)) and not nonfinite:
-            nonfinite.append(t)
-        return out
+            raise _Stop(Status.SOLVER, f"more than {MAX_RHS_EVALUATIONS} right-hand side evaluations "
+                                       "(a stiff problem: try rk4, radau or bdf)")
+        tau = applied_torque(t, y[2], y[5])
+        if not (math.isfinite(tau) and np.all(np.isfinite(y))):
+            raise _Stop(Status.NONFINITE, "")
+        ax, ay, ath, _ = accel(y[0], y[1], y[2], y[3], y[4], y[5], tau, consts)
+        return np.array([y[3], y[4], y[5], ax, ay, ath])
 
-    def singular(t, y):
-        return abs(math.cos(y[2])) - consts[6]
+    def failure(y):
+        """The status that a state ends the simulation with, or None."""
+        if not np.all(np.isfinite(y)):
+            return Status.NONFINITE
+        if abs(math.cos(y[2])) < consts[6]:
+            return Status.SINGULAR
+        if violation(y[0], y[1], y[2], consts[1]) > consts[7]:
+            return Status.CONSTRAINT
+        return None
 
-    def violated(t, y):
-        return consts[7] - dynamics.constraint_violation(y[0], y[1], y[2], consts[1])
-
-    singular.terminal = violated.terminal = True
+    y0 = np.array(initial_state(kinematics, settings.model))
+    steps_t, pieces = [0.0], []
+    status, detail, t_end = Status.SUCCESS, "", T_FINAL
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")  # the status reports what went wrong, once
+        solver, t_old = None, 0.0
+        while solver is None or solver.status == "running":
+            try:
+                if solver is None:  # the constructor evaluates the right-hand side too
+                    solver = getattr(scipy.integrate, SCIPY_METHODS[settings.integrator])(
+                        rhs, 0.0, y0, T_FINAL, rtol=settings.rtol, atol=settings.atol)
+                t_old, cos_old = solver.t, math.cos(solver.y[2])
+                message = solver.step()
+            except _Stop as stop:
+                status, detail, t_end = stop.status, stop.detail, t_old
+                break
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a solver breaking down
+                status, detail, t_end = Status.SOLVER, str(exc), t_old
+                break
+            if solver.status == "failed":
+                status, detail, t_end = Status.SOLVER, str(message), t_old
+                break
+            piece = solver.dense_output()
+            ended = failure(solver.y)
+            if ended is None and math.cos(solver.y[2]) * cos_old <= 0:  # jumped over cos(theta) = 0
+                ended = Status.SINGULAR
+            if ended is not None:
+                status, t_end = ended, _crossing(piece, ended, t_old, solver.t, consts, violation, brentq)
+                if t_end > t_old:
+                    steps_t.append(t_end)
+                    pieces.append(piece)
+                break
+            steps_t.append(solver.t)
+            pieces.append(piece)
     ts = sample_times()
-    try:
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
-            warnings.simplefilter("ignore")  # the status reports what went wrong, once
-            sol = solve_ivp(rhs, (0.0, T_FINAL), initial_state(kinematics, settings.model),
-                            method=SCIPY_METHODS[settings.integrator], t_eval=ts,
-                            rtol=settings.rtol, atol=settings.atol, events=(singular, violated))
-    except _TooManyEvaluations as exc:
-        return _empty_result(settings, Status.SOLVER, f"more than {MAX_RHS_EVALUATIONS} right-hand side "
-                             f"evaluations before t = {exc.args[0]:.4g} s (a stiff problem: try rk4, radau or bdf)")
-    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a solver that breaks down
-        return _empty_result(settings, Status.SOLVER, str(exc))
-    k = len(sol.t)
-    q = np.full((len(ts), 3), np.nan)
-    qd = np.full((len(ts), 3), np.nan)
-    q[:k], qd[:k] = sol.y[:3].T, sol.y[3:].T
-    detail = ""
-    if sol.status == 1:
-        status = Status.SINGULAR if len(sol.t_events[0]) else Status.CONSTRAINT
-        t_end = float((sol.t_events[0] if len(sol.t_events[0]) else sol.t_events[1])[0])
-    elif sol.status == 0 and not nonfinite:
-        status, t_end = Status.SUCCESS, T_FINAL
+    q, qd, applied = np.full((len(ts), 3), np.nan), np.full((len(ts), 3), np.nan), np.full(len(ts), np.nan)
+    reached = ts <= steps_t[-1] + 1e-12
+    reached[0] = True
+    if pieces:
+        states = scipy.integrate.OdeSolution(steps_t, pieces)(np.minimum(ts[reached], steps_t[-1])).T
     else:
-        status = Status.NONFINITE if nonfinite else Status.SOLVER
-        detail = sol.message if status is Status.SOLVER else ""
-        t_end = float(sol.t[-1]) if k else 0.0
-    bad = ~np.all(np.isfinite(np.hstack([q, qd])), axis=1)
-    q[bad], qd[bad] = np.nan, np.nan
-    applied = np.full(len(ts), np.nan)
-    for i in np.flatnonzero(~bad):
+        states = np.array([y0])
+    q[reached], qd[reached] = states[:, :3], states[:, 3:]
+    for i in np.flatnonzero(reached):
         applied[i] = applied_torque(ts[i], q[i, 2], qd[i, 2])
-    viol = settings.model.constraints(q[~bad])
+    viol = settings.model.constraints(q[reached])
     max_viol = float(np.max(np.abs(viol))) if viol.size else 0.0
     return SimulationResult(ts, q, qd, applied, t_end, status, max_viol, settings.integrator,
-                            detail=detail, rhs_evaluations=int(sol.nfev))
+                            detail=detail, rhs_evaluations=evaluations[0])
 
 
-class _TooManyEvaluations(Exception):
-    """Raised in the right-hand side to stop an adaptive integrator that no longer advances."""
+def _crossing(piece, status, t_old, t_new, consts, violation, brentq) -> float:
+    """Where within the step [t_old, t_new] the failure began (by the step's interpolant)."""
+    if status is Status.SINGULAR:
+        cos_old = math.cos(piece(t_old)[2])
+        def g(t):  # noqa: E306 - positive while theta is on the starting side, clear of the tolerance
+            return math.copysign(1.0, cos_old) * math.cos(piece(t)[2]) - consts[6]
+    elif status is Status.CONSTRAINT:
+        def g(t):  # noqa: E306
+            y = piece(t)
+            return consts[7] - violation(y[0], y[1], y[2], consts[1])
+    else:
+        return t_old
+    try:
+        if g(t_old) > 0 and g(t_new) <= 0:
+            return float(brentq(g, t_old, t_new, xtol=1e-12))
+    except (ValueError, ArithmeticError):
+        pass
+    return t_old
 
 
-def _empty_result(settings, status, detail):
-    ts = sample_times()
-    nan3 = np.full((len(ts), 3), np.nan)
-    return SimulationResult(ts, nan3, nan3.copy(), np.full(len(ts), np.nan), 0.0, status, 0.0,
-                            settings.integrator, detail=detail)
+class _Stop(Exception):
+    """Raised in the right-hand side to end an adaptive integration with a status."""
+
+    def __init__(self, status: Status, detail: str):
+        super().__init__(detail)
+        self.status, self.detail = status, detail
 
 
 def warm_up() -> None:

@@ -240,3 +240,11 @@ def test_simulated_start_is_the_desired_start():
         theta0, w0, _ = desired_motion(0.0, kinematics)
         assert result.theta[0] == pytest.approx(float(theta0), abs=1e-15)
         assert result.qd[0, 2] == pytest.approx(float(w0), abs=1e-15)
+
+
+@pytest.mark.parametrize("integrator", ["rk4", "rk45"])
+@pytest.mark.parametrize("value", [math.nan, math.inf])
+def test_non_finite_torque_is_reported_as_non_finite(integrator, value):
+    result = simulate(constant_torque(value), Settings(integrator=integrator))
+    assert result.status is Status.NONFINITE
+    assert result.t_end < 1 and "non-finite" in result.message
