@@ -4,7 +4,8 @@ The leading matrix M + alpha Phi_q^T Phi_q is solved in closed form: with point 
 elimination of the theta row leaves a 2x2 system in (x2'', y2'') whose determinant
 a^2 + 4 alpha a (x2^2 + y2^2) never vanishes, so the only singularity is cos(theta) = 0.
 
-Constants travel as one float64 array ``consts`` (see ``kernel_constants``) so that a kernel
+The kernels keep strict IEEE arithmetic (no fastmath): a run gives the same numbers on every
+x86-64 machine, which stored results and seeds rely on. Constants travel as one float64 array ``consts`` (see ``kernel_constants``) so that a kernel
 compiles once for every model and penalty setting.
 """
 
@@ -16,10 +17,6 @@ import numpy as np
 from numba import njit
 
 from .model import Forearm, Penalty
-
-# floating-point licences for the kernels: reassociation, contraction and reciprocals, but
-# not 'no NaN / no infinity', which would let the compiler drop the failure checks
-FAST = {"reassoc", "contract", "arcp", "nsz"}
 
 # status codes shared by the kernels and integrate.py
 OK, NONFINITE, SINGULAR, CONSTRAINT = 0, 1, 2, 3
@@ -45,7 +42,7 @@ def kernel_constants(model: Forearm, penalty: Penalty, cos_tol=COS_TOL, violatio
     )
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True)
 def accelerations(x, y, th, vx, vy, w, tau, consts):
     """q'' of eq. 12 for the state (q, q') and elbow torque tau (N m).
 
@@ -70,13 +67,13 @@ def accelerations(x, y, th, vx, vy, w, tau, consts):
     return ax, ay, ath, c
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True)
 def constraint_violation(x, y, th, L):
     """max |Phi_i| of eq. 9 (m^2 and m)."""
     return max(abs(x * x + y * y - L * L), abs(y - L * math.sin(th)))
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True)
 def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
     """State derivative for state = [q, q'] with PD torque added. Returns a status: NONFINITE
     for a non-finite theta, SINGULAR where |cos(theta)| is below tolerance or of another sign
@@ -92,7 +89,7 @@ def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
     return OK
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True)
 def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, states, qdd, applied):
     """Classical RK4 over n_steps steps of dt (s).
 
