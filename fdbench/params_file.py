@@ -31,7 +31,6 @@ def params_json(spec, outcome) -> str:
 
 def load_torque(path, model, option: str = "--params"):
     """The open-loop torque function (t (s) -> N m) of a saved parameter file."""
-    from .inverse import Feedforward, inverse_dynamics
     from .torques import make_torque
 
     path = Path(path)
@@ -54,9 +53,10 @@ def load_torque(path, model, option: str = "--params"):
         raise BadFile(f"{option}: {path}: {exc}") from None
     if params.shape != (torque.n_params,) or not np.all(np.isfinite(params)):
         raise BadFile(f"{option}: {path}: expected {torque.n_params} finite parameters for {name}")
-    inverse = inverse_dynamics(None, model, kinematics)
-    torque.prepare(inverse.t, inverse.torque, ff)  # restores the scaling the parameters refer to
-    feed = Feedforward(model, kinematics)
-    if ff:
-        return lambda t: feed(t) + torque.evaluate(params, t), f"{name} (feedforward) from {path.name}"
-    return lambda t: torque.evaluate(params, t), f"{name} from {path.name}"
+    from .integrate import Settings
+    from .problem import TrackingProblem
+
+    # the problem restores the scaling the parameters refer to and adds the feedforward
+    problem = TrackingProblem(torque, Settings(model=model, kinematics=kinematics), ff)
+    label = f"{name} (feedforward) from {path.name}" if ff else f"{name} from {path.name}"
+    return problem.torque_function(params), label
