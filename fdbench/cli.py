@@ -25,6 +25,8 @@ from .registry import PluginError
 _STARTED = time.perf_counter()
 
 FORMATS = ("table", "json", "csv")
+MAX_SEEDS = 1000  # runs per cell of a report
+MAX_JOBS = 256  # worker processes
 KINEMATICS_HELP = "Desired motion: 'paper' (eq. 5 as printed; reproduces the paper) or 'exact' (chain rule through t*)."
 INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
 
@@ -36,9 +38,19 @@ class BadInput(Exception):
 class FdbenchGroup(TyperGroup):
     """Routes every error to one line on stderr with the contract's exit codes."""
 
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:  # before click turns it into a silent exit code 1
+            raise _StdoutClosed from None
+
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
         code = 0
+        import warnings
+
+        # numerical trouble (overflow in a torque of 1e308...) is reported by a run's status, once
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
         try:
             returned = super().main(args=args, prog_name=prog_name or "fdbench", standalone_mode=False, **extra)
             code = returned if isinstance(returned, int) else 0
@@ -50,6 +62,8 @@ class FdbenchGroup(TyperGroup):
             code = _error(str(exc), 2)
         except KeyboardInterrupt:
             code = _error("interrupted", 130)
+        except (BrokenPipeError, _StdoutClosed):
+            code = _closed_stdout()
         except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback
             if hasattr(exc, "exit_code") and hasattr(exc, "format_message"):  # click usage errors
                 message = exc.format_message().strip()
@@ -58,11 +72,31 @@ class FdbenchGroup(TyperGroup):
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
                 code = _error(where + message, exc.exit_code)
+            elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
+                code = _error(f"--db: {exc}", 2)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:
                 code = _error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(code)
+
+
+class _StdoutClosed(Exception):
+    """Standard output was closed (``>&-``): nothing can be written there."""
+
+
+SIGPIPE_EXIT = 141  # 128 + SIGPIPE: what a shell tool exits with when its reader went away
+
+
+def _closed_stdout() -> int:
+    """A reader that stopped reading (``| head``) or a closed stdout is a normal end: no message,
+    and no second failure when Python flushes stdout at exit."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+    except OSError:
+        pass
+    return SIGPIPE_EXIT
 
 
 def _error(message: str, code: int = 1) -> int:
@@ -102,8 +136,8 @@ def _root(
 Kinematics = Annotated[str, typer.Option("--kinematics", help=KINEMATICS_HELP)]
 Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
 Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in [1e-6, 0.1].")]
-Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators).")]
-Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators).")]
+Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [2.2e-14, 1).")]
+Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators), in [1e-30, 1].")]
 Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12, in [1, 1e15].")]
 Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12.")]
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
@@ -112,12 +146,12 @@ Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write th
 SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Write the run's time history (1001 rows) as CSV to FILE.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
-Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, gradient evaluations included.")]
+Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, in [1, 1000000], gradient evaluations included.")]
 Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
 Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over [0, 1] s.")]
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
-Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size (default: cma's 4 + 3 ln n).")]
+Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")]
 
 
@@ -133,17 +167,20 @@ def _check_choice(option: str, value: str, valid) -> str:
     return value
 
 
-def _check_outputs(fmt: str, valid=FORMATS, **paths) -> None:
-    """Validate --format and every output path before any work starts."""
-    from .files import BadFile, check_writable
+def _check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None, **paths) -> None:
+    """Validate --format and every output path before any work starts: each can be written, and
+    none names an input file, the results database ``db`` or another output."""
+    from .files import BadFile, check_distinct, check_writable
 
     _check_choice("--format", fmt, valid)
-    for option, path in paths.items():
-        if path is not None:
-            try:
-                check_writable(path, "--" + option.replace("_", "-"))
-            except BadFile as exc:
-                raise BadInput(str(exc)) from None
+    outputs = {"--" + option.replace("_", "-"): path for option, path in paths.items()}
+    try:
+        for option, path in outputs.items():
+            if path is not None:
+                check_writable(path, option)
+        check_distinct(outputs, inputs, db)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
 
 
 def _validated(spec):
@@ -212,6 +249,8 @@ def _format_value(value) -> str:
 
 def _emit(text: str, output: Optional[Path]) -> None:
     if output is None:
+        if sys.stdout is None:
+            raise _StdoutClosed
         sys.stdout.write(text)
         sys.stdout.flush()
     else:
@@ -249,13 +288,14 @@ def _save_history(outcome, path) -> None:
 
 
 def _check_store(db: Optional[Path]) -> None:
-    """Refuse an unusable --db before any work starts."""
+    """Refuse an unusable --db before any work starts: not a database, damaged, read-only,
+    locked."""
     if db is not None:
         from .store import StoreError, open_store
 
         try:
-            with open_store(db):
-                pass
+            with open_store(db) as store:
+                store.check_usable()
         except StoreError as exc:
             raise BadInput(f"--db: {exc}") from None
 
@@ -338,7 +378,8 @@ def simulate(
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from .experiment import RunSpec
 
-    _check_outputs(fmt, output=output, save_history=save_history)
+    _check_outputs(fmt, output=output, save_history=save_history,
+                   inputs={"--torque-file": torque_file, "--params": params})
     if torque_file is not None and params is not None:
         raise BadInput("--torque-file and --params: give one of them, not both")
     spec = _validated(RunSpec(command="simulate", **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
@@ -509,9 +550,9 @@ def report(
     feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only Table 3 (with) or Table 2 (without); default both.", show_default=False)] = None,
     control: Annotated[bool, typer.Option("--control/--no-control", help="Include the PD control run.")] = True,
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
-    seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, seeds 0..N-1; medians and IQRs over them.")] = 5,
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
-    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes (default: the number of cores).", show_default=False)] = None,
+    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes, in [1, 256] (default: the number of cores).", show_default=False)] = None,
     db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
     rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
@@ -540,13 +581,16 @@ def report(
     Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
     from .benchmark import default_cells, make_plan
 
-    _check_outputs(fmt, ("md", "csv"), output=output, db=db)
-    if seeds < 1:
-        raise BadInput(f"--seeds must be an integer >= 1, got {seeds}")
-    if jobs is not None and jobs < 1:
-        raise BadInput(f"--jobs must be an integer >= 1, got {jobs}")
-    if figures is not None and not (figures.is_dir() or figures.parent.is_dir()):
-        raise BadInput(f"--figures: directory {figures.parent} does not exist")
+    from .store import default_path
+
+    db_path = db if db is not None else default_path()
+    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output)
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
+    if figures is not None:
+        _check_figures_dir(figures, output, db_path)
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
     cells = default_cells(torque, opt, feedforward, all_cells)
@@ -562,12 +606,12 @@ def report(
     )
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
         _validated(spec)
-    from .store import StoreError, default_path, open_store
+    from .store import StoreError, open_store
 
-    db_path = db if db is not None else default_path()
     jobs = jobs or os.cpu_count() or 1
     try:
         with open_store(db_path) as store:
+            store.check_usable()
             with _progress(quiet, "runs") as progress:
                 from .benchmark import execute
 
@@ -598,6 +642,34 @@ def report(
         _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
     if output is not None:
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+def _check_figures_dir(directory: Path, output: Optional[Path], db: Path) -> None:
+    """Refuse, before the work, a --figures folder that cannot take the figures: a file, the
+    report's own output, a missing parent, an unwritable folder, or a figure file in it that
+    would be refused (read-only, a directory, the database)."""
+    from .figures import FIGURE_FILES
+    from .files import BadFile, check_distinct, check_writable, same_file
+
+    if directory.exists() and not directory.is_dir():
+        raise BadInput(f"--figures: {directory} exists and is not a directory")
+    if output is not None and same_file(directory, output):
+        raise BadInput(f"--figures: {directory} is also the report's --output; give the figures a folder of their own")
+    if not directory.exists():
+        if not directory.parent.is_dir():
+            raise BadInput(f"--figures: directory {directory.parent} does not exist")
+        if not os.access(directory.parent, os.W_OK):
+            raise BadInput(f"--figures: directory {directory.parent} is not writable")
+        return
+    if not os.access(directory, os.W_OK):
+        raise BadInput(f"--figures: directory {directory} is not writable")
+    try:
+        paths = {f"--figures ({name})": directory / name for name in FIGURE_FILES}
+        for option, path in paths.items():
+            check_writable(path, option)
+        check_distinct({"--output": output, **paths}, database=db)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
 
 
 def _check_names(torques, optimizers) -> None:

@@ -14,8 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
-
+from .jit import njit
 from .model import Forearm, Penalty
 
 # status codes shared by the kernels and integrate.py
@@ -42,7 +41,7 @@ def kernel_constants(model: Forearm, penalty: Penalty, cos_tol=COS_TOL, violatio
     )
 
 
-@njit(cache=True)
+@njit
 def accelerations(x, y, th, vx, vy, w, tau, consts):
     """q'' of eq. 12 for the state (q, q') and elbow torque tau (N m).
 
@@ -67,13 +66,13 @@ def accelerations(x, y, th, vx, vy, w, tau, consts):
     return ax, ay, ath, c
 
 
-@njit(cache=True)
+@njit
 def constraint_violation(x, y, th, L):
     """max |Phi_i| of eq. 9 (m^2 and m)."""
     return max(abs(x * x + y * y - L * L), abs(y - L * math.sin(th)))
 
 
-@njit(cache=True)
+@njit
 def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
     """State derivative for state = [q, q'] with PD torque added. Returns a status: NONFINITE
     for a non-finite theta, SINGULAR where |cos(theta)| is below tolerance or of another sign
@@ -89,7 +88,7 @@ def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
     return OK
 
 
-@njit(cache=True)
+@njit
 def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, states, qdd, applied):
     """Classical RK4 over n_steps steps of dt (s).
 

@@ -18,6 +18,7 @@ from .motion import check_kinematics
 
 COMMANDS = ("control", "optimize", "simulate")
 MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
+MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
 
 # The keys of every record, in this order (JSON keys and CSV header).
 RECORD_FIELDS = (
@@ -52,6 +53,7 @@ class RunSpec:
     penalty_weight: float = 1.0
     torque_options: tuple = ()  # sorted (name, value) pairs, e.g. (("hidden", 4),)
     optimizer_options: tuple = ()
+    inputs: tuple = ()  # (option, SHA-256 of the file's content) of every input file, e.g. (("--torque-file", "ab12..."),)
 
     def settings(self) -> Settings:
         return Settings(Forearm(), Penalty(self.alpha, self.xi, self.omega), self.kinematics,
@@ -75,8 +77,8 @@ class RunSpec:
 
             if not isinstance(self.seed, int) or not 0 <= self.seed < MAX_SEED:
                 raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {self.seed}")
-            if not isinstance(self.budget, int) or self.budget < 1:
-                raise ValueError(f"--budget must be an integer >= 1, got {self.budget}")
+            if not isinstance(self.budget, int) or not 1 <= self.budget <= MAX_BUDGET:
+                raise ValueError(f"--budget must be an integer in [1, {MAX_BUDGET}], got {self.budget}")
             if not (math.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
                 raise ValueError(f"--penalty-weight must be a non-negative finite number, got {self.penalty_weight}")
             options = dict(self.torque_options)
@@ -89,10 +91,34 @@ class RunSpec:
     def as_dict(self) -> dict:
         return asdict(self)
 
+    def canonical(self) -> dict:
+        """The settings that determine the numbers, normalised so that equivalent specs compare
+        equal: -0.0 is 0.0, whole numbers in float fields are floats, the tolerances of the
+        adaptive integrators are left at their defaults for rk4 and the RK4 step for the others,
+        and fields added since the first results schema are left out at their defaults (so that
+        stored runs keep their identity)."""
+        data = self.as_dict()
+        defaults = RunSpec()
+        if self.integrator == "rk4":
+            data["rtol"], data["atol"] = defaults.rtol, defaults.atol
+        else:
+            data["dt"] = defaults.dt
+        for name in FLOAT_FIELDS:
+            if isinstance(data[name], (int, float)) and not isinstance(data[name], bool):
+                data[name] = float(data[name]) + 0.0  # + 0.0 turns -0.0 into 0.0
+        for name, default in OMITTED_AT_DEFAULT.items():
+            if data.get(name) == default:
+                data.pop(name)
+        return data
+
     def hash(self) -> str:
-        """A digest of the settings (stable across runs and machines), 16 hex digits."""
-        text = json.dumps(self.as_dict(), sort_keys=True, default=str)
+        """A digest of the canonical settings (stable across runs and machines), 16 hex digits."""
+        text = json.dumps(self.canonical(), sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight")
+OMITTED_AT_DEFAULT = {"inputs": ()}  # fields a spec's hash leaves out while they hold these values
 
 
 def control_spec(kp=80.0, kd=0.3, **common) -> RunSpec:
@@ -230,16 +256,21 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     from .integrate import simulate, warm_up
     from .inverse import Feedforward, inverse_dynamics
 
+    from dataclasses import replace
+
     settings = spec.settings()
     if torque_file is not None:
         from .files import read_torque_csv
 
         t_file, q_file = read_torque_csv(torque_file)
         torque, label = (lambda t: np.interp(t, t_file, q_file)), f"file:{torque_file}"
+        digest = hashlib.sha256(t_file.tobytes() + q_file.tobytes()).hexdigest()
+        spec = replace(spec, inputs=(("--torque-file", digest),))
     elif params_file is not None:
         from .params_file import load_torque
 
-        torque, label = load_torque(params_file, settings.model)
+        torque, label, digest = load_torque(params_file, settings.model)
+        spec = replace(spec, inputs=(("--params", digest),))
     else:
         torque, label = Feedforward(settings.model, settings.kinematics), "id"
     warm_up()

@@ -8,6 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
+# every file the report's --figures writes, checked before the work starts
+FIGURE_FILES = ("figure2_inverse_dynamics.png", "figure5_tracking.png", "figure6_tracking.png",
+                "convergence_table2.png", "convergence_table3.png")
+
 
 def _pyplot():
     import matplotlib
@@ -19,9 +23,13 @@ def _pyplot():
 
 
 def _save(fig, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    tmp.replace(path)
+    import io
+
+    from .files import write_atomic
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
+    write_atomic(path, buffer.getvalue(), "--figures")
 
 
 def inverse_figure(inverse, path: Path) -> None:

@@ -1,11 +1,13 @@
-"""Reading torque histories and writing outputs safely (a temporary file, then a rename)."""
+"""Reading input files with limits and writing outputs safely (as the shell's ``>``, made atomic)."""
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import math
 import os
+import stat
 import tempfile
 from pathlib import Path
 
@@ -16,30 +18,147 @@ class BadFile(ValueError):
     """A file that cannot be used; the message names it and says why."""
 
 
+MAX_INPUT_BYTES = 64 * 2**20  # a torque or motion CSV, a parameter file: far more than any real one
+
+
+def _stat(path) -> os.stat_result | None:
+    """os.stat following symlinks, or None where nothing exists (a dangling link included)."""
+    try:
+        return os.stat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise BadFile(f"cannot inspect {path}: {exc.strerror or exc}") from None
+
+
+def _in_place(path: Path, st: os.stat_result | None) -> bool:
+    """Targets that the shell's ``>`` writes in place and an atomic rename must not replace:
+    devices, FIFOs and sockets, anything under /dev or /proc, and files with other hard links."""
+    if st is None:
+        return False
+    special = str(path).startswith(("/dev/", "/proc/")) or os.path.realpath(path).startswith(("/dev/", "/proc/"))
+    return special or not stat.S_ISREG(st.st_mode) or st.st_nlink > 1
+
+
 def check_writable(path: str | os.PathLike, option: str) -> Path:
-    """Fail early, before any work, if ``path`` cannot be written."""
+    """Fail early, before any work, if ``path`` cannot be written as an output: a directory, a
+    missing folder, a read-only file (even for root: the user protected it), an unwritable
+    folder."""
     path = Path(path)
-    parent = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
+    if str(path) in ("", "."):
+        raise BadFile(f"{option}: an empty file name")
+    st = _stat(path)
+    if st is not None and stat.S_ISDIR(st.st_mode):
         raise BadFile(f"{option}: {path} is a directory")
-    if not parent.is_dir():
-        raise BadFile(f"{option}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise BadFile(f"{option}: directory {parent} is not writable")
+    if st is None:
+        target = Path(os.path.realpath(path))  # a dangling link creates its target, as '>' does
+        if not target.parent.is_dir():
+            raise BadFile(f"{option}: directory {target.parent} does not exist")
+        if not os.access(target.parent, os.W_OK):
+            raise BadFile(f"{option}: directory {target.parent} is not writable")
+        return path
+    if stat.S_ISREG(st.st_mode) and not (st.st_mode & 0o222):
+        raise BadFile(f"{option}: {path} is read-only; make it writable or choose another file")
+    if not os.access(path, os.W_OK):
+        raise BadFile(f"{option}: {path} is not writable")
     return path
 
 
-def write_atomic(path: str | os.PathLike, text: str, option: str = "--output") -> None:
-    """Write text to path so that a reader sees either the old file or the whole new one."""
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--output") -> None:
+    """Write ``data`` to ``path`` as the shell's ``>`` would, made atomic where that is possible.
+
+    A regular file (or a new name) is replaced atomically by a rename, keeping its permission bits
+    (and owner, where allowed): a reader sees the old file or the whole new one. A symlink is
+    written through (its target is replaced, the link stays). Devices, FIFOs, ``/dev/stdout``
+    and files with other hard links are opened and written in place."""
     path = check_writable(path, option)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent if str(path.parent) else ".")
+    payload = data.encode() if isinstance(data, str) else bytes(data)
+    st = _stat(path)
+    target = Path(os.path.realpath(path))
+    if _in_place(path, st) or not os.access(target.parent, os.W_OK):
+        with open(path, "wb") as handle:
+            handle.write(payload)
+        return
+    # a short temporary name: the target's own name may already be as long as the system allows
+    fd, tmp = tempfile.mkstemp(prefix=".fdbench-", suffix=".tmp", dir=target.parent)
     try:
-        with os.fdopen(fd, "w", newline="") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(payload)
+        os.chmod(tmp, stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~_umask())
+        if st is not None and hasattr(os, "chown") and (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
+            try:
+                os.chown(tmp, st.st_uid, st.st_gid)
+            except OSError:
+                pass  # not allowed: the file becomes the writer's, as with any rewrite
+        os.replace(tmp, target)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
+    """True if a and b name one file: by identity where both exist (hard and symbolic links
+    included), by resolved path otherwise."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.realpath(a) == os.path.realpath(b)
+
+
+def check_distinct(outputs: dict, inputs: dict | None = None, database=None) -> None:
+    """Refuse, before any work, an output that would destroy something the command needs or
+    another output: an output naming an input file, the results database (or its journal), or
+    another output. Keys are option names (``--output``), values paths or None. Devices such as
+    /dev/null may be named by several outputs."""
+    named = [(o, Path(p)) for o, p in outputs.items() if p is not None]
+    protected = [(o, Path(p)) for o, p in (inputs or {}).items() if p is not None]
+    if database is not None and str(database) != ":memory:":
+        protected += [("--db", Path(database))]
+        protected += [("--db", Path(f"{database}{suffix}")) for suffix in ("-wal", "-shm", "-journal")]
+    for i, (option, path) in enumerate(named):
+        st = _stat(path)
+        if st is not None and not stat.S_ISREG(st.st_mode):
+            continue  # a device or FIFO: writing it destroys nothing
+        for other, guarded in protected:
+            if same_file(path, guarded):
+                what = "the results database" if other == "--db" else f"the input of {other}"
+                raise BadFile(f"{option}: {path} is {what}; choose another file")
+        for other, earlier in named[:i]:
+            if same_file(path, earlier):
+                raise BadFile(f"{option} and {other} name the same file {path}; give each its own")
+
+
+def read_input_text(path: str | os.PathLike, option: str, limit: int = MAX_INPUT_BYTES) -> str:
+    """The text of an input file (UTF-8, a byte-order mark allowed), refusing one larger than
+    ``limit`` bytes (``/dev/zero`` included) and one that is a directory."""
+    path = Path(path)
+    if path.is_dir():
+        raise BadFile(f"{option}: {path} is a directory")
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read(limit + 1)
+    except FileNotFoundError:
+        raise BadFile(f"{option}: {path} does not exist") from None
+    except OSError as exc:
+        raise BadFile(f"{option}: cannot read {path}: {exc.strerror or exc}") from None
+    if len(raw) > limit:
+        raise BadFile(f"{option}: {path} is larger than {limit // 2**20} MiB; this is not a file fdbench reads")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise BadFile(f"{option}: {path} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+
+
+def file_digest(path: str | os.PathLike) -> str:
+    """SHA-256 of a file's content (hex): inputs enter a run's identity by what they hold."""
+    with open(path, "rb") as handle:
+        return hashlib.sha256(handle.read(MAX_INPUT_BYTES + 1)).hexdigest()
 
 
 def csv_text(header: list[str], rows) -> str:
@@ -55,12 +174,7 @@ def read_torque_csv(path: str | os.PathLike, option: str = "--torque-file") -> t
 
     Times must be finite and strictly increasing and cover [0, 1] s; returns (t, torque)."""
     path = Path(path)
-    if not path.is_file():
-        raise BadFile(f"{option}: {path} does not exist or is not a file")
-    try:
-        text = path.read_text()
-    except (OSError, UnicodeDecodeError) as exc:
-        raise BadFile(f"{option}: cannot read {path}: {exc}") from None
+    text = read_input_text(path, option)
     rows = [row for row in csv.reader(io.StringIO(text)) if row and any(cell.strip() for cell in row)]
     if not rows:
         raise BadFile(f"{option}: {path} is empty; expected a header 't,torque' and rows of numbers")

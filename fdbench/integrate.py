@@ -29,6 +29,7 @@ MAX_DT = 0.1  # s
 MIN_DT = 1e-6  # s: a million steps per simulation
 PENALTY_RANGES = {"alpha": (1.0, 1e15), "xi": (0.0, 1e6), "omega": (1e-6, 1e6)}  # sensible, and no overflow
 MIN_RTOL = 100 * np.finfo(float).eps  # scipy's own floor for rtol
+MIN_ATOL, MAX_ATOL = 1e-30, 1.0  # beyond these the step size underflows (LSODA) or nothing is checked
 MAX_RHS_EVALUATIONS = 100_000  # an adaptive integrator that needs more has met a stiff or broken problem
 
 
@@ -104,8 +105,8 @@ class Settings:
             raise ValueError(f"dt must be in [{MIN_DT:g}, {MAX_DT:g}] s, got {self.dt}")
         if not (math.isfinite(self.rtol) and MIN_RTOL <= self.rtol < 1):
             raise ValueError(f"rtol must be in [{MIN_RTOL:.2g}, 1), got {self.rtol}")
-        if not (math.isfinite(self.atol) and self.atol > 0):
-            raise ValueError(f"atol must be positive and finite, got {self.atol}")
+        if not (math.isfinite(self.atol) and MIN_ATOL <= self.atol <= MAX_ATOL):
+            raise ValueError(f"atol must be in [{MIN_ATOL:g}, {MAX_ATOL:g}], got {self.atol}")
         for name, (low, high) in PENALTY_RANGES.items():
             value = getattr(self.penalty, name)
             if not (math.isfinite(value) and low <= value <= high):
@@ -304,8 +305,10 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
     q, qd, applied = np.full((len(ts), 3), np.nan), np.full((len(ts), 3), np.nan), np.full(len(ts), np.nan)
     reached = ts <= steps_t[-1] + 1e-12
     reached[0] = True
-    if pieces:
-        states = scipy.integrate.OdeSolution(steps_t, pieces)(np.minimum(ts[reached], steps_t[-1])).T
+    if pieces and steps_t[-1] > steps_t[0]:
+        keep = np.flatnonzero(np.diff(steps_t) > 0)  # a step of zero length adds nothing
+        solution = scipy.integrate.OdeSolution([steps_t[0]] + [steps_t[k + 1] for k in keep], [pieces[k] for k in keep])
+        states = solution(np.minimum(ts[reached], steps_t[-1])).T
     else:
         states = np.array([y0])
     q[reached], qd[reached] = states[:, :3], states[:, 3:]

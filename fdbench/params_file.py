@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
-from .files import BadFile
+from .files import BadFile, read_input_text
 from .motion import check_kinematics
+
+MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand numbers
 
 
 def params_json(spec, outcome) -> str:
@@ -30,26 +33,33 @@ def params_json(spec, outcome) -> str:
 
 
 def load_torque(path, model, option: str = "--params"):
-    """The open-loop torque function (t (s) -> N m) of a saved parameter file."""
+    """The open-loop torque function (t (s) -> N m) of a saved parameter file, a label, and a
+    digest of what the file defines (the torque, its options, feedforward, kinematics, parameters)."""
     from .torques import make_torque
 
     path = Path(path)
     try:
-        data = json.loads(path.read_text())
-        name, params = data["torque"], np.asarray(data["params"], dtype=float)
-        options, ff, kinematics = dict(data.get("torque_options", {})), data["feedforward"], data["kinematics"]
-        if not isinstance(ff, bool):
-            raise ValueError("feedforward (true or false)")
+        data = json.loads(read_input_text(path, option, MAX_PARAMS_BYTES))
+    except (json.JSONDecodeError, RecursionError) as exc:
+        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+        raise BadFile(f"{option}: cannot read {path} as JSON: {reason}") from None
+    try:
+        if not isinstance(data, dict):
+            raise TypeError("content: a JSON object")
+        name, options, ff, kinematics = data["torque"], data.get("torque_options", {}), data["feedforward"], data["kinematics"]
+        for key, value, kind in (("torque", name, str), ("torque_options", options, dict), ("feedforward", ff, bool),
+                                 ("kinematics", kinematics, str), ("params", data["params"], list)):
+            if not isinstance(value, kind):
+                raise TypeError(f"{key} ({kind.__name__})")
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in data["params"]):
+            raise TypeError("params (a list of numbers)")
+        params, options = np.asarray(data["params"], dtype=float), dict(options)
         check_kinematics(kinematics)
-    except FileNotFoundError:
-        raise BadFile(f"{option}: {path} does not exist") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise BadFile(f"{option}: cannot read {path} as JSON: {exc}") from None
     except (KeyError, TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {path} is not a saved parameter file (missing or bad {exc})") from None
     try:
         torque = make_torque(name, **options)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {path}: {exc}") from None
     if params.shape != (torque.n_params,) or not np.all(np.isfinite(params)):
         raise BadFile(f"{option}: {path}: expected {torque.n_params} finite parameters for {name}")
@@ -59,4 +69,5 @@ def load_torque(path, model, option: str = "--params"):
     # the problem restores the scaling the parameters refer to and adds the feedforward
     problem = TrackingProblem(torque, Settings(model=model, kinematics=kinematics), ff)
     label = f"{name} (feedforward) from {path.name}" if ff else f"{name} from {path.name}"
-    return problem.torque_function(params), label
+    identity = json.dumps([name, sorted(options.items()), ff, kinematics, params.tolist()], default=str)
+    return problem.torque_function(params), label, hashlib.sha256(identity.encode()).hexdigest()

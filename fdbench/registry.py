@@ -81,12 +81,18 @@ def load_plugins() -> None:
     for name in names:
         try:
             importlib.import_module(name)
-        except Exception as exc:  # noqa: BLE001 - any failure of a plugin is reported the same way
-            raise PluginError(f"{PLUGINS_VARIABLE}: cannot import {name!r}: {exc}") from None
+        except (Exception, SystemExit) as exc:  # noqa: BLE001 - any failure of a plugin, sys.exit included
+            raise PluginError(f"{PLUGINS_VARIABLE}: cannot import {name!r}: {_failure(exc)}") from None
     from importlib.metadata import entry_points
 
     for entry in entry_points(group=ENTRY_POINT_GROUP):
         try:
             entry.load()
-        except Exception as exc:  # noqa: BLE001
-            raise PluginError(f"plugin {entry.name!r} ({entry.value}): cannot load: {exc}") from None
+        except (Exception, SystemExit) as exc:  # noqa: BLE001
+            raise PluginError(f"plugin {entry.name!r} ({entry.value}): cannot load: {_failure(exc)}") from None
+
+
+def _failure(exc: BaseException) -> str:
+    if isinstance(exc, SystemExit):
+        return f"it called sys.exit({exc.code!r}) while being imported"
+    return f"{type(exc).__name__}: {exc}" if not str(exc) else str(exc)

@@ -69,11 +69,16 @@ def open_store(path=None):
 
 class Store:
     def __init__(self, path):
+        if str(path) in ("", ":memory:"):
+            raise StoreError(f"{str(path) or 'an empty name'} is not a file: the results database must be a file "
+                             "that keeps the runs")
         self.path = Path(path)
         if self.path.is_dir():
             raise StoreError(f"{self.path} is a directory, not a results database")
         if not self.path.parent.is_dir():
             raise StoreError(f"directory {self.path.parent} of the results database does not exist")
+        if self.path.exists() and not self.path.is_file():
+            raise StoreError(f"{self.path} is not a regular file (a device or a pipe cannot hold results)")
         existed = self.path.exists() and self.path.stat().st_size > 0
         if existed:
             _check_header(self.path)
@@ -93,9 +98,37 @@ class Store:
                 self._check_meta()
             else:
                 self._create()
+        except sqlite3.DatabaseError as exc:
+            self.close()
+            raise StoreError(f"{self.path} cannot be used as a results database ({exc}); it was left untouched") from None
         except BaseException:
             self.close()
             raise
+
+    def check_usable(self, lock_patience_s: float = 10.0) -> None:
+        """Make sure, before any work, that runs can be written here: the file is intact, not
+        read-only, and not locked by another program for longer than ``lock_patience_s``."""
+        try:
+            problems = [row[0] for row in self.db.execute("PRAGMA quick_check")]
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"{self.path} is damaged ({exc}); it was left untouched: use another --db") from None
+        if problems != ["ok"]:
+            raise StoreError(f"{self.path} is damaged ({'; '.join(problems[:2])}); it was left untouched: "
+                             "use another --db")
+        if not os.access(self.path, os.W_OK) or not (self.path.stat().st_mode & 0o222):
+            raise StoreError(f"{self.path} is read-only; results could not be stored")
+        if not os.access(self.path.parent, os.W_OK):
+            raise StoreError(f"directory {self.path.parent} is not writable (the database keeps its journal there)")
+        self.db.execute(f"PRAGMA busy_timeout = {int(lock_patience_s * 1000)}")
+        try:
+            self.db.execute("BEGIN IMMEDIATE")
+            self.db.execute("ROLLBACK")
+        except sqlite3.OperationalError as exc:
+            if "locked" in str(exc) or "busy" in str(exc):
+                raise StoreError(f"{self.path} is locked by another program; try again when it is done") from None
+            raise StoreError(f"{self.path} cannot be written: {exc}") from None
+        finally:
+            self.db.execute("PRAGMA busy_timeout = 60000")
 
     def _create(self):
         try:
@@ -138,24 +171,29 @@ class Store:
 
     # ---- reading -----------------------------------------------------------------------------
 
+    def _query(self, sql: str, args=()) -> list:
+        try:
+            return self.db.execute(sql, args).fetchall()
+        except sqlite3.DatabaseError as exc:
+            raise StoreError(f"cannot read the results database {self.path}: {exc}") from None
+
     def get(self, spec_hash: str) -> dict | None:
         """The stored run with this settings hash, or None."""
-        row = self.db.execute(
-            "SELECT record_json, history_json, params_json FROM runs WHERE spec_hash = ?", (spec_hash,)
-        ).fetchone()
+        rows = self._query("SELECT record_json, history_json, params_json FROM runs WHERE spec_hash = ?", (spec_hash,))
+        row = rows[0] if rows else None
         if row is None:
             return None
         return {"record": json.loads(row[0]), "history": json.loads(row[1]),
                 "params": json.loads(row[2]) if row[2] else None}
 
     def hashes(self) -> set[str]:
-        return {row[0] for row in self.db.execute("SELECT spec_hash FROM runs")}
+        return {row[0] for row in self._query("SELECT spec_hash FROM runs")}
 
     def count(self) -> int:
-        return self.db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+        return self._query("SELECT COUNT(*) FROM runs")[0][0]
 
     def records(self) -> list[dict]:
-        return [json.loads(row[0]) for row in self.db.execute("SELECT record_json FROM runs ORDER BY id")]
+        return [json.loads(row[0]) for row in self._query("SELECT record_json FROM runs ORDER BY id")]
 
     # ---- writing -----------------------------------------------------------------------------
 
@@ -168,7 +206,7 @@ class Store:
         record = dict(record, jobs=jobs)
         record.pop("command_time_s", None)
         values = (
-            spec.hash(), spec.command, spec.seed, json.dumps(spec.as_dict(), sort_keys=True),
+            spec.hash(), spec.command, spec.seed, json.dumps(spec.as_dict(), sort_keys=True, default=str),
             json.dumps(record, default=_json_default), json.dumps([float(v) for v in history]),
             json.dumps([float(v) for v in params]) if params is not None else None,
             record.get("rmse_rot_deg"), record.get("rmse_torque_nm"), record.get("runtime_s"),

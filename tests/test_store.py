@@ -161,14 +161,16 @@ def _other_value(name, value):
 
 
 def test_hash_changes_with_every_setting_and_the_seed():
-    base = optimize_spec("cs", "bfgs", False, seed=0, budget=20)
-    hashes = {base.hash()}
+    rk4 = optimize_spec("cs", "bfgs", False, seed=0, budget=20)
+    adaptive = dataclasses.replace(rk4, integrator="rk45")  # the tolerances apply to adaptive integrators only
+    hashes = {rk4.hash(), adaptive.hash()}
     for field in dataclasses.fields(RunSpec):
+        base = adaptive if field.name in ("rtol", "atol") else rk4
         changed = dataclasses.replace(base, **{field.name: _other_value(field.name, getattr(base, field.name))})
         assert changed != base
         assert changed.hash() != base.hash(), field.name
         hashes.add(changed.hash())
-    assert len(hashes) == len(dataclasses.fields(RunSpec)) + 1
+    assert len(hashes) == len(dataclasses.fields(RunSpec)) + 2
     # consecutive seeds, torque options and optimizer options, as the benchmark varies them
     seeds = {optimize_spec("cs", "bfgs", False, seed=s, budget=20).hash() for s in range(50)}
     assert len(seeds) == 50
@@ -449,3 +451,26 @@ def test_report_without_db_uses_fdbench_db_then_the_working_directory(tmp_path, 
     assert (cwd / store_module.DEFAULT_DB).exists()
     with open_store(cwd / store_module.DEFAULT_DB) as store:
         assert store.count() == 1
+
+
+def test_equivalent_specs_hash_alike():
+    """Settings that cannot change the numbers do not change the identity of a run."""
+    base = control_spec(0.0, 0.3)
+    assert control_spec(-0.0, 0.3).hash() == base.hash()
+    assert control_spec(0, 0.3).hash() == base.hash()  # an int where a float is meant
+    assert control_spec(0.0, 0.3, rtol=1e-3, atol=1e-5).hash() == base.hash()  # rk4 has no tolerances
+    adaptive = control_spec(0.0, 0.3, integrator="rk45")
+    assert control_spec(0.0, 0.3, integrator="rk45", dt=0.01).hash() == adaptive.hash()  # nor rk45 a step
+    assert adaptive.hash() != base.hash()
+
+
+def test_stored_identity_of_default_specs_is_kept():
+    """Fields added to RunSpec since the first schema leave a default spec's hash unchanged: the
+    digest of the specification written without them."""
+    import hashlib
+    import json
+
+    spec = optimize_spec("cs", "bfgs", False, seed=3, budget=20)
+    legacy = {k: v for k, v in spec.as_dict().items() if k != "inputs"}
+    expected = hashlib.sha256(json.dumps(legacy, sort_keys=True, default=str).encode()).hexdigest()[:16]
+    assert spec.hash() == expected

@@ -8,6 +8,8 @@ import numpy as np
 
 from .base import OPTIMIZERS, Budgeted, Optimizer
 
+MAX_POPSIZE = 10_000  # candidates per generation: more than any budget here can feed
+
 
 @OPTIMIZERS.register("cmaes")
 class CMAES(Optimizer):
@@ -17,8 +19,8 @@ class CMAES(Optimizer):
     def __init__(self, sigma0: float = 0.1, popsize: int | None = None):
         if not (math.isfinite(sigma0) and sigma0 > 0):
             raise ValueError(f"--sigma0 must be a positive finite number, got {sigma0}")
-        if popsize is not None and popsize < 2:
-            raise ValueError(f"--popsize must be an integer >= 2, got {popsize}")
+        if popsize is not None and not 2 <= popsize <= MAX_POPSIZE:
+            raise ValueError(f"--popsize must be an integer in [2, {MAX_POPSIZE}], got {popsize}")
         self.sigma0, self.popsize = sigma0, popsize
 
     def warm_up(self):
@@ -30,13 +32,18 @@ class CMAES(Optimizer):
         options = {"seed": seed + 1, "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxfevals": f.budget}
         if self.popsize:
             options["popsize"] = self.popsize
+            if self.popsize == 2:  # two-point step-size adaptation needs room for its own two samples
+                options["AdaptSigma"] = cma.sigma_adaptation.CMAAdaptSigmaCSA
         es = cma.CMAEvolutionStrategy(np.asarray(x0, dtype=float), self.sigma0, options)
-        while not es.stop():
-            candidates = es.ask()
-            if f.remaining < len(candidates):
-                for x in candidates[: f.remaining]:
-                    f(x)
-                break
-            es.tell(candidates, [f(x) for x in candidates])
+        try:
+            while not es.stop():
+                candidates = es.ask()
+                if f.remaining < len(candidates):
+                    for x in candidates[: f.remaining]:
+                        f(x)
+                    break
+                es.tell(candidates, [f(x) for x in candidates])
+        except ValueError as exc:  # cma refusing its own state: the best point so far is the result
+            return f"cma stopped: {' '.join(str(exc).split())}"
         stop = es.stop()
         return ", ".join(f"{k} {v}" for k, v in stop.items()) if stop else "budget spent"

@@ -36,10 +36,23 @@ class GaussianSumTorque(TorqueParameterisation):
             return p
         from scipy.optimize import least_squares
 
-        every = max(1, len(t) // 200)  # the torque is smooth: ~200 points fit it as well as 1001
+        # the torque is smooth: ~200 points fit it as well as 1001, but never fewer than the parameters
+        every = max(1, len(t) // max(200, self.n_params))
         ts, targets = t[::every], target[::every]
-        fit = least_squares(lambda p: self.evaluate(p, ts) - targets, p, method="lm", max_nfev=300)
+        # Levenberg-Marquardt needs at least as many residuals as parameters; a trust region does not
+        method = "lm" if len(ts) >= self.n_params else "trf"
+        with np.errstate(all="ignore"):
+            fit = least_squares(lambda p: self.evaluate(p, ts) - targets, p, jac=lambda p: self.jacobian(p, ts),
+                                method=method, max_nfev=300)
         return fit.x
+
+    def jacobian(self, p, t) -> np.ndarray:
+        """d PF(t) / d p, shape (n, n_params): columns dA, dC, dT of each term in turn."""
+        a, c, centre = np.asarray(p, dtype=float).reshape(-1, 3).T
+        d = np.asarray(t, dtype=float)[:, None] - centre
+        with np.errstate(over="ignore", invalid="ignore"):
+            bump = np.exp(-c * d**2)
+        return np.stack([bump, -a * d**2 * bump, 2 * a * c * d * bump], axis=-1).reshape(len(d), -1)
 
     def evaluate(self, p, t):
         p = np.asarray(p, dtype=float).reshape(-1, 3)
