@@ -23,6 +23,7 @@ from pathlib import Path
 DEFAULT_DB = "fdbench-results.sqlite"
 SCHEMA_NAME = "fdbench-results"
 SCHEMA_VERSION = "1"
+OPEN_PATIENCE_S = 10.0  # how long opening waits for a lock held by another program
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS fdbench_meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -84,9 +85,14 @@ class Store:
             _check_header(self.path)
         self.db = None
         try:
-            self.db = sqlite3.connect(self.path, timeout=60, isolation_level=None)
-            self.db.execute("PRAGMA busy_timeout = 60000")
+            self.db = sqlite3.connect(self.path, timeout=OPEN_PATIENCE_S, isolation_level=None)
             tables = {row[0] for row in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            self.db.execute("PRAGMA busy_timeout = 60000")  # writers of a parallel report wait their turn
+        except sqlite3.OperationalError as exc:
+            self.close()
+            if "locked" in str(exc) or "busy" in str(exc):
+                raise StoreError(f"{self.path} is locked by another program; try again when it is done") from None
+            raise StoreError(f"{self.path} cannot be opened ({exc}); it was left untouched") from None
         except sqlite3.DatabaseError as exc:
             self.close()
             raise StoreError(f"{self.path} is not an fdbench results database ({exc}); it was left untouched") from None
