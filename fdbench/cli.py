@@ -142,7 +142,7 @@ Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12,
 Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12.")]
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
 Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
-Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout.")]
+Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
 SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Write the run's time history (1001 rows) as CSV to FILE.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
@@ -173,7 +173,8 @@ def _check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None,
     from .files import BadFile, check_distinct, check_writable
 
     _check_choice("--format", fmt, valid)
-    outputs = {"--" + option.replace("_", "-"): path for option, path in paths.items()}
+    outputs = {"--" + option.replace("_", "-"): path for option, path in paths.items()
+               if not (option == "output" and str(path) == "-")}  # '-o -' is stdout
     try:
         for option, path in outputs.items():
             if path is not None:
@@ -248,7 +249,7 @@ def _format_value(value) -> str:
 
 
 def _emit(text: str, output: Optional[Path]) -> None:
-    if output is None:
+    if output is None or str(output) == "-":
         if sys.stdout is None:
             raise _StdoutClosed
         sys.stdout.write(text)
@@ -262,7 +263,7 @@ def _emit(text: str, output: Optional[Path]) -> None:
 def _finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
     record["command_time_s"] = time.perf_counter() - _STARTED
     _emit(_render(record, fmt, title), output)
-    if output is not None:
+    if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output}")
     if record.get("status") not in (None, "success"):
         _say(quiet, f"[yellow]warning:[/] {record['message']}")
@@ -640,7 +641,7 @@ def report(
 
         links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
         _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
-    if output is not None:
+    if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 
 

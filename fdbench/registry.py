@@ -74,20 +74,24 @@ def load_plugins() -> None:
     if _plugins_loaded:
         return
     _plugins_loaded = True
+    import contextlib
     import importlib
     import os
+    import sys
 
     names = [n.strip() for n in os.environ.get(PLUGINS_VARIABLE, "").split(",") if n.strip()]
     for name in names:
         try:
-            importlib.import_module(name)
+            with contextlib.redirect_stdout(sys.stderr):  # a plugin's prints never mix with results
+                importlib.import_module(name)
         except (Exception, SystemExit) as exc:  # noqa: BLE001 - any failure of a plugin, sys.exit included
             raise PluginError(f"{PLUGINS_VARIABLE}: cannot import {name!r}: {_failure(exc)}") from None
     from importlib.metadata import entry_points
 
     for entry in entry_points(group=ENTRY_POINT_GROUP):
         try:
-            entry.load()
+            with contextlib.redirect_stdout(sys.stderr):
+                entry.load()
         except (Exception, SystemExit) as exc:  # noqa: BLE001
             raise PluginError(f"plugin {entry.name!r} ({entry.value}): cannot load: {_failure(exc)}") from None
 

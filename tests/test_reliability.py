@@ -221,6 +221,7 @@ MATRIX = [
     (["report", "--db", "db.sqlite", "--figures", "figs_ro"], {}, ["read-only"]),
     (["report", "--db", "db.sqlite", "--figures", "figs_dir"], {}, ["directory"]),
     (["report", "--db", "db.sqlite", "--figures", "figs_db"], {}, ["database"]),
+    (["report", "--db", "db.sqlite", "--figures", "adir", "-o", "adir/figure5_tracking.png"], {}, ["same file"]),
     (["report", "--db", "ro.sqlite"], {}, ["read-only"]),
     (["report", "--db", "garbage.sqlite"], {}, ["not"]),
     (["report", "--db", "corrupt.sqlite"], {}, ["damaged"]),
@@ -536,3 +537,19 @@ def test_non_root_user_with_read_only_home(tmp_path):
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["status"] == "success"
     assert len(out.stderr.splitlines()) <= 1
+
+
+def test_dash_output_is_stdout(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = invoke(["inverse", "-f", "json", "-o", "-", "-q"])
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["command"] == "inverse"
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_plugin_prints_do_not_reach_the_results(tmp_path):
+    (tmp_path / "noisy.py").write_text("print('hello from a plugin')\n")
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), FDBENCH_PLUGINS="noisy")
+    out = subprocess.run(FDBENCH + ["methods"], capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
+    assert out.returncode == 0, out.stderr
+    assert "hello" not in out.stdout and "hello from a plugin" in out.stderr
