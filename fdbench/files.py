@@ -169,35 +169,48 @@ def csv_text(header: list[str], rows) -> str:
     return buffer.getvalue()
 
 
-def read_torque_csv(path: str | os.PathLike, option: str = "--torque-file") -> tuple[np.ndarray, np.ndarray]:
-    """A torque history from a CSV file with a header and columns ``t`` (s) and ``torque`` (N m).
-
-    Times must be finite and strictly increasing and cover [0, 1] s; returns (t, torque)."""
+def read_columns(path: str | os.PathLike, option: str, required: tuple, optional: tuple = ()) -> dict:
+    """Named columns of numbers from a CSV file with a header (names case-insensitive, any order,
+    other columns ignored): {name: array of shape (n,)}; optional columns absent from the header
+    are absent from the result. Raises BadFile with a one-line message."""
     path = Path(path)
     text = read_input_text(path, option)
     rows = [row for row in csv.reader(io.StringIO(text)) if row and any(cell.strip() for cell in row)]
+    expected = ",".join(required)
     if not rows:
-        raise BadFile(f"{option}: {path} is empty; expected a header 't,torque' and rows of numbers")
+        raise BadFile(f"{option}: {path} is empty; expected a header '{expected}' and rows of numbers")
     header = [cell.strip().lower() for cell in rows[0]]
-    if "t" not in header or "torque" not in header:
-        raise BadFile(f"{option}: {path} needs columns 't' and 'torque' in its header, found {', '.join(header)}")
-    it, iq = header.index("t"), header.index("torque")
-    t, q = [], []
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise BadFile(f"{option}: {path} needs columns {', '.join(repr(n) for n in required)} in its header, "
+                      f"found {', '.join(header)}")
+    index = {name: header.index(name) for name in required + tuple(optional) if name in header}
+    values = {name: [] for name in index}
     for number, row in enumerate(rows[1:], start=2):
         try:
-            t.append(float(row[it]))
-            q.append(float(row[iq]))
+            for name, i in index.items():
+                values[name].append(float(row[i]))
         except (ValueError, IndexError):
-            raise BadFile(f"{option}: {path} line {number}: expected numbers in columns t and torque") from None
-    t, q = np.array(t), np.array(q)
+            raise BadFile(f"{option}: {path} line {number}: expected numbers in columns {', '.join(index)}") from None
+    return {name: np.array(column) for name, column in values.items()}
+
+
+def read_torque_csv(path: str | os.PathLike, option: str = "--torque-file", duration: float = 1.0
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """A torque history from a CSV file with a header and columns ``t`` (s) and ``torque`` (N m).
+
+    Times must be finite and strictly increasing and cover [0, duration] s; returns (t, torque)."""
+    path = Path(path)
+    columns = read_columns(path, option, ("t", "torque"))
+    t, q = columns["t"], columns["torque"]
     if len(t) < 2:
         raise BadFile(f"{option}: {path} needs at least 2 rows of data, found {len(t)}")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))):
         raise BadFile(f"{option}: {path} holds non-finite values")
     if np.any(np.diff(t) <= 0):
         raise BadFile(f"{option}: {path}: times must be strictly increasing")
-    if t[0] > 1e-9 or t[-1] < 1 - 1e-9:
-        raise BadFile(f"{option}: {path} covers [{t[0]:g}, {t[-1]:g}] s; it must cover [0, 1] s")
+    if t[0] > 1e-9 or t[-1] < duration - 1e-9:
+        raise BadFile(f"{option}: {path} covers [{t[0]:g}, {t[-1]:g}] s; it must cover [0, {duration:g}] s")
     return t, q
 
 

@@ -1,28 +1,282 @@
-"""The desired elbow motion of eq. 5 in two kinematics variants.
+"""Desired elbow motions: objects that know their duration, their sample times and theta (rad),
+theta' (rad/s), theta'' (rad/s^2) at any time t (s) of [0, duration].
 
-``paper``: the velocity and acceleration exactly as eq. 5 prints them, derivatives with respect
-to the warped time t* (this is what reproduces the paper's figures). ``exact``: derivatives with
-respect to t by the chain rule through t*(t) = a1 t + (1 - a1) t^2 (kinematically consistent).
+* ``paper`` and ``exact``: eq. 5 over [0, 1] s, sampled every 1 ms. ``paper`` takes the velocity
+  and acceleration exactly as eq. 5 prints them, derivatives with respect to the warped time t*
+  (this reproduces the paper's figures); ``exact`` takes derivatives with respect to t by the chain
+  rule through t*(t) = a1 t + (1 - a1) t^2 (kinematically consistent).
+* A recorded joint angle (``SampledMotion``, read by ``read_motion_csv``): times and angles, its
+  velocity and acceleration either given or estimated as biomechanics does, once, on the motion's
+  own samples: a zero-lag Butterworth low-pass then the derivatives of an interpolating spline, or
+  a smoothing spline.
+* ``noisy(motion, sigma_deg, seed)``: the angle of a motion sampled on a capture grid, with white
+  Gaussian noise added, then estimated like a recording: what captured data looks like.
+
+Times of a recording are counted from its first sample.
 """
 
 from __future__ import annotations
+
+import hashlib
+import math
+from abc import ABC, abstractmethod
 
 import numpy as np
 
 A1 = 0.05
 AMPLITUDE = np.pi / 4  # L of eq. 5, rad
-T_FINAL = 1.0  # s
-SAMPLE_DT = 1e-3  # s, the sampling of every reported history
+T_FINAL = 1.0  # s, the duration of eq. 5
+SAMPLE_DT = 1e-3  # s, the sampling of eq. 5's reported histories
 KINEMATICS = ("paper", "exact")
+DEFAULT_CUTOFF_HZ = 6.0
+DEFAULT_CAPTURE_HZ = 100.0
+FILTER_ORDER = 2  # a 2nd-order Butterworth run forward and backward: Winter's 4th-order zero-lag filter
+SMOOTHING = ("butterworth", "spline")
+MIN_SAMPLES = 10
 
 
-def sample_times() -> np.ndarray:
-    """The 1001 sample instants 0, 1 ms, ..., 1 s (a read-only array)."""
-    return _SAMPLES
+class Motion(ABC):
+    """A desired joint motion over [0, duration] s."""
+
+    name: str = ""
+
+    @property
+    @abstractmethod
+    def samples(self) -> np.ndarray:
+        """The reporting grid, times (s) from 0 to the duration, read-only, shape (n,)."""
+
+    @abstractmethod
+    def __call__(self, t):
+        """theta (rad), theta' (rad/s), theta'' (rad/s^2) at times t (s), each shaped like t."""
+
+    @property
+    def duration(self) -> float:
+        return float(self.samples[-1])
+
+    @property
+    def key(self) -> str:
+        """What identifies the motion (its name, and a digest of its data where it has any)."""
+        return self.name
+
+    def describe(self) -> dict:
+        """Fields that say which motion a result used."""
+        return {"motion": self.name}
+
+    def __eq__(self, other):
+        return isinstance(other, Motion) and self.key == other.key
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __repr__(self):
+        return f"{type(self).__name__}({self.key!r})"
 
 
-_SAMPLES = np.linspace(0.0, T_FINAL, int(round(T_FINAL / SAMPLE_DT)) + 1)
-_SAMPLES.flags.writeable = False
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array = np.array(array, dtype=float)
+    array.flags.writeable = False
+    return array
+
+
+class PaperMotion(Motion):
+    """Eq. 5 over [0, 1] s in one of the two kinematics variants, sampled every 1 ms."""
+
+    def __init__(self, kinematics: str = "paper"):
+        self.name = check_kinematics(kinematics)
+
+    @property
+    def samples(self) -> np.ndarray:
+        return _SAMPLES
+
+    def __call__(self, t):
+        return eq5(t, self.name)
+
+
+_SAMPLES = _read_only(np.linspace(0.0, T_FINAL, int(round(T_FINAL / SAMPLE_DT)) + 1))
+
+
+def eq5(t, kinematics: str = "paper"):
+    """theta (rad), theta' (rad/s), theta'' (rad/s^2) of eq. 5 at times t (s)."""
+    ts, dts = warped_time(t)
+    phase = 2 * np.pi * ts
+    theta = AMPLITUDE * (ts - np.sin(phase) / (2 * np.pi) - 1)
+    dtheta = AMPLITUDE * (1 - np.cos(phase))  # d theta / d t*
+    ddtheta = 2 * np.pi * AMPLITUDE * np.sin(phase)  # d^2 theta / d t*^2
+    if kinematics == "paper":
+        return theta, dtheta, ddtheta
+    return theta, dtheta * dts, ddtheta * dts**2 + dtheta * 2 * (1 - A1)
+
+
+class SampledMotion(Motion):
+    """A motion known at sample times: angles, and velocities and accelerations given or
+    estimated. Between samples (and for the integrator's stages) it is a smooth function of t.
+
+    t: times (s), increasing, shape (n,), n >= 10; theta: angles (rad), shape (n,); theta_vel,
+    theta_acc: rad/s and rad/s^2 (None: estimated). ``cutoff_hz``: the -3 dB frequency of the whole
+    zero-lag Butterworth filter; ``smoothing``: 'butterworth' or 'spline' (a smoothing spline whose
+    factor ``spline_lambda`` is chosen by generalised cross-validation when None). ``samples``:
+    the reporting grid (default: t)."""
+
+    def __init__(self, t, theta, theta_vel=None, theta_acc=None, *, name: str = "sampled",
+                 cutoff_hz: float = DEFAULT_CUTOFF_HZ, smoothing: str = "butterworth", spline_lambda=None,
+                 samples=None):
+        t, theta = np.asarray(t, dtype=float), np.asarray(theta, dtype=float)
+        check_samples(t, theta)
+        self.name = name
+        self._t = _read_only(t - t[0])
+        self._samples = self._t if samples is None else _read_only(samples)
+        self.cutoff_hz, self.smoothing, self.spline_lambda = cutoff_hz, smoothing, spline_lambda
+        self.given_derivatives = theta_vel is not None and theta_acc is not None
+        if self.given_derivatives:
+            self._theta, self._vel, self._acc = self._interpolants_given(theta, np.asarray(theta_vel, float),
+                                                                         np.asarray(theta_acc, float))
+        else:
+            self._theta, self._vel, self._acc = self._interpolants_estimated(theta)
+        digest = hashlib.sha256(np.concatenate([t, theta]).tobytes())
+        for extra in (theta_vel, theta_acc):
+            if extra is not None:
+                digest.update(np.asarray(extra, dtype=float).tobytes())
+        self._digest = digest.hexdigest()[:16]
+
+    @property
+    def samples(self) -> np.ndarray:
+        return self._samples
+
+    @property
+    def key(self) -> str:
+        if self.given_derivatives:
+            how = "given"
+        elif self.smoothing == "spline":
+            how = f"spline:{self.spline_lambda}"
+        else:
+            how = f"butterworth:{self.cutoff_hz!r}"
+        return f"{self.name}#{self._digest}#{how}"
+
+    def describe(self) -> dict:
+        if self.given_derivatives:
+            derivatives = "given"
+        elif self.smoothing == "spline":
+            derivatives = "smoothing spline" + ("" if self.spline_lambda is None else f" (lambda {self.spline_lambda:g})")
+        else:
+            derivatives = f"Butterworth {self.cutoff_hz:g} Hz zero-lag + spline"
+        return {"motion": self.name, "derivatives": derivatives}
+
+    def __call__(self, t):
+        t = np.clip(np.asarray(t, dtype=float), 0.0, self._t[-1])
+        return self._theta(t), self._vel(t), self._acc(t)
+
+    def _interpolants_given(self, theta, vel, acc):
+        from scipy.interpolate import CubicHermiteSpline, make_interp_spline
+
+        for values, what in ((vel, "theta_vel"), (acc, "theta_acc")):
+            if values.shape != theta.shape or not np.all(np.isfinite(values)):
+                raise ValueError(f"{what} must be finite, one value per sample")
+        # theta and theta' are each Hermite-interpolated with their own derivative: at the samples
+        # the motion is exactly as given
+        position = CubicHermiteSpline(self._t, theta, vel)
+        velocity = CubicHermiteSpline(self._t, vel, acc)
+        acceleration = make_interp_spline(self._t, acc, k=min(3, len(acc) - 1))
+        return position, velocity, acceleration
+
+    def _interpolants_estimated(self, theta):
+        from scipy.interpolate import make_interp_spline, make_smoothing_spline
+
+        if self.smoothing == "spline":
+            spline = make_smoothing_spline(self._t, theta, lam=self.spline_lambda)
+        else:
+            uniform_t, uniform_theta = _uniform(self._t, theta)
+            filtered = zero_lag_lowpass(uniform_theta, 1.0 / (uniform_t[1] - uniform_t[0]), self.cutoff_hz)
+            spline = make_interp_spline(uniform_t, filtered, k=5)  # quintic: a smooth acceleration
+        return spline, spline.derivative(1), spline.derivative(2)
+
+
+def _uniform(t, theta):
+    """The samples on a uniform grid of the same count (a recording with an irregular clock is
+    interpolated by a cubic spline first), as the filter needs."""
+    steps = np.diff(t)
+    if np.ptp(steps) <= 1e-9 * np.mean(steps):
+        return t, theta
+    from scipy.interpolate import CubicSpline
+
+    uniform = np.linspace(t[0], t[-1], len(t))
+    return uniform, CubicSpline(t, theta)(uniform)
+
+
+def butterworth_design_hz(cutoff_hz: float, rate_hz: float, passes: int = 2, order: int = FILTER_ORDER) -> float:
+    """The design cutoff (Hz) of a digital Butterworth filter of ``order`` run ``passes`` times so
+    that the whole has its -3 dB point at ``cutoff_hz`` (Winter's correction, exact for the
+    bilinear transform): |H|^(2 passes) = 1/2 at the cutoff."""
+    correction = (2 ** (1 / passes) - 1) ** (1 / (2 * order))
+    return rate_hz / math.pi * math.atan(math.tan(math.pi * cutoff_hz / rate_hz) / correction)
+
+
+def zero_lag_lowpass(values: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
+    """Winter's zero-lag 4th-order Butterworth low-pass: a 2nd-order filter forward then backward
+    (scipy's butter + filtfilt), its design cutoff corrected so that the -3 dB point of the whole
+    is ``cutoff_hz``. values: shape (n,) sampled at ``rate_hz``."""
+    from scipy.signal import butter, filtfilt
+
+    if not 0 < cutoff_hz < rate_hz / 2:
+        raise ValueError(f"the cutoff {cutoff_hz:g} Hz must be below half the sampling rate ({rate_hz / 2:.4g} Hz)")
+    b, a = butter(FILTER_ORDER, butterworth_design_hz(cutoff_hz, rate_hz), fs=rate_hz)
+    # odd (point-reflected) padding of a few filter time constants keeps the ends from ringing
+    return filtfilt(b, a, values, padtype="odd", padlen=min(len(values) - 1, 30 * max(len(a), len(b))))
+
+
+def check_samples(t: np.ndarray, theta: np.ndarray) -> None:
+    """Times and angles a motion can be built from; ValueError with a one-line message."""
+    if t.ndim != 1 or t.shape != theta.shape:
+        raise ValueError("times and angles must be two columns of the same length")
+    if len(t) < MIN_SAMPLES:
+        raise ValueError(f"a motion needs at least {MIN_SAMPLES} samples, found {len(t)}")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(theta))):
+        raise ValueError("times and angles must be finite numbers (no NaN or empty cells)")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("times must be strictly increasing")
+    if np.any(np.abs(np.cos(theta)) < 1e-2):
+        worst = float(np.degrees(theta[np.argmin(np.abs(np.cos(theta)))]))
+        raise ValueError(f"the angle reaches {worst:.4g} deg, where the mixed coordinates are singular "
+                         "(theta = +-90 deg); the forearm model needs angles clear of it")
+
+
+def noisy(motion: Motion, sigma_deg: float, seed: int, capture_hz: float = DEFAULT_CAPTURE_HZ,
+          cutoff_hz: float = DEFAULT_CUTOFF_HZ, smoothing: str = "butterworth", spline_lambda=None) -> SampledMotion:
+    """``motion``'s angle captured with white Gaussian noise of ``sigma_deg`` degrees (seeded) and
+    estimated like a recording. A recording keeps its own samples; an analytic motion is captured
+    every 1 / capture_hz s. The result reports on ``motion``'s samples."""
+    if isinstance(motion, SampledMotion):
+        t = np.array(motion._t)
+    else:
+        t = np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1)
+    theta, _, _ = motion(t)
+    rng = np.random.default_rng(seed)
+    measured = theta + np.radians(sigma_deg) * rng.standard_normal(len(t))
+    where = "" if isinstance(motion, SampledMotion) else f" at {capture_hz:g} Hz"
+    return SampledMotion(t, measured, name=f"{motion.name}+noise {sigma_deg:g} deg{where} (seed {seed})",
+                         cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
+                         samples=motion.samples)
+
+
+def read_motion_csv(path, option: str = "--motion", radians: bool = False, **estimate) -> SampledMotion:
+    """A recorded joint angle from a CSV file: columns ``t`` (s) and ``theta`` (degrees, or
+    radians with ``radians``), optionally ``theta_vel`` and ``theta_acc`` (deg/s, deg/s^2, or rad
+    units), any order, any sampling. ``estimate``: options of ``SampledMotion``. Raises
+    files.BadFile with a one-line message."""
+    from pathlib import Path
+
+    from .files import BadFile, read_columns
+
+    path = Path(path)
+    columns = read_columns(path, option, required=("t", "theta"), optional=("theta_vel", "theta_acc"))
+    unit = 1.0 if radians else math.pi / 180
+    vel, acc = columns.get("theta_vel"), columns.get("theta_acc")
+    if (vel is None) != (acc is None):
+        raise BadFile(f"{option}: {path} gives only one of theta_vel and theta_acc; give both or neither")
+    try:
+        return SampledMotion(columns["t"], columns["theta"] * unit, None if vel is None else vel * unit,
+                             None if acc is None else acc * unit, name=f"file:{path.name}", **estimate)
+    except ValueError as exc:
+        raise BadFile(f"{option}: {path}: {exc}") from None
 
 
 def check_kinematics(kinematics: str) -> str:
@@ -33,20 +287,37 @@ def check_kinematics(kinematics: str) -> str:
     return kinematics
 
 
+def as_motion(motion) -> Motion:
+    """A Motion from a Motion or the name of one of eq. 5's variants ('paper', 'exact')."""
+    if isinstance(motion, Motion):
+        return motion
+    return _named(check_kinematics(motion))
+
+
+_NAMED = {}
+
+
+def _named(name: str) -> Motion:
+    if name not in _NAMED:
+        _NAMED[name] = PaperMotion(name)
+    return _NAMED[name]
+
+
+# ---- the functions of eq. 5 that earlier code calls -------------------------------------------
+
+
+def sample_times() -> np.ndarray:
+    """The 1001 sample instants 0, 1 ms, ..., 1 s of eq. 5 (a read-only array)."""
+    return _SAMPLES
+
+
 def warped_time(t):
     """t*(t) and dt*/dt, dimensionless."""
     t = np.asarray(t, dtype=float)
     return A1 * t + (1 - A1) * t**2, A1 + 2 * (1 - A1) * t
 
 
-def desired_motion(t, kinematics: str = "paper"):
-    """theta (rad), theta' (rad/s), theta'' (rad/s^2) at times t (s), each shaped like t."""
-    check_kinematics(kinematics)
-    ts, dts = warped_time(t)
-    phase = 2 * np.pi * ts
-    theta = AMPLITUDE * (ts - np.sin(phase) / (2 * np.pi) - 1)
-    dtheta = AMPLITUDE * (1 - np.cos(phase))  # d theta / d t*
-    ddtheta = 2 * np.pi * AMPLITUDE * np.sin(phase)  # d^2 theta / d t*^2
-    if kinematics == "paper":
-        return theta, dtheta, ddtheta
-    return theta, dtheta * dts, ddtheta * dts**2 + dtheta * 2 * (1 - A1)
+def desired_motion(t, kinematics="paper"):
+    """theta (rad), theta' (rad/s), theta'' (rad/s^2) at times t (s) of a motion or of the named
+    variant of eq. 5, each shaped like t."""
+    return as_motion(kinematics)(t)
