@@ -26,11 +26,15 @@ class Controller(ABC):
 
     name: str = ""
     summary: str = ""
+    feedforward_label: str = "id"  # what tau_ff is, for records: "id" is the inverse-dynamics torque
 
     @abstractmethod
     def design(self, settings: Settings) -> tuple[TorqueFunction, FeedbackLaw]:
         """The feedforward torque tau_ff (t (s), shape (n,) -> N m, shape (n,)) and the feedback
         law towards the desired motion of ``settings.kinematics``."""
+
+    def warm_up(self) -> None:
+        """Import what ``design`` needs, so that a run's timing excludes imports."""
 
     def options(self) -> dict:
         """The options this controller was made with (for records and run hashes)."""

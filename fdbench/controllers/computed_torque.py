@@ -19,6 +19,7 @@ class ComputedTorque(Controller):
     2 I1 zeta omega_n (N m s/rad), gravity coefficient G = F_ext L12 + m g L1G (N m)."""
 
     name = "computed-torque"
+    feedforward_label = "I1*theta_ddot_d"
     summary = ("cancels the model's dynamics and imposes second-order error dynamics of bandwidth omega_n "
                "(feedback linearisation, as in OpenSim's computed muscle control and Drake's InverseDynamicsController)")
 

@@ -41,6 +41,10 @@ class LQR(Controller):
         self.q_rate = check_non_negative("--q-rate", q_rate)  # s^2 rad^-2
         self.r_torque = check_positive("--r-torque", r_torque)  # (N m)^-2
 
+    def warm_up(self) -> None:
+        import scipy.integrate  # noqa: F401
+        import scipy.linalg  # noqa: F401
+
     def design(self, settings: Settings):
         model, kinematics = settings.model, settings.kinematics
         G, inertia = gravity_moment(model), model.I1
