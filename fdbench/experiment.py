@@ -260,6 +260,8 @@ def _run_collocate(spec: RunSpec) -> RunOutcome:
     settings = spec.settings()
     options = dict(spec.method_options)
     warm_up()
+    import casadi  # noqa: F401  (its import is not part of the runtime)
+
     start = time.perf_counter()
     inverse = inverse_dynamics(None, settings.model, settings.kinematics)
     solution = collocate(settings, **options)
