@@ -596,6 +596,7 @@ def report(
     opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
     feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only Table 3 (with) or Table 2 (without); default both.", show_default=False)] = None,
     control: Annotated[bool, typer.Option("--control/--no-control", help="Include the PD control run.")] = True,
+    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation.")] = True,
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
@@ -638,8 +639,8 @@ def report(
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
     cells = default_cells(torque, opt, feedforward, all_cells)
-    if not cells and not control:
-        raise BadInput("nothing to run: the options select no cell and --no-control")
+    if not cells and not control and not beyond:
+        raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
@@ -665,6 +666,11 @@ def report(
                     progress.update(done)
 
                 runs = execute(plan, store, jobs, rerun, on_done)
+            if beyond:
+                from .beyond import beyond_methods, ensure_runs
+
+                methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega))
+                beyond_runs = ensure_runs(methods, store, rerun)
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
     from .inverse import inverse_dynamics
@@ -674,16 +680,24 @@ def report(
     inverse = inverse_dynamics(None, kinematics=kinematics)
     inverse_runtime = time.perf_counter() - start
     rows = build_rows(plan, runs)
+    extra_rows = []
+    if beyond:
+        from .beyond import beyond_rows
+
+        extra_rows = beyond_rows(methods, beyond_runs)
     if fmt == "csv":
+        from .beyond import beyond_csv_rows
         from .files import csv_text
         from .report import CSV_COLUMNS, csv_rows
 
-        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows)), output)
+        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows)), output)
     else:
+        from .beyond import beyond_markdown
         from .report import markdown, settings_table
 
         links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
-        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
+        section = beyond_markdown(extra_rows, methods) if beyond else None
+        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, section), output)
     if output is not None:
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 

@@ -435,7 +435,7 @@ def test_report_without_db_uses_fdbench_db_then_the_working_directory(tmp_path, 
     target = tmp_path / "env" / "results.sqlite"
     target.parent.mkdir()
     monkeypatch.setenv("FDBENCH_DB", str(target))
-    args = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", "1",
+    args = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond", "--seeds", "1",
             "--budget", "5", "--jobs", "1", "--format", "csv", "-q"]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 0, result.stderr
