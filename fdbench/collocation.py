@@ -31,7 +31,7 @@ from .motion import T_FINAL, desired_motion
 
 SCHEMES = ("hermite-simpson", "trapezoidal")
 DEFAULT_NODES = 100
-MIN_NODES, MAX_NODES = 2, 100_000
+MIN_NODES, MAX_NODES = 2, 10_000
 DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as much as 0.001 deg of error
 DEFAULT_MAX_ITER = 1000
 DEFAULT_MAX_TIME = 60.0  # s of IPOPT CPU time

@@ -13,7 +13,7 @@ class PD(Controller):
 
     name = "pd"
     summary = ("the inverse-dynamics torque plus constant PD feedback on the elbow rotation "
-               "(the paper's eqs. 13-14; OpenSim's computed muscle control uses the same PD law on accelerations)")
+               "(the paper's eqs. 13-14; Drake's PidController with an inverse-dynamics feedforward)")
 
     def __init__(self, kp: float = 80.0, kd: float = 0.3):
         self.kp = check_non_negative("--kp", kp)  # N m/rad
