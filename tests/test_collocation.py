@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from fdbench.cli import app
@@ -143,3 +145,23 @@ def test_save_torque_into_a_missing_directory_is_refused_before_work(tmp_path):
     result = invoke(["collocate", "--save-torque", tmp_path / "missing" / "torque.csv"])
     assert result.exit_code == 2 and "--save-torque" in result.stderr
     assert len(result.stderr.splitlines()) == 1
+
+
+@settings(max_examples=30)
+@given(nodes=st.integers(-5, 40),
+       regularization=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1e-6, 1e-2])),
+       scheme=st.sampled_from(["hermite-simpson", "trapezoidal", "euler", ""]),
+       max_iter=st.integers(-2, 50))
+def test_fuzz_collocate_is_a_result_or_one_line(nodes, regularization, scheme, max_iter):
+    """Whatever the options: a result (exit 0, a JSON record) or bad input (exit 2, one line)."""
+    result = invoke(["collocate", "--nodes", nodes, "--regularization", regularization, "--scheme", scheme,
+                     "--max-iter", max_iter, "-f", "json"])
+    assert result.exit_code in (0, 2), (result.exit_code, result.stderr)
+    if result.exit_code == 2:
+        lines = result.stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and result.stdout == ""
+    else:
+        record = json.loads(result.stdout)
+        assert record["command"] == "collocate" and record["ipopt_status"]
+        valid = 2 <= nodes and scheme in ("hermite-simpson", "trapezoidal") and max_iter >= 1
+        assert valid and math.isfinite(regularization) and regularization >= 0

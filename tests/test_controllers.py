@@ -10,6 +10,8 @@ from dataclasses import asdict
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.linalg import expm, solve_continuous_are
 from typer.testing import CliRunner
 
@@ -56,6 +58,21 @@ def test_computed_torque_imposes_the_second_order_error_dynamics(bandwidth, damp
     slow = bandwidth * (damping - np.sqrt(max(damping**2 - 1, 0.0)))
     late = t > 8 / slow
     assert np.max(np.abs(error[late])) < 0.01 * e0
+
+
+@settings(max_examples=25)
+@given(bandwidth=st.floats(8.0, 60.0), damping=st.floats(0.4, 1.5),
+       e0=st.floats(-0.1, 0.1).filter(lambda v: abs(v) > 1e-3), kinematics=st.sampled_from(["exact"]))
+def test_computed_torque_error_follows_the_closed_form_for_any_gains(bandwidth, damping, e0, kinematics):
+    """The same property over many gains and offsets (the error dynamics are linear in e0)."""
+    result = track(make_controller("computed-torque", bandwidth=bandwidth, damping=damping),
+                   Settings(kinematics=kinematics), start=perturbed_start(kinematics, -e0))
+    assert result.success, result.message
+    t = sample_times()[::20]
+    error = desired_motion(t, kinematics)[0] - result.theta[::20]
+    A = np.array([[0.0, 1.0], [-bandwidth**2, -2 * damping * bandwidth]])
+    expected = np.array([(expm(A * ti) @ [e0, 0.0])[0] for ti in t])
+    assert np.max(np.abs(error - expected)) < 5e-4 * abs(e0)
 
 
 def test_computed_torque_applies_its_formula():
