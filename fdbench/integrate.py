@@ -112,9 +112,6 @@ class Settings:
                 raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value}")
 
 
-Gain = "float | TorqueFunction"
-
-
 @dataclass(frozen=True)
 class FeedbackLaw:
     """The feedback every controller is made of, added to the feedforward torque tau_ff(t):
@@ -216,7 +213,7 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
 
     n = steps(settings.dt)
     dt = T_FINAL / n
-    _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
     tau = np.array(tau, dtype=float)  # a writable copy: one compiled signature for every caller
     if tau.shape != ref_th.shape:
         raise ValueError(f"torque on the half-step grid must have shape {ref_th.shape}, got {tau.shape}")
@@ -225,7 +222,6 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     applied = np.full(n + 1, np.nan)
     consts = constants(settings)
     law = FeedbackLaw(kp, kd) if law is None else law
-    half, _, _ = half_step_reference(n, settings.kinematics)
     kp_half, kd_half = law.gains(half)
     code, done, max_viol = dynamics.rk4_feedback(
         _start_state(settings, start), dt, n, tau, ref_th, ref_w,
