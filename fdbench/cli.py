@@ -397,8 +397,14 @@ def simulate(
 
 @app.command()
 def control(
-    kp: Annotated[float, typer.Option("--kp", help="Proportional gain, N m/rad (paper: 80).")] = 80.0,
-    kd: Annotated[float, typer.Option("--kd", help="Derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
+    controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods').")] = "pd",
+    kp: Annotated[float, typer.Option("--kp", help="pd: proportional gain, N m/rad (paper: 80).")] = 80.0,
+    kd: Annotated[float, typer.Option("--kd", help="pd: derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
+    bandwidth: Annotated[float, typer.Option("--bandwidth", help="computed-torque: error-dynamics natural frequency omega_n, rad/s.")] = 20.0,
+    damping: Annotated[float, typer.Option("--damping", help="computed-torque: error-dynamics damping ratio zeta.")] = 1.0,
+    q_angle: Annotated[float, typer.Option("--q-angle", help="lqr: weight of the squared angle error, rad^-2 (1e4: 0.01 rad costs as much as 1 N m).")] = 1e4,
+    q_rate: Annotated[float, typer.Option("--q-rate", help="lqr: weight of the squared rate error, s^2 rad^-2.")] = 1.0,
+    r_torque: Annotated[float, typer.Option("--r-torque", help="lqr: weight of the squared torque correction, (N m)^-2; positive.")] = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
@@ -413,16 +419,94 @@ def control(
     db: Db = None,
     quiet: Quiet = False,
 ):
-    """PD control with computed feedforward (eqs. 13-14): the inverse-dynamics torque plus PD feedback on the elbow rotation."""
+    """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
     from .experiment import control_spec, run
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db)
-    spec = _validated(control_spec(kp, kd, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
+    _check_controller(controller, options)
+    spec = _validated(control_spec(kp, kd, controller, options, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
     _check_store(db)
     outcome = run(spec)
     _save_history(outcome, save_history)
     _store(outcome, spec, db, quiet)
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _check_controller(name: str, options: dict) -> None:
+    """An unknown --controller, or an out-of-range option of any registered controller that
+    takes it (``--bandwidth -1`` with ``--controller pd`` too), is bad input."""
+    import inspect
+
+    from .controllers import CONTROLLERS
+    from .registry import UnknownName
+
+    try:
+        CONTROLLERS[name]
+    except UnknownName as exc:
+        raise BadInput(f"--controller: {exc}") from None
+    for _, cls in CONTROLLERS.items():
+        accepted = inspect.signature(cls).parameters
+        given = {k: v for k, v in options.items() if k in accepted and v is not None}
+        if given:
+            try:
+                cls(**given)
+            except ValueError as exc:
+                raise BadInput(str(exc)) from None
+
+
+@app.command()
+def collocate(
+    nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over [0, 1] s, >= 2.")] = 100,
+    scheme: Annotated[str, typer.Option("--scheme", help="Transcription: hermite-simpson (piecewise-quadratic torque) or trapezoidal (piecewise-linear).")] = "hermite-simpson",
+    regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
+    max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
+    max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
+    save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    db: Db = None,
+    quiet: Quiet = False,
+):
+    """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and torque are the unknowns of one sparse problem solved by IPOPT; the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
+    from .experiment import collocate_spec, run
+
+    _check_outputs(fmt, output=output, save_history=save_history, save_torque=save_torque, db=db)
+    spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time,
+                                     **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    try:
+        import casadi  # noqa: F401
+    except ImportError as exc:
+        raise ImportError(f"'fdbench collocate' needs casadi (pip install casadi): {exc}") from None
+    _check_store(db)
+    outcome = run(spec)
+    _save_history(outcome, save_history)
+    if save_torque is not None:
+        from .files import write_atomic
+
+        write_atomic(save_torque, _collocation_torque_text(outcome.extra["collocation"], spec), "--save-torque")
+    _store(outcome, spec, db, quiet)
+    _finish(outcome.record, fmt, output, "fdbench collocate", quiet)
+
+
+def _collocation_torque_text(solution, spec) -> str:
+    """The torque found on the half-step grid of the run's RK4 (so that 'simulate --torque-file'
+    with the same --dt replays exactly what collocate replayed), as CSV t (s), torque (N m)."""
+    from .files import csv_text
+    from .integrate import half_step_reference, steps
+
+    half, _, _ = half_step_reference(steps(spec.dt), spec.kinematics)
+    torque = solution.torque_samples(half)
+    return csv_text(["t", "torque"], ([f"{t:.17g}", f"{q:.17g}"] for t, q in zip(half, torque)))
 
 
 def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
@@ -470,12 +554,16 @@ def _methods_text() -> str:
     lines += [f"  {name:<12} {cls.summary}" for name, cls in TORQUES.items()]
     lines += ["optimizers (--opt):"]
     lines += [f"  {name:<12} {cls.summary}" for name, cls in OPTIMIZERS.items()]
+    from .controllers import CONTROLLERS
+
+    lines += ["controllers (control --controller):"]
+    lines += [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
     return "\n".join(lines) + "\n"
 
 
 @app.command()
 def methods():
-    """List the registered torque parameterisations and optimisers, one line each."""
+    """List the registered torque parameterisations, optimisers and controllers, one line each."""
     _emit(_methods_text(), None)
 
 
@@ -550,6 +638,7 @@ def report(
     opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
     feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only Table 3 (with) or Table 2 (without); default both.", show_default=False)] = None,
     control: Annotated[bool, typer.Option("--control/--no-control", help="Include the PD control run.")] = True,
+    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation.")] = True,
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
@@ -595,8 +684,8 @@ def report(
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
     cells = default_cells(torque, opt, feedforward, all_cells)
-    if not cells and not control:
-        raise BadInput("nothing to run: the options select no cell and --no-control")
+    if not cells and not control and not beyond:
+        raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
@@ -622,6 +711,11 @@ def report(
                     progress.update(done)
 
                 runs = execute(plan, store, jobs, rerun, on_done)
+            if beyond:
+                from .beyond import beyond_methods, ensure_runs
+
+                methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega))
+                beyond_runs = ensure_runs(methods, store, rerun)
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
     from .inverse import inverse_dynamics
@@ -631,16 +725,24 @@ def report(
     inverse = inverse_dynamics(None, kinematics=kinematics)
     inverse_runtime = time.perf_counter() - start
     rows = build_rows(plan, runs)
+    extra_rows = []
+    if beyond:
+        from .beyond import beyond_rows
+
+        extra_rows = beyond_rows(methods, beyond_runs)
     if fmt == "csv":
+        from .beyond import beyond_csv_rows
         from .files import csv_text
         from .report import CSV_COLUMNS, csv_rows
 
-        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows)), output)
+        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows)), output)
     else:
+        from .beyond import beyond_markdown
         from .report import markdown, settings_table
 
         links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
-        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
+        section = beyond_markdown(extra_rows, methods) if beyond else None
+        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, section), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 

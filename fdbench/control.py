@@ -26,3 +26,15 @@ def pd_control(kp: float = 80.0, kd: float = 0.3, settings: Settings = Settings(
     check_gain("kp", kp)
     check_gain("kd", kd)
     return simulate(feedforward(settings), settings, kp, kd)
+
+
+def track(controller, settings: Settings = Settings(), start=None) -> SimulationResult:
+    """Forward dynamics under a controller (a ``controllers.Controller`` or its registered name):
+    its feedforward torque plus its feedback law, designed once for these settings. ``start``: an
+    initial state [q, q'] of shape (6,) instead of the desired motion's (see ``simulate``)."""
+    if isinstance(controller, str):
+        from .controllers import make_controller
+
+        controller = make_controller(controller)
+    torque, law = controller.design(settings)
+    return simulate(torque, settings, law=law, start=start)

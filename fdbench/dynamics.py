@@ -73,11 +73,13 @@ def constraint_violation(x, y, th, L):
 
 
 @njit
-def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
-    """State derivative for state = [q, q'] with PD torque added. Returns a status: NONFINITE
-    for a non-finite theta, SINGULAR where |cos(theta)| is below tolerance or of another sign
-    than c0 (a step that jumped over cos(theta) = 0), else OK."""
+def _derivative(state, tau, ref_th, ref_w, kp, kd, g_c, consts, c0, out):
+    """State derivative for state = [q, q'] with the feedback law added to tau (see ``rk4_feedback``).
+    Returns a status: NONFINITE for a non-finite theta, SINGULAR where |cos(theta)| is below
+    tolerance or of another sign than c0 (a step that jumped over cos(theta) = 0), else OK."""
     total = tau + kp * (ref_th - state[2]) + kd * (ref_w - state[5])
+    if g_c != 0.0:
+        total += g_c * math.cos(state[2])
     ax, ay, ath, c = accelerations(state[0], state[1], state[2], state[3], state[4], state[5], total, consts)
     out[0], out[1], out[2] = state[3], state[4], state[5]
     out[3], out[4], out[5] = ax, ay, ath
@@ -90,41 +92,61 @@ def _derivative(state, tau, ref_th, ref_w, kp, kd, consts, c0, out):
 
 @njit
 def rk4(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp, kd, consts, states, qdd, applied):
-    """Classical RK4 over n_steps steps of dt (s).
+    """``rk4_feedback`` with constant PD gains kp (N m/rad) and kd (N m s/rad) and no gravity term:
+    the applied torque is tau + kp (ref_th - theta) + kd (ref_w - theta')."""
+    return rk4_feedback(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, np.full(1, kp), np.full(1, kd), 0.0,
+                        consts, states, qdd, applied)
 
-    tau_half, ref_th_half, ref_w_half: shape (2 n_steps + 1,), the open-loop torque (N m) and the
+
+@njit
+def rk4_feedback(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp_half, kd_half, g_c, consts, states, qdd,
+                 applied):
+    """Classical RK4 over n_steps steps of dt (s) under one feedback law shared by every controller.
+
+    tau_half, ref_th_half, ref_w_half: shape (2 n_steps + 1,), the feedforward torque (N m) and the
     reference rotation (rad) and velocity (rad/s) on the half-step grid t_k = k dt / 2.
-    The applied torque is tau + kp (ref_th - theta) + kd (ref_w - theta').
+    kp_half (N m/rad), kd_half (N m s/rad): the gains on the same grid, shape (2 n_steps + 1,), or
+    shape (1,) for constant gains. g_c (N m): the coefficient of a gravity compensation term.
+    The applied torque is tau + kp (ref_th - theta) + kd (ref_w - theta') + g_c cos(theta).
     Fills states (n+1, 6), qdd (n+1, 3) and applied (n+1,) up to the last step reached.
     Returns (status, steps_done, max constraint violation).
     """
     L, viol_tol = consts[1], consts[7]
+    sp = 1 if kp_half.shape[0] > 1 else 0  # stride: 0 reads the one constant gain
+    sd = 1 if kd_half.shape[0] > 1 else 0
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6)
     max_viol = constraint_violation(y[0], y[1], y[2], L)
     for i in range(n_steps + 1):
         j = 2 * i
         c0 = math.cos(y[2])
-        code = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp, kd, consts, c0, k1)
+        kp0, kd0 = kp_half[j * sp], kd_half[j * sd]
+        code = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp0, kd0, g_c, consts, c0, k1)
         for m in range(6):
             states[i, m] = y[m]
         qdd[i, 0], qdd[i, 1], qdd[i, 2] = k1[3], k1[4], k1[5]
-        applied[i] = tau_half[j] + kp * (ref_th_half[j] - y[2]) + kd * (ref_w_half[j] - y[5])
+        applied[i] = tau_half[j] + kp0 * (ref_th_half[j] - y[2]) + kd0 * (ref_w_half[j] - y[5])
+        if g_c != 0.0:
+            applied[i] += g_c * math.cos(y[2])
         if code != OK:
             return code, i, max_viol
         if i == n_steps:
             break
+        kp1, kd1 = kp_half[(j + 1) * sp], kd_half[(j + 1) * sd]
+        kp2, kd2 = kp_half[(j + 2) * sp], kd_half[(j + 2) * sd]
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k2)
+        code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp1, kd1, g_c, consts, c0, k2)
         if code == OK:
             for m in range(6):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp, kd, consts, c0, k3)
+            code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], kp1, kd1, g_c, consts, c0,
+                               k3)
         if code == OK:
             for m in range(6):
                 tmp[m] = y[m] + dt * k3[m]
-            code = _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp, kd, consts, c0, k4)
+            code = _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], kp2, kd2, g_c, consts, c0,
+                               k4)
         if code != OK:
             return code, i, max_viol
         finite = True

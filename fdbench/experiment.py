@@ -16,7 +16,7 @@ from .integrate import Settings, SimulationResult, check_integrator
 from .model import Forearm, Penalty
 from .motion import check_kinematics
 
-COMMANDS = ("control", "optimize", "simulate")
+COMMANDS = ("control", "optimize", "simulate", "collocate")
 MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
 MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
 
@@ -54,6 +54,8 @@ class RunSpec:
     torque_options: tuple = ()  # sorted (name, value) pairs, e.g. (("hidden", 4),)
     optimizer_options: tuple = ()
     inputs: tuple = ()  # (option, SHA-256 of the file's content) of every input file, e.g. (("--torque-file", "ab12..."),)
+    controller: str | None = None  # control: a registered controller; None is the paper's PD (kp, kd)
+    method_options: tuple = ()  # sorted (name, value) pairs of the controller or of collocate
 
     def settings(self) -> Settings:
         return Settings(Forearm(), Penalty(self.alpha, self.xi, self.omega), self.kinematics,
@@ -66,11 +68,19 @@ class RunSpec:
         check_kinematics(self.kinematics)
         check_integrator(self.integrator)
         self.settings()
-        if self.command == "control":
+        if self.command == "control" and self.controller not in (None, "pd"):
+            from .controllers import make_controller
+
+            make_controller(self.controller, **dict(self.method_options))
+        elif self.command == "control":
             from .control import check_gain
 
             check_gain("--kp", self.kp)
             check_gain("--kd", self.kd)
+        if self.command == "collocate":
+            from .collocation import check_options
+
+            check_options(**dict(self.method_options))
         if self.command == "optimize":
             from .optimizers import make_optimizer
             from .torques import make_torque
@@ -106,6 +116,8 @@ class RunSpec:
         for name in FLOAT_FIELDS:
             if isinstance(data[name], (int, float)) and not isinstance(data[name], bool):
                 data[name] = float(data[name]) + 0.0  # + 0.0 turns -0.0 into 0.0
+        if data.get("controller") == "pd":  # the paper's PD is the default controller
+            data["controller"] = None
         for name, default in OMITTED_AT_DEFAULT.items():
             if data.get(name) == default:
                 data.pop(name)
@@ -118,11 +130,31 @@ class RunSpec:
 
 
 FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight")
-OMITTED_AT_DEFAULT = {"inputs": ()}  # fields a spec's hash leaves out while they hold these values
+# fields a spec's hash leaves out while they hold these values (added after the first results schema)
+OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": ()}
 
 
-def control_spec(kp=80.0, kd=0.3, **common) -> RunSpec:
-    return RunSpec(command="control", kp=kp, kd=kd, feedforward=True, **common)
+def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
+    """A control spec: the paper's PD (kp, kd) or another registered controller with the options
+    its class accepts (``controller_options``; others are dropped, so a run has one hash)."""
+    if controller in (None, "pd"):
+        return RunSpec(command="control", kp=kp, kd=kd, feedforward=True, **common)
+    from .controllers import CONTROLLERS
+
+    return RunSpec(command="control", controller=controller, feedforward=True,
+                   method_options=_accepted(CONTROLLERS, controller, controller_options), **common)
+
+
+def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max_iter=None, max_time=None,
+                   **common) -> RunSpec:
+    """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default."""
+    from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION
+
+    options = dict(nodes=nodes, scheme=scheme,
+                   regularization=DEFAULT_REGULARIZATION if regularization is None else regularization,
+                   max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,
+                   max_time=DEFAULT_MAX_TIME if max_time is None else max_time)
+    return RunSpec(command="collocate", method_options=tuple(sorted(options.items())), **common)
 
 
 def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
@@ -191,10 +223,14 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
         return _run_control(spec)
     if spec.command == "optimize":
         return _run_optimize(spec, on_evaluation, on_start)
+    if spec.command == "collocate":
+        return _run_collocate(spec)
     raise ValueError("simulate runs are carried out by run_simulation")
 
 
 def _run_control(spec: RunSpec) -> RunOutcome:
+    if spec.controller not in (None, "pd"):
+        return _run_controller(spec)
     from .control import feedforward
     from .integrate import simulate, warm_up
     from .inverse import inverse_dynamics
@@ -206,8 +242,61 @@ def _run_control(spec: RunSpec) -> RunOutcome:
     result = simulate(feedforward(settings), settings, spec.kp, spec.kd)
     runtime = time.perf_counter() - start
     record = fill_result(base_record(spec), result, inverse)
-    record.update(torque="id", kp=spec.kp, kd=spec.kd, evaluations=1, runtime_s=runtime)
+    record.update(torque="id", kp=spec.kp, kd=spec.kd, evaluations=1, runtime_s=runtime, controller="pd")
     return RunOutcome(record, result, inverse)
+
+
+def _run_controller(spec: RunSpec) -> RunOutcome:
+    """A registered controller other than the paper's PD: its design (feedback gains, Riccati
+    solution) is part of the runtime."""
+    from .control import track
+    from .controllers import make_controller
+    from .integrate import warm_up
+    from .inverse import inverse_dynamics
+
+    settings = spec.settings()
+    controller = make_controller(spec.controller, **dict(spec.method_options))
+    warm_up()
+    controller.warm_up()
+    start = time.perf_counter()
+    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    result = track(controller, settings)
+    runtime = time.perf_counter() - start
+    record = fill_result(base_record(spec), result, inverse)
+    record.update(torque=controller.feedforward_label, evaluations=1, runtime_s=runtime, controller=spec.controller,
+                  controller_options=_options_text(spec.method_options))
+    return RunOutcome(record, result, inverse)
+
+
+def _run_collocate(spec: RunSpec) -> RunOutcome:
+    """Direct collocation, then the torque found replayed by fdbench's own forward simulation:
+    the three indicators are the replay's; the collocation's own tracking error, IPOPT's status,
+    iterations and solve time stand beside them. ``extra['collocation']`` holds the solution."""
+    from .collocation import collocate
+    from .integrate import simulate, warm_up
+    from .inverse import inverse_dynamics
+
+    settings = spec.settings()
+    options = dict(spec.method_options)
+    warm_up()
+    import casadi  # noqa: F401  (its import is not part of the runtime)
+
+    start = time.perf_counter()
+    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    solution = collocate(settings, **options)
+    result = simulate(solution.torque_function(), settings)
+    runtime = time.perf_counter() - start
+    record = fill_result(base_record(spec), result, inverse)
+    theta_d = np.interp(solution.t, inverse.t, inverse.theta)
+    own = float(np.sqrt(np.mean(np.degrees(solution.theta - theta_d) ** 2)))
+    record.update(torque="collocation", evaluations=1, runtime_s=runtime, nodes=options["nodes"],
+                  scheme=options["scheme"], regularization=options["regularization"],
+                  collocation_rmse_rot_deg=own, ipopt_status=solution.ipopt_status,
+                  ipopt_iterations=solution.iterations, solve_time_s=solution.solve_time_s)
+    if not solution.success:
+        record.update(status="collocation_failed", message=f"{solution.message}; the replay of its last iterate: "
+                                                             f"{result.message}")
+    return RunOutcome(record, result, inverse, extra={"collocation": solution})
 
 
 def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:

@@ -113,6 +113,34 @@ class Settings:
                 raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value}")
 
 
+@dataclass(frozen=True)
+class FeedbackLaw:
+    """The feedback every controller is made of, added to the feedforward torque tau_ff(t):
+
+        applied torque = tau_ff(t) + kp(t) (theta_d - theta) + kd(t) (theta'_d - theta') + gravity cos(theta)
+
+    kp (N m/rad) and kd (N m s/rad) are constants or functions of time (s), shape (n,) -> (n,);
+    gravity (N m) is a constant. Zero gains and gravity: open loop."""
+
+    kp: float | TorqueFunction = 0.0
+    kd: float | TorqueFunction = 0.0
+    gravity: float = 0.0
+
+    def gains(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """kp, kd at times t (s), each shape (n,), or shape (1,) where the gain is a constant."""
+        return _gain_on(self.kp, t), _gain_on(self.kd, t)
+
+    @property
+    def closed_loop(self) -> bool:
+        return callable(self.kp) or callable(self.kd) or self.kp != 0 or self.kd != 0 or self.gravity != 0
+
+
+def _gain_on(gain, t) -> np.ndarray:
+    if callable(gain):
+        return np.array(gain(t), dtype=float).reshape(np.shape(t))
+    return np.full(1, float(gain))
+
+
 def check_integrator(name: str) -> str:
     if name not in INTEGRATORS:
         from .registry import unknown_name_message
@@ -139,15 +167,21 @@ def initial_state(kinematics: str, model: Forearm) -> np.ndarray:
     return state
 
 
-def simulate(torque: TorqueFunction, settings: Settings = Settings(), kp: float = 0.0, kd: float = 0.0) -> SimulationResult:
+def simulate(torque: TorqueFunction, settings: Settings = Settings(), kp: float = 0.0, kd: float = 0.0, *,
+             law: FeedbackLaw | None = None, start: np.ndarray | None = None) -> SimulationResult:
     """Forward dynamics over [0, 1] s driven by ``torque`` plus PD feedback on theta with gains
-    kp (N m/rad) and kd (N m s/rad) towards the desired motion (zero gains: open loop)."""
-    start = time.perf_counter()
+    kp (N m/rad) and kd (N m s/rad) towards the desired motion (zero gains: open loop), or plus
+    the feedback ``law`` of a controller (which then replaces kp and kd).
+
+    ``start``: the initial state [x2, y2, theta, x2', y2', theta'], shape (6,) (default: on the
+    desired motion at t = 0); it should satisfy the constraints (``Forearm.coordinates``)."""
+    law = FeedbackLaw(kp, kd) if law is None else law
+    began = time.perf_counter()
     if settings.integrator == "rk4":
-        result = _simulate_rk4(torque, settings, kp, kd)
+        result = _simulate_rk4(torque, settings, law, start)
     else:
-        result = _simulate_scipy(torque, settings, kp, kd)
-    result.runtime_s = time.perf_counter() - start
+        result = _simulate_scipy(torque, settings, law, start)
+    result.runtime_s = time.perf_counter() - began
     return result
 
 
@@ -167,19 +201,20 @@ def half_step_reference(n: int, kinematics: str):
     return half, theta, w
 
 
-def _simulate_rk4(torque, settings: Settings, kp, kd) -> SimulationResult:
+def _simulate_rk4(torque, settings: Settings, law: FeedbackLaw, start) -> SimulationResult:
     half, _, _ = half_step_reference(steps(settings.dt), settings.kinematics)
-    return simulate_rk4_on_grid(torque(half), settings, kp, kd)
+    return simulate_rk4_on_grid(torque(half), settings, law=law, start=start)
 
 
-def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, kd: float = 0.0) -> SimulationResult:
+def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, kd: float = 0.0, *,
+                         law: FeedbackLaw | None = None, start: np.ndarray | None = None) -> SimulationResult:
     """RK4 with the open-loop torque tau (N m) given on the half-step grid of ``settings.dt``,
-    shape (2 n + 1,) (see ``half_step_reference``)."""
+    shape (2 n + 1,) (see ``half_step_reference``); feedback and ``start`` as in ``simulate``."""
     from . import dynamics
 
     n = steps(settings.dt)
     dt = T_FINAL / n
-    _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
     tau = np.array(tau, dtype=float)  # a writable copy: one compiled signature for every caller
     if tau.shape != ref_th.shape:
         raise ValueError(f"torque on the half-step grid must have shape {ref_th.shape}, got {tau.shape}")
@@ -187,9 +222,11 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     qdd = np.full((n + 1, 3), np.nan)
     applied = np.full(n + 1, np.nan)
     consts = constants(settings)
-    code, done, max_viol = dynamics.rk4(
-        initial_state(settings.kinematics, settings.model), dt, n, tau, ref_th, ref_w,
-        float(kp), float(kd), consts, states, qdd, applied,
+    law = FeedbackLaw(kp, kd) if law is None else law
+    kp_half, kd_half = law.gains(half)
+    code, done, max_viol = dynamics.rk4_feedback(
+        _start_state(settings, start), dt, n, tau, ref_th, ref_w,
+        kp_half, kd_half, float(law.gravity), consts, states, qdd, applied,
     )
     status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
     t_end = done * dt
@@ -197,6 +234,15 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     q, qd, applied_s = _resample(grid, states, qdd, applied, done)
     return SimulationResult(sample_times(), q, qd, applied_s, t_end, status, float(max_viol), "rk4",
                             rhs_evaluations=4 * done + 1)
+
+
+def _start_state(settings: Settings, start) -> np.ndarray:
+    if start is None:
+        return initial_state(settings.kinematics, settings.model)
+    start = np.array(start, dtype=float)
+    if start.shape != (6,) or not np.all(np.isfinite(start)):
+        raise ValueError(f"the initial state must be 6 finite numbers [q, q'], got {start}")
+    return start
 
 
 def _resample(grid, states, qdd, applied, done):
@@ -224,7 +270,7 @@ def _resample(grid, states, qdd, applied, done):
     return q, qd, tau
 
 
-def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
+def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> SimulationResult:
     """One of scipy's adaptive methods, stepped here so that a failure keeps the steps accepted
     before it: a non-finite torque or state, theta reaching +-pi/2, a constraint violation, a
     solver failure, or more than MAX_RHS_EVALUATIONS right-hand side evaluations."""
@@ -236,14 +282,17 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
     consts = constants(settings)
     accel, violation = dynamics.accelerations, dynamics.constraint_violation
     kinematics = settings.kinematics
-    closed_loop = kp != 0 or kd != 0
+    closed_loop = law.closed_loop
     evaluations = [0]
 
     def applied_torque(t, th, w):
         total = float(torque(np.array([t]))[0])
         if closed_loop:
             ref_th, ref_w, _ = desired_motion(t, kinematics)
-            total += kp * (float(ref_th) - th) + kd * (float(ref_w) - w)
+            kp, kd = law.gains(np.array([t]))
+            total += float(kp[0]) * (float(ref_th) - th) + float(kd[0]) * (float(ref_w) - w)
+            if law.gravity != 0:
+                total += law.gravity * math.cos(th)
         return total
 
     def rhs(t, y):
@@ -267,7 +316,7 @@ def _simulate_scipy(torque, settings: Settings, kp, kd) -> SimulationResult:
             return Status.CONSTRAINT
         return None
 
-    y0 = np.array(initial_state(kinematics, settings.model))
+    y0 = np.array(_start_state(settings, start))
     steps_t, pieces = [0.0], []
     status, detail, t_end = Status.SUCCESS, "", T_FINAL
     with warnings.catch_warnings(), np.errstate(all="ignore"):

@@ -81,7 +81,8 @@ def _median_iqr(summary: dict, name: str, digits=3) -> str:
     return f"{_num(med, digits)} ± {_num(iqr / 2 if iqr is not None else None, digits)}"
 
 
-def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict, figures: dict | None = None) -> str:
+def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict, figures: dict | None = None,
+             beyond: list[str] | None = None) -> str:
     """The report as Markdown. ``settings`` describes the run (kinematics, versions, machine...);
     ``figures`` maps figure names to relative paths of written PNG files."""
     out = ["# fdbench report", ""]
@@ -122,6 +123,7 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
             if any(r.cell and not r.cell.in_paper for r in cells):
                 out += ["", "Cells marked * are not in the paper."]
             out += [""]
+    out += beyond or []  # the "Beyond the paper" section (beyond.beyond_markdown)
     out += ["## Comparison", ""] + _comparison(rows) + [""]
     if figures:
         out += ["## Figures", ""]

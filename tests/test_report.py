@@ -100,7 +100,7 @@ CS_BFGS = ["--torque", "cs", "--opt", "bfgs"]
 
 def test_csv_report_one_row_per_cell_with_the_papers_values(tmp_path):
     db = tmp_path / "r.sqlite"
-    result = invoke("report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1, "--format", "csv", "-q")
+    result = invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1, "--format", "csv", "-q")
     assert result.stdout.splitlines()[0] == ",".join(CSV_COLUMNS)
     frame = read_csv(result.stdout)
     assert list(frame.columns) == list(CSV_COLUMNS)
@@ -148,7 +148,7 @@ def test_every_paper_cell_of_the_default_matrix_carries_its_published_figures():
 
 def test_cell_outside_the_paper_has_no_paper_values(tmp_path):
     db = tmp_path / "pf.sqlite"
-    args = ["report", "--db", db, "--torque", "pf", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", 1,
+    args = ["report", "--no-beyond", "--db", db, "--torque", "pf", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", 1,
             "--budget", 10, "--jobs", 1, "-q"]
     frame = read_csv(invoke(*args, "--format", "csv").stdout)
     assert len(frame) == 1
@@ -181,7 +181,7 @@ def test_markdown_sections_tables_and_figures(tmp_path):
     out = tmp_path / "out" / "report.md"
     out.parent.mkdir()
     figures = tmp_path / "figs"
-    result = invoke("report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+    result = invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
                     "--figures", figures, "--output", out, "-q")
     assert result.stdout == ""
     text = out.read_text()
@@ -231,7 +231,7 @@ def test_markdown_sections_tables_and_figures(tmp_path):
         "convergence_table2.png", "convergence_table3.png"}
 
     # the same runs, Table 2 only: no Table 3 section, nothing computed
-    text2 = invoke("report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+    text2 = invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
                    "--no-feedforward", "--no-control", "-q").stdout
     assert "## Table 2" in text2 and "## Table 3" not in text2 and "## PD control" not in text2
     assert "## Figures" not in text2
@@ -259,7 +259,7 @@ def test_figures_without_output_are_linked_relative_to_the_working_directory(tmp
 
 def test_resume_computes_nothing_and_rerun_recomputes(tmp_path, monkeypatch):
     db = tmp_path / "resume.sqlite"
-    args = ["report", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 2, "--format", "csv", "-q"]
+    args = ["report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 2, "--format", "csv", "-q"]
     first = invoke(*args).stdout
     before = db_rows(db)
     assert len(before) == 5 and len({r[1] for r in before}) == 5
@@ -334,7 +334,7 @@ def test_runs_stored_by_optimize_and_control_are_reused_by_report(tmp_path, monk
         raise AssertionError(f"run {spec.hash()} recomputed")
 
     monkeypatch.setattr(fdbench.benchmark, "_work", no_work)
-    frame = read_csv(invoke("report", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 1, "--budget", 15,
+    frame = read_csv(invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 1, "--budget", 15,
                             "--format", "csv", "-q").stdout)
     assert db_count(db) == 2
     assert cell_row(frame, "cs", "bfgs", False).rmse_rot_deg_median == single["rmse_rot_deg"]
@@ -343,7 +343,7 @@ def test_runs_stored_by_optimize_and_control_are_reused_by_report(tmp_path, monk
 def test_seeded_cell_statistics_across_seeds(tmp_path):
     # CMA-ES depends on its seed, so the median and IQR over seeds are not trivial
     db = tmp_path / "cma.sqlite"
-    frame = read_csv(invoke("report", "--db", db, "--torque", "cs", "--opt", "cmaes", "--no-feedforward",
+    frame = read_csv(invoke("report", "--no-beyond", "--db", db, "--torque", "cs", "--opt", "cmaes", "--no-feedforward",
                             "--no-control", "--seeds", 3, "--budget", 12, "--jobs", 1, "--format", "csv", "-q").stdout)
     values = stored_values(db, "cs", "cmaes", False)
     assert sorted(values) == [0, 1, 2]
@@ -376,7 +376,7 @@ def _count_or_zero(db: Path) -> int:
 def test_sigkill_then_resume_stores_each_run_once(tmp_path):
     db = tmp_path / "killed.sqlite"
     seeds = 16
-    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--db", str(db), *CS_BFGS, "--no-feedforward",
+    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--no-beyond", "--db", str(db), *CS_BFGS, "--no-feedforward",
            "--no-control", "--seeds", str(seeds), "--budget", "400", "--jobs", "1", "--format", "csv", "-q"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp_path)
     try:
@@ -414,7 +414,7 @@ def test_sigkill_then_resume_stores_each_run_once(tmp_path):
 def test_ctrl_c_stops_with_130_and_keeps_every_stored_run(tmp_path):
     db = tmp_path / "interrupted.sqlite"
     seeds = 24
-    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--db", str(db), *CS_BFGS, "--no-feedforward",
+    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--no-beyond", "--db", str(db), *CS_BFGS, "--no-feedforward",
            "--no-control", "--seeds", str(seeds), "--budget", "400", "--jobs", "2", "--format", "csv"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     try:

@@ -1,0 +1,112 @@
+"""The report's "Beyond the paper" table: the methods the field uses today (computed-torque and
+LQR control, direct collocation) on the report's model, motion and simulation settings, with the
+columns of the PD row. Each method is deterministic, so, like the PD row, it is one run; runs are
+stored and reused by their spec hash like every other run of the report."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .experiment import RunSpec, collocate_spec, control_spec
+
+
+@dataclass(frozen=True)
+class Method:
+    """One row of the table: its label, one sentence on what it does and which tool uses it, and
+    the run's specification."""
+
+    name: str
+    description: str
+    spec: RunSpec
+
+
+COLLOCATION_SUMMARY = ("states and torque are the unknowns of one sparse problem whose defects discretise the "
+                       "equation of motion, solved by IPOPT (as OpenSim Moco, bioptim and Drake do); fdbench replays "
+                       "the torque found through its own forward simulation, and the indicators are the replay's")
+
+
+def beyond_methods(**common) -> list[Method]:
+    """The methods of the table with their default options, on the settings ``common``
+    (kinematics, integrator, dt, rtol, atol, alpha, xi, omega)."""
+    from .collocation import DEFAULT_NODES
+    from .controllers import CONTROLLERS
+
+    ct, lqr = CONTROLLERS["computed-torque"], CONTROLLERS["lqr"]
+    return [
+        Method("Computed torque (omega_n 20 rad/s, zeta 1)", ct.summary,
+               control_spec(controller="computed-torque", controller_options=dict(bandwidth=20.0, damping=1.0),
+                            **common)),
+        Method("Time-varying LQR (q 1e4, 1; r 1)", lqr.summary, control_spec(controller="lqr", **common)),
+        Method(f"Direct collocation (Hermite-Simpson, {DEFAULT_NODES} intervals) + forward replay",
+               COLLOCATION_SUMMARY, collocate_spec(DEFAULT_NODES, "hermite-simpson", **common)),
+    ]
+
+
+def ensure_runs(methods: list[Method], store, rerun: bool = False) -> dict:
+    """Run (in this process, they take milliseconds) and store the methods' runs that are not
+    stored yet, or all of them with ``rerun``; return {spec hash: stored run}."""
+    from .experiment import run
+
+    out = {}
+    for method in methods:
+        key = method.spec.hash()
+        stored = None if rerun else store.get(key)
+        if stored is None:
+            store.add(method.spec, run(method.spec), replace=rerun)
+            stored = store.get(key)
+        out[key] = stored
+    return out
+
+
+def beyond_rows(methods: list[Method], runs: dict) -> list:
+    """The report rows (``report.Row``, table "beyond") of the methods from their stored runs."""
+    from .benchmark import summarise
+    from .report import Row
+
+    rows = []
+    for method in methods:
+        record = runs[method.spec.hash()]["record"]
+        rows.append(Row(method.name, "beyond", None, summarise([record]), None, [record]))
+    return rows
+
+
+def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
+    """The section's Markdown lines: one sentence per method, then the table (PD's columns)."""
+    from .report import _table
+
+    if not rows:
+        return []
+    out = ["## Beyond the paper", "",
+           "The methods the field uses today, on the same model, motion and indicators (one run each: "
+           "they are deterministic; the paper has no figures for them):", ""]
+    out += [f"- {m.name}: {m.description}." for m in methods]
+    out += [""] + _table(rows, with_success=False)
+    collocation = [r for r in rows if r.records[0].get("command") == "collocate"]
+    if collocation:
+        rec = collocation[0].records[0]
+        out += ["", f"Direct collocation's own RMSE_rot at its nodes: {_deg(rec.get('collocation_rmse_rot_deg'))} deg; "
+                    f"IPOPT: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, "
+                    f"{_deg(rec.get('solve_time_s'))} s."]
+    failed = [r.name for r in rows if r.records[0].get("status") != "success"]
+    if failed:
+        out += ["", f"Did not succeed: {', '.join(failed)} (see `message` in the CSV or the database)."]
+    return out + [""]
+
+
+def _deg(value) -> str:
+    return "-" if value is None else f"{value:.3g}"
+
+
+def beyond_csv_rows(rows: list) -> list[list]:
+    """CSV rows (the report's ``CSV_COLUMNS``) of the table, the method named in ``torque``."""
+    from .report import CSV_COLUMNS, csv_rows
+
+    out = csv_rows(rows)
+    for values, row in zip(out, rows):
+        rec = row.records[0]
+        fixed = {"torque": rec.get("controller") or rec.get("command"), "feedforward": rec.get("feedforward"),
+                 "in_paper": False}
+        for column, value in fixed.items():
+            if column in CSV_COLUMNS:
+                values[CSV_COLUMNS.index(column)] = value
+    return out

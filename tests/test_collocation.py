@@ -1,0 +1,167 @@
+"""Direct collocation: defects at the solution (recomputed here), the forward replay reproducing
+the collocation's states (second order for the trapezoidal scheme), the inverse-dynamics torque
+recovered, IPOPT failures as statuses, --save-torque, and bad options."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from typer.testing import CliRunner
+
+from fdbench.cli import app
+from fdbench.collocation import collocate
+from fdbench.integrate import Settings, simulate
+from fdbench.inverse import inverse_dynamics
+from fdbench.model import Forearm
+from fdbench.motion import desired_motion
+
+runner = CliRunner()
+MODEL = Forearm()
+G = MODEL.F_ext * MODEL.L12 + MODEL.m * MODEL.g * MODEL.L1G  # N m, Table 1
+
+
+def f(theta, omega, tau):
+    """[theta', theta''] of I1 theta'' = tau - G cos(theta), written out from Table 1."""
+    return omega, (tau - G * np.cos(theta)) / MODEL.I1
+
+
+def defects(sol) -> np.ndarray:
+    h = sol.t[1] - sol.t[0]
+    th, w, u = sol.theta, sol.theta_dot, sol.torque
+    d0, a0 = f(th[:-1], w[:-1], u[:-1])
+    d1, a1 = f(th[1:], w[1:], u[1:])
+    if sol.torque_mid is None:
+        return np.concatenate([th[1:] - th[:-1] - h / 2 * (d0 + d1), w[1:] - w[:-1] - h / 2 * (a0 + a1)])
+    th_m = (th[:-1] + th[1:]) / 2 + h / 8 * (d0 - d1)
+    w_m = (w[:-1] + w[1:]) / 2 + h / 8 * (a0 - a1)
+    dm, am = f(th_m, w_m, sol.torque_mid)
+    return np.concatenate([th[1:] - th[:-1] - h / 6 * (d0 + 4 * dm + d1),
+                           w[1:] - w[:-1] - h / 6 * (a0 + 4 * am + a1)])
+
+
+def replay_gap(sol, kinematics="paper") -> float:
+    """max |theta_replay - theta_collocation| over the nodes (rad); nodes on the 1 ms samples."""
+    replay = simulate(sol.torque_function(), Settings(kinematics=kinematics))
+    assert replay.success
+    index = np.round(sol.t * 1000).astype(int)
+    assert np.allclose(index / 1000, sol.t)
+    return float(np.max(np.abs(replay.theta[index] - sol.theta)))
+
+
+@pytest.mark.parametrize("scheme", ["hermite-simpson", "trapezoidal"])
+@pytest.mark.parametrize("nodes", [10, 100])
+def test_defects_vanish_and_the_initial_state_is_the_motions(scheme, nodes):
+    sol = collocate(Settings(kinematics="paper"), nodes, scheme)
+    assert sol.success, sol.message
+    assert np.max(np.abs(defects(sol))) < 1e-8
+    theta0, w0, _ = desired_motion(0.0, "paper")
+    assert sol.theta[0] == pytest.approx(theta0, abs=1e-12) and sol.theta_dot[0] == pytest.approx(w0, abs=1e-12)
+
+
+def test_hermite_simpson_torque_replayed_reproduces_its_states():
+    sol = collocate(Settings(kinematics="paper"), 100, "hermite-simpson")
+    assert replay_gap(sol) < 1e-6  # rad, over a motion of pi/4 rad
+
+
+def test_trapezoidal_replay_converges_at_second_order():
+    gaps = [replay_gap(collocate(Settings(kinematics="paper"), n, "trapezoidal")) for n in (25, 50, 100)]
+    orders = np.log2(np.array(gaps[:-1]) / np.array(gaps[1:]))
+    assert np.all((orders > 1.8) & (orders < 2.2)), orders
+
+
+def test_on_exact_kinematics_the_torque_is_the_inverse_dynamics_torque():
+    """The torque that tracks a consistent motion exactly is the one of eq. 3 (computed by the
+    penalty formulation's matrices); away from the free final state the collocation finds it."""
+    sol = collocate(Settings(kinematics="exact"), 100, "hermite-simpson")
+    inside = sol.t < 0.9
+    inverse = inverse_dynamics(sol.t, kinematics="exact").torque
+    assert np.max(np.abs(sol.torque[inside] - inverse[inside])) < 1e-3  # N m, against a range of ~8 N m
+
+
+def test_the_quadratic_torque_passes_through_the_node_and_midpoint_values():
+    sol = collocate(Settings(), 20, "hermite-simpson")
+    h = sol.t[1] - sol.t[0]
+    torque = sol.torque_function()
+    np.testing.assert_allclose(torque(sol.t), sol.torque, atol=1e-12)
+    np.testing.assert_allclose(torque(sol.t[:-1] + h / 2), sol.torque_mid, atol=1e-12)
+
+
+def invoke(args):
+    result = runner.invoke(app, [str(a) for a in args])
+    assert "Traceback" not in result.stderr
+    return result
+
+
+def test_collocate_command_reports_the_replay_and_ipopt(tmp_path):
+    path = tmp_path / "torque.csv"
+    result = invoke(["collocate", "-f", "json", "--save-torque", path, "--quiet"])
+    assert result.exit_code == 0, result.stderr
+    record = json.loads(result.stdout)
+    assert record["status"] == "success" and record["ipopt_status"] == "Solve_Succeeded"
+    assert record["rmse_rot_deg"] < 1e-3 and record["collocation_rmse_rot_deg"] < 1e-3
+    assert record["ipopt_iterations"] >= 1 and record["solve_time_s"] > 0
+    # the saved torque, replayed by 'simulate --torque-file', gives the same forward simulation
+    replay = json.loads(invoke(["simulate", "--torque-file", path, "-f", "json"]).stdout)
+    assert replay["rmse_rot_deg"] == pytest.approx(record["rmse_rot_deg"], rel=1e-9)
+    assert replay["rmse_torque_nm"] == pytest.approx(record["rmse_torque_nm"], rel=1e-9)
+
+
+def test_an_iteration_limit_is_a_status_with_a_message():
+    """Hermite-Simpson on 100 intervals needs two IPOPT iterations: one is not enough."""
+    result = invoke(["collocate", "--max-iter", 1, "-f", "json"])
+    assert result.exit_code == 0, result.stderr
+    record = json.loads(result.stdout)
+    assert record["ipopt_status"] == "Maximum_Iterations_Exceeded" and record["ipopt_iterations"] == 1
+    assert record["status"] == "collocation_failed" and "--max-iter" in record["message"]
+    assert math.isfinite(record["rmse_rot_deg"])  # the last iterate is still replayed
+
+
+@pytest.mark.parametrize("args, word", [
+    (["--nodes", 1], "--nodes"),
+    (["--nodes", 0], "--nodes"),
+    (["--nodes", -3], "--nodes"),
+    (["--scheme", "euler"], "--scheme"),
+    (["--regularization", -1e-3], "--regularization"),
+    (["--regularization", "nan"], "--regularization"),
+    (["--max-iter", 0], "--max-iter"),
+    (["--max-time", 0], "--max-time"),
+    (["--kinematics", "approx"], "--kinematics"),
+])
+def test_bad_collocate_options_are_one_line_exit_2(args, word, tmp_path):
+    out = tmp_path / "torque.csv"
+    result = invoke(["collocate", *args, "--save-torque", out])
+    assert result.exit_code == 2, (result.exit_code, result.stderr)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and word in lines[0], result.stderr
+    assert result.stdout == "" and not out.exists()
+
+
+def test_save_torque_into_a_missing_directory_is_refused_before_work(tmp_path):
+    result = invoke(["collocate", "--save-torque", tmp_path / "missing" / "torque.csv"])
+    assert result.exit_code == 2 and "--save-torque" in result.stderr
+    assert len(result.stderr.splitlines()) == 1
+
+
+@settings(max_examples=30)
+@given(nodes=st.integers(-5, 40),
+       regularization=st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1e-6, 1e-2])),
+       scheme=st.sampled_from(["hermite-simpson", "trapezoidal", "euler", ""]),
+       max_iter=st.integers(-2, 50))
+def test_fuzz_collocate_is_a_result_or_one_line(nodes, regularization, scheme, max_iter):
+    """Whatever the options: a result (exit 0, a JSON record) or bad input (exit 2, one line)."""
+    result = invoke(["collocate", "--nodes", nodes, "--regularization", regularization, "--scheme", scheme,
+                     "--max-iter", max_iter, "-f", "json"])
+    assert result.exit_code in (0, 2), (result.exit_code, result.stderr)
+    if result.exit_code == 2:
+        lines = result.stderr.splitlines()
+        assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and result.stdout == ""
+    else:
+        record = json.loads(result.stdout)
+        assert record["command"] == "collocate" and record["ipopt_status"]
+        valid = 2 <= nodes and scheme in ("hermite-simpson", "trapezoidal") and max_iter >= 1
+        assert valid and math.isfinite(regularization) and regularization >= 0
