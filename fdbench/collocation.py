@@ -11,7 +11,7 @@ I1 theta'' = tau - G cos(theta) (``fdbench.minimal``, the limit of the penalty f
   x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1}),  x_{k+1} - x_k - h/6 (f_k + 4 f_m + f_{k+1}) = 0;
   the torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
 
-The objective is the integral over [0, 1] s of the squared rotation error in degrees^2 plus
+The objective is the integral over the motion's span of the squared rotation error in degrees^2 plus
 ``regularization`` times the integral of tau^2 (N^2 m^2 s), by the scheme's own quadrature
 (trapezoid or Simpson). The initial state is fixed to the desired motion's at t = 0; the final
 state is free. ``casadi`` is imported here only.
@@ -27,7 +27,7 @@ import numpy as np
 
 from .integrate import Settings
 from .minimal import gravity_moment
-from .motion import T_FINAL, desired_motion
+from .motion import desired_motion
 
 SCHEMES = ("hermite-simpson", "trapezoidal")
 DEFAULT_NODES = 100
@@ -124,10 +124,11 @@ def collocate(settings: Settings = Settings(), nodes: int = DEFAULT_NODES, schem
     import casadi as ca
 
     began = time.perf_counter()
-    model, kinematics = settings.model, settings.kinematics
+    model, kinematics = settings.nominal_model, settings.kinematics
     G, inertia = gravity_moment(model), model.I1
-    n, h = int(nodes), T_FINAL / nodes
-    t = np.linspace(0.0, T_FINAL, n + 1)
+    duration = settings.motion.duration
+    n, h = int(nodes), duration / nodes
+    t = np.linspace(0.0, duration, n + 1)
     th_d, w_d, _ = desired_motion(t, kinematics)
     hs = scheme == "hermite-simpson"
 

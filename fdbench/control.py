@@ -15,8 +15,9 @@ def check_gain(name: str, value: float) -> float:
 
 
 def feedforward(settings: Settings) -> Feedforward:
-    """The inverse-dynamics torque of the settings' model and kinematics, as a torque function."""
-    return Feedforward(settings.model, settings.kinematics)
+    """The inverse-dynamics torque of the settings' nominal model and desired motion, as a torque
+    function."""
+    return Feedforward(settings.nominal_model, settings.kinematics)
 
 
 def pd_control(kp: float = 80.0, kd: float = 0.3, settings: Settings = Settings()) -> SimulationResult:

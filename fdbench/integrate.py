@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from .model import Forearm, Penalty
-from .motion import T_FINAL, check_kinematics, desired_motion, sample_times
+from .motion import Motion, as_motion
 
 TorqueFunction = Callable[[np.ndarray], np.ndarray]
 """An open-loop elbow torque history: times (s), shape (n,) -> torque (N m), shape (n,)."""
@@ -36,7 +36,7 @@ MAX_RHS_EVALUATIONS = 100_000  # an adaptive integrator that needs more has met 
 class Status(str, Enum):
     """How a simulation ended; the value is the message for the user."""
 
-    SUCCESS = "reached t = 1 s"
+    SUCCESS = "reached the end of the motion"
     NONFINITE = "the state or the applied torque became non-finite: the model was driven unstable"
     SINGULAR = "theta reached +-pi/2, where the mixed coordinate theta is undefined (singular leading matrix)"
     CONSTRAINT = "the constraint violation exceeded its tolerance; try a larger --alpha (or a smaller --dt with rk4)"
@@ -50,8 +50,8 @@ class Status(str, Enum):
 
 @dataclass
 class SimulationResult:
-    """A forward simulation sampled every 1 ms. Histories have shape (1001,) or (1001, 3);
-    samples after ``t_end`` are NaN."""
+    """A forward simulation on the desired motion's samples (eq. 5: every 1 ms, 1001 of them).
+    Histories have shape (n,) or (n, 3); samples after ``t_end`` are NaN."""
 
     t: np.ndarray  # s
     q: np.ndarray  # [x2 (m), y2 (m), theta (rad)]
@@ -71,7 +71,7 @@ class SimulationResult:
 
     @property
     def reached(self) -> np.ndarray:
-        """Boolean mask of the samples reached, shape (1001,)."""
+        """Boolean mask of the samples reached, shape (n,)."""
         return np.isfinite(self.q[:, 2])
 
     @property
@@ -88,18 +88,30 @@ class SimulationResult:
 
 @dataclass(frozen=True)
 class Settings:
-    """How to simulate: model, penalty parameters, kinematics variant and integrator."""
+    """How to simulate: the simulated body (``model``, the plant), penalty parameters, the desired
+    motion (``kinematics``: a Motion, or 'paper' / 'exact' for eq. 5), the integrator, and the
+    ``nominal`` model that inverse dynamics and model-based controllers believe (default: the
+    plant itself)."""
 
     model: Forearm = Forearm()
     penalty: Penalty = Penalty()
-    kinematics: str = "paper"
+    kinematics: str | Motion = "paper"
     integrator: str = "rk4"
     dt: float = 1e-3  # s, RK4 step
     rtol: float = 1e-6  # solve_ivp only
     atol: float = 1e-9  # solve_ivp only
+    nominal: Forearm | None = None
+
+    @property
+    def motion(self) -> Motion:
+        return as_motion(self.kinematics)
+
+    @property
+    def nominal_model(self) -> Forearm:
+        return self.model if self.nominal is None else self.nominal
 
     def __post_init__(self):
-        check_kinematics(self.kinematics)
+        as_motion(self.kinematics)
         check_integrator(self.integrator)
         if not (MIN_DT <= self.dt <= MAX_DT):
             raise ValueError(f"dt must be in [{MIN_DT:g}, {MAX_DT:g}] s, got {self.dt}")
@@ -158,9 +170,9 @@ def constants(settings: Settings) -> np.ndarray:
 
 
 @lru_cache(maxsize=16)
-def initial_state(kinematics: str, model: Forearm) -> np.ndarray:
+def initial_state(kinematics: str | Motion, model: Forearm) -> np.ndarray:
     """[q, q'] on the desired motion at t = 0, shape (6,)."""
-    theta, w, dw = desired_motion(0.0, kinematics)
+    theta, w, dw = as_motion(kinematics)(0.0)
     q, qd, _ = model.coordinates(theta, w, dw)
     state = np.concatenate([q, qd])
     state.flags.writeable = False
@@ -169,7 +181,7 @@ def initial_state(kinematics: str, model: Forearm) -> np.ndarray:
 
 def simulate(torque: TorqueFunction, settings: Settings = Settings(), kp: float = 0.0, kd: float = 0.0, *,
              law: FeedbackLaw | None = None, start: np.ndarray | None = None) -> SimulationResult:
-    """Forward dynamics over [0, 1] s driven by ``torque`` plus PD feedback on theta with gains
+    """Forward dynamics over the desired motion's span driven by ``torque`` plus PD feedback on theta with gains
     kp (N m/rad) and kd (N m s/rad) towards the desired motion (zero gains: open loop), or plus
     the feedback ``law`` of a controller (which then replaces kp and kd).
 
@@ -185,24 +197,25 @@ def simulate(torque: TorqueFunction, settings: Settings = Settings(), kp: float 
     return result
 
 
-def steps(dt: float) -> int:
-    """Number of RK4 steps over [0, 1] s for a requested step dt (s)."""
-    return max(1, int(round(T_FINAL / dt)))
+def steps(dt: float, duration: float = 1.0) -> int:
+    """Number of RK4 steps over [0, duration] s for a requested step dt (s)."""
+    return max(1, int(round(duration / dt)))
 
 
 @lru_cache(maxsize=16)
-def half_step_reference(n: int, kinematics: str):
-    """The half-step grid t_k = k dt / 2 (s) of n steps and the desired theta (rad) and
-    theta' (rad/s) on it; read-only arrays of shape (2 n + 1,)."""
-    half = np.linspace(0.0, T_FINAL, 2 * n + 1)
-    theta, w, _ = desired_motion(half, kinematics)
+def half_step_reference(n: int, kinematics: str | Motion):
+    """The half-step grid t_k = k dt / 2 (s) of n steps over the motion's span and the desired
+    theta (rad) and theta' (rad/s) on it; read-only arrays of shape (2 n + 1,)."""
+    motion = as_motion(kinematics)
+    half = np.linspace(0.0, motion.duration, 2 * n + 1)
+    theta, w, _ = motion(half)
     for array in (half, theta, w):
         array.flags.writeable = False
     return half, theta, w
 
 
 def _simulate_rk4(torque, settings: Settings, law: FeedbackLaw, start) -> SimulationResult:
-    half, _, _ = half_step_reference(steps(settings.dt), settings.kinematics)
+    half, _, _ = half_step_reference(steps(settings.dt, settings.motion.duration), settings.kinematics)
     return simulate_rk4_on_grid(torque(half), settings, law=law, start=start)
 
 
@@ -212,8 +225,9 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     shape (2 n + 1,) (see ``half_step_reference``); feedback and ``start`` as in ``simulate``."""
     from . import dynamics
 
-    n = steps(settings.dt)
-    dt = T_FINAL / n
+    motion = settings.motion
+    n = steps(settings.dt, motion.duration)
+    dt = motion.duration / n
     half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
     tau = np.array(tau, dtype=float)  # a writable copy: one compiled signature for every caller
     if tau.shape != ref_th.shape:
@@ -230,9 +244,9 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     )
     status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
     t_end = done * dt
-    grid = np.linspace(0.0, T_FINAL, n + 1)
-    q, qd, applied_s = _resample(grid, states, qdd, applied, done)
-    return SimulationResult(sample_times(), q, qd, applied_s, t_end, status, float(max_viol), "rk4",
+    grid = np.linspace(0.0, motion.duration, n + 1)
+    q, qd, applied_s = _resample(grid, states, qdd, applied, done, motion)
+    return SimulationResult(motion.samples, q, qd, applied_s, t_end, status, float(max_viol), "rk4",
                             rhs_evaluations=4 * done + 1)
 
 
@@ -245,11 +259,11 @@ def _start_state(settings: Settings, start) -> np.ndarray:
     return start
 
 
-def _resample(grid, states, qdd, applied, done):
-    """States on the integrator grid -> the 1 ms samples (cubic Hermite between steps)."""
-    ts = sample_times()
+def _resample(grid, states, qdd, applied, done, motion: Motion):
+    """States on the integrator grid -> the motion's samples (cubic Hermite between steps)."""
+    ts = motion.samples
     n = len(grid) - 1
-    if n % (len(ts) - 1) == 0:
+    if motion.uniform and n % (len(ts) - 1) == 0:
         every = n // (len(ts) - 1)
         return states[::every, :3].copy(), states[::every, 3:].copy(), applied[::every].copy()
     q = np.full((len(ts), 3), np.nan)
@@ -281,14 +295,14 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
 
     consts = constants(settings)
     accel, violation = dynamics.accelerations, dynamics.constraint_violation
-    kinematics = settings.kinematics
+    motion = settings.motion
     closed_loop = law.closed_loop
     evaluations = [0]
 
     def applied_torque(t, th, w):
         total = float(torque(np.array([t]))[0])
         if closed_loop:
-            ref_th, ref_w, _ = desired_motion(t, kinematics)
+            ref_th, ref_w, _ = motion(t)
             kp, kd = law.gains(np.array([t]))
             total += float(kp[0]) * (float(ref_th) - th) + float(kd[0]) * (float(ref_w) - w)
             if law.gravity != 0:
@@ -318,7 +332,7 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
 
     y0 = np.array(_start_state(settings, start))
     steps_t, pieces = [0.0], []
-    status, detail, t_end = Status.SUCCESS, "", T_FINAL
+    status, detail, t_end = Status.SUCCESS, "", motion.duration
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")  # the status reports what went wrong, once
         solver, t_old = None, 0.0
@@ -326,7 +340,7 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
             try:
                 if solver is None:  # the constructor evaluates the right-hand side too
                     solver = getattr(scipy.integrate, SCIPY_METHODS[settings.integrator])(
-                        rhs, 0.0, y0, T_FINAL, rtol=settings.rtol, atol=settings.atol)
+                        rhs, 0.0, y0, motion.duration, rtol=settings.rtol, atol=settings.atol)
                 t_old, cos_old = solver.t, math.cos(solver.y[2])
                 message = solver.step()
             except _Stop as stop:
@@ -350,7 +364,7 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
                 break
             steps_t.append(solver.t)
             pieces.append(piece)
-    ts = sample_times()
+    ts = motion.samples
     q, qd, applied = np.full((len(ts), 3), np.nan), np.full((len(ts), 3), np.nan), np.full(len(ts), np.nan)
     reached = ts <= steps_t[-1] + 1e-12
     reached[0] = True

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import Forearm
-from .motion import desired_motion, sample_times
+from .motion import Motion, as_motion
 
 
 @dataclass(frozen=True)
@@ -19,30 +19,32 @@ class InverseResult:
     theta_dot: np.ndarray  # rad/s
     theta_ddot: np.ndarray  # rad/s^2
     torque: np.ndarray  # elbow drive torque M_elbow, N m
-    kinematics: str
+    kinematics: str  # the motion's name
 
 
-def elbow_torque(t, model: Forearm = Forearm(), kinematics: str = "paper") -> np.ndarray:
+def elbow_torque(t, model: Forearm = Forearm(), kinematics: str | Motion = "paper") -> np.ndarray:
     """The inverse-dynamics elbow torque (N m) at times t (s), shaped like t."""
     return inverse_dynamics(t, model, kinematics).torque
 
 
-def inverse_dynamics(t=None, model: Forearm = Forearm(), kinematics: str = "paper") -> InverseResult:
-    """Solve eq. 3 at times t (default: the 1001 samples of [0, 1] s)."""
-    t = sample_times() if t is None else np.asarray(t, dtype=float)
-    theta, w, dw = desired_motion(t, kinematics)
+def inverse_dynamics(t=None, model: Forearm = Forearm(), kinematics: str | Motion = "paper") -> InverseResult:
+    """Solve eq. 3 at times t (s) (default: the motion's samples; eq. 5: 1001 of [0, 1] s) on a
+    Motion or the named variant of eq. 5."""
+    motion = as_motion(kinematics)
+    t = motion.samples if t is None else np.asarray(t, dtype=float)
+    theta, w, dw = motion(t)
     _, _, qdd = model.coordinates(theta, w, dw)
     R = model.velocity_transform(theta)
     generalized = qdd @ model.mass_matrix().T - model.external_forces()
     torque = np.sum(R * generalized, axis=-1)
-    return InverseResult(t, theta, w, dw, torque, kinematics)
+    return InverseResult(t, theta, w, dw, torque, motion.name)
 
 
 class Feedforward:
     """The inverse-dynamics torque as a torque function t (s) -> N m, remembering the grids it
     was evaluated on (a simulation asks for the same grid many times)."""
 
-    def __init__(self, model: Forearm = Forearm(), kinematics: str = "paper"):
+    def __init__(self, model: Forearm = Forearm(), kinematics: str | Motion = "paper"):
         self.model, self.kinematics = model, kinematics
         self._memo: dict[bytes, np.ndarray] = {}
         self._last: tuple = (None, None)

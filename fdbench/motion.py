@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import math
 from abc import ABC, abstractmethod
+from functools import cached_property
 
 import numpy as np
 
@@ -52,6 +53,12 @@ class Motion(ABC):
     @property
     def duration(self) -> float:
         return float(self.samples[-1])
+
+    @cached_property
+    def uniform(self) -> bool:
+        """True if the samples are equally spaced over [0, duration]."""
+        ts = self.samples
+        return bool(np.allclose(ts, np.linspace(0.0, ts[-1], len(ts)), rtol=0, atol=1e-12 * max(1.0, ts[-1])))
 
     @property
     def key(self) -> str:

@@ -1,5 +1,6 @@
 """The tracking problem of section 4: parameters -> torque history -> forward simulation ->
-objective f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end)  (eq. 18)."""
+objective f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end / T)  (eq. 18; T = 1 s in the paper, the
+motion's duration in general: the penalty is the fraction of the motion not reached)."""
 
 from __future__ import annotations
 
@@ -11,7 +12,6 @@ from .indicators import rmse_rot_deg, rmse_torque_nm
 from .integrate import (Settings, SimulationResult, constants, half_step_reference, initial_state, simulate,
                         simulate_rk4_on_grid, steps)
 from .inverse import Feedforward, inverse_dynamics
-from .motion import T_FINAL
 from .torques import TorqueParameterisation
 
 
@@ -29,18 +29,19 @@ class TrackingProblem:
             raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
         self.torque, self.settings = torque, settings
         self.feedforward, self.penalty_weight = feedforward, penalty_weight
-        self.inverse = inverse_dynamics(None, settings.model, settings.kinematics)
-        self._ff = Feedforward(settings.model, settings.kinematics)
+        self.inverse = inverse_dynamics(None, settings.nominal_model, settings.kinematics)
+        self._ff = Feedforward(settings.nominal_model, settings.kinematics)
+        self.duration = settings.motion.duration
         self.p0 = np.asarray(torque.prepare(self.inverse.t, self.inverse.torque, feedforward), dtype=float)
         self.scale = np.asarray(torque.scale(), dtype=float)
         self.x0 = self.p0 / self.scale
         self._fast = False
         if settings.integrator == "rk4":
-            n = steps(settings.dt)
+            n = steps(settings.dt, self.duration)
             half, _, _ = half_step_reference(n, settings.kinematics)
             self._on_grid = torque.on_grid(half)
             self._ff_half = np.array(self._ff(half)) if feedforward else np.zeros_like(half)
-            self._fast = n % (len(self.inverse.t) - 1) == 0
+            self._fast = settings.motion.uniform and n % (len(self.inverse.t) - 1) == 0
             if self._fast:  # buffers for the kernel, reused by every evaluation
                 self._n, self._every = n, n // (len(self.inverse.t) - 1)
                 self._buffers = (np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1))
@@ -68,7 +69,7 @@ class TrackingProblem:
         rmse = rmse_rot_deg(result, self.inverse.theta)
         if not math.isfinite(rmse):
             rmse = 0.0  # nothing reached beyond t = 0: the penalty term says it all
-        return rmse + self.penalty_weight * (T_FINAL - result.t_end)
+        return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
 
     def objective(self, p) -> float:
         if self._fast:
@@ -85,14 +86,14 @@ class TrackingProblem:
         with np.errstate(all="ignore"):
             tau = self._ff_half + self._on_grid(p)
         states, qdd, applied = self._buffers
-        _, done, _ = dynamics.rk4(initial_state(settings.kinematics, settings.model), T_FINAL / self._n, self._n,
+        _, done, _ = dynamics.rk4(initial_state(settings.kinematics, settings.model), self.duration / self._n, self._n,
                                   tau, ref_th, ref_w, 0.0, 0.0, constants(settings), states, qdd, applied)
         theta = states[: done + 1 : self._every, 2]
         error = np.degrees(theta - self.inverse.theta[: len(theta)])
         rmse = float(np.sqrt(np.mean(error**2)))
         if not math.isfinite(rmse):
             rmse = 0.0
-        return rmse + self.penalty_weight * (T_FINAL - done * (T_FINAL / self._n))
+        return rmse + self.penalty_weight * (1.0 - done / self._n)
 
     def objective_scaled(self, x) -> float:
         return self.objective(np.asarray(x) * self.scale)

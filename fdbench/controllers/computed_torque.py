@@ -28,7 +28,7 @@ class ComputedTorque(Controller):
         self.damping = check_non_negative("--damping", damping)  # zeta, dimensionless
 
     def design(self, settings: Settings):
-        model, kinematics = settings.model, settings.kinematics
+        model, kinematics = settings.nominal_model, settings.kinematics
         inertia = model.I1
 
         def feedforward(t):

@@ -19,7 +19,7 @@ import numpy as np
 from ..integrate import FeedbackLaw, Settings
 from ..inverse import Feedforward
 from ..minimal import gravity_moment
-from ..motion import T_FINAL, desired_motion
+from ..motion import desired_motion
 from .base import CONTROLLERS, Controller, check_non_negative, check_positive
 
 
@@ -46,15 +46,15 @@ class LQR(Controller):
         import scipy.linalg  # noqa: F401
 
     def design(self, settings: Settings):
-        model, kinematics = settings.model, settings.kinematics
+        model, kinematics = settings.nominal_model, settings.kinematics
         G, inertia = gravity_moment(model), model.I1
 
         def a21(t):
             return G * np.sin(desired_motion(t, kinematics)[0]) / inertia
 
         weights = np.diag([self.q_angle, self.q_rate])
-        p_final = algebraic_riccati(float(a21(T_FINAL)), inertia, weights, self.r_torque)
-        kp, kd = riccati_gains(a21, inertia, weights, self.r_torque, p_final, 0.0, T_FINAL)
+        p_final = algebraic_riccati(float(a21(settings.motion.duration)), inertia, weights, self.r_torque)
+        kp, kd = riccati_gains(a21, inertia, weights, self.r_torque, p_final, 0.0, settings.motion.duration)
         return Feedforward(model, kinematics), FeedbackLaw(kp, kd)
 
 

@@ -20,4 +20,4 @@ class PD(Controller):
         self.kd = check_non_negative("--kd", kd)  # N m s/rad
 
     def design(self, settings: Settings):
-        return Feedforward(settings.model, settings.kinematics), FeedbackLaw(self.kp, self.kd)
+        return Feedforward(settings.nominal_model, settings.kinematics), FeedbackLaw(self.kp, self.kd)

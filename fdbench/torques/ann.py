@@ -1,6 +1,6 @@
 """Artificial neural network of Figure 3: one hidden layer of tanh neurons, linear output.
 
-Input t in [0, 1] s is mapped to [-1, 1] and the output from [-1, 1] to torque (N m) as MATLAB's
+Input t in [0, T] s (T the motion's duration, 1 s in the paper) is mapped to [-1, 1] and the output from [-1, 1] to torque (N m) as MATLAB's
 fitnet does (mapminmax on the training target). Parameters, 3 n_h + 1 of them:
 [w_1 .. w_nh (input weights), b_1 .. b_nh (hidden biases), v_1 .. v_nh (output weights), c].
 """
@@ -84,6 +84,7 @@ class AnnTorque(TorqueParameterisation):
         self.hidden = check_count("--hidden", hidden, 1, 50)
         self.n_params = 3 * self.hidden + 1
         self.offset, self.span = 0.0, 1.0
+        self.duration = 1.0  # s, set by prepare from the motion's samples
         self.fit_rmse = float("nan")  # of the pre-training, scaled units
 
     def _scaling(self, target):
@@ -93,7 +94,8 @@ class AnnTorque(TorqueParameterisation):
     def prepare(self, t, target, feedforward):
         t, target = np.asarray(t, dtype=float), np.asarray(target, dtype=float)
         offset, self.span = self._scaling(target)
-        x, y = 2 * t - 1, (target - offset) / self.span
+        self.duration = float(t[-1]) if len(t) and t[-1] > 0 else 1.0
+        x, y = 2 * t / self.duration - 1, (target - offset) / self.span
         p, self.fit_rmse = _pretrain_cached(np.stack([x, y]).tobytes(), self.hidden, len(t))
         p = p.copy()
         if feedforward:
@@ -106,11 +108,11 @@ class AnnTorque(TorqueParameterisation):
 
     def evaluate(self, p, t):
         t = np.asarray(t, dtype=float)
-        return self.offset + self.span * network(np.asarray(p, dtype=float), 2 * t - 1, self.hidden)
+        return self.offset + self.span * network(np.asarray(p, dtype=float), 2 * t / self.duration - 1, self.hidden)
 
     def on_grid(self, t):
         # [x, 1] @ [w; b] is one small matrix product, several times faster than np.outer + b
-        inputs = np.column_stack([2 * np.asarray(t, dtype=float) - 1, np.ones(len(t))])
+        inputs = np.column_stack([2 * np.asarray(t, dtype=float) / self.duration - 1, np.ones(len(t))])
         n_h = self.hidden
 
         def evaluate(p):

@@ -9,7 +9,8 @@ from .base import TORQUES, TorqueParameterisation, check_count
 
 @TORQUES.register("cs")
 class CubicSplineTorque(TorqueParameterisation):
-    """Parameters: the torque (N m) at ``knots`` equally spaced instants of [0, 1] s; a
+    """Parameters: the torque (N m) at ``knots`` equally spaced instants of the motion's span
+    [0, T] s (set by ``prepare``; [0, 1] s in the paper); a
     not-a-knot cubic spline (as MATLAB's ``spline``) in between."""
 
     name = "cs"
@@ -22,6 +23,7 @@ class CubicSplineTorque(TorqueParameterisation):
         self._scale = 1.0
 
     def prepare(self, t, target, feedforward):
+        self.t_knots = np.linspace(0.0, float(t[-1]) if t[-1] > 0 else 1.0, self.knots)
         self._scale = max(float(np.ptp(target)) / 2, 1e-9)
         if feedforward:
             return np.zeros(self.n_params)

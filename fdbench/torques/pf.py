@@ -21,16 +21,18 @@ class GaussianSumTorque(TorqueParameterisation):
         self.terms = check_count("--terms", terms, 1, 100)
         self.n_params = 3 * self.terms
         self._amplitude = 1.0
+        self.duration = 1.0  # s, set by prepare from the motion's samples
 
     def default_shape(self) -> np.ndarray:
-        """Bumps of zero amplitude, centred in equal slices of [0, 1] s, about as wide as one."""
-        n = self.terms
-        centres = (np.arange(n) + 0.5) / n
-        sharpness = np.full(n, 2.0 * n**2)  # standard deviation 1 / (2 n) s
+        """Bumps of zero amplitude, centred in equal slices of [0, T] s, about as wide as one."""
+        n, span = self.terms, self.duration
+        centres = (np.arange(n) + 0.5) / n * span
+        sharpness = np.full(n, 2.0 * n**2 / span**2)  # standard deviation T / (2 n) s
         return np.column_stack([np.zeros(n), sharpness, centres]).ravel()
 
     def prepare(self, t, target, feedforward):
         self._amplitude = max(float(np.max(np.abs(target))), 1e-9)
+        self.duration = float(t[-1]) if t[-1] > 0 else 1.0
         p = self.default_shape()
         if feedforward:
             return p
@@ -73,5 +75,5 @@ class GaussianSumTorque(TorqueParameterisation):
         return evaluate
 
     def scale(self):
-        n = self.terms
-        return np.tile([self._amplitude, 2.0 * n**2, 1.0 / n], n)
+        n, span = self.terms, self.duration
+        return np.tile([self._amplitude, 2.0 * n**2 / span**2, span / n], n)
