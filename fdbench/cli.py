@@ -531,7 +531,7 @@ def report(
     alpha: Alpha = 1e7,
     xi: Xi = 1.0,
     omega: Omega = 10.0,
-    fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown) or csv (one row per cell).")] = "md",
+    fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown), csv (one row per cell) or json (settings and cells with medians, IQRs, success counts and the ids of their stored runs).")] = "md",
     output: Output = None,
     quiet: Quiet = False,
 ):
@@ -540,7 +540,7 @@ def report(
     Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
     from .benchmark import default_cells, make_plan
 
-    _check_outputs(fmt, ("md", "csv"), output=output, db=db)
+    _check_outputs(fmt, REPORT_FORMATS, output=output, db=db)
     if seeds < 1:
         raise BadInput(f"--seeds must be an integer >= 1, got {seeds}")
     if jobs is not None and jobs < 1:
@@ -566,6 +566,7 @@ def report(
 
     db_path = db if db is not None else default_path()
     jobs = jobs or os.cpu_count() or 1
+    _say_creating(db_path, db is None, quiet)
     try:
         with open_store(db_path) as store:
             with _progress(quiet, "runs") as progress:
@@ -585,19 +586,45 @@ def report(
     start = time.perf_counter()
     inverse = inverse_dynamics(None, kinematics=kinematics)
     inverse_runtime = time.perf_counter() - start
-    rows = build_rows(plan, runs)
+    with open_store(db_path) as store:
+        made = store.provenance(runs)
+    rows = build_rows(plan, runs, made)
+    _emit(_report_text(fmt, plan, runs, rows, inverse, inverse_runtime, seeds, jobs, figures, output, quiet), output)
+    if output is not None:
+        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+REPORT_FORMATS = ("md", "csv", "json")
+
+
+def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
+    """One line on stderr when a report is about to create its results database."""
+    if not db_path.exists():
+        hint = " (choose another with --db or $FDBENCH_DB)" if default else ""
+        _say(quiet, f"creating results database {db_path}{hint}")
+
+
+def _report_text(fmt, plan, runs, rows, inverse, inverse_runtime, seeds, jobs, figures, output, quiet) -> str:
+    from .report import settings_table
+
     if fmt == "csv":
         from .files import csv_text
         from .report import CSV_COLUMNS, csv_rows
 
-        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows)), output)
-    else:
-        from .report import markdown, settings_table
+        return csv_text(list(CSV_COLUMNS), csv_rows(rows))
+    if fmt == "json":
+        from .report import json_report
 
-        links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
-        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
-    if output is not None:
-        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+        return json.dumps(json_report(rows, settings_table(plan, seeds, jobs)), indent=2) + "\n"
+    from .report import markdown
+
+    links = None
+    if figures is not None:
+        from .figures import write_report_figures
+
+        links = write_report_figures(plan, runs, rows, inverse, figures, output.parent if output is not None else Path("."))
+        _say(quiet, f"wrote {len(links)} figures to {figures}")
+    return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links)
 
 
 def _check_names(torques, optimizers) -> None:
@@ -612,51 +639,6 @@ def _check_names(torques, optimizers) -> None:
             OPTIMIZERS[name]
     except UnknownName as exc:
         raise BadInput(_with_option(str(exc))) from None
-
-
-def _write_figures(plan, runs, rows, inverse, directory: Path, output, quiet) -> dict:
-    """Write the report's figures; return {title: path relative to the report}."""
-    import numpy as np
-
-    from . import figures as fig
-    from .experiment import replay, run
-
-    directory.mkdir(exist_ok=True)
-    base = output.parent if output is not None else Path(".")
-    written = {}
-
-    def link(name, path):
-        written[name] = os.path.relpath(path, base)
-
-    path = directory / "figure2_inverse_dynamics.png"
-    fig.inverse_figure(inverse, path)
-    link("Figure 2: desired rotation and inverse-dynamics torque", path)
-    control_curve = []
-    if plan.control is not None:
-        control_curve = [("PD control + feedforward", run(plan.control).result.theta)]
-    for table, title in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
-        curves = list(control_curve)
-        series = []
-        for row in rows:
-            if row.table != table:
-                continue
-            specs = plan.specs[row.cell]
-            stored = [runs[s.hash()] for s in specs]
-            values = np.array([r["record"]["rmse_rot_deg"] if r["record"]["rmse_rot_deg"] is not None else np.inf for r in stored])
-            median_seed = int(np.argsort(values)[len(values) // 2])
-            if stored[median_seed]["params"] is not None:
-                curves.append((row.name, replay(specs[median_seed], stored[median_seed]["params"]).theta))
-            series.append((row.name, [r["history"] for r in stored if r["history"]]))
-        if len(curves) > len(control_curve):
-            path = directory / f"figure{5 if table == 2 else 6}_tracking.png"
-            fig.tracking_figure(inverse, curves, path, f"{title}: desired rotation and the median run of each method")
-            link(title, path)
-        if series:
-            path = directory / f"convergence_table{table}.png"
-            fig.convergence_figure(series, path, f"Convergence, Table {table} (median over seeds, IQR band)")
-            link(f"Convergence, Table {table}", path)
-    _say(quiet, f"wrote {len(written)} figures to {directory}")
-    return written
 
 
 class _progress:
