@@ -38,6 +38,7 @@ class FdbenchGroup(TyperGroup):
 
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
+        self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
         code = 0
         try:
             returned = super().main(args=args, prog_name=prog_name or "fdbench", standalone_mode=False, **extra)
@@ -63,6 +64,59 @@ class FdbenchGroup(TyperGroup):
             else:
                 code = _error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(code)
+
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and getattr(self, "help_requested", False):
+            _show_choices(command, ctx)
+        return command
+
+    def format_help(self, ctx, formatter):
+        _show_choices(self, ctx)
+        return super().format_help(ctx, formatter)
+
+
+def _choices(name: str, command: str):
+    """The valid values of an option, from the registries (plugins included), for --help."""
+    if name == "torque":
+        from .torques import TORQUES
+
+        return list(TORQUES)
+    if name == "opt":
+        from .optimizers import OPTIMIZERS
+
+        return list(OPTIMIZERS)
+    if name == "kinematics":
+        from .motion import KINEMATICS
+
+        return list(KINEMATICS)
+    if name == "integrator":
+        from .integrate import INTEGRATORS
+
+        return list(INTEGRATORS)
+    if name == "fmt":
+        return list(REPORT_FORMATS if command == "report" else FORMATS)
+    return None
+
+
+def _show_choices(command, ctx) -> None:
+    """Help only: show registered names as an option's choices ('[ann|cs|pf]') and no type for
+    on/off flags (computed when help is asked for, so plugins appear and other commands stay fast)."""
+    params = list(getattr(command, "params", []))
+    help_option = command.get_help_option(ctx) if hasattr(command, "get_help_option") else None
+    for param in params + ([help_option] if help_option is not None else []):
+        if getattr(param, "is_flag", False) and getattr(param, "metavar", None) is None:
+            param.metavar = ""
+            continue
+        if getattr(param, "param_type_name", None) != "option" or param.metavar is not None:
+            continue
+        try:
+            choices = _choices(param.name, command.name)
+        except PluginError:
+            return  # the command itself reports it
+        if choices:
+            param.metavar = "[" + "|".join(choices) + "]"
 
 
 def _error(message: str, code: int = 1) -> int:
@@ -109,7 +163,7 @@ Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
 Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout.")]
-SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Write the run's time history (1001 rows) as CSV to FILE.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; 1001 rows), as CSV to FILE. --save-history is an older name.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
 Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, gradient evaluations included.")]
@@ -133,6 +187,10 @@ def _check_choice(option: str, value: str, valid) -> str:
     return value
 
 
+# output options with two names: errors name both
+OUTPUT_LABELS = {"save_history": "--save-trajectory (--save-history)", "history": "--save-convergence (--history)"}
+
+
 def _check_outputs(fmt: str, valid=FORMATS, **paths) -> None:
     """Validate --format and every output path before any work starts."""
     from .files import BadFile, check_writable
@@ -141,7 +199,7 @@ def _check_outputs(fmt: str, valid=FORMATS, **paths) -> None:
     for option, path in paths.items():
         if path is not None:
             try:
-                check_writable(path, "--" + option.replace("_", "-"))
+                check_writable(path, OUTPUT_LABELS.get(option, "--" + option.replace("_", "-")))
             except BadFile as exc:
                 raise BadInput(str(exc)) from None
 
@@ -245,7 +303,7 @@ def _save_history(outcome, path) -> None:
     if path is not None:
         from .files import write_atomic
 
-        write_atomic(path, _history_text(outcome), "--save-history")
+        write_atomic(path, _history_text(outcome), OUTPUT_LABELS["save_history"])
 
 
 def _check_store(db: Optional[Path]) -> None:
@@ -439,8 +497,8 @@ def methods():
 
 @app.command()
 def optimize(
-    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation: ann, cs, pf (see 'fdbench methods').")] = "cs",
-    opt: Annotated[str, typer.Option("--opt", help="Optimiser: cmaes, bfgs, nelder-mead, lbfgsb (see 'fdbench methods').")] = "bfgs",
+    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods').")] = "cs",
+    opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods').")] = "bfgs",
     feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
     budget: Budget = 200,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
@@ -461,7 +519,7 @@ def optimize(
     fmt: Format = "table",
     output: Output = None,
     save_history: SaveHistory = None,
-    history: Annotated[Optional[Path], typer.Option("--history", help="Write the best-so-far objective per evaluation as CSV to FILE.")] = None,
+    history: Annotated[Optional[Path], typer.Option("--save-convergence", "--history", help="Write the convergence, the best-so-far objective per evaluation, as CSV to FILE. --history is an older name.")] = None,
     save_params: Annotated[Optional[Path], typer.Option("--save-params", help="Write the best parameters as JSON to FILE (reusable by 'fdbench simulate --params').")] = None,
     list_methods: Annotated[bool, typer.Option("--list", help="List the registered torques and optimisers and exit.")] = False,
     db: Db = None,
@@ -492,7 +550,7 @@ def optimize(
     if history is not None:
         from .files import csv_text, write_atomic
 
-        write_atomic(history, csv_text(["evaluation", "best_objective"], enumerate(outcome.history, start=1)), "--history")
+        write_atomic(history, csv_text(["evaluation", "best_objective"], enumerate(outcome.history, start=1)), OUTPUT_LABELS["history"])
     if save_params is not None:
         from .files import write_atomic
         from .params_file import params_json
@@ -654,12 +712,15 @@ class _progress:
     def start(self, total: int, show_best: bool = True) -> None:
         if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
             return
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                                   TimeRemainingColumn)
 
         columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn()]
         if show_best:
             columns.append(TextColumn("best {task.fields[best]}"))
-        self.bar = Progress(*columns, TimeElapsedColumn(), console=_console(), transient=True)
+        # elapsed and time left from the first evaluations on: a slow integrator shows at once
+        columns += [TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn()]
+        self.bar = Progress(*columns, console=_console(), transient=True, speed_estimate_period=10)
         self.task = self.bar.add_task(self.label, total=total, best="-")
         self.bar.start()
 
