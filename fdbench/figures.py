@@ -85,7 +85,7 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
         middle.plot(t, np.degrees(theta - inverse.theta), label=label, **style)
         bottom.plot(t, torque, label=label, **style)
     top.plot(t, np.degrees(inverse.theta), label="desired rotation", **DESIRED)
-    middle.axhline(0.0, **DESIRED)
+    middle.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)  # the desired rotation: no error
     bottom.plot(t, inverse.torque, label="inverse-dynamics torque", **INVERSE_TORQUE)
     top.set_ylabel("rotation (deg)")
     top.set_title(title, fontsize=11)
