@@ -360,6 +360,9 @@ UNEXPLAINED = [
     "- Why the paper's Table 3 cells are worse than its Table 2 cells for the same parameterisation (CS + "
     "CMA-ES 1.284 against 0.558 deg, CS + BFGS 0.696 against 0.197 deg), while ours are about equal: the "
     "two start from the same objective here (2.93 deg), and the paper gives no reason.",
+    "- The RMSE_torque differences that remain (e.g. without feedforward): many torque histories track about "
+    "equally well, so the torque an optimiser settles on depends on where it stops; the paper's optimised "
+    "torques are not published to compare with.",
     "- The paper's runtimes (17 s to 2439 s) cannot be compared with ours beyond an order of magnitude.",
 ]
 

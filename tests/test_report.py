@@ -761,3 +761,56 @@ def test_method_styles_are_stable_across_processes_for_plugin_names():
     outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
             for _ in range(2)}
     assert len(outs) == 1 and "tab:green" in outs.pop()
+
+
+# ----------------------------------------------------------------------------- the dated experiments
+
+
+def _measured(title: str) -> str:
+    from fdbench.report import MEASURED
+
+    return next(item for item in MEASURED if item.startswith(f"- **{title}"))
+
+
+def _figures(text: str) -> list[float]:
+    return [float(v) for v in re.findall(r"\d+\.\d+|\d+e-\d+", text)]
+
+
+def test_the_measured_kinematics_figures_reproduce():
+    text = _measured("Kinematics")
+    pd_exact = re.search(r"tracks to (\S+) deg and (\S+) N m", text)
+    pd_paper = re.search(r"it gives ([\d.]+) deg and ([\d.]+) N m", text)
+    exact = _json_run("control", "--kinematics", "exact")
+    paper = _json_run("control")
+    assert float(pd_exact[1]) == pytest.approx(exact["rmse_rot_deg"], rel=0.5)
+    assert float(pd_exact[2]) == pytest.approx(exact["rmse_torque_nm"], rel=0.5)
+    assert (float(pd_paper[1]), float(pd_paper[2])) == (round(paper["rmse_rot_deg"], 3), round(paper["rmse_torque_nm"], 3))
+    start = re.search(r"already tracks to (\S+) deg", text)
+    assert float(start[1]) == pytest.approx(_json_run("simulate", "--kinematics", "exact")["rmse_rot_deg"], rel=0.5)
+
+
+def test_the_measured_budget_figures_reproduce():
+    text = _measured("Budget")
+    budgets = [int(b) for b in re.search(r"budgets of ([\d, and]+) evaluations", text)[1].replace("and", ",").split(",")
+               if b.strip()]
+    shown = [float(v) for v in re.search(r"feedforward ([\d., and]+) deg", text)[1].replace("and", ",").split(",")
+             if v.strip()]
+    assert len(budgets) == len(shown) == 7
+    for budget, value in zip(budgets, shown):  # BFGS is deterministic: one seed is every seed
+        run = _json_run("optimize", *CS_BFGS, "--budget", budget)
+        assert round(run["rmse_rot_deg"], 3) == value, budget
+    assert shown[budgets.index(100)] > PAPER_TABLE2[("cs", "bfgs")][0] > shown[budgets.index(200)]
+
+
+def test_the_measured_cmaes_step_figures_reproduce(tmp_path):
+    text = _measured("Initial step")
+    sigmas = re.search(r"`--sigma0` ([\d.]+) \(default\), ([\d.]+), ([\d.]+) and ([\d.]+):", text).groups()
+    medians = re.search(r": ([\d.]+), ([\d.]+), ([\d.]+) and ([\d.]+) deg", text).groups()
+    successes = re.search(r"successful runs (\d+), (\d+), (\d+) and (\d+) of 5", text).groups()
+    for sigma, median, success in list(zip(sigmas, medians, successes))[2:]:  # the two large steps
+        frame = read_csv(invoke("report", "--db", tmp_path / "sigma.sqlite", "--torque", "ann", "--opt", "cmaes",
+                                "--feedforward", "--no-control", "--sigma0", sigma, "--seeds", 5, "--jobs", 1,
+                                "--format", "csv", "-q").stdout)
+        row = frame.iloc[0]
+        assert round(row.rmse_rot_deg_median, 3) == float(median), sigma
+        assert round(row.success_rate * 5) == int(success), sigma
