@@ -90,3 +90,28 @@ def test_import_fdbench_is_cheap_and_the_entry_points_load_on_use():
         import fdbench
 
         fdbench.no_such_entry_point  # noqa: B018
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+def test_a_person_watching_sees_the_time_left_before_the_run_ends(tmp_path):
+    """On a terminal the progress bar estimates the time left from the first evaluations on."""
+    master, slave = os.openpty()
+    exe = Path(sys.executable).with_name("fdbench")
+    proc = subprocess.Popen([str(exe), "optimize", "--integrator", "rk45", "--budget", "8", "-f", "json",
+                             "-o", str(tmp_path / "run.json")], stderr=slave, stdout=subprocess.DEVNULL)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(master)
+    assert proc.wait(timeout=120) == 0
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", b"".join(chunks).decode(errors="replace"))
+    frames = re.findall(r"(\d+)/8 best \S+ \d+:\d\d:\d\d left (\d+:\d\d:\d\d)", text)
+    assert any(int(done) < 8 for done, _ in frames), text[-500:]  # an estimate while work remains
+    assert (tmp_path / "run.json").is_file()
