@@ -396,10 +396,30 @@ def _differences(rows: list[Row]) -> list[str]:
     if not computed:
         return []
     out = ["Computed from the runs of this report, for every figure not reproduced (≈):", ""] + computed
+    changed = _changed_settings(rows)
+    if changed:
+        out += ["", f"The experiments behind the default report (`fdbench report`) concern its settings; these runs "
+                f"differ ({', '.join(changed)}), so they are not repeated here."]
+        return out
     out += ["", f"Experiments that explain them, measured on {MEASURED_ON} with the commands given "
             "(default settings otherwise; rerun them to check):", ""] + MEASURED
     out += ["", "Not explained:", ""] + UNEXPLAINED
     return out
+
+
+DEFAULT_SETTINGS = {"kinematics": "paper", "integrator": "rk4", "dt": 1e-3, "budget": 200, "alpha": 1e7, "xi": 1.0,
+                    "omega": 10.0}
+
+
+def _changed_settings(rows: list[Row]) -> list[str]:
+    """The settings of these runs that differ from the default report's ('budget 50', ...)."""
+    changed = []
+    for name, default in DEFAULT_SETTINGS.items():
+        values = {r.get(name) for row in rows for r in row.records if row.table != "control" or name != "budget"}
+        values.discard(None)
+        if values - {default}:
+            changed.append(f"{name} {', '.join(str(v) for v in sorted(values, key=str))}")
+    return changed
 
 
 def _history_facts(row: Row, paper_rot: float) -> list[str]:
