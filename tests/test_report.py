@@ -655,6 +655,7 @@ def test_differences_name_when_each_run_passed_the_papers_figure(tmp_path):
     rows = [json.loads(h) for s, h in db_rows(db, "spec_json, history_json") if json.loads(s).get("budget") == 15]
     assert len(rows) == 1 and min(rows[0]) > PAPER_TABLE2[("cs", "bfgs")][0]
     assert "No run reaches the paper's figure within 15 evaluations." in short
+    assert "these runs differ (budget 15)" in short and "Not explained:" not in short
 
 
 def test_the_report_says_when_and_where_its_runs_were_made(tmp_path):
