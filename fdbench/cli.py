@@ -111,6 +111,9 @@ def _show_choices(command, ctx) -> None:
             continue
         if getattr(param, "param_type_name", None) != "option" or param.metavar is not None:
             continue
+        if param.name == "hidden":
+            param.metavar = "<int>|auto"
+            continue
         try:
             choices = _choices(param.name, command.name)
         except PluginError:
