@@ -215,7 +215,7 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
         "*Where we differ from the paper, and why* explains the differences from these runs.",
         "",
     ]
-    out += LEGEND + ["", "## Settings", "", "| setting | value |", "|---|---|"]
+    out += ["## Settings", "", "| setting | value |", "|---|---|"]
     out += [f"| {key} | {value} |" for key, value in settings.items()]
     out += ["", "## Inverse dynamics (Figure 2)", ""]
     out += [
@@ -227,14 +227,16 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     control = [r for r in rows if r.table == "control"]
     if control:
         rec = control[0].records[0]
-        out += ["## PD control with computed feedforward (section 3)", "",
-                f"Kp = {rec['kp']} N m/rad, Kd = {rec['kd']} N m s/rad.", ""]
+        out += ["## PD control with computed feedforward (section 3)", ""] + LEGEND + [""]
+        out += [f"Kp = {rec['kp']} N m/rad, Kd = {rec['kd']} N m s/rad.", ""]
         out += _table(control, with_success=False) + [""]
     for table, title in ((2, "Table 2: optimisation without computed feedforward"),
                          (3, "Table 3: optimisation with computed feedforward")):
         cells = [r for r in rows if r.table == table]
         if cells:
             out += [f"## {title}", ""]
+            if not control and table == min(r.table for r in rows if r.table != "control"):
+                out += LEGEND + [""]  # defined where first read
             out += _table(cells, with_success=True)
             notes = []
             if any(r.cell and not r.cell.in_paper for r in cells):

@@ -199,7 +199,8 @@ def test_markdown_sections_tables_and_figures(tmp_path):
 
     pd_section = _section(text, "## PD control")
     assert "Kp = 80.0" in pd_section and "Kd = 0.3" in pd_section
-    header = [c.strip() for c in pd_section.splitlines()[4].strip("|").split("|")]
+    header_line = next(line for line in pd_section.splitlines() if line.startswith("| method |"))
+    header = [c.strip() for c in header_line.strip("|").split("|")]
     assert header[:3] == ["method", "RMSE_rot (deg)", "paper"] and header.count("paper") == 3
     pd_cells = _table_line(pd_section, "PD control + feedforward")
     assert (pd_cells[2], pd_cells[5]) == ("0.116", "0.149")
