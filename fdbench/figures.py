@@ -14,6 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+# every file the report's --figures writes, checked before the work starts
+FIGURE_FILES = ("figure2_inverse_dynamics.png", "figure5_tracking.png", "figure6_tracking.png",
+                "convergence_table2.png", "convergence_table3.png")
+
 DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
 INVERSE_TORQUE = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
 CONTROL_STYLE = {"color": "tab:red", "linestyle": "-", "linewidth": 2.0}
