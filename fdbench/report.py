@@ -124,8 +124,8 @@ def _paper_runtime(value) -> str:
 
 
 def _factor(value: float) -> str:
-    """Two significant digits: 4.8, 21, 1.3."""
-    return f"{value:.2g}" if value < 10 else f"{value:,.0f}"
+    """One decimal below 10, whole numbers above: 4.8, 3.0, 21, 1,178."""
+    return f"{value:.1f}" if value < 9.95 else f"{value:,.0f}"
 
 
 def judgement(ours: float | None, paper: float | None, runs=()) -> dict:
