@@ -5,9 +5,8 @@
 The new parameterisation is a piecewise-linear torque through the values at equally spaced
 knots. Registering it with ``@TORQUES.register("pwl")`` is all it takes to make it usable by
 ``TrackingProblem``, by every optimiser of the registry and by ``fdbench.experiment.run``, the
-function behind ``fdbench optimize``. (The command line itself runs in a fresh process that only
-knows the built-in torques; a plug-in mechanism would be needed for ``fdbench optimize --torque
-pwl``.)
+function behind ``fdbench optimize``. The command line runs in a fresh process: to reach it, put
+the registration in a module and name it in ``FDBENCH_PLUGINS`` (see ``examples/my_methods.py``).
 """
 
 from __future__ import annotations

@@ -2,7 +2,41 @@
 
 A 1-DOF forearm must follow a prescribed elbow rotation; fdbench compares PD control with
 computed feedforward against optimised torque histories (ANN, cubic spline, parametric
-function) by RMSE of rotation, RMSE of torque and runtime.
+function) by RMSE of rotation (deg), RMSE of torque (N m) and runtime (s).
+
+The entry points for a script (imported on first use, so ``import fdbench`` stays cheap):
+
+- ``RunSpec``, ``control_spec(kp, kd, ...)``, ``optimize_spec(torque, optimizer, ...)``: a run's
+  full specification; ``run(spec)`` carries it out and returns a ``RunOutcome`` (``record``:
+  the flat record of the command line; ``result``: the simulation; ``history``; ``params``).
+- ``simulate(torque=None, ...)``: open-loop forward dynamics, by default of the
+  inverse-dynamics torque; ``inverse_dynamics()``: that torque on the 1001 samples.
+- ``TORQUES``, ``OPTIMIZERS``: the registries of torque parameterisations and optimisers.
+- ``load_report(db, ...)``: a stored report's table as a pandas DataFrame; ``load_runs(db)``:
+  every stored run.
 """
 
 __version__ = "0.1.0"
+
+_ENTRY_POINTS = {
+    "RunSpec": "experiment", "RunOutcome": "experiment", "run": "experiment", "control_spec": "experiment",
+    "optimize_spec": "experiment", "inverse_dynamics": "inverse", "simulate": "api", "load_report": "api",
+    "load_runs": "api", "TORQUES": "torques", "OPTIMIZERS": "optimizers",
+}
+
+__all__ = ["__version__", *_ENTRY_POINTS]
+
+
+def __getattr__(name):
+    module = _ENTRY_POINTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fdbench' has no attribute {name!r}")
+    import importlib
+
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_ENTRY_POINTS))

@@ -46,6 +46,7 @@ class FdbenchGroup(TyperGroup):
 
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
+        self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
         code = 0
         import warnings
 
@@ -79,6 +80,70 @@ class FdbenchGroup(TyperGroup):
             else:
                 code = _error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(code)
+
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and getattr(self, "help_requested", False):
+            _show_choices(command, ctx)
+        return command
+
+    def format_help(self, ctx, formatter):
+        _show_choices(self, ctx)
+        return super().format_help(ctx, formatter)
+
+
+def _choices(name: str, command: str):
+    """The valid values of an option, from the registries (plugins included), for --help."""
+    if name == "torque":
+        from .torques import TORQUES
+
+        return list(TORQUES)
+    if name == "opt":
+        from .optimizers import OPTIMIZERS
+
+        return list(OPTIMIZERS)
+    if name == "kinematics":
+        from .motion import KINEMATICS
+
+        return list(KINEMATICS)
+    if name == "integrator":
+        from .integrate import INTEGRATORS
+
+        return list(INTEGRATORS)
+    if name == "controller":
+        from .controllers import CONTROLLERS
+
+        return list(CONTROLLERS)
+    if name == "scheme":
+        from .collocation import SCHEMES
+
+        return list(SCHEMES)
+    if name == "fmt":
+        return list(REPORT_FORMATS if command == "report" else FORMATS)
+    return None
+
+
+def _show_choices(command, ctx) -> None:
+    """Help only: show registered names as an option's choices ('[ann|cs|pf]') and no type for
+    on/off flags (computed when help is asked for, so plugins appear and other commands stay fast)."""
+    params = list(getattr(command, "params", []))
+    help_option = command.get_help_option(ctx) if hasattr(command, "get_help_option") else None
+    for param in params + ([help_option] if help_option is not None else []):
+        if getattr(param, "is_flag", False) and getattr(param, "metavar", None) is None:
+            param.metavar = ""
+            continue
+        if getattr(param, "param_type_name", None) != "option" or param.metavar is not None:
+            continue
+        if param.name == "hidden":
+            param.metavar = "<int>|auto"
+            continue
+        try:
+            choices = _choices(param.name, command.name)
+        except PluginError:
+            return  # the command itself reports it
+        if choices:
+            param.metavar = "[" + "|".join(choices) + "]"
 
 
 class _StdoutClosed(Exception):
@@ -143,7 +208,7 @@ Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
 Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
-SaveHistory = Annotated[Optional[Path], typer.Option("--save-history", help="Write the run's time history (1001 rows) as CSV to FILE.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; 1001 rows), as CSV to FILE. --save-history is an older name.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
 Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, in [1, 1000000], gradient evaluations included.")]
@@ -167,13 +232,17 @@ def _check_choice(option: str, value: str, valid) -> str:
     return value
 
 
+# output options with two names: errors name both
+OUTPUT_LABELS = {"save_history": "--save-trajectory (--save-history)", "history": "--save-convergence (--history)"}
+
+
 def _check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None, **paths) -> None:
     """Validate --format and every output path before any work starts: each can be written, and
     none names an input file, the results database ``db`` or another output."""
     from .files import BadFile, check_distinct, check_writable
 
     _check_choice("--format", fmt, valid)
-    outputs = {"--" + option.replace("_", "-"): path for option, path in paths.items()
+    outputs = {OUTPUT_LABELS.get(option, "--" + option.replace("_", "-")): path for option, path in paths.items()
                if not (option == "output" and str(path) == "-")}  # '-o -' is stdout
     try:
         for option, path in outputs.items():
@@ -285,7 +354,7 @@ def _save_history(outcome, path) -> None:
     if path is not None:
         from .files import write_atomic
 
-        write_atomic(path, _history_text(outcome), "--save-history")
+        write_atomic(path, _history_text(outcome), OUTPUT_LABELS["save_history"])
 
 
 def _check_store(db: Optional[Path]) -> None:
@@ -569,8 +638,8 @@ def methods():
 
 @app.command()
 def optimize(
-    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation: ann, cs, pf (see 'fdbench methods').")] = "cs",
-    opt: Annotated[str, typer.Option("--opt", help="Optimiser: cmaes, bfgs, nelder-mead, lbfgsb (see 'fdbench methods').")] = "bfgs",
+    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods').")] = "cs",
+    opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods').")] = "bfgs",
     feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
     budget: Budget = 200,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
@@ -591,7 +660,7 @@ def optimize(
     fmt: Format = "table",
     output: Output = None,
     save_history: SaveHistory = None,
-    history: Annotated[Optional[Path], typer.Option("--history", help="Write the best-so-far objective per evaluation as CSV to FILE.")] = None,
+    history: Annotated[Optional[Path], typer.Option("--save-convergence", "--history", help="Write the convergence, the best-so-far objective per evaluation, as CSV to FILE. --history is an older name.")] = None,
     save_params: Annotated[Optional[Path], typer.Option("--save-params", help="Write the best parameters as JSON to FILE (reusable by 'fdbench simulate --params').")] = None,
     list_methods: Annotated[bool, typer.Option("--list", help="List the registered torques and optimisers and exit.")] = False,
     db: Db = None,
@@ -622,7 +691,7 @@ def optimize(
     if history is not None:
         from .files import csv_text, write_atomic
 
-        write_atomic(history, csv_text(["evaluation", "best_objective"], enumerate(outcome.history, start=1)), "--history")
+        write_atomic(history, csv_text(["evaluation", "best_objective"], enumerate(outcome.history, start=1)), OUTPUT_LABELS["history"])
     if save_params is not None:
         from .files import write_atomic
         from .params_file import params_json
@@ -662,7 +731,7 @@ def report(
     alpha: Alpha = 1e7,
     xi: Xi = 1.0,
     omega: Omega = 10.0,
-    fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown) or csv (one row per cell).")] = "md",
+    fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown), csv (one row per cell) or json (settings and cells with medians, IQRs, success counts and the ids of their stored runs).")] = "md",
     output: Output = None,
     quiet: Quiet = False,
 ):
@@ -674,7 +743,7 @@ def report(
     from .store import default_path
 
     db_path = db if db is not None else default_path()
-    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output)
+    _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output)
     if not 1 <= seeds <= MAX_SEEDS:
         raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
     if jobs is not None and not 1 <= jobs <= MAX_JOBS:
@@ -699,9 +768,12 @@ def report(
     from .store import StoreError, open_store
 
     jobs = jobs or os.cpu_count() or 1
+    existed = db_path.exists()
     try:
         with open_store(db_path) as store:
             store.check_usable()
+            if not existed:
+                _say_creating(db_path, db is None, quiet)
             with _progress(quiet, "runs") as progress:
                 from .benchmark import execute
 
@@ -724,27 +796,56 @@ def report(
     start = time.perf_counter()
     inverse = inverse_dynamics(None, kinematics=kinematics)
     inverse_runtime = time.perf_counter() - start
-    rows = build_rows(plan, runs)
+    with open_store(db_path) as store:
+        made = store.provenance(runs)
+    rows = build_rows(plan, runs, made)
     extra_rows = []
     if beyond:
         from .beyond import beyond_rows
 
         extra_rows = beyond_rows(methods, beyond_runs)
+    else:
+        methods = None
+    _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds, jobs, figures,
+                       output, quiet), output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+REPORT_FORMATS = ("md", "csv", "json")
+
+
+def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
+    """One line on stderr when a report has created its results database."""
+    hint = " (choose another with --db or $FDBENCH_DB)" if default else ""
+    _say(quiet, f"creating results database {db_path}{hint}")
+
+
+def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds, jobs, figures, output,
+                 quiet) -> str:
+    from .report import settings_table
+
     if fmt == "csv":
         from .beyond import beyond_csv_rows
         from .files import csv_text
         from .report import CSV_COLUMNS, csv_rows
 
-        _emit(csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows)), output)
-    else:
-        from .beyond import beyond_markdown
-        from .report import markdown, settings_table
+        return csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows))
+    if fmt == "json":
+        from .report import json_report
 
-        links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
-        section = beyond_markdown(extra_rows, methods) if beyond else None
-        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, section), output)
-    if output is not None and str(output) != "-":
-        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+        return json.dumps(json_report(rows + extra_rows, settings_table(plan, seeds, jobs)), indent=2) + "\n"
+    from .beyond import beyond_markdown
+    from .report import markdown
+
+    links = None
+    if figures is not None:
+        from .figures import write_report_figures
+
+        links = write_report_figures(plan, runs, rows, inverse, figures, output.parent if output is not None else Path("."))
+        _say(quiet, f"wrote {len(links)} figures to {figures}")
+    section = beyond_markdown(extra_rows, methods) if methods else None
+    return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section)
 
 
 def _check_figures_dir(directory: Path, output: Optional[Path], db: Path) -> None:
@@ -789,51 +890,6 @@ def _check_names(torques, optimizers) -> None:
         raise BadInput(_with_option(str(exc))) from None
 
 
-def _write_figures(plan, runs, rows, inverse, directory: Path, output, quiet) -> dict:
-    """Write the report's figures; return {title: path relative to the report}."""
-    import numpy as np
-
-    from . import figures as fig
-    from .experiment import replay, run
-
-    directory.mkdir(exist_ok=True)
-    base = output.parent if output is not None else Path(".")
-    written = {}
-
-    def link(name, path):
-        written[name] = os.path.relpath(path, base)
-
-    path = directory / "figure2_inverse_dynamics.png"
-    fig.inverse_figure(inverse, path)
-    link("Figure 2: desired rotation and inverse-dynamics torque", path)
-    control_curve = []
-    if plan.control is not None:
-        control_curve = [("PD control + feedforward", run(plan.control).result.theta)]
-    for table, title in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
-        curves = list(control_curve)
-        series = []
-        for row in rows:
-            if row.table != table:
-                continue
-            specs = plan.specs[row.cell]
-            stored = [runs[s.hash()] for s in specs]
-            values = np.array([r["record"]["rmse_rot_deg"] if r["record"]["rmse_rot_deg"] is not None else np.inf for r in stored])
-            median_seed = int(np.argsort(values)[len(values) // 2])
-            if stored[median_seed]["params"] is not None:
-                curves.append((row.name, replay(specs[median_seed], stored[median_seed]["params"]).theta))
-            series.append((row.name, [r["history"] for r in stored if r["history"]]))
-        if len(curves) > len(control_curve):
-            path = directory / f"figure{5 if table == 2 else 6}_tracking.png"
-            fig.tracking_figure(inverse, curves, path, f"{title}: desired rotation and the median run of each method")
-            link(title, path)
-        if series:
-            path = directory / f"convergence_table{table}.png"
-            fig.convergence_figure(series, path, f"Convergence, Table {table} (median over seeds, IQR band)")
-            link(f"Convergence, Table {table}", path)
-    _say(quiet, f"wrote {len(written)} figures to {directory}")
-    return written
-
-
 class _progress:
     """A rich progress bar on stderr: evaluations done and the best objective so far."""
 
@@ -847,12 +903,15 @@ class _progress:
     def start(self, total: int, show_best: bool = True) -> None:
         if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
             return
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                                   TimeRemainingColumn)
 
         columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn()]
         if show_best:
             columns.append(TextColumn("best {task.fields[best]}"))
-        self.bar = Progress(*columns, TimeElapsedColumn(), console=_console(), transient=True)
+        # elapsed and time left from the first evaluations on: a slow integrator shows at once
+        columns += [TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn()]
+        self.bar = Progress(*columns, console=_console(), transient=True, speed_estimate_period=10)
         self.task = self.bar.add_task(self.label, total=total, best="-")
         self.bar.start()
 

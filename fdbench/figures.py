@@ -1,9 +1,15 @@
 """Figures of the report as PNG files (matplotlib, Agg backend): the paper's Figure 2 (desired
-rotation and inverse-dynamics torque), Figures 5 and 6 (desired rotation against PD control and
-the optimised methods) and convergence curves (best objective against evaluations)."""
+rotation and inverse-dynamics torque), Figures 5 and 6 (rotation, its error and the applied torque
+of PD control and of each optimised method) and convergence curves (best objective against
+evaluations, PD control's RMSE as a reference line).
+
+Every method keeps one colour and one line style in every figure: the colour comes from the
+torque parameterisation, the line style from the optimiser (``method_style``)."""
 
 from __future__ import annotations
 
+import hashlib
+import os
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +17,30 @@ import numpy as np
 # every file the report's --figures writes, checked before the work starts
 FIGURE_FILES = ("figure2_inverse_dynamics.png", "figure5_tracking.png", "figure6_tracking.png",
                 "convergence_table2.png", "convergence_table3.png")
+
+DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
+INVERSE_TORQUE = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
+CONTROL_STYLE = {"color": "tab:red", "linestyle": "-", "linewidth": 2.0}
+TORQUE_COLOURS = {"ann": "tab:blue", "cs": "tab:green", "pf": "tab:purple"}
+OPTIMIZER_LINES = {"cmaes": "-", "bfgs": "--", "nelder-mead": ":", "lbfgsb": "-."}
+_SPARE_COLOURS = ("tab:orange", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+_SPARE_LINES = ("-", "--", ":", "-.")
+
+
+def _stable_pick(name: str, choices):
+    """The same choice for the same name in every process (``hash`` is salted per process)."""
+    return choices[int(hashlib.sha256(name.encode()).hexdigest(), 16) % len(choices)]
+
+
+def method_style(torque: str | None, optimizer: str | None = None) -> dict:
+    """Matplotlib line properties of a method: ``method_style(None)`` is PD control; otherwise the
+    colour follows the torque parameterisation and the line style the optimiser (a registered
+    plugin gets a stable colour and style of its own)."""
+    if torque is None or torque == "id":
+        return dict(CONTROL_STYLE)
+    colour = TORQUE_COLOURS.get(torque) or _stable_pick(torque, _SPARE_COLOURS)
+    line = OPTIMIZER_LINES.get(optimizer) or _stable_pick(str(optimizer), _SPARE_LINES)
+    return {"color": colour, "linestyle": line, "linewidth": 1.4}
 
 
 def _pyplot():
@@ -38,8 +68,9 @@ def inverse_figure(inverse, path: Path) -> None:
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     top.plot(inverse.t, np.degrees(inverse.theta), color="k")
     top.set_ylabel("rotation (deg)")
-    top.set_title(f"Desired rotation and inverse-dynamics torque ({inverse.kinematics} kinematics)")
-    bottom.plot(inverse.t, inverse.torque, color="tab:red")
+    top.set_title(f"Figure 2: desired rotation and inverse-dynamics torque\n({inverse.kinematics} kinematics)",
+                  fontsize=11)
+    bottom.plot(inverse.t, inverse.torque, color="k")
     bottom.set_ylabel("elbow torque (N m)")
     bottom.set_xlabel("time (s)")
     for ax in (top, bottom):
@@ -49,42 +80,104 @@ def inverse_figure(inverse, path: Path) -> None:
 
 
 def tracking_figure(inverse, curves, path: Path, title: str) -> None:
-    """Figures 5 and 6: desired rotation and simulated ones; curves are (label, theta (rad))
-    on the 1001 samples. A lower panel shows each error against the desired rotation."""
+    """Figures 5 and 6 in three panels against time (s): the rotation (deg) with the desired one
+    drawn dashed on top, each method's error against it (deg), and the applied elbow torque (N m)
+    against the inverse-dynamics torque. ``curves`` are (label, style, theta (rad), torque (N m)),
+    arrays of the 1001 samples; ``style`` comes from ``method_style``."""
     plt = _pyplot()
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 6.5), sharex=True, gridspec_kw={"height_ratios": [3, 2]})
-    top.plot(inverse.t, np.degrees(inverse.theta), color="k", lw=2.5, label="desired")
-    for label, theta in curves:
-        top.plot(inverse.t, np.degrees(theta), lw=1.2, label=label)
-        bottom.plot(inverse.t, np.degrees(theta - inverse.theta), lw=1.2, label=label)
+    fig, (top, middle, bottom) = plt.subplots(3, 1, figsize=(8, 9), sharex=True,
+                                              gridspec_kw={"height_ratios": [3, 2, 2]})
+    t = inverse.t
+    for label, style, theta, torque in curves:
+        top.plot(t, np.degrees(theta), label=label, **style)
+        middle.plot(t, np.degrees(theta - inverse.theta), label=label, **style)
+        bottom.plot(t, torque, label=label, **style)
+    top.plot(t, np.degrees(inverse.theta), label="desired rotation", **DESIRED)
+    middle.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)  # the desired rotation: no error
+    bottom.plot(t, inverse.torque, label="inverse-dynamics torque", **INVERSE_TORQUE)
     top.set_ylabel("rotation (deg)")
-    top.set_title(title)
-    top.legend(fontsize=8)
-    bottom.set_ylabel("error (deg)")
+    top.set_title(title, fontsize=11)
+    top.legend(fontsize=7.5, loc="upper left")
+    middle.set_ylabel("error (deg)")
+    bottom.set_ylabel("applied torque (N m)")
     bottom.set_xlabel("time (s)")
-    for ax in (top, bottom):
+    bottom.legend(handles=bottom.lines[-1:], fontsize=7.5, loc="upper left")
+    for ax in (top, middle, bottom):
         ax.grid(alpha=0.3)
     _save(fig, path)
     plt.close(fig)
 
 
-def convergence_figure(series, path: Path, title: str) -> None:
-    """Best objective against evaluations: series are (label, [history per seed]); the median
-    over seeds is drawn with the interquartile range as a band."""
+def convergence_figure(series, path: Path, title: str, reference: float | None = None) -> None:
+    """Best objective (deg, eq. 18) against evaluations: series are (label, style, [history per
+    seed]); the median over seeds is drawn with the interquartile range as a band. ``reference``
+    (deg), PD control's RMSE of rotation, is drawn as a horizontal line."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(8, 5))
-    for label, histories in series:
+    for label, style, histories in series:
         length = max(len(h) for h in histories)
         padded = np.array([np.pad(h, (0, length - len(h)), mode="edge") for h in histories], dtype=float)
         q1, med, q3 = np.percentile(padded, [25, 50, 75], axis=0)
         x = np.arange(1, length + 1)
-        (line,) = ax.plot(x, med, label=label)
-        ax.fill_between(x, q1, q3, color=line.get_color(), alpha=0.2)
+        ax.plot(x, med, label=label, **style)
+        ax.fill_between(x, q1, q3, color=style["color"], alpha=0.15)
+    if reference is not None and np.isfinite(reference) and reference > 0:
+        ax.axhline(reference, label=f"PD control + feedforward ({reference:.3f} deg)",
+                   **{**CONTROL_STYLE, "linewidth": 1.2, "linestyle": (0, (1, 1))})
     ax.set_yscale("log")
-    ax.set_xlabel("objective evaluations")
-    ax.set_ylabel("best objective f* (eq. 18)")
-    ax.set_title(title)
+    ax.set_xlabel("objective evaluations (forward simulations)")
+    ax.set_ylabel("best objective f* (deg, eq. 18)")
+    ax.set_title(title, fontsize=11)
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7.5)
     _save(fig, path)
     plt.close(fig)
+
+
+def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base: Path) -> dict:
+    """Write the report's figures into ``directory`` (created if missing) for the plan's stored
+    runs ({hash: stored run}) and report rows; return {title: path relative to ``base``}, the
+    directory of the report. Each tracking figure shows the run of median RMSE_rot of each cell."""
+    from .experiment import replay, run
+
+    directory.mkdir(exist_ok=True)
+    written = {}
+
+    def link(name, path):
+        written[name] = os.path.relpath(path, base)
+
+    path = directory / "figure2_inverse_dynamics.png"
+    inverse_figure(inverse, path)
+    link("Figure 2: desired rotation and inverse-dynamics torque", path)
+    control_curves, reference = [], None
+    if plan.control is not None:
+        result = run(plan.control).result
+        control_curves = [("PD control + feedforward", method_style(None), result.theta, result.torque)]
+        reference = runs[plan.control.hash()]["record"].get("rmse_rot_deg")
+    for table, name in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
+        curves = list(control_curves)
+        series = []
+        for row in rows:
+            if row.table != table:
+                continue
+            specs = plan.specs[row.cell]
+            stored = [runs[s.hash()] for s in specs]
+            style = method_style(row.cell.torque, row.cell.optimizer)
+            values = np.array([r["record"]["rmse_rot_deg"] if r["record"]["rmse_rot_deg"] is not None else np.inf
+                               for r in stored])
+            median_seed = int(np.argsort(values)[len(values) // 2])
+            if stored[median_seed]["params"] is not None:
+                result = replay(specs[median_seed], stored[median_seed]["params"])
+                curves.append((row.name, style, result.theta, result.torque))
+            histories = [r["history"] for r in stored if r["history"]]
+            if histories:
+                series.append((row.name, style, histories))
+        if len(curves) > len(control_curves):
+            path = directory / f"figure{5 if table == 2 else 6}_tracking.png"
+            tracking_figure(inverse, curves, path, f"{name}: the median run of each method")
+            link(name, path)
+        if series:
+            path = directory / f"convergence_table{table}.png"
+            convergence_figure(series, path, f"Convergence, Table {table}: median over seeds, IQR band", reference)
+            link(f"Convergence, Table {table}", path)
+    return written

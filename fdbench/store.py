@@ -201,6 +201,18 @@ class Store:
     def records(self) -> list[dict]:
         return [json.loads(row[0]) for row in self._query("SELECT record_json FROM runs ORDER BY id")]
 
+    def provenance(self, hashes) -> dict:
+        """{spec hash: {id, created_at, machine, jobs, git_commit, fdbench_version}} of the
+        stored runs among ``hashes``: when, where and by what each run was made."""
+        wanted = set(hashes)
+        out = {}
+        for row in self.db.execute("SELECT spec_hash, id, created_at, machine, jobs, git_commit, fdbench_version "
+                                   "FROM runs ORDER BY id"):
+            if row[0] in wanted:
+                out[row[0]] = dict(zip(("id", "created_at", "machine", "jobs", "git_commit", "fdbench_version"),
+                                       row[1:]))
+        return out
+
     # ---- writing -----------------------------------------------------------------------------
 
     def add(self, spec, outcome, jobs: int = 1, replace: bool = False) -> bool:

@@ -187,7 +187,7 @@ def test_markdown_sections_tables_and_figures(tmp_path):
     text = out.read_text()
     headings = [line for line in text.splitlines() if line.startswith("## ")]
     expected = ["## Settings", "## Inverse dynamics", "## PD control", "## Table 2", "## Table 3", "## Comparison",
-                "## Figures"]
+                "## Where we differ from the paper, and why", "## When and where the runs were made", "## Figures"]
     assert [next(h for h in headings if h.startswith(e)) for e in expected] == \
         [h for h in headings if any(h.startswith(e) for e in expected)]
     assert len(headings) == len(expected)
@@ -199,19 +199,21 @@ def test_markdown_sections_tables_and_figures(tmp_path):
 
     pd_section = _section(text, "## PD control")
     assert "Kp = 80.0" in pd_section and "Kd = 0.3" in pd_section
-    header = [c.strip() for c in pd_section.splitlines()[4].strip("|").split("|")]
+    header_line = next(line for line in pd_section.splitlines() if line.startswith("| method |"))
+    header = [c.strip() for c in header_line.strip("|").split("|")]
     assert header[:3] == ["method", "RMSE_rot (deg)", "paper"] and header.count("paper") == 3
     pd_cells = _table_line(pd_section, "PD control + feedforward")
-    assert (pd_cells[2], pd_cells[4]) == ("0.116", "0.149")
+    assert (pd_cells[2], pd_cells[5]) == ("0.116", "0.149")
 
     for heading, paper in (("## Table 2", PAPER_TABLE2), ("## Table 3", PAPER_TABLE3)):
         section = _section(text, heading)
         assert "| method | RMSE_rot (deg) | paper |" in section and "success |" in section
         cells = _table_line(section, "CS (11 points) + BFGS quasi-Newton")
         rot, torque, runtime = paper[("cs", "bfgs")]
-        assert (cells[2], cells[4], cells[6]) == (f"{rot:.3f}", f"{torque:.3f}", f"{runtime:.2f}")
-        assert cells[-1].endswith("(2 runs)")
-        assert "±" in cells[1]  # median ± half IQR over 2 seeds
+        assert (cells[2], cells[5], cells[8]) == (f"{rot:.3f}", f"{torque:.3f}", f"{runtime:.2f}")
+        # BFGS from a fixed start: both seeds give the same run, shown once (no "± 0.000")
+        assert cells[-1] == "2/2, identical"
+        assert "±" not in cells[1] and "±" not in cells[4] and "±" in cells[7]  # runtimes still vary
 
     comparison = _section(text, "## Comparison")
     assert "Most accurate:" in comparison and "Fastest:" in comparison
@@ -242,7 +244,7 @@ def test_markdown_shows_the_published_pd_runtime(tmp_path):
     text = invoke("report", "--db", tmp_path / "pd.sqlite", *CS_BFGS, "--no-feedforward", "--seeds", 1,
                   "--budget", 5, "--jobs", 1, "-q").stdout
     cells = _table_line(_section(text, "## PD control"), "PD control + feedforward")
-    assert float(cells[6]) == PAPER_PD[2]
+    assert float(cells[8]) == PAPER_PD[2]
 
 
 def test_figures_without_output_are_linked_relative_to_the_working_directory(tmp_path, monkeypatch):
@@ -526,3 +528,292 @@ def test_bad_usage_exits_2_with_one_line(tmp_path, case, monkeypatch):
     assert option in lines[0]
     assert result.stdout == ""
     assert list(tmp_path.iterdir()) == []  # nothing created: no database, no report, no figures
+
+
+# ----------------------------------------------------------------------------- judging against the paper
+
+from hypothesis import given  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+from fdbench.report import SAME_FACTOR, Row, first_reached, judgement  # noqa: E402
+
+positive = st.floats(min_value=1e-6, max_value=1e4, allow_nan=False, allow_infinity=False)
+
+
+@given(positive, positive)
+def test_judgement_says_same_within_the_factor_and_otherwise_how_many_times(ours, paper):
+    j = judgement(ours, paper)
+    ratio = ours / paper
+    if 1 / SAME_FACTOR <= ratio <= SAME_FACTOR:
+        assert j["verdict"] == "same" and j["factor"] == pytest.approx(ratio)
+    elif ratio < 1:
+        assert j["verdict"] == "lower" and j["factor"] == pytest.approx(paper / ours) and j["factor"] > SAME_FACTOR
+    else:
+        assert j["verdict"] == "higher" and j["factor"] == pytest.approx(ratio) and j["factor"] > SAME_FACTOR
+    # swapping ours and the paper's swaps lower and higher, by the same factor
+    swapped = judgement(paper, ours)
+    flip = {"same": "same", "lower": "higher", "higher": "lower"}
+    assert swapped["verdict"] == flip[j["verdict"]]
+    if j["verdict"] != "same":
+        assert swapped["factor"] == pytest.approx(j["factor"])
+
+
+@given(st.lists(positive, min_size=2, max_size=8), st.floats(min_value=0, max_value=1))
+def test_a_paper_figure_within_the_range_of_our_runs_is_reproduced(runs, where):
+    paper = min(runs) + where * (max(runs) - min(runs))
+    assert judgement(float(np.median(runs)), paper, runs)["verdict"] == "same"
+
+
+def test_judgement_without_a_paper_figure_is_none():
+    assert judgement(0.5, None)["verdict"] is None and judgement(None, 0.5)["verdict"] is None
+    assert judgement(float("nan"), 0.5)["verdict"] is None
+
+
+@given(st.lists(st.floats(min_value=0.01, max_value=10), min_size=1, max_size=50), positive)
+def test_first_reached_is_the_first_evaluation_at_or_below_the_level(values, level):
+    history = list(np.minimum.accumulate(values))
+    n = first_reached(history, level)
+    if n is None:
+        assert min(history) > level
+    else:
+        assert history[n - 1] <= level and all(v > level for v in history[: n - 1])
+
+
+def _row(records):
+    return Row("m", 2, None, summarise(records), (1.0, 1.0, 1.0), records)
+
+
+def test_identical_runs_are_detected_from_the_data():
+    same = {"rmse_rot_deg": 0.5, "rmse_torque_nm": 0.1, "best_objective": 0.5, "t_end": 1.0, "status": "success"}
+    assert _row([dict(same, runtime_s=t) for t in (0.1, 0.2, 0.3)]).identical  # runtimes may differ
+    assert not _row([same]).identical  # one run: nothing to compare
+    assert not _row([same, dict(same, rmse_rot_deg=0.5000001)]).identical  # seeds that matter
+
+
+def _numbers_of_column(section_text: str, column: int) -> list[str]:
+    lines = [line for line in section_text.splitlines() if line.startswith("| ") and not line.startswith("| method")]
+    return [[c.strip() for c in line.strip("|").split("|")][column] for line in lines]
+
+
+def test_each_column_has_one_number_format_and_stochastic_cells_keep_their_spread(tmp_path):
+    text = invoke("report", "--db", tmp_path / "fmt.sqlite", "--torque", "cs", "--seeds", 3, "--budget", 12,
+                  "--jobs", 1, "-q").stdout
+    one = r"(\d+\.\d{3}|< 0\.001)"
+    for heading in ("## Table 2", "## Table 3"):
+        section = _section(text, heading)
+        for column in (1, 4, 7):  # RMSE_rot, RMSE_torque, runtime
+            for cell in _numbers_of_column(section, column):
+                assert re.fullmatch(f"{one}( ± {one})?", cell), (heading, column, cell)
+        cma = _table_line(section, "CS (11 points) + CMA-ES")
+        assert "±" in cma[1] and "identical" not in cma[-1]  # CMA-ES depends on its seed
+        bfgs = _table_line(section, "CS (11 points) + BFGS quasi-Newton")
+        assert "±" not in bfgs[1] and bfgs[-1].endswith("identical")
+
+
+def test_vs_paper_column_agrees_with_the_published_figures(tmp_path):
+    db = tmp_path / "vs.sqlite"
+    text = invoke("report", "--db", db, *CS_BFGS, "--seeds", 1, "--budget", 200, "--jobs", 1, "-q").stdout
+    for heading, paper, feedforward in (("## Table 2", PAPER_TABLE2, False), ("## Table 3", PAPER_TABLE3, True)):
+        cells = _table_line(_section(text, heading), "CS (11 points) + BFGS quasi-Newton")
+        ours = stored_values(db, "cs", "bfgs", feedforward)[0]
+        published = paper[("cs", "bfgs")][0]
+        found = re.fullmatch(r"([\d.]+)× (lower|higher)|≈ \(×([\d.]+)\)", cells[3])
+        assert found, cells[3]
+        if found[3]:
+            assert abs(ours / published - 1) <= 0.25 and float(found[3]) == pytest.approx(ours / published, abs=0.01)
+        else:
+            factor = published / ours if found[2] == "lower" else ours / published
+            assert (ours < published) == (found[2] == "lower")
+            assert float(found[1]) == pytest.approx(factor, rel=0.05)
+
+
+# ----------------------------------------------------------------------------- where we differ, provenance
+
+
+def _stored_history(db: Path, torque, optimizer, feedforward, seed=0) -> list:
+    for spec_json, history in db_rows(db, "spec_json, history_json"):
+        spec = json.loads(spec_json)
+        if (spec["command"], spec["torque"], spec["optimizer"], spec["feedforward"], spec["seed"]) == \
+                ("optimize", torque, optimizer, feedforward, seed):
+            return json.loads(history)
+    raise AssertionError("no such run")
+
+
+def test_differences_name_when_each_run_passed_the_papers_figure(tmp_path):
+    db = tmp_path / "differ.sqlite"
+    text = invoke("report", "--db", db, *CS_BFGS, "--seeds", 1, "--budget", 200, "--jobs", 1, "-q").stdout
+    differ = _section(text, "## Where we differ from the paper, and why")
+    for feedforward, table, paper in ((False, 2, PAPER_TABLE2), (True, 3, PAPER_TABLE3)):
+        history = _stored_history(db, "cs", "bfgs", feedforward)
+        level = paper[("cs", "bfgs")][0]
+        first = next(i for i, v in enumerate(history, start=1) if v <= level)
+        line = next(l for l in differ.splitlines() if l.startswith("- **CS (11 points) + BFGS") and f"(Table {table})" in l)
+        assert f"after {first} of 200 evaluations" in line
+    assert "Not explained:" in differ and "measured on" in differ
+
+    short = invoke("report", "--db", db, *CS_BFGS, "--no-feedforward", "--no-control", "--seeds", 1, "--budget", 15,
+                   "--jobs", 1, "-q").stdout
+    rows = [json.loads(h) for s, h in db_rows(db, "spec_json, history_json") if json.loads(s).get("budget") == 15]
+    assert len(rows) == 1 and min(rows[0]) > PAPER_TABLE2[("cs", "bfgs")][0]
+    assert "No run reaches the paper's figure within 15 evaluations." in short
+    assert "these runs differ (budget 15)" in short and "Not explained:" not in short
+
+
+def test_the_report_says_when_and_where_its_runs_were_made(tmp_path):
+    db = tmp_path / "when.sqlite"
+    args = ["report", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 2, "--budget", 5, "--jobs", 1, "--no-beyond",
+            "-q"]
+    text = invoke(*args).stdout
+    made = _section(text, "## When and where the runs were made")
+    rows = db_rows(db, "created_at, machine, jobs")
+    assert len({r[1] for r in rows}) == 1
+    assert f"All {len(rows)} runs were made on {rows[0][1]} with 1 parallel job(s)" in made
+    assert min(r[0] for r in rows)[:10] in made and "--rerun" in made
+    # runs from another machine: a table, one line per cell and session
+    con = sqlite3.connect(db)
+    con.execute("UPDATE runs SET machine = 'elsewhere', created_at = '2020-01-02T03:04:05+00:00' WHERE seed = 1")
+    con.commit()
+    con.close()
+    made = _section(invoke(*args).stdout, "## When and where the runs were made")
+    assert "several sessions" in made
+    assert "| CS (11 points) + BFGS quasi-Newton | 2 | 1 | 2020-01-02 03:04 | elsewhere | 1 |" in made
+
+
+def test_first_report_in_a_folder_says_it_creates_the_database(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("FDBENCH_DB", raising=False)
+    args = ["report", *CS_BFGS, "--no-feedforward", "--no-control", "--seeds", 1, "--budget", 5, "--jobs", 1,
+            "--format", "csv"]
+    first = invoke(*args)
+    assert first.stderr.splitlines().count(
+        "creating results database fdbench-results.sqlite (choose another with --db or $FDBENCH_DB)") == 1
+    assert (tmp_path / "fdbench-results.sqlite").is_file()
+    assert "creating" not in invoke(*args).stderr  # only the first time
+    quiet = invoke("report", "--db", tmp_path / "other.sqlite", *args[1:], "-q")
+    assert quiet.stderr == "" and (tmp_path / "other.sqlite").is_file()
+    named = invoke("report", "--db", tmp_path / "named.sqlite", *args[1:])
+    assert f"creating results database {tmp_path / 'named.sqlite'}\n" in named.stderr
+
+
+# ----------------------------------------------------------------------------- JSON
+
+
+def test_json_report_has_the_cells_of_the_csv_and_the_ids_of_their_runs(tmp_path):
+    db = tmp_path / "json.sqlite"
+    common = ["report", "--db", db, "--torque", "cs", "--seeds", 2, "--budget", 12, "--jobs", 1, "--no-beyond", "-q"]
+    csv_frame = read_csv(invoke(*common, "--format", "csv").stdout)
+    result = subprocess.run([sys.executable, "-m", "fdbench.cli", *map(str, common), "-f", "json"],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout, parse_constant=lambda c: pytest.fail(f"non-standard JSON {c}"))
+    assert report["command"] == "report" and report["settings"]["kinematics"] == "paper"
+    cells = report["cells"]
+    assert len(cells) == len(csv_frame) == 5
+    ids = {spec_hash: row_id for row_id, spec_hash, *_ in db_rows(db)}
+    for cell, (_, row) in zip(cells, csv_frame.iterrows()):
+        assert cell["cell"] == row.cell
+        for column in INDICATOR_COLUMNS:
+            assert cell[column] == pytest.approx(row[column], rel=1e-12, abs=1e-15)
+        assert cell["run_ids"] == [ids[h] for h in cell["spec_hashes"]]
+        assert len(cell["run_ids"]) == cell["runs"]
+        assert cell["successes"] == round(cell["success_rate"] * cell["runs"])
+        assert cell["identical"] == (cell["optimizer"] == "bfgs")
+        ratio = cell["rmse_rot_deg_median"] / cell["paper_rmse_rot_deg"]
+        verdict = cell["vs_paper"]["rmse_rot_deg"]["verdict"]
+        if 0.8 <= ratio <= 1.25:
+            assert verdict == "same"
+        elif verdict != "same":  # "same" also when the paper's figure lies within the range of our runs
+            assert verdict == ("lower" if ratio < 1 else "higher")
+            assert cell["vs_paper"]["rmse_rot_deg"]["factor"] == pytest.approx(max(ratio, 1 / ratio))
+    assert sorted(i for c in cells for i in c["run_ids"]) == sorted(ids.values())
+
+
+# ----------------------------------------------------------------------------- figures
+
+
+def test_figures_keep_one_style_per_method_and_pd_as_reference(tmp_path, monkeypatch):
+    import fdbench.figures as figures
+
+    drawn = {"tracking": [], "convergence": []}
+    monkeypatch.setattr(figures, "tracking_figure",
+                        lambda inverse, curves, path, title: drawn["tracking"].append((title, curves)))
+    monkeypatch.setattr(figures, "convergence_figure",
+                        lambda series, path, title, reference=None: drawn["convergence"].append((series, reference)))
+    db = tmp_path / "fig.sqlite"
+    invoke("report", "--db", db, "--opt", "cmaes", "--opt", "bfgs", "--torque", "cs", "--torque", "ann",
+           "--seeds", 1, "--budget", 8, "--jobs", 1, "--figures", tmp_path / "figs", "-q")
+    styles = {}
+    for _, curves in drawn["tracking"]:
+        for label, style, theta, torque in curves:
+            assert theta.shape == torque.shape == (1001,)
+            styles.setdefault(label, []).append(style)
+    for series, reference in drawn["convergence"]:
+        for label, style, histories in series:
+            styles.setdefault(label, []).append(style)
+        control = [json.loads(r) for s, r in db_rows(db, "spec_json, record_json") if json.loads(s)["command"] == "control"]
+        assert reference == control[0]["rmse_rot_deg"]
+    assert len(drawn["tracking"]) == len(drawn["convergence"]) == 2
+    for label, used in styles.items():
+        assert all(s == used[0] for s in used), label  # the same method looks the same everywhere
+    distinct = {(s[0]["color"], str(s[0]["linestyle"])) for s in styles.values()}
+    assert len(distinct) == len(styles) == 5  # PD and four methods, each its own look
+
+
+def test_method_styles_are_stable_across_processes_for_plugin_names():
+    code = "from fdbench.figures import method_style as m; print(m('my-torque', 'my-opt'), m('cs', 'bfgs'))"
+    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
+            for _ in range(2)}
+    assert len(outs) == 1 and "tab:green" in outs.pop()
+
+
+# ----------------------------------------------------------------------------- the dated experiments
+
+
+def _measured(title: str) -> str:
+    from fdbench.report import MEASURED
+
+    return next(item for item in MEASURED if item.startswith(f"- **{title}"))
+
+
+def _figures(text: str) -> list[float]:
+    return [float(v) for v in re.findall(r"\d+\.\d+|\d+e-\d+", text)]
+
+
+def test_the_measured_kinematics_figures_reproduce():
+    text = _measured("Kinematics")
+    pd_exact = re.search(r"tracks to (\S+) deg and (\S+) N m", text)
+    pd_paper = re.search(r"it gives ([\d.]+) deg and ([\d.]+) N m", text)
+    exact = _json_run("control", "--kinematics", "exact")
+    paper = _json_run("control")
+    assert float(pd_exact[1]) == pytest.approx(exact["rmse_rot_deg"], rel=0.5)
+    assert float(pd_exact[2]) == pytest.approx(exact["rmse_torque_nm"], rel=0.5)
+    assert (float(pd_paper[1]), float(pd_paper[2])) == (round(paper["rmse_rot_deg"], 3), round(paper["rmse_torque_nm"], 3))
+    start = re.search(r"already tracks to (\S+) deg", text)
+    assert float(start[1]) == pytest.approx(_json_run("simulate", "--kinematics", "exact")["rmse_rot_deg"], rel=0.5)
+
+
+def test_the_measured_budget_figures_reproduce():
+    text = _measured("Budget")
+    budgets = [int(b) for b in re.search(r"budgets of ([\d, and]+) evaluations", text)[1].replace("and", ",").split(",")
+               if b.strip()]
+    shown = [float(v) for v in re.search(r"feedforward ([\d., and]+) deg", text)[1].replace("and", ",").split(",")
+             if v.strip()]
+    assert len(budgets) == len(shown) == 7
+    for budget, value in zip(budgets, shown):  # BFGS is deterministic: one seed is every seed
+        run = _json_run("optimize", *CS_BFGS, "--budget", budget)
+        assert round(run["rmse_rot_deg"], 3) == value, budget
+    assert shown[budgets.index(100)] > PAPER_TABLE2[("cs", "bfgs")][0] > shown[budgets.index(200)]
+
+
+def test_the_measured_cmaes_step_figures_reproduce(tmp_path):
+    text = _measured("Initial step")
+    sigmas = re.search(r"`--sigma0` ([\d.]+) \(default\), ([\d.]+), ([\d.]+) and ([\d.]+):", text).groups()
+    medians = re.search(r": ([\d.]+), ([\d.]+), ([\d.]+) and ([\d.]+) deg", text).groups()
+    successes = re.search(r"successful runs (\d+), (\d+), (\d+) and (\d+) of 5", text).groups()
+    for sigma, median, success in list(zip(sigmas, medians, successes))[2:]:  # the two large steps
+        frame = read_csv(invoke("report", "--db", tmp_path / "sigma.sqlite", "--torque", "ann", "--opt", "cmaes",
+                                "--feedforward", "--no-control", "--sigma0", sigma, "--seeds", 5, "--jobs", 1,
+                                "--format", "csv", "-q").stdout)
+        row = frame.iloc[0]
+        assert round(row.rmse_rot_deg_median, 3) == float(median), sigma
+        assert round(row.success_rate * 5) == int(success), sigma

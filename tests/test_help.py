@@ -1,0 +1,117 @@
+"""What a newcomer sees first: --help with the registered names as choices (plugins included) and
+no type noise on flags, output options whose names say what they hold (old names still accepted),
+and an ``import fdbench`` that costs nothing until an entry point is used."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from fdbench.cli import app
+from fdbench.integrate import INTEGRATORS
+from fdbench.motion import KINEMATICS
+from fdbench.optimizers import OPTIMIZERS
+from fdbench.torques import TORQUES
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+COMMANDS = ("inverse", "simulate", "control", "optimize", "report", "methods")
+
+
+def help_text(*args) -> str:
+    result = CliRunner().invoke(app, [*args, "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.stderr
+    return result.stdout
+
+
+def choice(names) -> str:
+    return "[" + "|".join(names) + "]"
+
+
+@pytest.mark.parametrize("command", ("optimize", "report"))
+def test_method_options_show_the_registered_names(command):
+    text = help_text(command)
+    assert choice(TORQUES) in text and choice(OPTIMIZERS) in text
+    assert choice(KINEMATICS) in text and choice(INTEGRATORS) in text
+
+
+def test_formats_are_shown_as_choices():
+    assert "[table|json|csv]" in help_text("control")
+    assert "[md|csv|json]" in help_text("report")
+
+
+@pytest.mark.parametrize("command", (None, *COMMANDS))
+def test_no_help_shows_a_bare_type_for_flags_or_names(command):
+    text = help_text(*([command] if command else []))
+    assert "<bool>" not in text
+    assert "<str>" not in text
+
+
+def test_plugin_names_appear_among_the_choices():
+    env = dict(os.environ, PYTHONPATH=str(EXAMPLES), FDBENCH_PLUGINS="my_methods", COLUMNS="200")
+    exe = Path(sys.executable).with_name("fdbench")
+    out = subprocess.run([str(exe), "optimize", "--help"], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert choice([*TORQUES, "linear"]) in out.stdout and choice([*OPTIMIZERS, "random"]) in out.stdout
+
+
+def test_new_and_old_names_of_the_output_options_write_the_same_files(tmp_path):
+    runner = CliRunner()
+    base = ["optimize", "--torque", "cs", "--opt", "bfgs", "--budget", "12", "-q", "--format", "json"]
+    paths = {name: tmp_path / f"{name}.csv" for name in ("traj_new", "traj_old", "conv_new", "conv_old")}
+    for trajectory, convergence, a, b in (("--save-trajectory", "--save-convergence", "traj_new", "conv_new"),
+                                          ("--save-history", "--history", "traj_old", "conv_old")):
+        result = runner.invoke(app, [*base, trajectory, str(paths[a]), convergence, str(paths[b])])
+        assert result.exit_code == 0, result.stderr
+    assert paths["traj_new"].read_text() == paths["traj_old"].read_text()
+    assert paths["traj_new"].read_text().splitlines()[0].startswith("t,theta,theta_desired")
+    assert len(paths["traj_new"].read_text().splitlines()) == 1002
+    convergence = paths["conv_new"].read_text().splitlines()
+    assert convergence == paths["conv_old"].read_text().splitlines()
+    assert convergence[0] == "evaluation,best_objective" and len(convergence) == 13
+    text = help_text("optimize")
+    assert "--save-trajectory" in text and "--save-convergence" in text
+
+
+def test_import_fdbench_is_cheap_and_the_entry_points_load_on_use():
+    code = ("import sys, fdbench; heavy = [m for m in ('numpy', 'numba', 'pandas', 'scipy') if m in sys.modules]; "
+            "print(heavy); print(sorted(fdbench.TORQUES)); print(callable(fdbench.run), callable(fdbench.load_report))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    lines = out.stdout.splitlines()
+    assert lines[0] == "[]"
+    assert lines[1] == str(sorted(TORQUES)) and lines[2] == "True True"
+    with pytest.raises(AttributeError):
+        import fdbench
+
+        fdbench.no_such_entry_point  # noqa: B018
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
+def test_a_person_watching_sees_the_time_left_before_the_run_ends(tmp_path):
+    """On a terminal the progress bar estimates the time left from the first evaluations on."""
+    master, slave = os.openpty()
+    exe = Path(sys.executable).with_name("fdbench")
+    proc = subprocess.Popen([str(exe), "optimize", "--integrator", "rk45", "--budget", "8", "-f", "json",
+                             "-o", str(tmp_path / "run.json")], stderr=slave, stdout=subprocess.DEVNULL)
+    os.close(slave)
+    chunks = []
+    while True:
+        try:
+            chunk = os.read(master, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        chunks.append(chunk)
+    os.close(master)
+    assert proc.wait(timeout=120) == 0
+    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", b"".join(chunks).decode(errors="replace"))
+    frames = re.findall(r"(\d+)/8 best \S+ \d+:\d\d:\d\d left (\d+:\d\d:\d\d)", text)
+    assert any(int(done) < 8 for done, _ in frames), text[-500:]  # an estimate while work remains
+    assert (tmp_path / "run.json").is_file()
