@@ -27,7 +27,10 @@ _STARTED = time.perf_counter()
 FORMATS = ("table", "json", "csv")
 MAX_SEEDS = 1000  # runs per cell of a report
 MAX_JOBS = 256  # worker processes
-KINEMATICS_HELP = "Desired motion: 'paper' (eq. 5 as printed; reproduces the paper) or 'exact' (chain rule through t*)."
+KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper), 'exact' (eq. 5 "
+                   "differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: columns t (s) "
+                   "and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any duration and "
+                   "sampling. --kinematics is an older name.")
 INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
 
 
@@ -103,14 +106,18 @@ def _choices(name: str, command: str):
         from .optimizers import OPTIMIZERS
 
         return list(OPTIMIZERS)
-    if name == "kinematics":
-        from .motion import KINEMATICS
-
-        return list(KINEMATICS)
     if name == "integrator":
         from .integrate import INTEGRATORS
 
         return list(INTEGRATORS)
+    if name == "smoothing":
+        from .motion import SMOOTHING
+
+        return list(SMOOTHING)
+    if name == "kinematics":
+        from .motion import KINEMATICS
+
+        return list(KINEMATICS) + ["FILE"]
     if name == "controller":
         from .controllers import CONTROLLERS
 
@@ -198,7 +205,7 @@ def _root(
 
 # ---- options shared by several commands ------------------------------------------------------
 
-Kinematics = Annotated[str, typer.Option("--kinematics", help=KINEMATICS_HELP)]
+Kinematics = Annotated[str, typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP)]
 Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
 Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in [1e-6, 0.1].")]
 Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [2.2e-14, 1).")]
@@ -210,18 +217,140 @@ Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for 
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
 SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; 1001 rows), as CSV to FILE. --save-history is an older name.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
+NoiseSeed = Annotated[int, typer.Option("--seed", help="Seed of the --noise-deg noise; the same seed gives the same noisy motion.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
 Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, in [1, 1000000], gradient evaluations included.")]
 Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
-Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over [0, 1] s.")]
+Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span (eq. 5: [0, 1] s).")]
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
 Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
-PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")]
+PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
 
 
-def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega) -> dict:
-    return dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi, omega=omega)
+# Options of the motion, its noise and the model, shared by every command that simulates: declared once
+# here and added to a command by @_with_conditions, which hands them over as one dict ``conditions``
+# of RunSpec fields.
+CONDITIONS = {
+    "radians": (bool, False, typer.Option("--radians", help="The motion file's angles (and derivatives) are in radians, not degrees.")),
+    "cutoff_hz": (float, 6.0, typer.Option("--cutoff", help="Derivative estimate: -3 dB frequency (Hz) of the zero-lag 4th-order Butterworth low-pass (Winter's), applied to a recorded or noisy angle before an interpolating spline is differentiated.")),
+    "smoothing": (str, "butterworth", typer.Option("--smoothing", help="Derivative estimate: 'butterworth' (low-pass, then spline) or 'spline' (a smoothing spline, factor by generalised cross-validation or --spline-lambda).")),
+    "spline_lambda": (Optional[float], None, typer.Option("--spline-lambda", help="Smoothing factor of --smoothing spline (> 0; default: chosen by generalised cross-validation).", show_default=False)),
+    "sample_dt": (Optional[float], None, typer.Option("--sample-dt", help="Report the histories and indicators every SAMPLE_DT s (default: the motion's own samples; eq. 5: 1 ms).", show_default=False)),
+    "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angle before the derivative estimate; indicators stay measured against the noise-free motion.")),
+    "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
+    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
+    "model": (Optional[list[str]], None, typer.Option("--model", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the nominal model and the simulated body (keys as --plant).", show_default=False)),
+    "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
+}
+
+
+def _with_conditions(command):
+    """Add the CONDITIONS options to a command; it receives them as ``conditions`` (a dict of
+    RunSpec fields), the motion and model files among ``conditions['_inputs']``."""
+    import functools
+    import inspect
+
+    signature = inspect.signature(command, eval_str=True)  # the annotations as objects, as typer reads them
+    added = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default,
+                               annotation=Annotated[kind, option])
+             for name, (kind, default, option) in CONDITIONS.items()]
+    kept = [p for p in signature.parameters.values() if p.name != "conditions"]
+
+    @functools.wraps(command)
+    def wrapper(**kwargs):
+        values = {name: kwargs.pop(name) for name in CONDITIONS}
+        return command(conditions=_conditions(**values), **kwargs)
+
+    wrapper.__signature__ = signature.replace(parameters=kept + added)
+    wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
+    return wrapper
+
+
+def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
+                model_file) -> dict:
+    """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
+    pairs = _model_file(model_file) if model_file is not None else []
+    pairs += _key_values("--model", model or [])
+    return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
+                sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
+                plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
+                _inputs={"--model-file": model_file})
+
+
+def _key_values(option: str, items) -> list:
+    pairs = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g), got {item!r}")
+        try:
+            pairs.append((key.strip(), float(value)))
+        except ValueError:
+            raise BadInput(f"{option}: {key.strip()} must be a number, got {value!r}") from None
+    return pairs
+
+
+def _model_file(path: Path) -> list:
+    """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
+    from .files import BadFile, read_input_text
+
+    try:
+        text = read_input_text(path, "--model-file", 2**20)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            import tomllib
+
+            data = tomllib.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise BadInput(f"--model-file: cannot read {path} as {'JSON' if path.suffix.lower() == '.json' else 'TOML'}: "
+                       f"{' '.join(str(exc).split())[:200]}") from None
+    if isinstance(data, dict) and len(data) == 1 and isinstance(next(iter(data.values())), dict):
+        data = next(iter(data.values()))  # [forearm] L12 = 0.3 ...
+    if not isinstance(data, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                             for v in data.values()):
+        raise BadInput(f"--model-file: {path} must hold KEY = number pairs (keys L12, L1G, m, I1, F_ext, g)")
+    return [(str(k), float(v)) for k, v in data.items()]
+
+
+def _spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
+    """The input files of a command (for the output checks): the motion file, the model file, others."""
+    from .motion import KINEMATICS
+
+    inputs = dict(conditions.get("_inputs", {}))
+    if kinematics not in KINEMATICS:
+        inputs["--motion"] = Path(kinematics)
+    return {**inputs, **others}
+
+
+def _fields(conditions: dict) -> dict:
+    return {k: v for k, v in conditions.items() if not k.startswith("_")}
+
+
+def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions: dict | None = None) -> dict:
+    """RunSpec fields shared by every command that simulates (a motion file enters by its digest)."""
+    fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
+                  omega=omega, **_fields(conditions or {}))
+    from .motion import KINEMATICS
+
+    if kinematics not in KINEMATICS:
+        from .experiment import motion_digest
+        from .files import BadFile
+
+        try:
+            fields["inputs"] = (("--motion", motion_digest(kinematics)),)
+        except BadFile as exc:
+            raise BadInput(str(exc)) from None
+    return fields
+
+
+def _noise_seed(conditions: dict, seed: int) -> dict:
+    """The seed field of a command whose only randomness is the motion's noise (none without it)."""
+    return {"seed": seed} if conditions.get("noise_deg") else {}
 
 
 def _check_choice(option: str, value: str, valid) -> str:
@@ -387,28 +516,31 @@ def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
 
 
 @app.command()
+@_with_conditions
 def inverse(
     kinematics: Kinematics = "paper",
+    seed: NoiseSeed = 0,
     fmt: Format = "table",
     output: Output = None,
     quiet: Quiet = False,
+    conditions: dict = None,
 ):
-    """Inverse dynamics (eq. 3): the elbow torque that should produce the desired motion.
+    """Inverse dynamics (eq. 3): the elbow torque that should produce the desired motion, with the nominal model.
 
-    The table and JSON give a summary; --format csv gives the whole history (t, theta, theta_dot, theta_ddot, torque; 1001 rows, SI units)."""
-    _check_outputs(fmt, output=output)
-    try:
-        from .motion import check_kinematics
+    The table and JSON give a summary; --format csv gives the whole history (t, theta, theta_dot, theta_ddot, torque on the motion's samples, SI units; eq. 5: 1001 rows)."""
+    from .experiment import RunSpec
 
-        check_kinematics(kinematics)
-    except ValueError as exc:
-        raise BadInput(_with_option(str(exc))) from None
+    _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))
+    spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
+                              **_common(kinematics, "rk4", 1e-3, 1e-6, 1e-9, 1e7, 1.0, 10.0, conditions)))
     import numpy as np
 
     from .inverse import inverse_dynamics
 
+    settings = spec.settings()
+    desired, _ = spec.motions()
     start = time.perf_counter()
-    inv = inverse_dynamics(None, kinematics=kinematics)
+    inv = inverse_dynamics(desired.samples, settings.nominal_model, desired)
     runtime = time.perf_counter() - start
     if fmt == "csv":
         from .files import csv_text
@@ -418,7 +550,7 @@ def inverse(
         _emit(text, output)
         return
     record = {
-        "command": "inverse", "kinematics": kinematics, "samples": len(inv.t),
+        "command": "inverse", "kinematics": kinematics, **spec.describe(),
         "theta_start_deg": float(np.degrees(inv.theta[0])), "theta_end_deg": float(np.degrees(inv.theta[-1])),
         "torque_min_nm": float(inv.torque.min()), "torque_max_nm": float(inv.torque.max()),
         "torque_start_nm": float(inv.torque[0]), "torque_end_nm": float(inv.torque[-1]),
@@ -429,8 +561,9 @@ def inverse(
 
 
 @app.command()
+@_with_conditions
 def simulate(
-    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and torque (N m) covering [0, 1] s, linearly interpolated. Default: the inverse-dynamics torque.")] = None,
+    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and torque (N m) covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
     params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -440,19 +573,22 @@ def simulate(
     alpha: Alpha = 1e7,
     xi: Xi = 1.0,
     omega: Omega = 10.0,
+    seed: NoiseSeed = 0,
     fmt: Format = "table",
     output: Output = None,
     save_history: SaveHistory = None,
     quiet: Quiet = False,
+    conditions: dict = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from .experiment import RunSpec
 
     _check_outputs(fmt, output=output, save_history=save_history,
-                   inputs={"--torque-file": torque_file, "--params": params})
+                   inputs=_spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
     if torque_file is not None and params is not None:
         raise BadInput("--torque-file and --params: give one of them, not both")
-    spec = _validated(RunSpec(command="simulate", **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
+                              **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     from .experiment import run_simulation
     from .files import BadFile
 
@@ -465,6 +601,7 @@ def simulate(
 
 
 @app.command()
+@_with_conditions
 def control(
     controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods').")] = "pd",
     kp: Annotated[float, typer.Option("--kp", help="pd: proportional gain, N m/rad (paper: 80).")] = 80.0,
@@ -486,15 +623,18 @@ def control(
     output: Output = None,
     save_history: SaveHistory = None,
     db: Db = None,
+    seed: NoiseSeed = 0,
     quiet: Quiet = False,
+    conditions: dict = None,
 ):
     """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
     from .experiment import control_spec, run
 
-    _check_outputs(fmt, output=output, save_history=save_history, db=db)
+    _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
     _check_controller(controller, options)
-    spec = _validated(control_spec(kp, kd, controller, options, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    spec = _validated(control_spec(kp, kd, controller, options, **_noise_seed(conditions, seed),
+                                   **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     _check_store(db)
     outcome = run(spec)
     _save_history(outcome, save_history)
@@ -525,8 +665,9 @@ def _check_controller(name: str, options: dict) -> None:
 
 
 @app.command()
+@_with_conditions
 def collocate(
-    nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over [0, 1] s, >= 2.")] = 100,
+    nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over the motion's span (eq. 5: [0, 1] s), >= 2.")] = 100,
     scheme: Annotated[str, typer.Option("--scheme", help="Transcription: hermite-simpson (piecewise-quadratic torque) or trapezoidal (piecewise-linear).")] = "hermite-simpson",
     regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
@@ -544,14 +685,17 @@ def collocate(
     output: Output = None,
     save_history: SaveHistory = None,
     db: Db = None,
+    seed: NoiseSeed = 0,
     quiet: Quiet = False,
+    conditions: dict = None,
 ):
     """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and torque are the unknowns of one sparse problem solved by IPOPT; the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
     from .experiment import collocate_spec, run
 
-    _check_outputs(fmt, output=output, save_history=save_history, save_torque=save_torque, db=db)
-    spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time,
-                                     **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega)))
+    _check_outputs(fmt, output=output, save_history=save_history, save_torque=save_torque, db=db,
+                   inputs=_spec_inputs(conditions, kinematics))
+    spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, **_noise_seed(conditions, seed),
+                                     **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     try:
         import casadi  # noqa: F401
     except ImportError as exc:
@@ -637,6 +781,7 @@ def methods():
 
 
 @app.command()
+@_with_conditions
 def optimize(
     torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods').")] = "cs",
     opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods').")] = "bfgs",
@@ -665,6 +810,7 @@ def optimize(
     list_methods: Annotated[bool, typer.Option("--list", help="List the registered torques and optimisers and exit.")] = False,
     db: Db = None,
     quiet: Quiet = False,
+    conditions: dict = None,
 ):
     """Forward dynamic optimisation (section 4): tune a parameterised torque history so the simulated rotation tracks the desired one (objective of eq. 18)."""
     if list_methods:
@@ -672,14 +818,15 @@ def optimize(
         return
     from .experiment import optimize_spec, run
 
-    _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db)
+    _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db,
+                   inputs=_spec_inputs(conditions, kinematics))
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
     spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
+        penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
     _check_store(db)
     with _progress(quiet, f"{torque} + {opt}") as progress:
@@ -702,6 +849,7 @@ def optimize(
 
 
 @app.command()
+@_with_conditions
 def report(
     torque: Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")] = None,
     opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
@@ -734,6 +882,7 @@ def report(
     fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown), csv (one row per cell) or json (settings and cells with medians, IQRs, success counts and the ids of their stored runs).")] = "md",
     output: Output = None,
     quiet: Quiet = False,
+    conditions: dict = None,
 ):
     """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown or CSV.
 
@@ -743,7 +892,7 @@ def report(
     from .store import default_path
 
     db_path = db if db is not None else default_path()
-    _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output)
+    _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
     if not 1 <= seeds <= MAX_SEEDS:
         raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
     if jobs is not None and not 1 <= jobs <= MAX_JOBS:
@@ -761,7 +910,7 @@ def report(
     plan = make_plan(
         cells, seeds, budget, control, kp, kd, torque_options=torque_options,
         optimizer_options=optimizer_options, penalty_weight=penalty_weight,
-        **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega),
+        **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     )
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
         _validated(spec)
@@ -786,15 +935,14 @@ def report(
             if beyond:
                 from .beyond import beyond_methods, ensure_runs
 
-                methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega))
+                methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
                 beyond_runs = ensure_runs(methods, store, rerun)
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
-    from .inverse import inverse_dynamics
     from .report import build_rows
 
     start = time.perf_counter()
-    inverse = inverse_dynamics(None, kinematics=kinematics)
+    inverse = (plan.control or plan.all_specs()[0]).reference()
     inverse_runtime = time.perf_counter() - start
     with open_store(db_path) as store:
         made = store.provenance(runs)

@@ -8,13 +8,14 @@ import json
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
 from . import __version__
 from .integrate import Settings, SimulationResult, check_integrator
-from .model import Forearm, Penalty
-from .motion import check_kinematics
+from .model import Penalty, forearm_with
+from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ, KINEMATICS
 
 COMMANDS = ("control", "optimize", "simulate", "collocate")
 MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
@@ -25,8 +26,8 @@ RECORD_FIELDS = (
     "command", "kinematics", "integrator", "dt", "torque", "optimizer", "feedforward",
     "kp", "kd", "seed", "budget", "rmse_rot_deg", "rmse_torque_nm", "runtime_s", "evaluations",
     "best_objective", "initial_objective", "t_end", "status", "message", "stop_reason", "max_violation", "n_params",
-    "torque_options", "optimizer_options", "alpha", "xi", "omega", "penalty_weight", "spec_hash",
-    "fdbench_version",
+    "torque_options", "optimizer_options", "alpha", "xi", "omega", "penalty_weight", "motion", "derivatives",
+    "noise_deg", "model", "plant", "spec_hash", "fdbench_version",
 )
 
 
@@ -56,17 +57,57 @@ class RunSpec:
     inputs: tuple = ()  # (option, SHA-256 of the file's content) of every input file, e.g. (("--torque-file", "ab12..."),)
     controller: str | None = None  # control: a registered controller; None is the paper's PD (kp, kd)
     method_options: tuple = ()  # sorted (name, value) pairs of the controller or of collocate
+    # the desired motion: ``kinematics`` names eq. 5's variant or a recorded motion's CSV file
+    radians: bool = False  # the file's angles are in radians (else degrees)
+    cutoff_hz: float = DEFAULT_CUTOFF_HZ  # derivative estimate: zero-lag Butterworth -3 dB frequency, Hz
+    smoothing: str = "butterworth"  # or "spline" (a smoothing spline)
+    spline_lambda: float | None = None  # the smoothing spline's factor (None: generalised cross-validation)
+    sample_dt: float | None = None  # the reporting grid's step, s (None: the motion's samples)
+    noise_deg: float = 0.0  # white Gaussian noise added to the captured angle, deg (seeded by ``seed``)
+    capture_hz: float = DEFAULT_CAPTURE_HZ  # the capture rate of a noisy copy of an analytic motion, Hz
+    plant: tuple = ()  # (key, value) pairs changing the simulated body only
+    model: tuple = ()  # (key, value) pairs changing the nominal model and the simulated body
 
     def settings(self) -> Settings:
-        return Settings(Forearm(), Penalty(self.alpha, self.xi, self.omega), self.kinematics,
-                        self.integrator, self.dt, self.rtol, self.atol)
+        """The simulation settings: the plant simulated, the nominal model that inverse dynamics
+        and model-based controllers believe, and the desired motion they are given."""
+        desired, _ = self.motions()
+        nominal = forearm_with(self.model)
+        plant = forearm_with(self.model + self.plant) if self.plant else nominal
+        return Settings(plant, Penalty(self.alpha, self.xi, self.omega), desired,
+                        self.integrator, self.dt, self.rtol, self.atol, nominal=None if plant == nominal else nominal)
+
+    def motions(self):
+        """(desired, true) motions: the motion given to every method (a noisy capture when
+        ``noise_deg`` > 0) and the one its indicators are measured against."""
+        return _motions(self.kinematics, self.radians, self.cutoff_hz, self.smoothing, self.spline_lambda,
+                        self.sample_dt, self.noise_deg, self.seed or 0, self.capture_hz, dict(self.inputs).get("--motion"))
+
+    def reference(self):
+        """The inverse dynamics of the nominal model on the true motion, on its samples: what the
+        indicators are measured against (InverseResult)."""
+        from .inverse import inverse_dynamics
+
+        _, truth = self.motions()
+        return inverse_dynamics(None, forearm_with(self.model), truth)
+
+    def describe(self) -> dict:
+        """The record's fields that say which motion, noise, filter and plant a run used."""
+        desired, truth = self.motions()
+        out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
+        if self.kinematics not in KINEMATICS or self.noise_deg:
+            out["derivatives"] = desired.describe().get("derivatives")
+        out["noise_deg"] = self.noise_deg
+        out["model"] = _options_text(self.model) or None
+        out["plant"] = _options_text(self.plant) or None
+        return out
 
     def validate(self) -> "RunSpec":
         """Raise ValueError with a one-line message for anything out of range; no work done."""
         if self.command not in COMMANDS:
             raise ValueError(f"unknown command {self.command!r}; valid: {', '.join(COMMANDS)}")
-        check_kinematics(self.kinematics)
         check_integrator(self.integrator)
+        check_conditions(self)
         self.settings()
         if self.command == "control" and self.controller not in (None, "pd"):
             from .controllers import make_controller
@@ -116,6 +157,8 @@ class RunSpec:
         for name in FLOAT_FIELDS:
             if isinstance(data[name], (int, float)) and not isinstance(data[name], bool):
                 data[name] = float(data[name]) + 0.0  # + 0.0 turns -0.0 into 0.0
+        if dict(self.inputs).get("--motion"):  # a recorded motion counts by its content, not its file name
+            data["kinematics"] = "file"
         if data.get("controller") == "pd":  # the paper's PD is the default controller
             data["controller"] = None
         for name, default in OMITTED_AT_DEFAULT.items():
@@ -129,9 +172,62 @@ class RunSpec:
         return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight")
+FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight", "cutoff_hz",
+                "spline_lambda", "sample_dt", "noise_deg", "capture_hz")
+MAX_NOISE_DEG = 45.0
+MAX_CAPTURE_HZ = 100_000.0
+
+
+def check_conditions(spec: "RunSpec") -> None:
+    """The motion, noise and model options of a spec; ValueError with a one-line message."""
+    from .motion import check_estimate
+
+    check_estimate(spec.cutoff_hz, spec.smoothing, spec.spline_lambda)
+    if not (math.isfinite(spec.noise_deg) and 0 <= spec.noise_deg <= MAX_NOISE_DEG):
+        raise ValueError(f"--noise-deg must be in [0, {MAX_NOISE_DEG:g}] deg, got {spec.noise_deg}")
+    if not (math.isfinite(spec.capture_hz) and 1 <= spec.capture_hz <= MAX_CAPTURE_HZ):
+        raise ValueError(f"--capture-hz must be in [1, {MAX_CAPTURE_HZ:g}] Hz, got {spec.capture_hz}")
+    if spec.noise_deg and spec.seed is not None and not (isinstance(spec.seed, int) and 0 <= spec.seed < MAX_SEED):
+        raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {spec.seed}")
+    forearm_with(spec.model)
+    forearm_with(spec.model + spec.plant)
+
+
+@lru_cache(maxsize=64)
+def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, seed, capture_hz, digest):
+    from .motion import load_motion, noisy
+
+    truth = load_motion(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt)
+    if digest is not None and digest != motion_digest(source):
+        from .files import BadFile
+
+        raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
+    if not noise_deg:
+        return truth, truth
+    return noisy(truth, noise_deg, seed, capture_hz, cutoff_hz, smoothing, spline_lambda), truth
+
+
+def motion_digest(path) -> str:
+    """SHA-256 of a recorded motion file's content."""
+    from .files import read_input_text
+    from .motion import check_source
+
+    check_source(str(path))
+    return hashlib.sha256(read_input_text(path, "--motion").encode()).hexdigest()
+
+
+def with_motion_file(spec: "RunSpec") -> "RunSpec":
+    """The spec with its recorded motion's content digest among its inputs (none for eq. 5)."""
+    from dataclasses import replace
+
+    if spec.kinematics in KINEMATICS:
+        return spec
+    inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.kinematics)),)
+    return replace(spec, inputs=tuple(sorted(inputs)))
 # fields a spec's hash leaves out while they hold these values (added after the first results schema)
-OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": ()}
+OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
+                      "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
+                      "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": ()}
 
 
 def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
@@ -200,6 +296,8 @@ def base_record(spec: RunSpec) -> dict:
         feedforward=spec.feedforward, alpha=spec.alpha, xi=spec.xi, omega=spec.omega,
         spec_hash=spec.hash(), fdbench_version=__version__,
     )
+    described = spec.describe()
+    record.update({k: v for k, v in described.items() if k in record})
     return record
 
 
@@ -233,12 +331,11 @@ def _run_control(spec: RunSpec) -> RunOutcome:
         return _run_controller(spec)
     from .control import feedforward
     from .integrate import simulate, warm_up
-    from .inverse import inverse_dynamics
 
     settings = spec.settings()
     warm_up()
     start = time.perf_counter()
-    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    inverse = spec.reference()
     result = simulate(feedforward(settings), settings, spec.kp, spec.kd)
     runtime = time.perf_counter() - start
     record = fill_result(base_record(spec), result, inverse)
@@ -252,14 +349,13 @@ def _run_controller(spec: RunSpec) -> RunOutcome:
     from .control import track
     from .controllers import make_controller
     from .integrate import warm_up
-    from .inverse import inverse_dynamics
 
     settings = spec.settings()
     controller = make_controller(spec.controller, **dict(spec.method_options))
     warm_up()
     controller.warm_up()
     start = time.perf_counter()
-    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    inverse = spec.reference()
     result = track(controller, settings)
     runtime = time.perf_counter() - start
     record = fill_result(base_record(spec), result, inverse)
@@ -274,7 +370,6 @@ def _run_collocate(spec: RunSpec) -> RunOutcome:
     iterations and solve time stand beside them. ``extra['collocation']`` holds the solution."""
     from .collocation import collocate
     from .integrate import simulate, warm_up
-    from .inverse import inverse_dynamics
 
     settings = spec.settings()
     options = dict(spec.method_options)
@@ -282,7 +377,7 @@ def _run_collocate(spec: RunSpec) -> RunOutcome:
     import casadi  # noqa: F401  (its import is not part of the runtime)
 
     start = time.perf_counter()
-    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    inverse = spec.reference()
     solution = collocate(settings, **options)
     result = simulate(solution.torque_function(), settings)
     runtime = time.perf_counter() - start
@@ -318,7 +413,7 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
         from .inverse import inverse_dynamics
         from .torques.ann import select_hidden
 
-        inv = inverse_dynamics(None, settings.model, settings.kinematics)
+        inv = inverse_dynamics(None, settings.nominal_model, settings.kinematics)
         torque_options["hidden"], extra["hidden_fits"] = select_hidden(inv.t, inv.torque)
     torque = make_torque(spec.torque, **torque_options)
     problem = TrackingProblem(torque, settings, spec.feedforward, spec.penalty_weight)
@@ -326,7 +421,8 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
     params = opt.x * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - start
-    record = fill_result(base_record(spec), result, problem.inverse)
+    reference = spec.reference()
+    record = fill_result(base_record(spec), result, reference)
     record.update(
         torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
         evaluations=opt.evaluations, best_objective=opt.fun, stop_reason=opt.stop_reason,
@@ -335,36 +431,36 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
         optimizer_options=_options_text(spec.optimizer_options),
     )
     record["initial_objective"] = problem.objective(problem.p0)
-    return RunOutcome(record, result, problem.inverse, opt.history, params, extra)
+    return RunOutcome(record, result, reference, opt.history, params, extra)
 
 
 
 def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutcome:
     """Open-loop forward dynamics driven by the inverse-dynamics torque, a CSV torque history
     or saved optimisation parameters. Bad files raise ``files.BadFile``."""
-    from .integrate import simulate, warm_up
-    from .inverse import Feedforward, inverse_dynamics
-
     from dataclasses import replace
+
+    from .integrate import simulate, warm_up
+    from .inverse import Feedforward
 
     settings = spec.settings()
     if torque_file is not None:
         from .files import read_torque_csv
 
-        t_file, q_file = read_torque_csv(torque_file)
+        t_file, q_file = read_torque_csv(torque_file, duration=settings.motion.duration)
         torque, label = (lambda t: np.interp(t, t_file, q_file)), f"file:{torque_file}"
         digest = hashlib.sha256(t_file.tobytes() + q_file.tobytes()).hexdigest()
-        spec = replace(spec, inputs=(("--torque-file", digest),))
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
     elif params_file is not None:
         from .params_file import load_torque
 
-        torque, label, digest = load_torque(params_file, settings.model)
-        spec = replace(spec, inputs=(("--params", digest),))
+        torque, label, digest = load_torque(params_file, settings)
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
     else:
-        torque, label = Feedforward(settings.model, settings.kinematics), "id"
+        torque, label = Feedforward(settings.nominal_model, settings.kinematics), "id"
     warm_up()
     start = time.perf_counter()
-    inverse = inverse_dynamics(None, settings.model, settings.kinematics)
+    inverse = spec.reference()
     result = simulate(torque, settings)
     runtime = time.perf_counter() - start
     record = fill_result(base_record(spec), result, inverse)

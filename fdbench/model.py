@@ -5,6 +5,7 @@ Point 1 (the elbow) is fixed at the origin; point 2 is the far end of the forear
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,3 +80,31 @@ class Penalty:
     alpha: float = 1e7
     xi: float = 1.0
     omega: float = 10.0
+
+
+MODEL_KEYS = ("L12", "L1G", "m", "I1", "F_ext", "g")
+POSITIVE_KEYS = ("L12", "L1G", "m", "I1")
+
+
+def forearm_with(changes=()) -> Forearm:
+    """Table 1's forearm with some constants changed: ``changes`` are (key, value) pairs of the
+    keys L12, L1G, m, I1 (positive) and F_ext, g (any finite value). ValueError otherwise."""
+    values = {}
+    for key, value in changes:
+        if key not in MODEL_KEYS:
+            from .registry import unknown_name_message
+
+            raise ValueError(unknown_name_message("model constant", key, list(MODEL_KEYS)))
+        try:
+            value = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{key} must be a number, got {value!r}") from None
+        if not math.isfinite(value) or (key in POSITIVE_KEYS and value <= 0) or abs(value) > 1e6:
+            kind = "a positive number" if key in POSITIVE_KEYS else "a finite number"
+            raise ValueError(f"{key} must be {kind} of at most 1e6, got {value}")
+        values[key] = value
+    if "L1G" in values or "L12" in values:
+        merged = {**{k: getattr(Forearm(), k) for k in MODEL_KEYS}, **values}
+        if merged["L1G"] > merged["L12"]:
+            raise ValueError(f"L1G ({merged['L1G']:g} m) must not exceed L12 ({merged['L12']:g} m)")
+    return Forearm(**values)

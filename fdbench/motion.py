@@ -328,3 +328,73 @@ def desired_motion(t, kinematics="paper"):
     """theta (rad), theta' (rad/s), theta'' (rad/s^2) at times t (s) of a motion or of the named
     variant of eq. 5, each shaped like t."""
     return as_motion(kinematics)(t)
+
+
+class Resampled(Motion):
+    """A motion reported on another grid: every ``sample_dt`` s over its span (the end included)."""
+
+    def __init__(self, motion: Motion, sample_dt: float):
+        if not (math.isfinite(sample_dt) and MIN_SAMPLE_DT <= sample_dt <= motion.duration):
+            raise ValueError(f"the sample step must be in [{MIN_SAMPLE_DT:g}, {motion.duration:g}] s, got {sample_dt}")
+        self.base, self.sample_dt, self.name = motion, float(sample_dt), motion.name
+        grid = np.arange(0.0, motion.duration, sample_dt)
+        if motion.duration - grid[-1] > 1e-9 * sample_dt:
+            grid = np.append(grid, motion.duration)
+        else:
+            grid[-1] = motion.duration
+        self._samples = _read_only(grid)
+
+    @property
+    def samples(self) -> np.ndarray:
+        return self._samples
+
+    @property
+    def key(self) -> str:
+        return f"{self.base.key}@{self.sample_dt!r}"
+
+    def describe(self) -> dict:
+        return {**self.base.describe(), "sample_dt": self.sample_dt}
+
+    def __call__(self, t):
+        return self.base(t)
+
+
+MIN_SAMPLE_DT = 1e-4  # s
+
+
+def load_motion(source: str, radians: bool = False, cutoff_hz: float = DEFAULT_CUTOFF_HZ,
+                smoothing: str = "butterworth", spline_lambda=None, sample_dt=None, option: str = "--motion") -> Motion:
+    """The motion named ``source`` ('paper', 'exact') or recorded in the CSV file ``source``,
+    reported every ``sample_dt`` s if given. Files raise files.BadFile; options ValueError."""
+    check_estimate(cutoff_hz, smoothing, spline_lambda)
+    check_source(source)
+    if source in KINEMATICS:
+        motion = as_motion(source)
+    else:
+        motion = read_motion_csv(source, option, radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing,
+                                 spline_lambda=spline_lambda)
+    return motion if sample_dt is None else Resampled(motion, sample_dt)
+
+
+def check_estimate(cutoff_hz: float, smoothing: str, spline_lambda) -> None:
+    """Options of the derivative estimate; ValueError with a one-line message."""
+    if not (math.isfinite(cutoff_hz) and cutoff_hz > 0):
+        raise ValueError(f"--cutoff must be a positive frequency in Hz, got {cutoff_hz}")
+    if smoothing not in SMOOTHING:
+        from .registry import unknown_name_message
+
+        raise ValueError("--smoothing: " + unknown_name_message("smoothing", smoothing, list(SMOOTHING)))
+    if spline_lambda is not None and not (math.isfinite(spline_lambda) and spline_lambda > 0):
+        raise ValueError(f"--spline-lambda must be a positive number, got {spline_lambda}")
+
+
+def check_source(source: str, option: str = "--motion (--kinematics)") -> None:
+    """A motion's name or an existing file; files.BadFile naming the valid names otherwise."""
+    import os
+
+    if source not in KINEMATICS and not os.path.exists(source):
+        from .files import BadFile
+        from .registry import unknown_name_message
+
+        raise BadFile(f"{option}: {unknown_name_message('motion', source, list(KINEMATICS))}, and no file "
+                      f"{source} exists (a recorded motion is a CSV file with columns t, theta)")

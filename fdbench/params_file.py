@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
 from .files import BadFile, read_input_text
-from .motion import check_kinematics
+from .motion import KINEMATICS
 
 MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand numbers
 
@@ -23,7 +24,7 @@ def params_json(spec, outcome) -> str:
         "torque_options": dict(spec.torque_options),
         "n_params": len(outcome.params),
         "feedforward": spec.feedforward,
-        "kinematics": spec.kinematics,
+        "kinematics": spec.settings().motion.name if spec.kinematics not in KINEMATICS else spec.kinematics,
         "params": [float(v) for v in outcome.params],
         "rmse_rot_deg": outcome.record["rmse_rot_deg"],
     }
@@ -32,7 +33,7 @@ def params_json(spec, outcome) -> str:
     return json.dumps(data, indent=2) + "\n"
 
 
-def load_torque(path, model, option: str = "--params"):
+def load_torque(path, settings, option: str = "--params"):
     """The open-loop torque function (t (s) -> N m) of a saved parameter file, a label, and a
     digest of what the file defines (the torque, its options, feedforward, kinematics, parameters)."""
     from .torques import make_torque
@@ -54,7 +55,11 @@ def load_torque(path, model, option: str = "--params"):
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in data["params"]):
             raise TypeError("params (a list of numbers)")
         params, options = np.asarray(data["params"], dtype=float), dict(options)
-        check_kinematics(kinematics)
+        if kinematics in KINEMATICS:
+            settings = replace(settings, kinematics=kinematics)
+        elif kinematics != settings.motion.name:
+            raise ValueError(f"kinematics: these parameters were optimised for the motion {kinematics!r}; "
+                             f"give that motion with --motion")
     except (KeyError, TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {path} is not a saved parameter file (missing or bad {exc})") from None
     try:
@@ -63,11 +68,10 @@ def load_torque(path, model, option: str = "--params"):
         raise BadFile(f"{option}: {path}: {exc}") from None
     if params.shape != (torque.n_params,) or not np.all(np.isfinite(params)):
         raise BadFile(f"{option}: {path}: expected {torque.n_params} finite parameters for {name}")
-    from .integrate import Settings
     from .problem import TrackingProblem
 
     # the problem restores the scaling the parameters refer to and adds the feedforward
-    problem = TrackingProblem(torque, Settings(model=model, kinematics=kinematics), ff)
+    problem = TrackingProblem(torque, settings, ff)
     label = f"{name} (feedforward) from {path.name}" if ff else f"{name} from {path.name}"
     identity = json.dumps([name, sorted(options.items()), ff, kinematics, params.tolist()], default=str)
     return problem.torque_function(params), label, hashlib.sha256(identity.encode()).hexdigest()

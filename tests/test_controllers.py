@@ -10,6 +10,8 @@ from dataclasses import asdict
 
 import numpy as np
 import pytest
+
+from fdbench.experiment import OMITTED_AT_DEFAULT
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm, solve_continuous_are
@@ -153,7 +155,7 @@ def test_scipy_integrator_agrees_with_compiled_rk4(name):
 def test_pd_spec_hash_is_that_of_the_first_release():
     """Fields added for new methods stay out of the hash at their defaults: stored PD runs are reused."""
     spec = control_spec(80.0, 0.3)
-    old = {k: v for k, v in asdict(spec).items() if k not in ("controller", "method_options", "inputs")}
+    old = {k: v for k, v in asdict(spec).items() if k not in OMITTED_AT_DEFAULT}
     digest = hashlib.sha256(json.dumps(old, sort_keys=True, default=str).encode()).hexdigest()[:16]
     assert spec.hash() == digest
     assert control_spec(controller="lqr").hash() != control_spec(controller="computed-torque").hash()

@@ -16,6 +16,8 @@ import time
 from pathlib import Path
 
 import pytest
+
+from fdbench.experiment import OMITTED_AT_DEFAULT
 from typer.testing import CliRunner
 
 from fdbench import store as store_module
@@ -471,6 +473,6 @@ def test_stored_identity_of_default_specs_is_kept():
     import json
 
     spec = optimize_spec("cs", "bfgs", False, seed=3, budget=20)
-    legacy = {k: v for k, v in spec.as_dict().items() if k not in ("inputs", "controller", "method_options")}
+    legacy = {k: v for k, v in spec.as_dict().items() if k not in OMITTED_AT_DEFAULT}
     expected = hashlib.sha256(json.dumps(legacy, sort_keys=True, default=str).encode()).hexdigest()[:16]
     assert spec.hash() == expected
