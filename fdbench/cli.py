@@ -960,6 +960,152 @@ def report(
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 
 
+@app.command()
+@_with_conditions
+def study(
+    kind: Annotated[str, typer.Argument(help="noise: the motion captured with white noise of each level (deg); mismatch: one constant of the simulated body changed by each level (percent) while the methods keep the nominal model.", metavar="noise|mismatch")],
+    levels: Annotated[str, typer.Option("--levels", help="The levels, comma-separated: deg for noise (e.g. 0,0.25,0.5,1,2), percent for mismatch (e.g. -20,-10,0,10,20).")] = "",
+    param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g.")] = "I1",
+    torque: Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")] = None,
+    opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
+    feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with (Table 3) or without (Table 2) feedforward; default both.", show_default=False)] = None,
+    control: Annotated[bool, typer.Option("--control/--no-control", help="Include PD control.")] = True,
+    all_cells: Annotated[bool, typer.Option("--all-cells", help="Also the cells the paper left out (PF without feedforward).")] = False,
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per method and level, in [1, 1000]: seeds 0..N-1 (the noise realisation and the optimiser's seed).")] = 5,
+    budget: Budget = 200,
+    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes, in [1, 256] (default: the number of cores).", show_default=False)] = None,
+    db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
+    rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
+    figures: Annotated[Optional[Path], typer.Option("--figures", help="Write one PNG per indicator into DIR (created if missing): level on x, median and IQR band per method.")] = None,
+    kp: Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")] = 80.0,
+    kd: Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")] = 0.3,
+    hidden: Hidden = "4",
+    knots: Knots = 11,
+    terms: Terms = 4,
+    sigma0: Sigma0 = 0.1,
+    popsize: Popsize = None,
+    penalty_weight: PenaltyWeight = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Annotated[str, typer.Option("--format", "-f", help="md (tables per indicator) or csv (one row per method and level).")] = "md",
+    output: Output = None,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Sweep one condition over the methods: 'fdbench study noise --levels 0,0.25,0.5,1,2 --seeds 10' or 'fdbench study mismatch --param I1 --levels -20,-10,0,10,20'.
+
+    Runs are stored and reused like a report's (resume, --jobs, --rerun); the table gives the median and IQR of each indicator per method and level."""
+    from . import study as studies
+    from .benchmark import default_cells
+    from .store import StoreError, default_path, open_store
+
+    _check_choice("study", kind, studies.KINDS)
+    db_path = db if db is not None else default_path()
+    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
+    if not levels:
+        raise BadInput("--levels: give the levels to sweep, e.g. --levels " + ("0,0.5,1,2" if kind == "noise" else "-20,0,20"))
+    try:
+        parsed = studies.parse_levels(levels, kind)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    if kind == "noise" and conditions["noise_deg"]:
+        raise BadInput("--noise-deg: the noise study sets the noise itself (--levels)")
+    if kind == "mismatch":
+        from .model import MODEL_KEYS
+
+        _check_choice("--param", param, MODEL_KEYS)
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
+    if figures is not None:
+        _check_study_figures(figures, output, db_path)
+    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_names(torque, opt)
+    cells = default_cells(torque, opt, feedforward, all_cells)
+    if not cells and not control:
+        raise BadInput("nothing to run: the options select no cell and --no-control")
+    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
+    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
+    _check_method_options(torque_options, optimizer_options)
+    try:
+        sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, budget, torque_options,
+                                   optimizer_options, penalty_weight, param if kind == "mismatch" else None,
+                                   **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+    for key in sweep.specs:
+        _validated(sweep.specs[key][0])
+    jobs = jobs or os.cpu_count() or 1
+    existed = db_path.exists()
+    try:
+        with open_store(db_path) as store:
+            store.check_usable()
+            if not existed:
+                _say_creating(db_path, db is None, quiet)
+            with _progress(quiet, "runs") as progress:
+                from .benchmark import execute
+
+                def on_done(done, total):
+                    if progress.bar is None:
+                        progress.start(total, show_best=False)
+                    progress.update(done)
+
+                runs = execute(sweep, store, jobs, rerun, on_done)
+    except StoreError as exc:
+        raise BadInput(f"--db: {exc}") from None
+    rows = studies.summary(sweep, runs)
+    if fmt == "csv":
+        from .files import csv_text
+
+        _emit(csv_text(list(studies.CSV_COLUMNS), studies.csv_rows(sweep, rows)), output)
+    else:
+        links = None
+        if figures is not None:
+            written = studies.write_figures(sweep, rows, figures)
+            base = output.parent if output is not None else Path(".")
+            links = {title: os.path.relpath(path, base) for title, path in written.items()}
+            _say(quiet, f"wrote {len(written)} figures to {figures}")
+        settings = _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt)
+        _emit(studies.markdown(sweep, rows, settings, links), output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
+
+
+def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> dict:
+    from .store import machine
+
+    spec = sweep.all_specs()[0]
+    described = spec.describe()
+    return {
+        "study": sweep.kind + (f" of {sweep.param}" if sweep.param else ""),
+        "levels": ", ".join(f"{v:g}" for v in sweep.levels) + f" {'deg' if sweep.kind == 'noise' else '%'}",
+        "motion": f"{kinematics} ({described['duration_s']:g} s, {described['samples']} samples)",
+        "derivative estimate": ("Butterworth zero-lag, then spline" if spec.smoothing == "butterworth"
+                                else "smoothing spline") + (f", cutoff {spec.cutoff_hz:g} Hz" if spec.smoothing == "butterworth" else ""),
+        "integrator": integrator + (f" (dt = {dt} s)" if integrator == "rk4" else ""),
+        "seeds": f"{seeds} per method and level (PD: one run where the runs would be identical)",
+        "budget": f"{budget} evaluations per optimisation",
+        "runs": str(len(sweep.all_specs())),
+        "parallel jobs": str(jobs),
+        "fdbench": __version__,
+        "machine": machine(),
+    }
+
+
+def _check_study_figures(directory: Path, output: Optional[Path], db: Path) -> None:
+    """As for the report's --figures: refuse before the work a folder that cannot take them."""
+    from .study import FIGURE_NAMES
+
+    _check_figures_dir(directory, output, db, FIGURE_NAMES)
+
+
 REPORT_FORMATS = ("md", "csv", "json")
 
 
@@ -996,7 +1142,7 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
     return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section)
 
 
-def _check_figures_dir(directory: Path, output: Optional[Path], db: Path) -> None:
+def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=None) -> None:
     """Refuse, before the work, a --figures folder that cannot take the figures: a file, the
     report's own output, a missing parent, an unwritable folder, or a figure file in it that
     would be refused (read-only, a directory, the database)."""
@@ -1016,7 +1162,7 @@ def _check_figures_dir(directory: Path, output: Optional[Path], db: Path) -> Non
     if not os.access(directory, os.W_OK):
         raise BadInput(f"--figures: directory {directory} is not writable")
     try:
-        paths = {f"--figures ({name})": directory / name for name in FIGURE_FILES}
+        paths = {f"--figures ({name})": directory / name for name in (names or FIGURE_FILES)}
         for option, path in paths.items():
             check_writable(path, option)
         check_distinct({"--output": output, **paths}, database=db)

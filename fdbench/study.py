@@ -1,0 +1,243 @@
+"""Studies: one condition swept over the methods. ``noise``: the desired motion captured with
+white noise of each level (deg), one noise realisation per seed; ``mismatch``: one constant of the
+simulated body (the plant) changed by each level (percent) while inverse dynamics and every
+model-based method keep the nominal model.
+
+A study is a list of run specifications (``Sweep``) carried out and stored like a report's, so it
+resumes and reuses stored runs; its summary has the median and interquartile range of each
+indicator per method and level.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .benchmark import INDICATORS, Cell, succeeded
+from .experiment import RunSpec, control_spec, optimize_spec
+
+KINDS = ("noise", "mismatch")
+MAX_LEVELS = 50
+UNITS = {"noise": "deg", "mismatch": "%"}
+AXIS = {"noise": "noise on the captured angle (deg)", "mismatch": "plant {param} against the nominal model (%)"}
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """The runs of a study: {(method label, level): tuple of RunSpec}, methods in order."""
+
+    kind: str
+    param: str | None
+    levels: tuple
+    methods: tuple  # labels, PD first
+    specs: dict
+
+    def all_specs(self) -> list[RunSpec]:
+        return [spec for key in self.specs for spec in self.specs[key]]
+
+
+def parse_levels(text: str, kind: str) -> tuple:
+    """'0,0.25,0.5' -> (0.0, 0.25, 0.5): finite, distinct, at most MAX_LEVELS; noise >= 0, mismatch > -100 %."""
+    try:
+        levels = tuple(float(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise ValueError(f"--levels: expected numbers separated by commas, got {text!r}") from None
+    if not levels or len(levels) > MAX_LEVELS:
+        raise ValueError(f"--levels: give 1 to {MAX_LEVELS} levels, got {len(levels)}")
+    if not all(math.isfinite(v) for v in levels) or len(set(levels)) != len(levels):
+        raise ValueError(f"--levels: levels must be finite and distinct, got {text!r}")
+    if kind == "noise" and min(levels) < 0:
+        raise ValueError("--levels: noise levels are standard deviations in deg, >= 0")
+    if kind == "mismatch" and min(levels) <= -100:
+        raise ValueError("--levels: a mismatch in percent must be above -100 (the constant stays positive)")
+    return tuple(sorted(levels))
+
+
+def method_label(cell: Cell | None) -> str:
+    if cell is None:
+        return "PD + feedforward"
+    ff = " + ff" if cell.feedforward else ""
+    return f"{cell.torque.upper()} + {cell.optimizer}{ff}"
+
+
+def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, kd: float, budget: int,
+               torque_options: dict, optimizer_options: dict, penalty_weight: float, param: str | None = None,
+               **common) -> Sweep:
+    """The specs of a study: for each level, PD control (one run per seed when the runs differ by
+    their noise, else one) and each optimisation cell (seeds 0..seeds-1)."""
+    from .model import forearm_with
+
+    if kind not in KINDS:
+        from .registry import unknown_name_message
+
+        raise ValueError(unknown_name_message("study", kind, list(KINDS)))
+    nominal = forearm_with(common.get("model", ()))
+    specs, methods = {}, []
+    for level in levels:
+        if kind == "noise":
+            condition = {"noise_deg": float(level)}
+        else:
+            value = getattr(nominal, param) * (1 + level / 100)
+            condition = {"plant": tuple(common.get("plant", ())) + ((param, value),)}
+        base = {**common, **condition}
+        noisy = bool(base.get("noise_deg"))
+        if control:
+            label = method_label(None)
+            pd = control_spec(kp, kd, **base)
+            runs = tuple(replace(pd, seed=s) for s in range(seeds)) if noisy else (pd,)
+            specs[(label, level)] = runs
+            methods.append(label)
+        for cell in cells:
+            label = method_label(cell)
+            specs[(label, level)] = tuple(
+                optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
+                              optimizer_options, penalty_weight=penalty_weight, **base)
+                for seed in range(seeds))
+            methods.append(label)
+    return Sweep(kind, param, tuple(levels), tuple(dict.fromkeys(methods)), specs)
+
+
+def summary(sweep: Sweep, runs: dict) -> list[dict]:
+    """One row per method and level: median and IQR of each indicator over the runs, and the
+    number of successful runs."""
+    rows = []
+    for method in sweep.methods:
+        for level in sweep.levels:
+            records = [runs[s.hash()]["record"] for s in sweep.specs[(method, level)]]
+            row = {"method": method, "level": level, "runs": len(records),
+                   "successes": sum(succeeded(r) for r in records)}
+            for name in INDICATORS:
+                values = np.array([r.get(name) if r.get(name) is not None else np.nan for r in records], dtype=float)
+                values = values[np.isfinite(values)]
+                q1, median, q3 = np.percentile(values, [25, 50, 75]) if values.size else (np.nan,) * 3
+                row[f"{name}_median"], row[f"{name}_q1"], row[f"{name}_q3"] = float(median), float(q1), float(q3)
+            rows.append(row)
+    return rows
+
+
+CSV_COLUMNS = ("study", "param", "method", "level", "unit", "runs", "successes") + tuple(
+    f"{name}_{stat}" for name in INDICATORS for stat in ("median", "q1", "q3"))
+
+
+def csv_rows(sweep: Sweep, rows: list[dict]) -> list[list]:
+    unit = UNITS[sweep.kind]
+    return [[sweep.kind, sweep.param or "", r["method"], r["level"], unit, r["runs"], r["successes"]]
+            + [r[c] for c in CSV_COLUMNS[7:]] for r in rows]
+
+
+def _cell(row: dict, name: str, digits: int = 3) -> str:
+    median, q1, q3 = row[f"{name}_median"], row[f"{name}_q1"], row[f"{name}_q3"]
+    if not math.isfinite(median):
+        return "-"
+    if row["runs"] == 1 or q3 - q1 == 0:
+        return f"{median:.{digits}f}"
+    return f"{median:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
+
+
+def markdown(sweep: Sweep, rows: list[dict], settings: dict, figures: dict | None = None) -> str:
+    """The study as Markdown: settings, one table per indicator (methods by level), figures."""
+    unit = UNITS[sweep.kind]
+    what = ("white noise on the captured angle" if sweep.kind == "noise"
+            else f"the simulated body's {sweep.param} off the nominal model")
+    out = [f"# fdbench study: {sweep.kind}" + (f" of {sweep.param}" if sweep.param else ""), "",
+           f"Each method tracks the desired motion with {what}, at each level; every figure is the median over "
+           "the runs with the interquartile range [Q1, Q3] (one value: a single run, or identical runs). "
+           "RMSE_rot is measured against the true (noise-free) motion, RMSE_torque against the inverse-dynamics "
+           "torque of the nominal model on it.", "", "## Settings", "", "| setting | value |", "|---|---|"]
+    out += [f"| {k} | {v} |" for k, v in settings.items()]
+    titles = {"rmse_rot_deg": "RMSE of rotation (deg)", "rmse_torque_nm": "RMSE of torque (N m)",
+              "runtime_s": "Runtime (s)"}
+    by_key = {(r["method"], r["level"]): r for r in rows}
+    for name in INDICATORS:
+        out += ["", f"## {titles[name]}", "",
+                "| method | " + " | ".join(f"{level:g} {unit}" for level in sweep.levels) + " | successes |",
+                "|---|" + "---:|" * len(sweep.levels) + "---:|"]
+        for method in sweep.methods:
+            cells = [by_key[(method, level)] for level in sweep.levels]
+            done = sum(c["successes"] for c in cells)
+            total = sum(c["runs"] for c in cells)
+            digits = 4 if name == "runtime_s" else 3
+            out.append(f"| {method} | " + " | ".join(_cell(c, name, digits) for c in cells) + f" | {done}/{total} |")
+    out += ["", "## Reading it", ""] + _reading(sweep, rows)
+    if figures:
+        out += ["", "## Figures", ""] + [f"![{title}]({path})" for title, path in figures.items()]
+    return "\n".join(out).rstrip() + "\n"
+
+
+def _reading(sweep: Sweep, rows: list[dict]) -> list[str]:
+    """A sentence per method from the numbers: how its RMSE_rot changes from the first level to the last."""
+    lines = []
+    first, last = sweep.levels[0], sweep.levels[-1]
+    unit = UNITS[sweep.kind]
+    by_key = {(r["method"], r["level"]): r for r in rows}
+    for method in sweep.methods:
+        a, b = by_key[(method, first)]["rmse_rot_deg_median"], by_key[(method, last)]["rmse_rot_deg_median"]
+        if not (math.isfinite(a) and math.isfinite(b)):
+            continue
+        change = f"{b / a:.1f} times" if a > 0 else "from zero"
+        lines.append(f"- {method}: median RMSE_rot {a:.3g} deg at {first:g} {unit}, {b:.3g} deg at {last:g} {unit} "
+                     f"({change}).")
+    finite = [r for r in rows if r["level"] == last and math.isfinite(r["rmse_rot_deg_median"])]
+    if finite:
+        best = min(finite, key=lambda r: r["rmse_rot_deg_median"])
+        lines.append(f"- At {last:g} {unit} the most accurate is {best['method']} "
+                     f"({best['rmse_rot_deg_median']:.3g} deg).")
+    return lines
+
+
+def write_figures(sweep: Sweep, rows: list[dict], directory) -> dict:
+    """One PNG per indicator: level on x, the median per method with its IQR band; returns
+    {title: path}."""
+    from pathlib import Path
+
+    from .figures import _pyplot, _save
+
+    plt = _pyplot()
+    directory = Path(directory)
+    directory.mkdir(exist_ok=True)
+    labels = {"rmse_rot_deg": "RMSE of rotation (deg)", "rmse_torque_nm": "RMSE of torque (N m)",
+              "runtime_s": "runtime (s)"}
+    axis = AXIS[sweep.kind].format(param=sweep.param)
+    styles = _styles(sweep)
+    written = {}
+    for name in INDICATORS:
+        fig, ax = plt.subplots(figsize=(7.5, 4.8))
+        for method in sweep.methods:
+            points = [r for r in rows if r["method"] == method]
+            x = np.array([r["level"] for r in points])
+            median = np.array([r[f"{name}_median"] for r in points])
+            (line,) = ax.plot(x, median, marker="o", label=method, **styles.get(method, {}))
+            ax.fill_between(x, [r[f"{name}_q1"] for r in points], [r[f"{name}_q3"] for r in points],
+                            color=line.get_color(), alpha=0.15)
+        ax.set_xlabel(axis)
+        ax.set_ylabel(labels[name])
+        if name != "runtime_s" and all(r[f"{name}_median"] > 0 for r in rows if math.isfinite(r[f"{name}_median"])):
+            ax.set_yscale("log")
+        ax.set_title(f"{labels[name]} against {sweep.kind} (median, IQR band)", fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7, ncol=2)
+        path = directory / f"study_{sweep.kind}_{name}.png"
+        _save(fig, path)
+        plt.close(fig)
+        written[labels[name]] = str(path)
+    return written
+
+
+def _styles(sweep: Sweep) -> dict:
+    """The report's style of each method (PD red; colour by torque, line by optimiser)."""
+    from .figures import method_style
+
+    out = {}
+    for method in sweep.methods:
+        specs = sweep.specs[(method, sweep.levels[0])]
+        spec = specs[0]
+        style = method_style(None if spec.command == "control" else spec.torque, spec.optimizer)
+        if spec.feedforward and spec.command == "optimize":
+            style["linewidth"] = 2.4  # with feedforward: the same colour and line, drawn thicker
+        out[method] = style
+    return out
+
+
+FIGURE_NAMES = tuple(f"study_{kind}_{name}.png" for kind in KINDS for name in INDICATORS)
