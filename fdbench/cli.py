@@ -119,6 +119,10 @@ Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
 Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size (default: cma's 4 + 3 ln n).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end).")]
+# Execution of many runs (report, study): where they run and how many at once.
+BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install 'fdbench[dask]').")]
+Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version).", show_default=False)]
+Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)]
 
 
 def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega) -> dict:
@@ -511,7 +515,9 @@ def report(
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
-    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes (default: the number of cores).", show_default=False)] = None,
+    jobs: Jobs = None,
+    backend: BackendName = "local",
+    scheduler: Scheduler = None,
     db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
     rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
@@ -549,6 +555,7 @@ def report(
         raise BadInput(f"--figures: directory {figures.parent} does not exist")
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
+    executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
@@ -566,8 +573,10 @@ def report(
 
     db_path = db if db is not None else default_path()
     jobs = jobs or os.cpu_count() or 1
+    from .execution import BackendError, Terminated, sigterm_as_interrupt
+
     try:
-        with open_store(db_path) as store:
+        with sigterm_as_interrupt(), open_store(db_path) as store:
             with _progress(quiet, "runs") as progress:
                 from .benchmark import execute
 
@@ -576,9 +585,14 @@ def report(
                         progress.start(total, show_best=False)
                     progress.update(done)
 
-                runs = execute(plan, store, jobs, rerun, on_done)
+                runs = execute(plan, store, rerun=rerun, on_done=on_done, backend=executor)
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
+    except BackendError as exc:
+        raise BadInput(str(exc)) from None
+    except Terminated:
+        _error("terminated")
+        raise typer.Exit(143) from None
     from .inverse import inverse_dynamics
     from .report import build_rows
 
@@ -598,6 +612,16 @@ def report(
         _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
     if output is not None:
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+def _backend(name: str, jobs: Optional[int], scheduler: Optional[str]):
+    """The execution backend of --backend/--jobs/--scheduler, checked before any work."""
+    from .execution import BackendError, make_backend
+
+    try:
+        return make_backend(name, jobs=jobs, scheduler=scheduler)
+    except BackendError as exc:
+        raise BadInput(str(exc)) from None
 
 
 def _check_names(torques, optimizers) -> None:

@@ -22,6 +22,7 @@ import pytest
 from typer.testing import CliRunner
 
 import fdbench.benchmark
+import fdbench.execution
 from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
 from fdbench.cli import app
 from fdbench.report import CSV_COLUMNS
@@ -267,7 +268,7 @@ def test_resume_computes_nothing_and_rerun_recomputes(tmp_path, monkeypatch):
     def no_work(spec):
         raise AssertionError(f"run {spec.hash()} recomputed")
 
-    monkeypatch.setattr(fdbench.benchmark, "_work", no_work)
+    monkeypatch.setattr(fdbench.execution, "run_spec", no_work)
     second = invoke(*args).stdout
     assert second == first
     assert db_rows(db) == before  # same ids, timestamps and records
@@ -333,7 +334,7 @@ def test_runs_stored_by_optimize_and_control_are_reused_by_report(tmp_path, monk
     def no_work(spec):
         raise AssertionError(f"run {spec.hash()} recomputed")
 
-    monkeypatch.setattr(fdbench.benchmark, "_work", no_work)
+    monkeypatch.setattr(fdbench.execution, "run_spec", no_work)
     frame = read_csv(invoke("report", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 1, "--budget", 15,
                             "--format", "csv", "-q").stdout)
     assert db_count(db) == 2
