@@ -609,9 +609,16 @@ def report(
         from .report import markdown, settings_table
 
         links = _write_figures(plan, runs, rows, inverse, figures, output, quiet) if figures is not None else None
-        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links), output)
+        _emit(markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, _parallelism(backend, jobs, scheduler)), links), output)
     if output is not None:
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+def _parallelism(name: str, jobs: int, scheduler: Optional[str]):
+    """How the runs were carried out, for the report's settings."""
+    if name != "dask":
+        return jobs
+    return f"Dask scheduler {scheduler}" if scheduler is not None else f"{jobs} (local Dask cluster)"
 
 
 def _backend(name: str, jobs: Optional[int], scheduler: Optional[str]):
