@@ -5,8 +5,9 @@ budget 200) on the two execution backends, each from an empty results database:
 - ``--backend dask --jobs 2``: a Dask LocalCluster of two single-threaded worker processes
   started by the command (cluster start-up included, as a user pays it);
 
-then the Dask backend with a fixed number of specs per task (1, the automatic choice, 8) to show
-what batching buys against the scheduler's cost per task. Every command runs as a subprocess in
+then the Dask backend with a fixed number of specs per task (1 and 8; the automatic choice gives 6
+here) to show what batching buys against the scheduler's cost per task, and the fixed cost of
+starting and stopping the cluster alone. Every command runs as a subprocess in
 a temporary directory; the ratios are against the local baseline measured in the same run.
 
 Run: python benchmarks/bench_backends.py        (needs pip install 'fdbench[dask]')
@@ -37,6 +38,18 @@ from fdbench.store import open_store
 batch = None if sys.argv[2] == "auto" else int(sys.argv[2])
 with open_store(sys.argv[1]) as store:
     execute(make_plan(default_cells(), seeds=5), store, backend=DaskBackend(jobs=2, batch=batch))
+"""
+
+
+# A child process that only starts and stops the same LocalCluster (its fixed cost), warming the
+# workers' kernels as the first run does.
+CLUSTER_ONLY = """
+import logging
+from distributed import Client, LocalCluster
+from fdbench.execution import warm_up_worker
+with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None,
+                  silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+    client.run(warm_up_worker)
 """
 
 
@@ -83,6 +96,7 @@ def main() -> None:
         report("report --backend local --jobs 2 (again)", "--backend", "local", "--jobs", "2")
         for batch in (1, 8):
             batched(f"library, LocalCluster of 2, {batch} spec(s) per task", batch)
+        cluster = timed([sys.executable, "-c", CLUSTER_ONLY], tmp)
 
     baseline = min(s for label, s, _ in results if label.startswith("report --backend local"))
     print(f"fdbench {fdbench.__version__}, dask distributed {distributed.__version__}, python "
@@ -92,6 +106,7 @@ def main() -> None:
     for label, seconds, (rows, distinct) in results:
         note = "" if rows == distinct == EXPECTED_RUNS else f"   WARNING: {rows} rows, {distinct} distinct"
         print(f"  {label:<66} {seconds:7.2f} s   x{seconds / baseline:5.2f} of local{note}")
+    print(f"  {'LocalCluster of 2 started, kernels loaded, closed; no run':<66} {cluster:7.2f} s")
     print("(x = wall time / the faster local --jobs 2 run of this benchmark)")
     print(f"total benchmark time: {time.perf_counter() - start:.1f} s")
 

@@ -215,6 +215,10 @@ def _pool_outcomes(specs, workers: int):
 def _kill_workers(pool) -> None:
     """Stop a process pool at once: its workers hold nothing worth keeping (only this process
     writes the store), so they are killed rather than left to finish their runs."""
+    kill_workers = getattr(pool, "kill_workers", None)  # Python >= 3.14
+    if kill_workers is not None:
+        kill_workers()
+        return
     processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:

@@ -101,6 +101,28 @@ def test_runner_stops_the_backend_when_storing_fails(tmp_path):
     assert kept["status"] == "error" and kept["message"] == "RuntimeError: boom"
 
 
+def _dies_on_kp_13(spec):
+    """A run that kills its worker process (as the kernel's out-of-memory killer would)."""
+    if spec.kp == 13.0:
+        os._exit(9)
+    return run_spec(spec)
+
+
+def test_a_local_worker_that_dies_stops_the_sweep_with_a_clear_error_and_keeps_stored_runs(tmp_path, monkeypatch):
+    import fdbench.execution as execution
+
+    monkeypatch.setattr(execution, "run_spec", _dies_on_kp_13)  # workers fork with it
+    specs = [control_spec(kp, 0.3) for kp in (80.0, 13.0)] + [control_spec(kp, 0.3) for kp in range(20, 30)]
+    with open_store(tmp_path / "r.sqlite") as store:
+        with pytest.raises(execution.ExecutionError, match="worker process died"):
+            execute_specs(specs, store, LocalBackend(jobs=2))
+        assert specs[1].hash() not in store.hashes()  # the lost run is not stored: a rerun computes it
+        kept = store.count()
+        monkeypatch.undo()
+        execute_specs(specs, store, LocalBackend(jobs=2))
+        assert store.count() == len(specs) and kept < len(specs)
+
+
 # ----------------------------------------------------------------------------- parent death
 
 
