@@ -1,8 +1,9 @@
 """The Dask backend against a real cluster on 127.0.0.1: a scheduler and two workers started as
 subprocesses, as a user starts them. A report through ``--backend dask --scheduler`` gives
 exactly the numbers of the local backend; a worker killed during a sweep loses and duplicates no
-run; a worker running another fdbench version is refused; without Dask installed the backend is
-refused with the install command. Every subprocess is stopped in a ``finally``."""
+run; a worker running another fdbench version is refused; a client stopped by SIGTERM leaves no
+process and resumes; without Dask installed the backend is refused with the install command.
+Network traffic stays on 127.0.0.1; every subprocess is stopped in a ``finally``."""
 
 from __future__ import annotations
 
@@ -265,3 +266,58 @@ def test_an_unreachable_scheduler_exits_2_naming_it(tmp_path):
     with pytest.raises(BackendError, match=f"--scheduler {address}: cannot connect"):
         backend.start(1)
     assert backend.client is None
+
+
+def _session(sid: int) -> list[int]:
+    """Live processes of the session ``sid``: a command and everything it started."""
+    pids = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                text = Path(f"/proc/{name}/stat").read_text()
+            except OSError:
+                continue
+            fields = text[text.rindex(")") + 2:].split()
+            if int(fields[3]) == sid and fields[0] != "Z":
+                pids.append(int(name))
+    return pids
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="needs Linux /proc to list processes")
+def test_a_terminated_client_of_a_local_dask_cluster_leaves_nothing_and_resumes(tmp_path):
+    """SIGTERM: the client cancels its tasks, closes its cluster and exits 143; the runs stored
+    are kept and the same command completes the rest."""
+    _needs_dask()
+    signum = signal.SIGTERM
+    db = tmp_path / "client.sqlite"
+    seeds = 10
+    cmd = FDBENCH + ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds",
+                     str(seeds), "--budget", "150", "--backend", "dask", "--jobs", "2", "--db", str(db), "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 60
+        while proc.poll() is None and time.monotonic() < deadline and _count(db) < 1:
+            time.sleep(0.01)
+        assert proc.poll() is None, "the report ended before it could be killed: give it more work"
+        assert len(_session(proc.pid)) >= 3  # the client and its cluster's worker processes
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=60)
+        deadline = time.monotonic() + 10
+        while _session(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _session(proc.pid) == []
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+    assert proc.returncode == 143 and out == ""
+    assert err.strip().splitlines()[-1] == "fdbench: error: terminated" and "Traceback" not in err
+    kept = stored(db)
+    assert 1 <= len(kept) < seeds
+    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr
+    after = stored(db)
+    assert len(after) == seeds and {k: after[k] for k in kept} == kept
