@@ -24,7 +24,9 @@ from fdbench.cli import app
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 SMALL = ["report", "--torque", "cs", "--opt", "bfgs", "--seeds", "2", "--budget", "20"]
-EXECUTION_FIELDS = ("runtime_s", "jobs")  # how long and how parallel: the only fields that may differ
+def _execution_field(name: str) -> bool:
+    """How long and how parallel (runtime_s, jobs, any other *time_s): the only fields that may differ."""
+    return name == "jobs" or name.endswith("time_s")
 
 
 def _needs_dask():
@@ -106,18 +108,18 @@ def stored(db: Path) -> dict:
         con.close()
     records = {}
     for key, text in rows:
-        record = json.loads(text)
-        for name in EXECUTION_FIELDS:
-            record.pop(name, None)
-        records[key] = record
+        records[key] = {k: v for k, v in json.loads(text).items() if not _execution_field(k)}
     assert len(records) == len(rows)
     return records
 
 
 def _numbers(csv_text: str) -> list[list[str]]:
-    """The report's CSV without its runtime columns (time depends on the machine, nothing else may)."""
-    lines = [line.split(",") for line in csv_text.strip().splitlines()]
-    keep = [i for i, name in enumerate(lines[0]) if "runtime" not in name and "speedup" not in name]
+    """The report's CSV without its time columns (time depends on the machine, nothing else may)."""
+    import csv
+    import io
+
+    lines = list(csv.reader(io.StringIO(csv_text)))
+    keep = [i for i, name in enumerate(lines[0]) if "time" not in name and "speedup" not in name]
     return [[row[i] for i in keep] for row in lines]
 
 

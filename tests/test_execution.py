@@ -202,7 +202,7 @@ def _session(sid: int) -> list[int]:
 
 
 def _records(db: Path) -> dict:
-    """{spec hash: record without the execution fields runtime_s and jobs}, and the row ids."""
+    """{spec hash: record without its execution fields (times, job count)}."""
     con = sqlite3.connect(db, timeout=10)
     try:
         rows = con.execute("SELECT id, spec_hash, record_json FROM runs ORDER BY id").fetchall()
@@ -211,10 +211,15 @@ def _records(db: Path) -> dict:
     out = {}
     for _, key, text in rows:
         record = json.loads(text)
-        record.pop("runtime_s"), record.pop("jobs")
-        out[key] = record
+        out[key] = {k: v for k, v in record.items() if not _timing(k)}
     assert len(out) == len(rows)  # each run stored once
     return out
+
+
+def _timing(field: str) -> bool:
+    """Fields that say how long or how parallel, not what was computed (runtime_s, jobs, and any
+    other *time_s a method reports)."""
+    return field == "jobs" or field.endswith("time_s")
 
 
 def _count(db: Path) -> int:
