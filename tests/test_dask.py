@@ -331,3 +331,35 @@ def test_a_terminated_client_of_a_local_dask_cluster_leaves_nothing_and_resumes(
     assert resumed.returncode == 0, resumed.stderr
     after = stored(db)
     assert _optimizations(after) == seeds and {k: after[k] for k in kept} == kept
+
+
+def test_task_failures_become_one_line_errors_that_say_what_to_do():
+    """How a finished task's failure reaches the user: workers that kept dying, a worker of
+    another version, anything else a worker raised."""
+    _needs_dask()
+    from distributed import KilledWorker
+
+    from fdbench.execution import BackendError, ExecutionError, VersionMismatch, _task_result
+
+    class Failed:
+        def __init__(self, exc):
+            self.exc = exc
+
+        def result(self):
+            raise self.exc
+
+    class Died(KilledWorker):  # the constructor's arguments vary across Dask versions
+        def __init__(self):
+            Exception.__init__(self, "task-1")
+
+        def __str__(self):
+            return "attempted to run task-1 on 3 different workers, which all died"
+
+    with pytest.raises(ExecutionError, match="kept dying.*run the command again to resume"):
+        _task_result(Failed(Died()))
+    with pytest.raises(BackendError, match="fdbench 9.9"):
+        _task_result(Failed(VersionMismatch("this worker runs fdbench 9.9, the client 0.1.0")))
+    with pytest.raises(ExecutionError, match="ModuleNotFoundError: No module named 'fdbench'"):
+        _task_result(Failed(ModuleNotFoundError("No module named 'fdbench'")))
+    with pytest.raises(KeyboardInterrupt):
+        _task_result(Failed(KeyboardInterrupt()))
