@@ -1,10 +1,10 @@
-"""The benchmark matrix of the paper (PD control, Tables 2 and 3) and its execution: stored runs
-are reused by settings hash, missing ones are computed in parallel worker processes and stored
-one by one as they finish, so an interrupted benchmark resumes where it stopped."""
+"""The benchmark matrix of the paper (PD control, Tables 2 and 3), its execution (handed to an
+execution backend, see ``execution``: stored runs are reused by settings hash, missing ones are
+computed by workers and stored one by one as they finish, so an interrupted benchmark resumes
+where it stopped) and its statistics."""
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,69 +103,17 @@ def make_plan(cells, seeds=5, budget=200, control=True, kp=80.0, kd=0.3, torque_
     return Plan(control_run, tuple(cells), specs)
 
 
-def _work(spec: RunSpec):
-    """Run one spec in a worker process; return what the store needs (picklable)."""
-    from .experiment import run
-
-    outcome = run(spec)
-    params = None if outcome.params is None else [float(v) for v in outcome.params]
-    return outcome.record, outcome.history, params
-
-
-def execute(plan: Plan, store, jobs: int | None = None, rerun: bool = False, on_done=None) -> dict:
+def execute(plan: Plan, store, jobs: int | None = None, rerun: bool = False, on_done=None, backend=None) -> dict:
     """Make sure every run of the plan is in the store; return {spec hash: stored run}.
 
-    ``on_done(finished, total)`` reports progress. Runs already stored are reused unless
-    ``rerun``; each new run is stored as soon as it finishes."""
-    specs = plan.all_specs()
-    stored = set() if rerun else store.hashes()
-    missing = [s for s in specs if s.hash() not in stored]
-    jobs = max(1, min(jobs or os.cpu_count() or 1, len(missing) or 1))
-    done = len(specs) - len(missing)
-    if on_done:
-        on_done(done, len(specs))
-    if missing:
-        _prepare_parent(missing)
-        if jobs == 1:
-            for spec in missing:
-                store.add_record(spec, *_work(spec), jobs=1, replace=rerun)
-                done += 1
-                if on_done:
-                    on_done(done, len(specs))
-        else:
-            done = _execute_parallel(missing, store, jobs, rerun, done, len(specs), on_done)
-    return {s.hash(): store.get(s.hash()) for s in specs}
+    ``backend`` (an ``execution.Backend``; default: local worker processes, ``jobs`` of them)
+    carries out the missing runs; ``on_done(finished, total)`` reports progress. Runs already
+    stored are reused unless ``rerun``; each new run is stored as soon as it finishes."""
+    from .execution import LocalBackend, execute_specs
 
-
-def _prepare_parent(specs) -> None:
-    """Compile/load the kernels (and import cma) once, before worker processes fork."""
-    from .integrate import warm_up
-
-    warm_up()
-    if any(s.optimizer == "cmaes" for s in specs):
-        import cma  # noqa: F401
-
-
-def _execute_parallel(missing, store, jobs, rerun, done, total, on_done) -> int:
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-    context = multiprocessing.get_context("fork") if hasattr(os, "fork") else None
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures = {pool.submit(_work, spec): spec for spec in missing}
-        try:
-            pending = set(futures)
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in finished:
-                    store.add_record(futures[future], *future.result(), jobs=jobs, replace=rerun)
-                    done += 1
-                    if on_done:
-                        on_done(done, total)
-        except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)
-            raise
-    return done
+    if backend is None:
+        backend = LocalBackend(jobs)
+    return execute_specs(plan.all_specs(), store, backend, rerun, on_done)
 
 
 # ---- statistics ------------------------------------------------------------------------------

@@ -42,22 +42,6 @@ def beyond_methods(**common) -> list[Method]:
     ]
 
 
-def ensure_runs(methods: list[Method], store, rerun: bool = False) -> dict:
-    """Run (in this process, they take milliseconds) and store the methods' runs that are not
-    stored yet, or all of them with ``rerun``; return {spec hash: stored run}."""
-    from .experiment import run
-
-    out = {}
-    for method in methods:
-        key = method.spec.hash()
-        stored = None if rerun else store.get(key)
-        if stored is None:
-            store.add(method.spec, run(method.spec), replace=rerun)
-            stored = store.get(key)
-        out[key] = stored
-    return out
-
-
 def beyond_rows(methods: list[Method], runs: dict) -> list:
     """The report rows (``report.Row``, table "beyond") of the methods from their stored runs."""
     from .benchmark import summarise

@@ -118,6 +118,10 @@ def _choices(name: str, command: str):
         from .motion import KINEMATICS
 
         return list(KINEMATICS) + ["FILE"]
+    if name == "backend":
+        from .execution import BACKENDS
+
+        return list(BACKENDS)
     if name == "controller":
         from .controllers import CONTROLLERS
 
@@ -226,6 +230,10 @@ Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
 Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
+# Execution of many runs (report, study): where they run and how many at once.
+BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install 'fdbench\\[dask]').")]
+Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version).", show_default=False)]
+Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once, in [1, 256]: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)]
 
 
 # Options of the motion, its noise and the model, shared by every command that simulates: declared once
@@ -859,7 +867,9 @@ def report(
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
-    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes, in [1, 256] (default: the number of cores).", show_default=False)] = None,
+    jobs: Jobs = None,
+    backend: BackendName = "local",
+    scheduler: Scheduler = None,
     db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
     rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
@@ -901,6 +911,7 @@ def report(
         _check_figures_dir(figures, output, db_path)
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
+    executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control and not beyond:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
@@ -914,31 +925,16 @@ def report(
     )
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
         _validated(spec)
-    from .store import StoreError, open_store
+    from .store import open_store
 
     jobs = jobs or os.cpu_count() or 1
-    existed = db_path.exists()
-    try:
-        with open_store(db_path) as store:
-            store.check_usable()
-            if not existed:
-                _say_creating(db_path, db is None, quiet)
-            with _progress(quiet, "runs") as progress:
-                from .benchmark import execute
+    methods = None
+    if beyond:
+        from .beyond import beyond_methods
 
-                def on_done(done, total):
-                    if progress.bar is None:
-                        progress.start(total, show_best=False)
-                    progress.update(done)
-
-                runs = execute(plan, store, jobs, rerun, on_done)
-            if beyond:
-                from .beyond import beyond_methods, ensure_runs
-
-                methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
-                beyond_runs = ensure_runs(methods, store, rerun)
-    except StoreError as exc:
-        raise BadInput(f"--db: {exc}") from None
+        methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+    extra = [m.spec for m in methods] if methods else []
+    runs = _run_specs(plan.all_specs() + extra, db_path, db is None, executor, rerun, quiet)
     from .report import build_rows
 
     start = time.perf_counter()
@@ -948,14 +944,12 @@ def report(
         made = store.provenance(runs)
     rows = build_rows(plan, runs, made)
     extra_rows = []
-    if beyond:
+    if methods:
         from .beyond import beyond_rows
 
-        extra_rows = beyond_rows(methods, beyond_runs)
-    else:
-        methods = None
-    _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds, jobs, figures,
-                       output, quiet), output)
+        extra_rows = beyond_rows(methods, runs)
+    _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
+                       _parallelism(backend, jobs, scheduler), figures, output, quiet), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 
@@ -973,7 +967,9 @@ def study(
     all_cells: Annotated[bool, typer.Option("--all-cells", help="Also the cells the paper left out (PF without feedforward).")] = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per method and level, in [1, 1000]: seeds 0..N-1 (the noise realisation and the optimiser's seed).")] = 5,
     budget: Budget = 200,
-    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Parallel worker processes, in [1, 256] (default: the number of cores).", show_default=False)] = None,
+    jobs: Jobs = None,
+    backend: BackendName = "local",
+    scheduler: Scheduler = None,
     db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
     rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write one PNG per indicator into DIR (created if missing): level on x, median and IQR band per method.")] = None,
@@ -1003,7 +999,7 @@ def study(
     Runs are stored and reused like a report's (resume, --jobs, --rerun); the table gives the median and IQR of each indicator per method and level."""
     from . import study as studies
     from .benchmark import default_cells
-    from .store import StoreError, default_path, open_store
+    from .store import default_path
 
     _check_choice("study", kind, studies.KINDS)
     db_path = db if db is not None else default_path()
@@ -1028,6 +1024,7 @@ def study(
         _check_study_figures(figures, output, db_path)
     _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
+    executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
@@ -1043,23 +1040,7 @@ def study(
     for key in sweep.specs:
         _validated(sweep.specs[key][0])
     jobs = jobs or os.cpu_count() or 1
-    existed = db_path.exists()
-    try:
-        with open_store(db_path) as store:
-            store.check_usable()
-            if not existed:
-                _say_creating(db_path, db is None, quiet)
-            with _progress(quiet, "runs") as progress:
-                from .benchmark import execute
-
-                def on_done(done, total):
-                    if progress.bar is None:
-                        progress.start(total, show_best=False)
-                    progress.update(done)
-
-                runs = execute(sweep, store, jobs, rerun, on_done)
-    except StoreError as exc:
-        raise BadInput(f"--db: {exc}") from None
+    runs = _run_specs(sweep.all_specs(), db_path, db is None, executor, rerun, quiet)
     rows = studies.summary(sweep, runs)
     if fmt == "csv":
         from .files import csv_text
@@ -1072,7 +1053,7 @@ def study(
             base = output.parent if output is not None else Path(".")
             links = {title: os.path.relpath(path, base) for title, path in written.items()}
             _say(quiet, f"wrote {len(written)} figures to {figures}")
-        settings = _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt)
+        settings = _study_settings(sweep, seeds, budget, _parallelism(backend, jobs, scheduler), kinematics, integrator, dt)
         _emit(studies.markdown(sweep, rows, settings, links), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
@@ -1104,6 +1085,36 @@ def _check_study_figures(directory: Path, output: Optional[Path], db: Path) -> N
     from .study import FIGURE_NAMES
 
     _check_figures_dir(directory, output, db, FIGURE_NAMES)
+
+
+def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:
+    """Make sure every spec is stored in the database (missing runs carried out by the backend,
+    each stored as it finishes), with a progress bar; {spec hash: stored run}. An unusable
+    database or backend is bad input; SIGTERM ends the command like Ctrl-C, exit 143."""
+    from .execution import BackendError, Terminated, execute_specs, sigterm_as_interrupt
+    from .store import StoreError, open_store
+
+    existed = db_path.exists()
+    try:
+        with sigterm_as_interrupt(), open_store(db_path) as store:
+            store.check_usable()
+            if not existed:
+                _say_creating(db_path, default_db, quiet)
+            with _progress(quiet, "runs") as progress:
+
+                def on_done(done, total):
+                    if progress.bar is None:
+                        progress.start(total, show_best=False)
+                    progress.update(done)
+
+                return execute_specs(specs, store, executor, rerun, on_done)
+    except StoreError as exc:
+        raise BadInput(f"--db: {exc}") from None
+    except BackendError as exc:
+        raise BadInput(str(exc)) from None
+    except Terminated:
+        _error("terminated")
+        raise typer.Exit(143) from None
 
 
 REPORT_FORMATS = ("md", "csv", "json")
@@ -1167,6 +1178,23 @@ def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=
             check_writable(path, option)
         check_distinct({"--output": output, **paths}, database=db)
     except BadFile as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _parallelism(name: str, jobs: int, scheduler: Optional[str]):
+    """How the runs were carried out, for the report's settings."""
+    if name != "dask":
+        return jobs
+    return f"Dask scheduler {scheduler}" if scheduler is not None else f"{jobs} (local Dask cluster)"
+
+
+def _backend(name: str, jobs: Optional[int], scheduler: Optional[str]):
+    """The execution backend of --backend/--jobs/--scheduler, checked before any work."""
+    from .execution import BackendError, make_backend
+
+    try:
+        return make_backend(name, jobs=jobs, scheduler=scheduler)
+    except BackendError as exc:
         raise BadInput(str(exc)) from None
 
 

@@ -1,0 +1,454 @@
+"""Execution of a list of run specifications by a backend, and storage of each run as it ends.
+
+A backend receives the runs still missing and yields each one's outcome as soon as it is known:
+``local`` runs them in worker processes on this machine (``--jobs`` of them), ``dask`` on the
+workers of a Dask distributed cluster (a scheduler given by its address, or a local cluster).
+Everything else is the same code for every backend (:func:`execute_specs`): stored runs are
+reused by settings hash, each new run is stored by this process alone (workers never open the
+results database) as soon as its outcome arrives, so an interrupted sweep loses at most the runs
+in flight and resumes where it stopped. A run that raises is stored as a failed run
+(``status = "error"``) with the exception as its message, whatever the backend.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+from abc import ABC, abstractmethod
+from contextlib import closing, contextmanager
+from dataclasses import dataclass
+from typing import Iterator
+
+from . import __version__
+from .registry import Registry
+
+DASK_INSTALL = "pip install 'fdbench[dask]'"
+PARENT_POLL_S = 0.5  # how often a local worker checks that its parent is alive
+
+
+class BackendError(Exception):
+    """The backend cannot be used (not installed, unreachable, another fdbench version on a
+    worker): bad usage, checked before any run starts where possible. One-line message."""
+
+
+class ExecutionError(Exception):
+    """The backend failed during a sweep (a worker process died, a task kept failing); the runs
+    stored so far are kept and a rerun resumes."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM was received: the command stops as it does on Ctrl-C."""
+
+
+class VersionMismatch(Exception):
+    """Raised on a worker whose fdbench version differs from the client's."""
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What the store needs of one finished run; small and picklable.
+
+    record: the flat record of the command-line contract; history: best-so-far objective per
+    evaluation (length = evaluations, empty for control); params: the best parameters of an
+    optimisation (length n_params) or None."""
+
+    record: dict
+    history: list
+    params: list | None = None
+
+
+# ---- one run, on whichever worker ----------------------------------------------------------------
+
+
+def run_spec(spec) -> Outcome:
+    """Carry out one run; an exception becomes a failed run's outcome, never a lost run."""
+    from .experiment import run
+
+    try:
+        outcome = run(spec)
+    except Exception as exc:  # noqa: BLE001 - a benchmark run never dies: it is recorded as failed
+        return Outcome(failed_record(spec, exc), [], None)
+    params = None if outcome.params is None else [float(v) for v in outcome.params]
+    return Outcome(outcome.record, [float(v) for v in outcome.history], params)
+
+
+def run_batch(specs, client_version: str | None = None) -> list[Outcome]:
+    """Carry out several runs in order (one task of a distributed backend). ``client_version``,
+    when given, must equal this worker's fdbench version."""
+    if client_version is not None and client_version != __version__:
+        raise VersionMismatch(f"this worker runs fdbench {__version__}, the client {client_version}")
+    return [run_spec(spec) for spec in specs]
+
+
+def failed_record(spec, exc: BaseException) -> dict:
+    """The record of a run that raised: its settings, status 'error', the exception as message."""
+    from .experiment import base_record
+
+    record = base_record(spec)
+    if spec.command == "control":
+        record.update(torque="id", kp=spec.kp, kd=spec.kd)
+    elif spec.command == "optimize":
+        record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
+                      penalty_weight=spec.penalty_weight)
+    message = " ".join(f"{type(exc).__name__}: {exc}".split())
+    record.update(status="error", message=message)
+    return record
+
+
+def worker_version() -> str:
+    """fdbench's version where this function runs (asked of every Dask worker)."""
+    return __version__
+
+
+def warm_up_worker() -> None:
+    """Compile or load the kernels once, before the first run (not counted in any runtime)."""
+    from .integrate import warm_up
+
+    warm_up()
+
+
+# ---- the backends ---------------------------------------------------------------------------------
+
+
+class Backend(ABC):
+    """Executes runs. ``start(n)`` acquires the workers for n runs (raising BackendError if they
+    cannot be had), ``outcomes(specs)`` yields ``(index into specs, Outcome)`` as runs end,
+    ``stop()`` releases everything (also after an interruption). ``workers`` is the number of
+    runs carried out at once, stored with every run as ``jobs``."""
+
+    name = ""
+    workers = 1
+
+    def check(self) -> None:
+        """Checks that need no worker (an installed library, option combinations): run before
+        any work, also when every run is already stored."""
+
+    def start(self, n_runs: int) -> None:
+        """Acquire workers for ``n_runs`` runs."""
+
+    @abstractmethod
+    def outcomes(self, specs: list) -> Iterator[tuple[int, Outcome]]:
+        """Yield ``(i, outcome of specs[i])`` for every spec, in the order runs end."""
+
+    def stop(self) -> None:
+        """Release the workers; safe to call more than once."""
+
+
+BACKENDS: Registry[type] = Registry("backend")
+
+
+def make_backend(name: str, jobs: int | None = None, scheduler: str | None = None, **options) -> Backend:
+    """The backend of this name (``local`` or ``dask``), checked (``BackendError`` otherwise)."""
+    from .registry import UnknownName
+
+    try:
+        cls = BACKENDS[name]
+    except UnknownName as exc:
+        raise BackendError(f"--backend: {exc}") from None
+    backend = cls(jobs=jobs, scheduler=scheduler, **options)
+    backend.check()
+    return backend
+
+
+@BACKENDS.register("local")
+class LocalBackend(Backend):
+    """``jobs`` worker processes on this machine (forked after the kernels are loaded), one run
+    per task; with one job, or one run, everything happens in this process. Workers die with
+    this process, whatever ends it (SIGKILL included)."""
+
+    name = "local"
+
+    def __init__(self, jobs: int | None = None, scheduler: str | None = None):
+        if scheduler is not None:
+            raise BackendError("--scheduler is an option of --backend dask; the local backend uses --jobs")
+        if jobs is not None and jobs < 1:
+            raise BackendError(f"--jobs must be an integer >= 1, got {jobs}")
+        self.jobs = jobs or os.cpu_count() or 1
+
+    def start(self, n_runs: int) -> None:
+        self.workers = max(1, min(self.jobs, n_runs))
+
+    def outcomes(self, specs):
+        _prepare_parent(specs)
+        if self.workers == 1 or len(specs) == 1:
+            for index, spec in enumerate(specs):
+                yield index, run_spec(spec)
+            return
+        yield from _pool_outcomes(specs, self.workers)
+
+
+def _prepare_parent(specs) -> None:
+    """Compile/load the kernels (and import cma) once, before worker processes fork."""
+    warm_up_worker()
+    if any(getattr(s, "optimizer", None) == "cmaes" for s in specs):
+        import cma  # noqa: F401
+
+
+def _pool_outcomes(specs, workers: int):
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    context = multiprocessing.get_context("fork") if hasattr(os, "fork") else None
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_local_worker_init,
+                               initargs=(os.getpid(),))
+    try:
+        futures = {pool.submit(run_spec, spec): index for index, spec in enumerate(specs)}
+        pending = set(futures)
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for future in finished:
+                try:
+                    outcome = future.result()
+                except BrokenProcessPool:
+                    raise ExecutionError("a worker process died unexpectedly (killed, or out of memory); "
+                                         "the runs stored so far are kept: run the command again to resume") from None
+                yield futures[future], outcome
+    except BaseException:
+        _kill_workers(pool)
+        raise
+    pool.shutdown(wait=True)
+
+
+def _kill_workers(pool) -> None:
+    """Stop a process pool at once: its workers hold nothing worth keeping (only this process
+    writes the store), so they are killed rather than left to finish their runs."""
+    kill_workers = getattr(pool, "kill_workers", None)  # Python >= 3.14
+    if kill_workers is not None:
+        kill_workers()
+        return
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        try:
+            process.kill()
+        except (OSError, ValueError, AttributeError):
+            pass
+    for process in processes:
+        try:
+            process.join(timeout=5)
+        except (OSError, ValueError, AssertionError):
+            pass
+
+
+def _local_worker_init(parent_pid: int) -> None:
+    """Initializer of a local worker process: Ctrl-C and SIGTERM are the parent's business (it
+    stops the workers), and the worker dies with its parent."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent(parent_pid)
+
+
+def die_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:
+    """Make this process end when the process ``parent_pid`` ends, however it ends: on Linux the
+    kernel sends SIGKILL (prctl PR_SET_PDEATHSIG); everywhere a daemon thread polls the parent
+    id every ``poll_s`` seconds and exits when this process has been re-parented."""
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # 1 = PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the request above took effect
+        os._exit(1)
+    watchdog = threading.Thread(target=_watch_parent, args=(parent_pid, poll_s), name="fdbench-parent-watch",
+                                daemon=True)
+    watchdog.start()
+
+
+def _watch_parent(parent_pid: int, poll_s: float) -> None:
+    import time
+
+    while os.getppid() == parent_pid:
+        time.sleep(poll_s)
+    os._exit(1)
+
+
+@BACKENDS.register("dask")
+class DaskBackend(Backend):
+    """The workers of a Dask distributed cluster: the scheduler at ``scheduler`` (started by the
+    user with ``dask scheduler``, workers with ``dask worker ADDRESS``), or a local cluster of
+    ``jobs`` single-threaded worker processes. Runs travel in batches of ``batch`` specs per task
+    (default: chosen from the number of runs and workers); a task whose worker dies is run again
+    elsewhere by the scheduler, and a task that raises is retried ``retries`` times."""
+
+    name = "dask"
+
+    def __init__(self, jobs: int | None = None, scheduler: str | None = None, batch: int | None = None,
+                 retries: int = 2, connect_timeout_s: float = 10.0, workers_timeout_s: float = 60.0):
+        if jobs is not None and jobs < 1:
+            raise BackendError(f"--jobs must be an integer >= 1, got {jobs}")
+        if batch is not None and batch < 1:
+            raise BackendError(f"batch must be an integer >= 1, got {batch}")
+        self.jobs = jobs or os.cpu_count() or 1
+        self.scheduler = scheduler
+        self.batch, self.retries = batch, retries
+        self.connect_timeout_s, self.workers_timeout_s = connect_timeout_s, workers_timeout_s
+        self.client = self.cluster = None
+
+    def check(self) -> None:
+        _import_distributed()
+        if self.scheduler is not None and not str(self.scheduler).strip():
+            raise BackendError("--scheduler: give the scheduler's address, e.g. tcp://10.0.0.5:8786")
+
+    def start(self, n_runs: int) -> None:
+        distributed = _import_distributed()
+        where = f"--scheduler {self.scheduler}"
+        try:
+            if self.scheduler is not None:
+                try:
+                    self.client = distributed.Client(self.scheduler, timeout=f"{self.connect_timeout_s}s",
+                                                     set_as_default=False)
+                except (OSError, TimeoutError, ValueError, TypeError) as exc:
+                    raise BackendError(f"{where}: cannot connect to the Dask scheduler: {exc}") from None
+            else:
+                import logging
+
+                where = "local Dask cluster"
+                self.cluster = distributed.LocalCluster(
+                    n_workers=max(1, min(self.jobs, n_runs)), threads_per_worker=1, processes=True,
+                    host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
+                )
+                self.client = distributed.Client(self.cluster, set_as_default=False)
+            try:
+                self.client.wait_for_workers(1, timeout=self.workers_timeout_s)
+            except (TimeoutError, OSError):
+                raise BackendError(f"{where}: no worker joined within {self.workers_timeout_s:g} s; start "
+                                   f"workers with 'dask worker {self.scheduler}'") from None
+            self._check_versions(where)
+            self.workers = max(1, sum(self.client.nthreads().values()))
+        except BaseException:
+            self.stop()
+            raise
+
+    def _check_versions(self, where: str) -> None:
+        try:
+            versions = self.client.run(worker_version)
+        except Exception as exc:  # noqa: BLE001 - a worker that cannot even import fdbench
+            raise BackendError(f"{where}: the workers cannot run fdbench ({type(exc).__name__}: {exc}); "
+                               f"install fdbench {__version__} on every worker") from None
+        wrong = {address: version for address, version in versions.items() if version != __version__}
+        if wrong:
+            address, version = sorted(wrong.items())[0]
+            raise BackendError(f"{where}: worker {address} runs fdbench {version}, this client fdbench "
+                               f"{__version__} ({len(wrong)} of {len(versions)} workers differ); install "
+                               f"fdbench {__version__} on every worker")
+
+    def outcomes(self, specs):
+        from distributed import as_completed
+
+        size = self.batch or auto_batch(len(specs), self.workers)
+        batches = [list(range(start, min(start + size, len(specs)))) for start in range(0, len(specs), size)]
+        futures = []
+        try:
+            for indices in batches:
+                future = self.client.submit(run_batch, [specs[i] for i in indices], __version__,
+                                            retries=self.retries, pure=False)
+                futures.append((future, indices))
+            index_of = {future.key: indices for future, indices in futures}
+            for future in as_completed([f for f, _ in futures], loop=self.client.loop):
+                outcomes = _task_result(future)
+                for index, outcome in zip(index_of[future.key], outcomes):
+                    yield index, outcome
+                future.release()
+        finally:
+            unfinished = [f for f, _ in futures if not f.done()]
+            if unfinished:
+                try:
+                    self.client.cancel(unfinished)
+                except Exception:  # noqa: BLE001 - the connection may already be gone
+                    pass
+
+    def stop(self) -> None:
+        client, cluster = self.client, self.cluster
+        self.client = self.cluster = None
+        for thing in (client, cluster):
+            if thing is not None:
+                try:
+                    thing.close()
+                except Exception:  # noqa: BLE001 - closing after a failure must not hide it
+                    pass
+
+
+def auto_batch(n_runs: int, workers: int) -> int:
+    """Specs per Dask task: about four tasks per worker keeps every worker busy to the end while
+    the scheduler's cost per task (a few ms) stays small against runs of 10-200 ms; never more
+    than 8 runs in flight per task, so an interruption loses little."""
+    return max(1, min(8, n_runs // (4 * max(1, workers))))
+
+
+def _task_result(future) -> list:
+    from distributed import KilledWorker
+
+    try:
+        return future.result()
+    except VersionMismatch as exc:
+        raise BackendError(f"a Dask worker cannot be used: {exc}; install fdbench {__version__} on every worker") from None
+    except KilledWorker as exc:
+        raise ExecutionError(f"Dask workers kept dying while running a task ({exc}); the runs stored so far "
+                             "are kept: run the command again to resume") from None
+    except (KeyboardInterrupt, ExecutionError, BackendError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - e.g. a worker that cannot unpickle the task
+        raise ExecutionError(f"a Dask task failed: {type(exc).__name__}: {exc}") from None
+
+
+def _import_distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise BackendError(f"--backend dask needs Dask distributed, which is not installed: {DASK_INSTALL}") from None
+    return distributed
+
+
+# ---- the runner: the same code for every backend ---------------------------------------------
+
+
+def execute_specs(specs, store, backend: Backend, rerun: bool = False, on_done=None) -> dict:
+    """Make sure every spec is in the store; return {spec hash: stored run}.
+
+    Runs already stored are reused unless ``rerun``; the missing ones (each settings hash once)
+    are handed to the backend and each is stored as soon as its outcome arrives.
+    ``on_done(finished, total)`` reports progress (total = distinct specs)."""
+    distinct = {spec.hash(): spec for spec in specs}
+    stored = set() if rerun else store.hashes()
+    missing = [spec for key, spec in distinct.items() if key not in stored]
+    done = len(distinct) - len(missing)
+    if on_done:
+        on_done(done, len(distinct))
+    if missing:
+        backend.start(len(missing))
+        try:
+            with closing(backend.outcomes(missing)) as outcomes:
+                for index, outcome in outcomes:
+                    store.add_record(missing[index], outcome.record, outcome.history, outcome.params,
+                                     jobs=backend.workers, replace=rerun)
+                    done += 1
+                    if on_done:
+                        on_done(done, len(distinct))
+        finally:
+            backend.stop()
+    return {key: store.get(key) for key in distinct}
+
+
+@contextmanager
+def sigterm_as_interrupt():
+    """Within the block, SIGTERM raises :class:`Terminated` (a KeyboardInterrupt) in the main
+    thread, so a terminated command stops as cleanly as on Ctrl-C: workers stopped, stored runs
+    kept. Outside the main thread, nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def terminate(signum, frame):
+        raise Terminated()
+
+    previous = signal.signal(signal.SIGTERM, terminate)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

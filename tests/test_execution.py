@@ -1,0 +1,296 @@
+"""Execution of run specifications: the runner stores what any backend yields, in any order, once;
+a local worker process dies with its parent however the parent ends; ``fdbench report --jobs 2``
+killed by SIGKILL or SIGTERM leaves no process behind, keeps its stored runs, and a rerun
+completes them with the numbers of an uninterrupted report. Tests that need signals or /proc
+skip where they cannot run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from fdbench.execution import Backend, LocalBackend, Outcome, execute_specs, failed_record, run_spec
+from fdbench.experiment import control_spec
+from fdbench.store import open_store
+
+FDBENCH = [sys.executable, "-m", "fdbench.cli"]
+needs_proc = pytest.mark.skipif(not (sys.platform.startswith("linux") and Path("/proc/self/stat").exists()),
+                                reason="needs Linux /proc to list processes")
+needs_signals = pytest.mark.skipif(not hasattr(signal, "SIGKILL") or not hasattr(os, "killpg"),
+                                   reason="needs POSIX signals")
+
+
+# ----------------------------------------------------------------------------- the runner
+
+
+class Reversed(Backend):
+    """A backend that computes in this process and yields the outcomes in reverse order, as a
+    cluster may; it also counts what it was asked to run."""
+
+    name = "reversed"
+
+    def __init__(self):
+        self.asked = []
+        self.stopped = 0
+
+    def start(self, n_runs):
+        self.workers = 3
+
+    def outcomes(self, specs):
+        self.asked.extend(specs)
+        results = [(i, run_spec(spec)) for i, spec in enumerate(specs)]
+        yield from reversed(results)
+
+    def stop(self):
+        self.stopped += 1
+
+
+def test_runner_stores_each_outcome_under_its_own_spec_whatever_the_order(tmp_path):
+    gains = [10.0, 20.0, 40.0, 80.0]
+    specs = [control_spec(kp, 0.3) for kp in gains]
+    backend = Reversed()
+    progress = []
+    with open_store(tmp_path / "r.sqlite") as store:
+        runs = execute_specs(specs + specs[:2], store, backend, on_done=lambda done, total: progress.append((done, total)))
+    assert len(backend.asked) == 4 and backend.stopped == 1  # duplicates asked for once
+    assert progress == [(0, 4), (1, 4), (2, 4), (3, 4), (4, 4)]
+    for spec in specs:
+        record = runs[spec.hash()]["record"]
+        assert record["kp"] == spec.kp and record["spec_hash"] == spec.hash() and record["jobs"] == 3
+    # higher gains track better: the stored numbers belong to their own gains
+    errors = [runs[s.hash()]["record"]["rmse_rot_deg"] for s in specs]
+    assert errors == sorted(errors, reverse=True)
+
+
+def test_runner_reuses_stored_runs_and_asks_the_backend_for_nothing(tmp_path):
+    specs = [control_spec(kp, 0.3) for kp in (30.0, 60.0)]
+    with open_store(tmp_path / "r.sqlite") as store:
+        first = execute_specs(specs, store, LocalBackend(jobs=1))
+        backend = Reversed()
+        second = execute_specs(specs, store, backend)
+        assert backend.asked == [] and backend.stopped == 0  # no worker acquired for nothing
+        assert second == first
+        third = execute_specs(specs, store, backend, rerun=True)
+        assert len(backend.asked) == 2
+    assert [third[s.hash()]["record"]["rmse_rot_deg"] for s in specs] == \
+        [first[s.hash()]["record"]["rmse_rot_deg"] for s in specs]
+
+
+def test_runner_stops_the_backend_when_storing_fails(tmp_path):
+    class Failing(Reversed):
+        def outcomes(self, specs):
+            yield 0, Outcome(failed_record(specs[0], RuntimeError("boom")), [], None)
+            raise RuntimeError("the cluster went away")
+
+    backend = Failing()
+    with open_store(tmp_path / "r.sqlite") as store:
+        spec = control_spec(80.0, 0.3)
+        with pytest.raises(RuntimeError, match="went away"):
+            execute_specs([spec, control_spec(70.0, 0.3)], store, backend)
+        assert backend.stopped == 1
+        kept = store.get(spec.hash())["record"]  # what arrived before the failure is kept
+    assert kept["status"] == "error" and kept["message"] == "RuntimeError: boom"
+
+
+def _dies_on_kp_13(spec):
+    """A run that kills its worker process (as the kernel's out-of-memory killer would)."""
+    if spec.kp == 13.0:
+        os._exit(9)
+    return run_spec(spec)
+
+
+def test_a_local_worker_that_dies_stops_the_sweep_with_a_clear_error_and_keeps_stored_runs(tmp_path, monkeypatch):
+    import fdbench.execution as execution
+
+    monkeypatch.setattr(execution, "run_spec", _dies_on_kp_13)  # workers fork with it
+    specs = [control_spec(kp, 0.3) for kp in (80.0, 13.0)] + [control_spec(kp, 0.3) for kp in range(20, 30)]
+    with open_store(tmp_path / "r.sqlite") as store:
+        with pytest.raises(execution.ExecutionError, match="worker process died"):
+            execute_specs(specs, store, LocalBackend(jobs=2))
+        assert specs[1].hash() not in store.hashes()  # the lost run is not stored: a rerun computes it
+        kept = store.count()
+        monkeypatch.undo()
+        execute_specs(specs, store, LocalBackend(jobs=2))
+        assert store.count() == len(specs) and kept < len(specs)
+
+
+# ----------------------------------------------------------------------------- parent death
+
+
+def _alive(pid: int) -> bool:
+    """True if ``pid`` exists and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat") as handle:
+            text = handle.read()
+    except OSError:
+        return False
+    return text[text.rindex(")") + 2] != "Z"
+
+
+def _wait_gone(pids, timeout_s: float) -> list[int]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        alive = [pid for pid in pids if _alive(pid)]
+        if not alive:
+            return []
+        time.sleep(0.05)
+    return [pid for pid in pids if _alive(pid)]
+
+
+@needs_proc
+@needs_signals
+@pytest.mark.parametrize("mechanism", ["pdeathsig", "watchdog"])
+def test_a_worker_dies_with_its_parent(tmp_path, mechanism):
+    """A middle process starts a child that calls die_with_parent and sleeps; the middle one is
+    SIGKILLed. With 'watchdog' the kernel request is skipped (as on a system without prctl), so
+    the polling thread alone must end the child."""
+    child = textwrap.dedent(f"""
+        import os, sys, time
+        if {mechanism!r} == "watchdog":
+            sys.platform = "other"
+        from fdbench.execution import die_with_parent
+        die_with_parent(os.getppid(), poll_s=0.05)
+        print(os.getpid(), flush=True)
+        time.sleep(120)
+    """)
+    middle = textwrap.dedent(f"""
+        import subprocess, sys, time
+        child = subprocess.Popen([sys.executable, "-c", {child!r}], stdout=sys.stdout)
+        time.sleep(120)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", middle], stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        child_pid = int(proc.stdout.readline())
+        assert _alive(child_pid)
+        proc.kill()
+        proc.wait(timeout=10)
+        assert _wait_gone([child_pid], 5) == []
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+
+
+# ----------------------------------------------------------------------------- killing a report
+
+
+def _session(sid: int) -> list[int]:
+    """Live processes of the session ``sid`` (the report and every process it started)."""
+    pids = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                with open(f"/proc/{name}/stat") as handle:
+                    text = handle.read()
+            except OSError:
+                continue
+            fields = text[text.rindex(")") + 2:].split()
+            if int(fields[3]) == sid and fields[0] != "Z":
+                pids.append(int(name))
+    return pids
+
+
+def _records(db: Path) -> dict:
+    """{spec hash: record without its execution fields (times, job count)}."""
+    con = sqlite3.connect(db, timeout=10)
+    try:
+        rows = con.execute("SELECT id, spec_hash, record_json FROM runs ORDER BY id").fetchall()
+    finally:
+        con.close()
+    out = {}
+    for _, key, text in rows:
+        record = json.loads(text)
+        out[key] = {k: v for k, v in record.items() if not _timing(k)}
+    assert len(out) == len(rows)  # each run stored once
+    return out
+
+
+def _optimizations(records: dict) -> int:
+    return sum(r["command"] == "optimize" for r in records.values())
+
+
+def _timing(field: str) -> bool:
+    """Fields that say how long or how parallel, not what was computed (runtime_s, jobs, and any
+    other *time_s a method reports)."""
+    return field == "jobs" or field.endswith("time_s")
+
+
+def _count(db: Path) -> int:
+    """Stored optimisation runs (the sweep's runs)."""
+    try:
+        con = sqlite3.connect(db, timeout=5)
+        try:
+            return con.execute("SELECT COUNT(*) FROM runs WHERE command = 'optimize'").fetchone()[0]
+        finally:
+            con.close()
+    except sqlite3.OperationalError:
+        return 0
+
+
+SWEEP = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", "10",
+         "--budget", "250", "--format", "csv", "-q"]
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory) -> dict:
+    """The stored records of the sweep run to its end without interruption."""
+    db = tmp_path_factory.mktemp("whole") / "whole.sqlite"
+    done = subprocess.run(FDBENCH + SWEEP + ["--jobs", "2", "--db", str(db)], capture_output=True, text=True,
+                          timeout=120, cwd=db.parent)
+    assert done.returncode == 0, done.stderr
+    return _records(db)
+
+
+@needs_proc
+@needs_signals
+@pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_path, signum, uninterrupted):
+    db = tmp_path / "killed.sqlite"
+    cmd = FDBENCH + SWEEP + ["--jobs", "2", "--db", str(db)]
+    start = time.monotonic()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                            start_new_session=True)
+    try:
+        # at least 1 s after the start, with the workers running and a run stored
+        deadline = start + 60
+        while proc.poll() is None and time.monotonic() < deadline and (
+                time.monotonic() - start < 1 or len(_session(proc.pid)) < 3 or not db.exists() or _count(db) < 1):
+            time.sleep(0.01)
+        assert proc.poll() is None, "the report ended before it could be killed: give it more work"
+        members = _session(proc.pid)
+        assert len(members) >= 3  # the report and its two workers
+        proc.send_signal(signum)
+        out, err = proc.communicate(timeout=30)  # also waits for every holder of its pipes
+        assert _wait_gone(members, 5) == [] and _session(proc.pid) == []
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.wait()
+    if signum == signal.SIGKILL:
+        assert proc.returncode == -signal.SIGKILL
+    else:
+        assert proc.returncode in (143, 130)
+        assert out == "" and "Traceback" not in err
+        assert err.strip().splitlines() == ["fdbench: error: terminated"]
+    kept = _records(db)
+    assert 1 <= _optimizations(kept) < 10
+
+    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert resumed.returncode == 0, resumed.stderr
+    after = _records(db)
+    assert {k: after[k] for k in kept} == kept  # nothing stored before the kill was redone or lost
+    assert after == uninterrupted  # the numbers of an uninterrupted report
+    assert _optimizations(after) == 10
