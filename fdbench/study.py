@@ -127,13 +127,14 @@ def csv_rows(sweep: Sweep, rows: list[dict]) -> list[list]:
             + [r[c] for c in CSV_COLUMNS[7:]] for r in rows]
 
 
-def _cell(row: dict, name: str, digits: int = 3) -> str:
+def _cell(row: dict, name: str) -> str:
+    """'median [Q1, Q3]' with three significant digits, or the one value of a single or repeated run."""
     median, q1, q3 = row[f"{name}_median"], row[f"{name}_q1"], row[f"{name}_q3"]
     if not math.isfinite(median):
         return "-"
     if row["runs"] == 1 or q3 - q1 == 0:
-        return f"{median:.{digits}f}"
-    return f"{median:.{digits}f} [{q1:.{digits}f}, {q3:.{digits}f}]"
+        return f"{median:.3g}"
+    return f"{median:.3g} [{q1:.3g}, {q3:.3g}]"
 
 
 def markdown(sweep: Sweep, rows: list[dict], settings: dict, figures: dict | None = None) -> str:
@@ -158,8 +159,7 @@ def markdown(sweep: Sweep, rows: list[dict], settings: dict, figures: dict | Non
             cells = [by_key[(method, level)] for level in sweep.levels]
             done = sum(c["successes"] for c in cells)
             total = sum(c["runs"] for c in cells)
-            digits = 4 if name == "runtime_s" else 3
-            out.append(f"| {method} | " + " | ".join(_cell(c, name, digits) for c in cells) + f" | {done}/{total} |")
+            out.append(f"| {method} | " + " | ".join(_cell(c, name) for c in cells) + f" | {done}/{total} |")
     out += ["", "## Reading it", ""] + _reading(sweep, rows)
     if figures:
         out += ["", "## Figures", ""] + [f"![{title}]({path})" for title, path in figures.items()]
@@ -176,9 +176,7 @@ def _reading(sweep: Sweep, rows: list[dict]) -> list[str]:
         a, b = by_key[(method, first)]["rmse_rot_deg_median"], by_key[(method, last)]["rmse_rot_deg_median"]
         if not (math.isfinite(a) and math.isfinite(b)):
             continue
-        change = f"{b / a:.1f} times" if a > 0 else "from zero"
-        lines.append(f"- {method}: median RMSE_rot {a:.3g} deg at {first:g} {unit}, {b:.3g} deg at {last:g} {unit} "
-                     f"({change}).")
+        lines.append(f"- {method}: median RMSE_rot {a:.3g} deg at {first:g} {unit}, {b:.3g} deg at {last:g} {unit}.")
     finite = [r for r in rows if r["level"] == last and math.isfinite(r["rmse_rot_deg_median"])]
     if finite:
         best = min(finite, key=lambda r: r["rmse_rot_deg_median"])

@@ -147,7 +147,7 @@ def test_the_quick_start_comment_figures(workdir):
 def test_every_command_of_the_commands_table_runs_as_written(first_report, workdir):
     rows = [line for line in section("Commands").splitlines() if line.startswith("| `")]
     commands = [re.findall(r"`([^`]+)`", row)[-1] for row in rows]
-    assert len(commands) == 8 and all(c.startswith("fdbench ") for c in commands)
+    assert len(commands) == 9 and all(c.startswith("fdbench ") for c in commands)
     for command in commands:  # in order: inverse writes id.csv, simulate reads it
         sh(command, workdir)
     assert (workdir / "id.csv").read_text().startswith("t,theta,theta_dot,theta_ddot,torque")
@@ -263,3 +263,20 @@ def test_the_plugin_example_runs_exactly_as_written():
     assert re.search(r"evaluations\s+│ 50 ", out.stdout) and re.search(r"status\s+│ success", out.stdout)
     listed = sh(command.split(" fdbench ")[0] + " fdbench methods", ROOT).stdout
     assert "linear" in listed and "random" in listed
+
+
+def test_the_commands_of_your_own_data_run_as_written(first_report, tmp_path):
+    """From the repository's top folder, as the section says (in a copy, so nothing is written
+    into the checkout)."""
+    top = tmp_path / "checkout"
+    (top / "examples").mkdir(parents=True)
+    shutil.copy(ROOT / "examples" / "elbow_flexion.csv", top / "examples")
+    (lang, body), = [b for b in code_blocks(section("Your own data")) if b[0] == "bash"]
+    commands = [line for line in body.splitlines() if line.startswith("fdbench ")]
+    assert len(commands) == 6
+    for command in commands:
+        sh(command + " --quiet", top)
+    assert (top / "elbow_torque.csv").read_text().startswith("t,theta,theta_dot,theta_ddot,torque")
+    assert len((top / "elbow_torque.csv").read_text().splitlines()) == 302  # 2.5 s at 120 Hz and a header
+    assert (top / "study" / "study_noise_rmse_rot_deg.png").is_file() and (top / "mismatch.md").is_file()
+    assert (ROOT / "docs" / "study_noise_rmse_rot_deg.png").is_file()
