@@ -236,6 +236,18 @@ Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRES
 Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once, in [1, 256]: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)]
 
 
+# Options of the commands that run many specs (report, study)
+TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")]
+OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")]
+FeedforwardSelection = Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with feedforward (Table 3) or without (Table 2); default both.", show_default=False)]
+WithControl = Annotated[bool, typer.Option("--control/--no-control", help="Include PD control.")]
+AllCells = Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")]
+StoreDb = Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)]
+Rerun = Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")]
+Kp = Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")]
+Kd = Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")]
+
+
 # Options of the motion, its noise and the model, shared by every command that simulates: declared once
 # here and added to a command by @_with_conditions, which hands them over as one dict ``conditions``
 # of RunSpec fields.
@@ -859,22 +871,22 @@ def optimize(
 @app.command()
 @_with_conditions
 def report(
-    torque: Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")] = None,
-    opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
-    feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only Table 3 (with) or Table 2 (without); default both.", show_default=False)] = None,
-    control: Annotated[bool, typer.Option("--control/--no-control", help="Include the PD control run.")] = True,
+    torque: TorqueSelection = None,
+    opt: OptSelection = None,
+    feedforward: FeedforwardSelection = None,
+    control: WithControl = True,
     beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation.")] = True,
-    all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False,
+    all_cells: AllCells = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
     jobs: Jobs = None,
     backend: BackendName = "local",
     scheduler: Scheduler = None,
-    db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
-    rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
+    db: StoreDb = None,
+    rerun: Rerun = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
-    kp: Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")] = 80.0,
-    kd: Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")] = 0.3,
+    kp: Kp = 80.0,
+    kd: Kd = 0.3,
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
@@ -898,26 +910,18 @@ def report(
 
     Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
     from .benchmark import default_cells, make_plan
-
     from .store import default_path
 
     db_path = db if db is not None else default_path()
     _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
-    if not 1 <= seeds <= MAX_SEEDS:
-        raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
-    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
-        raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
     if figures is not None:
         _check_figures_dir(figures, output, db_path)
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
-    _check_names(torque, opt)
+    torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
+                                                       penalty_weight)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control and not beyond:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
-    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
-    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
-    _check_method_options(torque_options, optimizer_options)
     plan = make_plan(
         cells, seeds, budget, control, kp, kd, torque_options=torque_options,
         optimizer_options=optimizer_options, penalty_weight=penalty_weight,
@@ -960,21 +964,21 @@ def study(
     kind: Annotated[str, typer.Argument(help="noise: the motion captured with white noise of each level (deg); mismatch: one constant of the simulated body changed by each level (percent) while the methods keep the nominal model.", metavar="noise|mismatch")],
     levels: Annotated[str, typer.Option("--levels", help="The levels, comma-separated: deg for noise (e.g. 0,0.25,0.5,1,2), percent for mismatch (e.g. -20,-10,0,10,20).")] = "",
     param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g.")] = "I1",
-    torque: Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")] = None,
-    opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")] = None,
-    feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with (Table 3) or without (Table 2) feedforward; default both.", show_default=False)] = None,
-    control: Annotated[bool, typer.Option("--control/--no-control", help="Include PD control.")] = True,
-    all_cells: Annotated[bool, typer.Option("--all-cells", help="Also the cells the paper left out (PF without feedforward).")] = False,
+    torque: TorqueSelection = None,
+    opt: OptSelection = None,
+    feedforward: FeedforwardSelection = None,
+    control: WithControl = True,
+    all_cells: AllCells = False,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per method and level, in [1, 1000]: seeds 0..N-1 (the noise realisation and the optimiser's seed).")] = 5,
     budget: Budget = 200,
     jobs: Jobs = None,
     backend: BackendName = "local",
     scheduler: Scheduler = None,
-    db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None,
-    rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False,
+    db: StoreDb = None,
+    rerun: Rerun = False,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write one PNG per indicator into DIR (created if missing): level on x, median and IQR band per method.")] = None,
-    kp: Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")] = 80.0,
-    kd: Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")] = 0.3,
+    kp: Kp = 80.0,
+    kd: Kd = 0.3,
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
@@ -1016,21 +1020,14 @@ def study(
         from .model import MODEL_KEYS
 
         _check_choice("--param", param, MODEL_KEYS)
-    if not 1 <= seeds <= MAX_SEEDS:
-        raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
-    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
-        raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
     if figures is not None:
         _check_study_figures(figures, output, db_path)
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
-    _check_names(torque, opt)
+    torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
+                                                       penalty_weight)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
-    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
-    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
-    _check_method_options(torque_options, optimizer_options)
     try:
         sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, budget, torque_options,
                                    optimizer_options, penalty_weight, param if kind == "mismatch" else None,
@@ -1085,6 +1082,21 @@ def _check_study_figures(directory: Path, output: Optional[Path], db: Path) -> N
     from .study import FIGURE_NAMES
 
     _check_figures_dir(directory, output, db, FIGURE_NAMES)
+
+
+def _sweep_options(seeds, jobs, torques, optimizers, hidden, knots, terms, sigma0, popsize, penalty_weight):
+    """The checks shared by the commands that run many specs (report, study), before any work;
+    returns the (torque options, optimizer options) of their cells."""
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
+    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_names(torques, optimizers)
+    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
+    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
+    _check_method_options(torque_options, optimizer_options)
+    return torque_options, optimizer_options
 
 
 def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:
