@@ -122,7 +122,7 @@ INDICATORS = ("rmse_rot_deg", "rmse_torque_nm", "runtime_s")
 
 
 def succeeded(record: dict) -> bool:
-    """A run that reached t = 1 s and (for an optimisation) beat its unoptimised initial guess."""
+    """A run that reached the end of its motion (t = 1 s for eq. 5) and (for an optimisation) beat its unoptimised initial guess."""
     if record.get("status") != "success":
         return False
     best, initial = record.get("best_objective"), record.get("initial_objective")

@@ -219,7 +219,7 @@ Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
 Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
-SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; 1001 rows), as CSV to FILE. --save-history is an older name.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; one row per sample of the motion, 1001 for eq. 5), as CSV to FILE. --save-history is an older name.")]
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 NoiseSeed = Annotated[int, typer.Option("--seed", help="Seed of the --noise-deg noise; the same seed gives the same noisy motion.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]

@@ -8,7 +8,7 @@ from .integrate import SimulationResult
 
 
 def rmse_rot_deg(result: SimulationResult, theta_desired: np.ndarray) -> float:
-    """RMSE (degrees) of the simulated rotation against theta_desired (rad, shape (1001,)),
+    """RMSE (degrees) of the simulated rotation against theta_desired (rad, shape (n,), the motion's samples),
     over the samples reached."""
     reached = result.reached
     if not reached.any():
@@ -19,7 +19,7 @@ def rmse_rot_deg(result: SimulationResult, theta_desired: np.ndarray) -> float:
 
 def rmse_torque_nm(result: SimulationResult, torque_inverse: np.ndarray) -> float:
     """RMSE (N m) of the total applied elbow torque against the inverse-dynamics torque
-    (shape (1001,)), over the samples reached."""
+    (shape (n,)), over the samples reached."""
     reached = result.reached
     if not reached.any():
         return float("nan")

@@ -86,11 +86,13 @@ def build_rows(plan: Plan, runs: dict, provenance: dict | None = None) -> list[R
     """Summaries of every cell of the plan from the stored runs ({hash: stored run});
     ``provenance`` ({hash: info}, from ``Store.provenance``) adds when and where each was made."""
     provenance = provenance or {}
+    comparable = paper_conditions(plan)
     rows = []
     if plan.control is not None:
         h = plan.control.hash()
         record = runs[h]["record"]
-        rows.append(Row("PD control + feedforward", "control", None, summarise([record]), PAPER_CONTROL, [record],
+        rows.append(Row("PD control + feedforward", "control", None, summarise([record]),
+                        PAPER_CONTROL if comparable else None, [record],
                         [], [provenance[h]] if h in provenance else [], [h]))
     for cell in plan.cells:
         specs = plan.specs[cell]
@@ -98,9 +100,17 @@ def build_rows(plan: Plan, runs: dict, provenance: dict | None = None) -> list[R
         records = [runs[h]["record"] for h in hashes]
         histories = [runs[h].get("history") or [] for h in hashes]
         name = f"{torque_label(cell.torque, dict(specs[0].torque_options))} + {OPTIMIZER_LABELS.get(cell.optimizer, cell.optimizer)}"
-        rows.append(Row(name, cell.table, cell, summarise(records), cell.paper, records, histories,
+        rows.append(Row(name, cell.table, cell, summarise(records), cell.paper if comparable else None, records, histories,
                         [provenance[h] for h in hashes if h in provenance], hashes))
     return rows
+
+
+def paper_conditions(plan: Plan) -> bool:
+    """True when the plan's runs have the paper's conditions (its motion as printed, no noise, the
+    exact model), so that the paper's figures can stand beside them."""
+    spec = plan.control or (plan.all_specs() or [None])[0]
+    return spec is None or (spec.kinematics == "paper" and not spec.noise_deg and not spec.plant and not spec.model
+                            and spec.sample_dt is None)
 
 
 # ---- numbers ---------------------------------------------------------------------------------
@@ -195,7 +205,7 @@ LEGEND = [
     "in brackets), otherwise how many times lower or higher ours is. For RMSE_rot, lower is better.",
     "- **speed-up**: the paper's runtime divided by our median runtime. Different machines and languages "
     "(the paper's implementation against fdbench's compiled kernels): an order of magnitude, not a measurement.",
-    "- **success**: runs that reached t = 1 s and ended with an objective (eq. 18) below that of their "
+    "- **success**: runs that reached the end of the motion (t = 1 s) and ended with an objective (eq. 18) below that of their "
     "unoptimised initial guess, out of all runs. *identical*: every seed gave the same result (a "
     "deterministic method, e.g. BFGS from a fixed start), so the cell shows that one run; its runtime is "
     "still the median ± h of the repeats.",
@@ -290,7 +300,7 @@ def _comparison(rows: list[Row]) -> list[str]:
               and r.summary.get("success_rate", 0) > 0]
     failed = [r.name for r in rows if r not in finite]
     if not finite:
-        return ["No method reached t = 1 s with a finite RMSE of rotation."]
+        return ["No method reached the end of the motion with a finite RMSE of rotation."]
     best = min(finite, key=lambda r: r.summary["rmse_rot_deg_median"])
     fastest = min(finite, key=lambda r: r.summary["runtime_s_median"])
     lines = [

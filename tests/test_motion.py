@@ -313,3 +313,13 @@ def test_noise_is_measured_against_the_true_motion():
     clean = run_json("control", "--motion", "exact")
     assert clean["rmse_rot_deg"] < 1e-6 < noisy_run["rmse_rot_deg"] < 2.0
     assert noisy_run["noise_deg"] == 1.0 and "noise" in noisy_run["motion"]
+
+
+def test_report_on_a_recorded_motion_sets_no_paper_figure_beside_ours(tmp_path):
+    result = invoke("report", "--motion", EXAMPLE, "--torque", "cs", "--opt", "bfgs", "--feedforward", "--seeds", 1,
+                    "--budget", 5, "--no-beyond", "--jobs", 1, "--db", tmp_path / "r.sqlite", "-f", "csv", "-q")
+    assert result.exit_code == 0, result.stderr
+    import pandas as pd
+
+    frame = pd.read_csv(io.StringIO(result.stdout))
+    assert frame["paper_rmse_rot_deg"].isna().all() and len(frame) == 2
