@@ -226,6 +226,18 @@ MATRIX = [
     (["report", "--db", "garbage.sqlite"], {}, ["not"]),
     (["report", "--db", "corrupt.sqlite"], {}, ["damaged"]),
     (["report", "--db", ":memory:"], {}, ["--db"]),
+    # collocate, study, motion and model files
+    (["collocate", "--nodes", "1"], {}, ["--nodes"]),
+    (["collocate", "--db", "db.sqlite", "--save-torque", "db.sqlite"], {}, ["database"]),
+    (["collocate", "--motion", "in.csv", "--save-torque", "in.csv"], {}, ["--motion"]),
+    (["study", "noise", "--levels", "0,1", "--db", "db.sqlite", "-o", "db.sqlite"], {}, ["database"]),
+    (["study", "noise", "--levels", "0,1", "--db", "db.sqlite", "--figures", "afile"], {}, ["not a directory"]),
+    (["study", "mismatch", "--levels", "0,1", "--db", "corrupt.sqlite"], {}, ["damaged"]),
+    (["control", "--motion", "binary.csv"], {}, ["UTF-8"]),
+    (["control", "--model-file", "/dev/zero"], {}, ["larger than"]),
+    (["control", "--model-file", "params.json", "-o", "params.json"], {}, ["--model-file"]),
+    (["inverse", "--motion", "params.json"], {}, ["columns"]),
+    (["optimize", "--motion", "in.csv", "--save-params", "link_to_in.csv"], {}, ["--motion"]),
     # plugins
     (["optimize", "--budget", "2"], {"FDBENCH_PLUGINS": "exits_at_import"}, ["sys.exit(3)"]),
     (["methods"], {"FDBENCH_PLUGINS": "raises_at_import"}, ["broken plugin"]),
