@@ -36,10 +36,12 @@ class TrackingProblem:
         self.scale = np.asarray(torque.scale(), dtype=float)
         self.x0 = self.p0 / self.scale
         self._fast = False
+        self._jacobian, self._dtheta = None, None
         if settings.integrator == "rk4":
             n = steps(settings.dt, self.duration)
             half, _, _ = half_step_reference(n, settings.kinematics)
             self._on_grid = torque.on_grid(half)
+            self._jacobian = torque.on_grid_jacobian(half)  # d tau / d p for exact gradients, or None
             self._ff_half = np.array(self._ff(half)) if feedforward else np.zeros_like(half)
             self._fast = settings.motion.uniform and n % (len(self.inverse.t) - 1) == 0
             if self._fast:  # buffers for the kernel, reused by every evaluation
@@ -97,6 +99,17 @@ class TrackingProblem:
 
     def objective_scaled(self, x) -> float:
         return self.objective(np.asarray(x) * self.scale)
+
+    def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
+        """Eq. 18 and its exact gradient with respect to p, shape (n_params,) (see ``gradient``)."""
+        from .gradient import value_and_gradient
+
+        return value_and_gradient(self, np.asarray(p, dtype=float))
+
+    def value_and_gradient_scaled(self, x) -> tuple[float, np.ndarray]:
+        """``value_and_gradient`` on the scaled parameters x = p / scale."""
+        f, g = self.value_and_gradient(np.asarray(x, dtype=float) * self.scale)
+        return f, g * self.scale
 
     def indicators(self, result: SimulationResult) -> dict:
         return {

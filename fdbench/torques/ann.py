@@ -120,3 +120,8 @@ class AnnTorque(TorqueParameterisation):
             return self.offset + self.span * (hidden @ p[2 * n_h : 3 * n_h] + p[3 * n_h])
 
         return evaluate
+
+    def on_grid_jacobian(self, t):
+        x = 2 * np.asarray(t, dtype=float) / self.duration - 1
+        n_h = self.hidden
+        return lambda p: self.span * _residual_jacobian(np.asarray(p, dtype=float), x, n_h)

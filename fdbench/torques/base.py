@@ -43,6 +43,11 @@ class TorqueParameterisation(ABC):
         """A fast evaluator p -> torque on the fixed times t (override to precompute)."""
         return lambda p: self.evaluate(p, t)
 
+    def on_grid_jacobian(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+        """An evaluator p -> d torque / d p on the fixed times t, shape (n, n_params) (N m per
+        parameter unit), for exact gradients; None where the parameterisation gives none."""
+        return None
+
 
 TORQUES: Registry[type[TorqueParameterisation]] = Registry("torque")
 

@@ -44,5 +44,9 @@ class CubicSplineTorque(TorqueParameterisation):
         basis = np.ascontiguousarray(self.basis(t))
         return lambda p: basis @ p
 
+    def on_grid_jacobian(self, t):
+        basis = np.ascontiguousarray(self.basis(t))  # the spline is linear in p: a constant Jacobian
+        return lambda p: basis
+
     def scale(self):
         return np.full(self.n_params, self._scale)

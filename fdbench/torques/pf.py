@@ -74,6 +74,15 @@ class GaussianSumTorque(TorqueParameterisation):
 
         return evaluate
 
+    def on_grid_jacobian(self, t):
+        t = np.asarray(t, dtype=float)
+
+        def jacobian(p):
+            with np.errstate(over="ignore", invalid="ignore"):
+                return np.ascontiguousarray(self.jacobian(p, t))
+
+        return jacobian
+
     def scale(self):
         n, span = self.terms, self.duration
         return np.tile([self._amplitude, 2.0 * n**2 / span**2, span / n], n)
