@@ -229,6 +229,7 @@ Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
 Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
+Gradient = Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
 # Execution of many runs (report, study): where they run and how many at once.
 BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install 'fdbench\\[dask]').")]
@@ -730,6 +731,13 @@ def _collocation_torque_text(solution, spec) -> str:
     return csv_text(["t", "torque"], ([f"{t:.17g}", f"{q:.17g}"] for t, q in zip(half, torque)))
 
 
+def _check_gradient(gradient: str) -> None:
+    from .experiment import GRADIENTS
+
+    if gradient not in GRADIENTS:
+        raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+
+
 def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
     """Reject an out-of-range method option even when the chosen method does not use it
     (``--terms 0`` with ``--torque cs``): every registered class that takes it checks it."""
@@ -801,6 +809,7 @@ def optimize(
     terms: Terms = 4,
     sigma0: Sigma0 = 0.1,
     popsize: Popsize = None,
+    gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -832,9 +841,10 @@ def optimize(
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
+    _check_gradient(gradient)
     spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
+        penalty_weight=penalty_weight, gradient=gradient, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
     _check_store(db)
     with _progress(quiet, f"{torque} + {opt}") as progress:
@@ -880,6 +890,7 @@ def report(
     terms: Terms = 4,
     sigma0: Sigma0 = 0.1,
     popsize: Popsize = None,
+    gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -918,9 +929,10 @@ def report(
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
+    _check_gradient(gradient)
     plan = make_plan(
         cells, seeds, budget, control, kp, kd, torque_options=torque_options,
-        optimizer_options=optimizer_options, penalty_weight=penalty_weight,
+        optimizer_options=optimizer_options, penalty_weight=penalty_weight, gradient=gradient,
         **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     )
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
@@ -980,6 +992,7 @@ def study(
     terms: Terms = 4,
     sigma0: Sigma0 = 0.1,
     popsize: Popsize = None,
+    gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -1031,9 +1044,11 @@ def study(
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
+    _check_gradient(gradient)
     try:
         sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, budget, torque_options,
                                    optimizer_options, penalty_weight, param if kind == "mismatch" else None,
+                                   gradient=gradient,
                                    **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
     except ValueError as exc:
         raise BadInput(_with_option(str(exc))) from None
