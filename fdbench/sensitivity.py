@@ -74,19 +74,48 @@ def acceleration_jacobian(x, y, th, vx, vy, w, tau, consts, jac):
 
 
 @njit
-def _stage_sensitivity(S_in, G, j, jac, K):
-    """K = f_y S_in + f_tau G[j] with jac = (f_y, f_tau) of the accelerations at the stage's
-    state: the sensitivity of one stage derivative, shape (6, P)."""
-    P = S_in.shape[1]
-    for r in range(3):
-        for q in range(P):
-            K[r, q] = S_in[r + 3, q]
-    for r in range(3):
-        for q in range(P):
-            acc = jac[r, 6] * G[j, q]
-            for m in range(6):
-                acc += jac[r, m] * S_in[m, q]
-            K[r + 3, q] = acc
+def _step_sensitivity(S, G, j, j1, j2, J1, J2, J3, J4, dt):
+    """Advance S (P, 6), the sensitivity of the state, over one RK4 step, column by column in
+    registers: K_s = f_y(y_s) (S + c_s dt K_{s-1}) + f_tau(y_s) G[j_s] with the stage Jacobians
+    J1..J4, shape (3, 7) (f_y: the first six columns of the accelerations' rows; the first three
+    rows of f_y are the identity on the velocities), then S += dt/6 (K1 + 2 K2 + 2 K3 + K4)."""
+    h2 = 0.5 * dt
+    for q in range(S.shape[0]):
+        s0, s1, s2, s3, s4, s5 = S[q, 0], S[q, 1], S[q, 2], S[q, 3], S[q, 4], S[q, 5]
+        ga, gb, gc = G[j, q], G[j1, q], G[j2, q]
+        # stage 1 at y
+        a0, a1, a2 = s3, s4, s5
+        a3 = J1[0, 6] * ga + J1[0, 0] * s0 + J1[0, 1] * s1 + J1[0, 2] * s2 + J1[0, 3] * s3 + J1[0, 4] * s4 + J1[0, 5] * s5
+        a4 = J1[1, 6] * ga + J1[1, 0] * s0 + J1[1, 1] * s1 + J1[1, 2] * s2 + J1[1, 3] * s3 + J1[1, 4] * s4 + J1[1, 5] * s5
+        a5 = J1[2, 6] * ga + J1[2, 0] * s0 + J1[2, 1] * s1 + J1[2, 2] * s2 + J1[2, 3] * s3 + J1[2, 4] * s4 + J1[2, 5] * s5
+        # stage 2 at y + dt/2 k1
+        u0, u1, u2 = s0 + h2 * a0, s1 + h2 * a1, s2 + h2 * a2
+        u3, u4, u5 = s3 + h2 * a3, s4 + h2 * a4, s5 + h2 * a5
+        b0, b1, b2 = u3, u4, u5
+        b3 = J2[0, 6] * gb + J2[0, 0] * u0 + J2[0, 1] * u1 + J2[0, 2] * u2 + J2[0, 3] * u3 + J2[0, 4] * u4 + J2[0, 5] * u5
+        b4 = J2[1, 6] * gb + J2[1, 0] * u0 + J2[1, 1] * u1 + J2[1, 2] * u2 + J2[1, 3] * u3 + J2[1, 4] * u4 + J2[1, 5] * u5
+        b5 = J2[2, 6] * gb + J2[2, 0] * u0 + J2[2, 1] * u1 + J2[2, 2] * u2 + J2[2, 3] * u3 + J2[2, 4] * u4 + J2[2, 5] * u5
+        # stage 3 at y + dt/2 k2
+        u0, u1, u2 = s0 + h2 * b0, s1 + h2 * b1, s2 + h2 * b2
+        u3, u4, u5 = s3 + h2 * b3, s4 + h2 * b4, s5 + h2 * b5
+        c0, c1, c2 = u3, u4, u5
+        c3 = J3[0, 6] * gb + J3[0, 0] * u0 + J3[0, 1] * u1 + J3[0, 2] * u2 + J3[0, 3] * u3 + J3[0, 4] * u4 + J3[0, 5] * u5
+        c4 = J3[1, 6] * gb + J3[1, 0] * u0 + J3[1, 1] * u1 + J3[1, 2] * u2 + J3[1, 3] * u3 + J3[1, 4] * u4 + J3[1, 5] * u5
+        c5 = J3[2, 6] * gb + J3[2, 0] * u0 + J3[2, 1] * u1 + J3[2, 2] * u2 + J3[2, 3] * u3 + J3[2, 4] * u4 + J3[2, 5] * u5
+        # stage 4 at y + dt k3
+        u0, u1, u2 = s0 + dt * c0, s1 + dt * c1, s2 + dt * c2
+        u3, u4, u5 = s3 + dt * c3, s4 + dt * c4, s5 + dt * c5
+        d0, d1, d2 = u3, u4, u5
+        d3 = J4[0, 6] * gc + J4[0, 0] * u0 + J4[0, 1] * u1 + J4[0, 2] * u2 + J4[0, 3] * u3 + J4[0, 4] * u4 + J4[0, 5] * u5
+        d4 = J4[1, 6] * gc + J4[1, 0] * u0 + J4[1, 1] * u1 + J4[1, 2] * u2 + J4[1, 3] * u3 + J4[1, 4] * u4 + J4[1, 5] * u5
+        d5 = J4[2, 6] * gc + J4[2, 0] * u0 + J4[2, 1] * u1 + J4[2, 2] * u2 + J4[2, 3] * u3 + J4[2, 4] * u4 + J4[2, 5] * u5
+        w = dt / 6.0
+        S[q, 0] = s0 + w * (a0 + 2.0 * b0 + 2.0 * c0 + d0)
+        S[q, 1] = s1 + w * (a1 + 2.0 * b1 + 2.0 * c1 + d1)
+        S[q, 2] = s2 + w * (a2 + 2.0 * b2 + 2.0 * c2 + d2)
+        S[q, 3] = s3 + w * (a3 + 2.0 * b3 + 2.0 * c3 + d3)
+        S[q, 4] = s4 + w * (a4 + 2.0 * b4 + 2.0 * c4 + d4)
+        S[q, 5] = s5 + w * (a5 + 2.0 * b5 + 2.0 * c5 + d5)
 
 
 @njit
@@ -102,11 +131,8 @@ def rk4_sensitivity(y0, dt, n_steps, tau_half, G_half, ref_th_half, ref_w_half, 
     P = G_half.shape[1]
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6)
-    S = np.zeros((6, P))
-    Sn = np.empty((6, P))
-    K1, K2, K3, K4 = np.empty((6, P)), np.empty((6, P)), np.empty((6, P)), np.empty((6, P))
-    jac = np.empty((3, 7))
-    h2 = 0.5 * dt
+    S = np.zeros((P, 6))
+    J1, J2, J3, J4 = np.empty((3, 7)), np.empty((3, 7)), np.empty((3, 7)), np.empty((3, 7))
     for i in range(n_steps + 1):
         j = 2 * i
         c0 = math.cos(y[2])
@@ -114,43 +140,30 @@ def rk4_sensitivity(y0, dt, n_steps, tau_half, G_half, ref_th_half, ref_w_half, 
         for m in range(6):
             states[i, m] = y[m]
         for q in range(P):
-            dtheta[i, q] = S[2, q]
+            dtheta[i, q] = S[q, 2]
         if code != OK:
             return code, i
         if i == n_steps:
             break
-        acceleration_jacobian(y[0], y[1], y[2], y[3], y[4], y[5], tau_half[j], consts, jac)
-        _stage_sensitivity(S, G_half, j, jac, K1)
+        acceleration_jacobian(y[0], y[1], y[2], y[3], y[4], y[5], tau_half[j], consts, J1)
         for m in range(6):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
         code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], 0.0, 0.0, 0.0, consts, c0, k2)
         if code == OK:
-            acceleration_jacobian(tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5], tau_half[j + 1], consts, jac)
-            for m in range(6):
-                for q in range(P):
-                    Sn[m, q] = S[m, q] + h2 * K1[m, q]
-            _stage_sensitivity(Sn, G_half, j + 1, jac, K2)
+            acceleration_jacobian(tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5], tau_half[j + 1], consts, J2)
             for m in range(6):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
             code = _derivative(tmp, tau_half[j + 1], ref_th_half[j + 1], ref_w_half[j + 1], 0.0, 0.0, 0.0, consts, c0,
                                k3)
         if code == OK:
-            acceleration_jacobian(tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5], tau_half[j + 1], consts, jac)
-            for m in range(6):
-                for q in range(P):
-                    Sn[m, q] = S[m, q] + h2 * K2[m, q]
-            _stage_sensitivity(Sn, G_half, j + 1, jac, K3)
+            acceleration_jacobian(tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5], tau_half[j + 1], consts, J3)
             for m in range(6):
                 tmp[m] = y[m] + dt * k3[m]
             code = _derivative(tmp, tau_half[j + 2], ref_th_half[j + 2], ref_w_half[j + 2], 0.0, 0.0, 0.0, consts, c0,
                                k4)
         if code != OK:
             return code, i
-        acceleration_jacobian(tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5], tau_half[j + 2], consts, jac)
-        for m in range(6):
-            for q in range(P):
-                Sn[m, q] = S[m, q] + dt * K3[m, q]
-        _stage_sensitivity(Sn, G_half, j + 2, jac, K4)
+        acceleration_jacobian(tmp[0], tmp[1], tmp[2], tmp[3], tmp[4], tmp[5], tau_half[j + 2], consts, J4)
         finite = True
         for m in range(6):
             tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
@@ -161,8 +174,6 @@ def rk4_sensitivity(y0, dt, n_steps, tau_half, G_half, ref_th_half, ref_w_half, 
             return SINGULAR, i
         if constraint_violation(tmp[0], tmp[1], tmp[2], L) > viol_tol:
             return CONSTRAINT, i
-        for m in range(6):
-            for q in range(P):
-                S[m, q] = S[m, q] + dt / 6.0 * (K1[m, q] + 2.0 * K2[m, q] + 2.0 * K3[m, q] + K4[m, q])
+        _step_sensitivity(S, G_half, j, j + 1, j + 2, J1, J2, J3, J4, dt)
         y[:] = tmp
     return OK, n_steps

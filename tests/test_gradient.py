@@ -24,7 +24,7 @@ def richardson(f, x, h=1e-3):
     return (4 * cd(h / 2) - cd(h)) / 3
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(th=st.floats(-1.4, 1.4), w=st.floats(-10, 10), vx=st.floats(-1, 1), vy=st.floats(-1, 1),
        dx=st.floats(-1e-4, 1e-4), dy=st.floats(-1e-4, 1e-4), tau=st.floats(-20, 20))
 def test_acceleration_jacobian_matches_the_complex_step_derivative(th, w, vx, vy, dx, dy, tau):
@@ -46,7 +46,7 @@ def test_acceleration_jacobian_matches_the_complex_step_derivative(th, w, vx, vy
             args = z.astype(complex)
             args[m] += 1j * h
             reference = np.array(accelerations.py_func(*args, CONSTS)[:3]).imag / h
-            assert np.allclose(jac[:, m], reference, rtol=1e-7, atol=1e-9 * (np.max(np.abs(jac)) + 1)), m
+            assert np.allclose(jac[:, m], reference, rtol=1e-6, atol=1e-7 * (np.max(np.abs(jac)) + 1)), m
     finally:
         dynamics.math = real_math
 
