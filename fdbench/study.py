@@ -90,7 +90,7 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
             specs[(label, level)] = runs
             methods.append(label)
         for cell in cells:
-            label = method_label(cell)
+            label = method_label(cell) + (", exact gradient" if gradient_for(cell.optimizer, gradient) == "exact" else "")
             specs[(label, level)] = tuple(
                 optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
                               optimizer_options, penalty_weight=penalty_weight,
