@@ -229,6 +229,8 @@ Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
 Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
 Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
+MAX_THREADS = 1024
+Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads evaluating a CMA-ES population at once, in [1, {MAX_THREADS}] (default: the cores available); the numbers do not depend on it.", show_default=False)]
 Gradient = Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
 # Execution of many runs (report, study): where they run and how many at once.
@@ -810,6 +812,7 @@ def optimize(
     sigma0: Sigma0 = 0.1,
     popsize: Popsize = None,
     gradient: Gradient = "fd",
+    threads: Threads = None,
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -842,11 +845,17 @@ def optimize(
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
     _check_gradient(gradient)
+    if threads is not None and not 1 <= threads <= MAX_THREADS:
+        raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
     spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
         penalty_weight=penalty_weight, gradient=gradient, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
     _check_store(db)
+    if opt == "cmaes":
+        from .population import set_threads
+
+        set_threads(threads)
     with _progress(quiet, f"{torque} + {opt}") as progress:
         outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)
     if "hidden_fits" in outcome.extra:

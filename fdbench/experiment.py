@@ -439,10 +439,21 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
     from .problem import TrackingProblem
     from .torques import make_torque
 
+    from .torques import TORQUES
+
     settings = spec.settings()
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
     warm_up()
     optimizer.warm_up()
+    TORQUES[spec.torque].warm_up()
+    if spec.gradient == "exact":
+        from .gradient import warm_up as gradient_warm_up
+
+        gradient_warm_up()
+    if spec.optimizer == "cmaes" and settings.integrator == "rk4":
+        from .population import warm_up as population_warm_up
+
+        population_warm_up()
     if on_start:
         on_start(spec.budget)
     start = time.perf_counter()
@@ -457,7 +468,9 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
     torque = make_torque(spec.torque, **torque_options)
     problem = TrackingProblem(torque, settings, spec.feedforward, spec.penalty_weight)
     gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
-    opt = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient)
+    batch = problem.objectives_scaled if problem.batched else None
+    opt = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
+                             batch)
     params = opt.x * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - start

@@ -59,3 +59,15 @@ def value_and_gradient(problem, p: np.ndarray) -> tuple[float, np.ndarray]:
         if not np.all(np.isfinite(gradient)):
             gradient = np.zeros(len(p))
     return rmse + problem.penalty_weight * (1.0 - done / n), gradient
+
+
+def warm_up() -> None:
+    """Load (or compile) the sensitivity kernel, so that later timings exclude it."""
+    from .integrate import Settings, constants, initial_state
+    from .sensitivity import rk4_sensitivity
+
+    settings = Settings(dt=0.1)
+    n = 10
+    ref = np.zeros(2 * n + 1)
+    rk4_sensitivity(initial_state(settings.kinematics, settings.model), 0.1, n, ref, np.zeros((2 * n + 1, 1)), ref,
+                    ref, constants(settings), np.empty((n + 1, 6)), np.empty((n + 1, 1)))

@@ -574,6 +574,8 @@ def settings_table(plan: Plan, seeds: int, jobs: int) -> dict:
             "budget": f"{first.budget} evaluations per optimisation",
             "seeds": f"{seeds} per cell (0 to {seeds - 1})",
         })
+    table["runtime_s"] = ("the method's own wall time per run (set-up, evaluations, final simulation); kernel "
+                          "loading and imports are done before the clock starts")
     table.update({
         "parallel jobs": str(jobs),
         "fdbench": f"{__version__}" + (f" (commit {git_commit()[:12]})" if git_commit() else ""),

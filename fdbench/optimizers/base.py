@@ -41,9 +41,10 @@ class Budgeted:
 
     ``on_evaluation(count, best)`` is called after every evaluation (progress display)."""
 
-    def __init__(self, objective: Objective, budget: int, on_evaluation=None, gradient=None):
+    def __init__(self, objective: Objective, budget: int, on_evaluation=None, gradient=None, batch=None):
         self.objective, self.budget, self.on_evaluation = objective, budget, on_evaluation
         self.gradient = gradient  # x -> (f, df/dx, shape (n,)), or None
+        self.batch = batch  # X, shape (lam, n) -> f of each row, shape (lam,), or None
         self.count = 0
         self.best_x: np.ndarray | None = None
         self.best_f = math.inf
@@ -58,6 +59,18 @@ class Budgeted:
             raise BudgetExhausted
         x = np.array(x, dtype=float)
         return self._record(x, float(self.objective(x)))
+
+    def many(self, xs) -> list[float]:
+        """f of each of the points xs (a population), in order, counted as len(xs) evaluations;
+        the same numbers and the same bookkeeping as calling f on each in turn, in one call of
+        ``batch`` when given. Evaluates at most the remaining budget's worth of points."""
+        if self.count >= self.budget:
+            raise BudgetExhausted
+        xs = [np.array(x, dtype=float) for x in xs][: self.remaining]
+        if self.batch is None:
+            return [self(x) for x in xs]
+        values = self.batch(np.array(xs))
+        return [self._record(x, float(f)) for x, f in zip(xs, values)]
 
     def value_and_gradient(self, x) -> tuple[float, np.ndarray]:
         """f(x) and its gradient, shape (n,), counted as one evaluation (needs ``gradient``);
@@ -101,14 +114,16 @@ class Optimizer(ABC):
         (used when the budget is not spent)."""
 
     def minimize(self, objective: Objective, x0, budget: int, seed: int = 0, on_evaluation=None,
-                 gradient=None) -> OptimizationResult:
+                 gradient=None, batch=None) -> OptimizationResult:
         """Minimise objective from x0 within budget evaluations. ``gradient``: x -> (f(x), df/dx),
-        the exact gradient, used by gradient-based optimisers instead of finite differences."""
+        the exact gradient, used by gradient-based optimisers instead of finite differences.
+        ``batch``: X (lam, n) -> f of each row, the same numbers as ``objective`` row by row,
+        used by population-based optimisers to evaluate a generation in one call."""
         if budget < 1:
             raise ValueError(f"budget must be >= 1, got {budget}")
         if gradient is not None and not self.uses_gradient:
             raise ValueError(f"optimizer {self.name!r} uses no gradient; exact gradients serve bfgs and lbfgsb")
-        f = Budgeted(objective, budget, on_evaluation, gradient)
+        f = Budgeted(objective, budget, on_evaluation, gradient, batch)
         x0 = np.asarray(x0, dtype=float)
         try:
             reason = self.run(f, x0, seed)

@@ -91,6 +91,10 @@ class AnnTorque(TorqueParameterisation):
         lo, hi = float(np.min(target)), float(np.max(target))
         return (lo + hi) / 2, max((hi - lo) / 2, 1e-9)
 
+    @classmethod
+    def warm_up(cls):
+        import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
+
     def prepare(self, t, target, feedforward):
         t, target = np.asarray(t, dtype=float), np.asarray(target, dtype=float)
         offset, self.span = self._scaling(target)

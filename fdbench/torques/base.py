@@ -43,6 +43,10 @@ class TorqueParameterisation(ABC):
         """A fast evaluator p -> torque on the fixed times t (override to precompute)."""
         return lambda p: self.evaluate(p, t)
 
+    @classmethod
+    def warm_up(cls) -> None:
+        """Import what the parameterisation needs, so that a run's timing excludes start-up costs."""
+
     def on_grid_jacobian(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
         """An evaluator p -> d torque / d p on the fixed times t, shape (n, n_params) (N m per
         parameter unit), for exact gradients; None where the parameterisation gives none."""

@@ -22,6 +22,10 @@ class CubicSplineTorque(TorqueParameterisation):
         self.t_knots = np.linspace(0.0, 1.0, self.knots)
         self._scale = 1.0
 
+    @classmethod
+    def warm_up(cls):
+        import scipy.interpolate  # noqa: F401  (its import is not part of a run's runtime)
+
     def prepare(self, t, target, feedforward):
         self.t_knots = np.linspace(0.0, float(t[-1]) if t[-1] > 0 else 1.0, self.knots)
         self._scale = max(float(np.ptp(target)) / 2, 1e-9)

@@ -30,6 +30,10 @@ class GaussianSumTorque(TorqueParameterisation):
         sharpness = np.full(n, 2.0 * n**2 / span**2)  # standard deviation T / (2 n) s
         return np.column_stack([np.zeros(n), sharpness, centres]).ravel()
 
+    @classmethod
+    def warm_up(cls):
+        import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
+
     def prepare(self, t, target, feedforward):
         self._amplitude = max(float(np.max(np.abs(target))), 1e-9)
         self.duration = float(t[-1]) if t[-1] > 0 else 1.0
