@@ -227,8 +227,8 @@ Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (fo
 Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
 Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span (eq. 5: [0, 1] s).")]
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
-Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
-Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
+Sigma0 = Annotated[Optional[float], typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units (default: per torque, cs 0.05, ann 0.2, pf 0.03).", show_default=False)]
+Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: per torque, cs and ann 8, pf cma's 4 + 3 ln n).")]
 MAX_THREADS = 1024
 Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads evaluating a CMA-ES population at once, in [1, {MAX_THREADS}] (default: the cores available); the numbers do not depend on it.", show_default=False)]
 Gradient = Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")]
@@ -809,7 +809,7 @@ def optimize(
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
-    sigma0: Sigma0 = 0.1,
+    sigma0: Sigma0 = None,
     popsize: Popsize = None,
     gradient: Gradient = "fd",
     threads: Threads = None,
@@ -840,7 +840,7 @@ def optimize(
 
     _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db,
                    inputs=_spec_inputs(conditions, kinematics))
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
@@ -897,7 +897,7 @@ def report(
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
-    sigma0: Sigma0 = 0.1,
+    sigma0: Sigma0 = None,
     popsize: Popsize = None,
     gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
@@ -929,7 +929,7 @@ def report(
         raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
     if figures is not None:
         _check_figures_dir(figures, output, db_path)
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
@@ -1007,7 +1007,7 @@ def study(
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
-    sigma0: Sigma0 = 0.1,
+    sigma0: Sigma0 = None,
     popsize: Popsize = None,
     gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
@@ -1052,7 +1052,7 @@ def study(
         raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
     if figures is not None:
         _check_study_figures(figures, output, db_path)
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
     _check_names(torque, opt)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)

@@ -289,9 +289,12 @@ def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budg
     from .optimizers import OPTIMIZERS
     from .torques import TORQUES
 
+    options = {k: v for k, v in (optimizer_options or {}).items() if v is not None}
+    if torque in TORQUES:  # the parameterisation's defaults for this optimiser, where not given
+        options = {**getattr(TORQUES[torque], "optimizer_defaults", {}).get(optimizer, {}), **options}
     return RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
                    seed=seed, budget=budget, torque_options=_accepted(TORQUES, torque, torque_options),
-                   optimizer_options=_accepted(OPTIMIZERS, optimizer, optimizer_options),
+                   optimizer_options=_accepted(OPTIMIZERS, optimizer, options),
                    gradient=gradient, **common)
 
 

@@ -24,6 +24,9 @@ class TorqueParameterisation(ABC):
     name: str = ""
     summary: str = ""
     n_params: int
+    # default options of optimisers on this parameterisation, {optimizer: {option: value}}
+    # (in the scaled parameters of ``scale``); an option given by the user wins
+    optimizer_defaults: dict = {}
 
     @abstractmethod
     def prepare(self, t: np.ndarray, target: np.ndarray, feedforward: bool) -> np.ndarray:

@@ -14,6 +14,9 @@ class CubicSplineTorque(TorqueParameterisation):
     not-a-knot cubic spline (as MATLAB's ``spline``) in between."""
 
     name = "cs"
+    # CMA-ES: steps of 5% of half the torque range; a population of 8 gives 25 generations in 200
+    # evaluations (median of 5 seeds, Table 2: 0.37 deg against 0.64 with cma's 0.1 and 11)
+    optimizer_defaults = {"cmaes": {"sigma0": 0.05, "popsize": 8}}
     summary = "cubic spline through the torque at --knots equally spaced instants (default 11)"
 
     def __init__(self, knots: int = 11):
