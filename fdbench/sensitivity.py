@@ -22,55 +22,57 @@ from .jit import njit
 def acceleration_jacobian(x, y, th, vx, vy, w, tau, consts, jac):
     """Partial derivatives of (x2'', y2'', theta'') of ``dynamics.accelerations`` with respect to
     (x2, y2, theta, x2', y2', theta', tau), written into jac, shape (3, 7) (SI units).
-    Zero where the leading matrix is singular (the accelerations are set to zero there)."""
+    Zero where the leading matrix is singular (the accelerations are set to zero there).
+    Straight-line code: with ax = nx / det, ay = ny / det (see ``accelerations``),
+    d ax = (d nx - ax d det) / det, and theta'' = tau / (alpha lc^2) + (c2 + ay) / lc."""
     a, L, load_y, alpha, A, B = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
     s, c = math.sin(th), math.cos(th)
     lc = L * c
-    for r in range(3):
-        for m in range(7):
-            jac[r, m] = 0.0
     if abs(c) < consts[6]:
+        for r in range(3):
+            for m in range(7):
+                jac[r, m] = 0.0
         return
     c1 = 2 * vx * vx + 2 * vy * vy + A * (2 * x * vx + 2 * y * vy) + B * (x * x + y * y - L * L)
     c2 = L * s * w * w + A * (vy - lc * w) + B * (y - L * s)
     b1 = -2 * alpha * x * c1
     b2 = load_y + tau / lc - 2 * alpha * y * c1
     det = a * a + 4 * alpha * a * (x * x + y * y)
-    ax = ((a + 4 * alpha * y * y) * b1 - 4 * alpha * x * y * b2) / det
-    ay = ((a + 4 * alpha * x * x) * b2 - 4 * alpha * x * y * b1) / det
-    # partials of c1 (index: 0 x, 1 y, 3 vx, 4 vy) and of c2 (1 y, 2 th, 4 vy, 5 w)
-    dc1 = (2 * A * vx + 2 * B * x, 2 * A * vy + 2 * B * y, 0.0, 4 * vx + 2 * A * x, 4 * vy + 2 * A * y, 0.0, 0.0)
-    dc2 = (0.0, B, L * c * w * w + A * L * s * w - B * L * c, 0.0, A, 2 * L * s * w - A * lc, 0.0)
-    for m in range(7):
-        db1 = -2 * alpha * x * dc1[m]
-        db2 = -2 * alpha * y * dc1[m]
-        ddet = 0.0
-        dnx = 0.0
-        dny = 0.0
-        if m == 0:
-            db1 += -2 * alpha * c1
-            ddet = 8 * alpha * a * x
-            dnx = -4 * alpha * y * b2
-            dny = 8 * alpha * x * b2 - 4 * alpha * y * b1
-        elif m == 1:
-            db2 += -2 * alpha * c1
-            ddet = 8 * alpha * a * y
-            dnx = 8 * alpha * y * b1 - 4 * alpha * x * b2
-            dny = -4 * alpha * x * b1
-        elif m == 2:
-            db2 += tau * L * s / (lc * lc)
-        elif m == 6:
-            db2 += 1.0 / lc
-        dnx += (a + 4 * alpha * y * y) * db1 - 4 * alpha * x * y * db2
-        dny += (a + 4 * alpha * x * x) * db2 - 4 * alpha * x * y * db1
-        dax = (dnx - ax * ddet) / det
-        day = (dny - ay * ddet) / det
-        dath = (dc2[m] + day) / lc
-        if m == 2:
-            dath += 2 * tau * L * s / (alpha * lc * lc * lc) + (c2 + ay) * L * s / (lc * lc)
-        elif m == 6:
-            dath += 1.0 / (alpha * lc * lc)
-        jac[0, m], jac[1, m], jac[2, m] = dax, day, dath
+    inv_det, inv_lc = 1.0 / det, 1.0 / lc
+    p1, p2, q = a + 4 * alpha * y * y, a + 4 * alpha * x * x, 4 * alpha * x * y
+    ax = (p1 * b1 - q * b2) * inv_det
+    ay = (p2 * b2 - q * b1) * inv_det
+    k = -2 * alpha
+    # c1's partials (x, y, vx, vy); c2's (y, theta, vy, theta')
+    c1x, c1y, c1vx, c1vy = 2 * A * vx + 2 * B * x, 2 * A * vy + 2 * B * y, 4 * vx + 2 * A * x, 4 * vy + 2 * A * y
+    c2th, c2w = L * c * w * w + A * L * s * w - B * L * c, 2 * L * s * w - A * lc
+    # x
+    b1m, b2m, ddet = k * c1 + k * x * c1x, k * y * c1x, 8 * alpha * a * x
+    dax = (p1 * b1m - q * b2m - 4 * alpha * y * b2 - ax * ddet) * inv_det
+    day = (p2 * b2m - q * b1m + 8 * alpha * x * b2 - 4 * alpha * y * b1 - ay * ddet) * inv_det
+    jac[0, 0], jac[1, 0], jac[2, 0] = dax, day, day * inv_lc
+    # y
+    b1m, b2m, ddet = k * x * c1y, k * c1 + k * y * c1y, 8 * alpha * a * y
+    dax = (p1 * b1m - q * b2m + 8 * alpha * y * b1 - 4 * alpha * x * b2 - ax * ddet) * inv_det
+    day = (p2 * b2m - q * b1m - 4 * alpha * x * b1 - ay * ddet) * inv_det
+    jac[0, 1], jac[1, 1], jac[2, 1] = dax, day, (B + day) * inv_lc
+    # theta (through tau / lc in b2, and lc, c2 in theta'')
+    b2m = tau * L * s * inv_lc * inv_lc
+    dax, day = -q * b2m * inv_det, p2 * b2m * inv_det
+    jac[0, 2], jac[1, 2] = dax, day
+    jac[2, 2] = (c2th + day) * inv_lc + 2 * tau * L * s / (alpha * lc * lc * lc) + (c2 + ay) * L * s * inv_lc * inv_lc
+    # x' and y'
+    b1m, b2m = k * x * c1vx, k * y * c1vx
+    day = (p2 * b2m - q * b1m) * inv_det
+    jac[0, 3], jac[1, 3], jac[2, 3] = (p1 * b1m - q * b2m) * inv_det, day, day * inv_lc
+    b1m, b2m = k * x * c1vy, k * y * c1vy
+    day = (p2 * b2m - q * b1m) * inv_det
+    jac[0, 4], jac[1, 4], jac[2, 4] = (p1 * b1m - q * b2m) * inv_det, day, (A + day) * inv_lc
+    # theta'
+    jac[0, 5], jac[1, 5], jac[2, 5] = 0.0, 0.0, c2w * inv_lc
+    # tau
+    dax, day = -q * inv_lc * inv_det, p2 * inv_lc * inv_det
+    jac[0, 6], jac[1, 6], jac[2, 6] = dax, day, day * inv_lc + 1.0 / (alpha * lc * lc)
 
 
 @njit
