@@ -18,7 +18,7 @@ from pathlib import Path
 
 # the method options of 'fdbench report' by default (its runs are stored under these settings)
 REPORT_TORQUE_OPTIONS = {"hidden": 4, "knots": 11, "terms": 4}
-REPORT_OPTIMIZER_OPTIONS = {"sigma0": 0.1, "popsize": None}
+REPORT_OPTIMIZER_OPTIONS = {"sigma0": None, "popsize": None}  # None: each torque's default
 
 
 def simulate(torque=None, **settings):

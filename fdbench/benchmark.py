@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .experiment import RunSpec, control_spec, optimize_spec
+from .experiment import RunSpec, control_spec, gradient_for, optimize_spec
 
 # The paper's published figures: (RMSE_rot deg, RMSE_torque N m, runtime s).
 PAPER_INVERSE_RUNTIME_S = 0.12
@@ -90,12 +90,13 @@ class Plan:
 
 
 def make_plan(cells, seeds=5, budget=200, control=True, kp=80.0, kd=0.3, torque_options=None,
-              optimizer_options=None, penalty_weight=1.0, **common) -> Plan:
+              optimizer_options=None, penalty_weight=1.0, gradient="fd", **common) -> Plan:
     control_run = control_spec(kp, kd, **common) if control else None
     specs = {
         cell: tuple(
             optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
-                          optimizer_options, penalty_weight=penalty_weight, **common)
+                          optimizer_options, penalty_weight=penalty_weight,
+                          gradient=gradient_for(cell.optimizer, gradient), **common)
             for seed in range(seeds)
         )
         for cell in cells

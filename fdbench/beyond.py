@@ -42,6 +42,28 @@ def beyond_methods(**common) -> list[Method]:
     ]
 
 
+EXACT_GRADIENT_SUMMARY = ("the paper's cell with the gradient computed exactly, by forward sensitivities of the "
+                          "RK4 simulation, instead of by finite differences; a simulation with its sensitivities "
+                          "counts as one evaluation of the budget; seed 0")
+
+
+def exact_gradient_methods(cells, budget, torque_options, optimizer_options, penalty_weight, **common) -> list[Method]:
+    """A row per gradient-based cell of ``cells`` (benchmark.Cell) run with ``--gradient exact``
+    (seed 0: one run, like the other rows of the table)."""
+    from .experiment import gradient_for, optimize_spec
+
+    methods = []
+    for cell in cells:
+        if gradient_for(cell.optimizer, "exact") != "exact":
+            continue
+        ff = " + ff" if cell.feedforward else ""
+        spec = optimize_spec(cell.torque, cell.optimizer, cell.feedforward, 0, budget, torque_options,
+                             optimizer_options, gradient="exact", penalty_weight=penalty_weight, **common)
+        methods.append(Method(f"{cell.torque.upper()} + {cell.optimizer}{ff}, exact gradient", EXACT_GRADIENT_SUMMARY,
+                              spec))
+    return methods
+
+
 def beyond_rows(methods: list[Method], runs: dict) -> list:
     """The report rows (``report.Row``, table "beyond") of the methods from their stored runs."""
     from .benchmark import summarise
@@ -63,7 +85,10 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     out = ["## Beyond the paper", "",
            "The methods the field uses today, on the same model, motion and indicators (one run each: "
            "they are deterministic; the paper has no figures for them):", ""]
-    out += [f"- {m.name}: {m.description}." for m in methods]
+    described = {}
+    for m in methods:  # one line per description (the exact-gradient rows share theirs)
+        described.setdefault(m.description, []).append(m.name)
+    out += [f"- {'; '.join(names)}: {description}." for description, names in described.items()]
     out += [""] + _table(rows, with_success=False)
     collocation = [r for r in rows if r.records[0].get("command") == "collocate"]
     if collocation:
@@ -88,7 +113,8 @@ def beyond_csv_rows(rows: list) -> list[list]:
     out = csv_rows(rows)
     for values, row in zip(out, rows):
         rec = row.records[0]
-        fixed = {"torque": rec.get("controller") or rec.get("command"), "feedforward": rec.get("feedforward"),
+        method = rec.get("torque") if rec.get("command") == "optimize" else rec.get("command")
+        fixed = {"torque": rec.get("controller") or method, "feedforward": rec.get("feedforward"),
                  "in_paper": False}
         for column, value in fixed.items():
             if column in CSV_COLUMNS:

@@ -227,8 +227,11 @@ Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (fo
 Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
 Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span (eq. 5: [0, 1] s).")]
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
-Sigma0 = Annotated[float, typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units.")]
-Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: cma's 4 + 3 ln n).")]
+Sigma0 = Annotated[Optional[float], typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units (default: per torque, cs 0.05, ann 0.2, pf 0.03).", show_default=False)]
+Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: per torque, cs and ann 8, pf cma's 4 + 3 ln n).")]
+MAX_THREADS = 1024
+Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads evaluating a CMA-ES population at once, in [1, {MAX_THREADS}] (default: the cores available); the numbers do not depend on it.", show_default=False)]
+Gradient = Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")]
 PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
 # Execution of many runs (report, study): where they run and how many at once.
 BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install 'fdbench\\[dask]').")]
@@ -742,6 +745,13 @@ def _collocation_torque_text(solution, spec) -> str:
     return csv_text(["t", "torque"], ([f"{t:.17g}", f"{q:.17g}"] for t, q in zip(half, torque)))
 
 
+def _check_gradient(gradient: str) -> None:
+    from .experiment import GRADIENTS
+
+    if gradient not in GRADIENTS:
+        raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+
+
 def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
     """Reject an out-of-range method option even when the chosen method does not use it
     (``--terms 0`` with ``--torque cs``): every registered class that takes it checks it."""
@@ -811,8 +821,10 @@ def optimize(
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
-    sigma0: Sigma0 = 0.1,
+    sigma0: Sigma0 = None,
     popsize: Popsize = None,
+    gradient: Gradient = "fd",
+    threads: Threads = None,
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -840,15 +852,22 @@ def optimize(
 
     _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db,
                    inputs=_spec_inputs(conditions, kinematics))
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
+    _check_gradient(gradient)
+    if threads is not None and not 1 <= threads <= MAX_THREADS:
+        raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
     spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
+        penalty_weight=penalty_weight, gradient=gradient, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
     _check_store(db)
+    if opt == "cmaes":
+        from .population import set_threads
+
+        set_threads(threads)
     with _progress(quiet, f"{torque} + {opt}") as progress:
         outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)
     if "hidden_fits" in outcome.extra:
@@ -890,8 +909,9 @@ def report(
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
-    sigma0: Sigma0 = 0.1,
+    sigma0: Sigma0 = None,
     popsize: Popsize = None,
+    gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -922,11 +942,12 @@ def report(
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control and not beyond:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
+    _check_gradient(gradient)
     plan = make_plan(
         cells, seeds, budget, control, kp, kd, torque_options=torque_options,
         optimizer_options=optimizer_options, penalty_weight=penalty_weight,
         **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
-    )
+    )  # Tables 2 and 3 keep the paper's finite differences; exact gradients go to "Beyond the paper"
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
         _validated(spec)
     from .store import open_store
@@ -937,6 +958,14 @@ def report(
         from .beyond import beyond_methods
 
         methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+    if gradient == "exact":
+        from .beyond import exact_gradient_methods
+
+        methods = (methods or []) + exact_gradient_methods(
+            plan.cells, budget, torque_options, optimizer_options, penalty_weight,
+            **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+        for method in methods:
+            _validated(method.spec)
     extra = [m.spec for m in methods] if methods else []
     runs = _run_specs(plan.all_specs() + extra, db_path, db is None, executor, rerun, quiet)
     from .report import build_rows
@@ -982,8 +1011,9 @@ def study(
     hidden: Hidden = "4",
     knots: Knots = 11,
     terms: Terms = 4,
-    sigma0: Sigma0 = 0.1,
+    sigma0: Sigma0 = None,
     popsize: Popsize = None,
+    gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
     kinematics: Kinematics = "paper",
     integrator: Integrator = "rk4",
@@ -1028,9 +1058,11 @@ def study(
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
+    _check_gradient(gradient)
     try:
         sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, budget, torque_options,
                                    optimizer_options, penalty_weight, param if kind == "mismatch" else None,
+                                   gradient=gradient,
                                    **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
     except ValueError as exc:
         raise BadInput(_with_option(str(exc))) from None
@@ -1091,7 +1123,7 @@ def _sweep_options(seeds, jobs, torques, optimizers, hidden, knots, terms, sigma
         raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
     if jobs is not None and not 1 <= jobs <= MAX_JOBS:
         raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
-    _check_finite(sigma0=sigma0, penalty_weight=penalty_weight)
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
     _check_names(torques, optimizers)
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}

@@ -239,6 +239,9 @@ def _local_worker_init(parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     die_with_parent(parent_pid)
+    from .population import set_threads
+
+    set_threads(1)  # the workers already share the cores: one thread each for population evaluation
 
 
 def die_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:

@@ -26,7 +26,7 @@ RECORD_FIELDS = (
     "command", "kinematics", "integrator", "dt", "torque", "optimizer", "feedforward",
     "kp", "kd", "seed", "budget", "rmse_rot_deg", "rmse_torque_nm", "runtime_s", "evaluations",
     "best_objective", "initial_objective", "t_end", "status", "message", "stop_reason", "max_violation", "n_params",
-    "torque_options", "optimizer_options", "alpha", "xi", "omega", "penalty_weight", "motion", "derivatives",
+    "torque_options", "optimizer_options", "gradient", "alpha", "xi", "omega", "penalty_weight", "motion", "derivatives",
     "noise_deg", "model", "plant", "spec_hash", "fdbench_version",
 )
 
@@ -67,6 +67,7 @@ class RunSpec:
     capture_hz: float = DEFAULT_CAPTURE_HZ  # the capture rate of a noisy copy of an analytic motion, Hz
     plant: tuple = ()  # (key, value) pairs changing the simulated body only
     model: tuple = ()  # (key, value) pairs changing the nominal model and the simulated body
+    gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
 
     def settings(self) -> Settings:
         """The simulation settings: the plant simulated, the nominal model that inverse dynamics
@@ -135,8 +136,11 @@ class RunSpec:
             options = dict(self.torque_options)
             if options.get("hidden") == "auto":
                 options.pop("hidden")
-            make_torque(self.torque, **options)
-            make_optimizer(self.optimizer, **dict(self.optimizer_options))
+            torque = make_torque(self.torque, **options)
+            optimizer = make_optimizer(self.optimizer, **dict(self.optimizer_options))
+            check_gradient(self.gradient, optimizer, torque, self.integrator)
+        elif self.gradient != "fd":
+            raise ValueError("--gradient applies to optimisations only")
         return self
 
     def as_dict(self) -> dict:
@@ -176,6 +180,30 @@ FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penal
                 "spline_lambda", "sample_dt", "noise_deg", "capture_hz")
 MAX_NOISE_DEG = 45.0
 MAX_CAPTURE_HZ = 100_000.0
+
+
+GRADIENTS = ("fd", "exact")
+
+
+def check_gradient(gradient, optimizer, torque, integrator) -> None:
+    """ValueError with a one-line message unless ``gradient`` suits the optimiser, the torque
+    parameterisation and the integrator (exact gradients: bfgs or lbfgsb, rk4, a torque with
+    d tau / d p)."""
+    if gradient not in GRADIENTS:
+        raise ValueError(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+    if gradient == "fd":
+        return
+    if not optimizer.uses_gradient:
+        from .optimizers import OPTIMIZERS
+
+        users = ", ".join(n for n, c in OPTIMIZERS.items() if getattr(c, "uses_gradient", False))
+        raise ValueError(f"--gradient exact needs a gradient-based optimiser ({users}), got {optimizer.name}")
+    if integrator != "rk4":
+        raise ValueError(f"--gradient exact needs --integrator rk4, got {integrator}")
+    from .torques.base import TorqueParameterisation
+
+    if type(torque).on_grid_jacobian is TorqueParameterisation.on_grid_jacobian:
+        raise ValueError(f"--gradient exact: torque {torque.name!r} gives no d tau / d p")
 
 
 def check_conditions(spec: "RunSpec") -> None:
@@ -227,7 +255,7 @@ def with_motion_file(spec: "RunSpec") -> "RunSpec":
 # fields a spec's hash leaves out while they hold these values (added after the first results schema)
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
                       "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
-                      "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": ()}
+                      "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd"}
 
 
 def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
@@ -254,15 +282,29 @@ def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max
 
 
 def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
-                  torque_options=None, optimizer_options=None, **common) -> RunSpec:
+                  torque_options=None, optimizer_options=None, gradient="fd", **common) -> RunSpec:
     """An optimisation spec keeping only the options its torque and optimiser accept, so that
-    the same run has the same hash whichever command asks for it."""
+    the same run has the same hash whichever command asks for it. ``gradient`` "exact" serves
+    gradient-based optimisers only (see ``gradient_for``)."""
     from .optimizers import OPTIMIZERS
     from .torques import TORQUES
 
+    options = {k: v for k, v in (optimizer_options or {}).items() if v is not None}
+    if torque in TORQUES:  # the parameterisation's defaults for this optimiser, where not given
+        options = {**getattr(TORQUES[torque], "optimizer_defaults", {}).get(optimizer, {}), **options}
     return RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
                    seed=seed, budget=budget, torque_options=_accepted(TORQUES, torque, torque_options),
-                   optimizer_options=_accepted(OPTIMIZERS, optimizer, optimizer_options), **common)
+                   optimizer_options=_accepted(OPTIMIZERS, optimizer, options),
+                   gradient=gradient, **common)
+
+
+def gradient_for(optimizer: str, gradient: str) -> str:
+    """The gradient option a sweep gives ``optimizer``: ``gradient`` for a gradient-based
+    optimiser, "fd" (the default, no gradient used) for the others."""
+    from .optimizers import OPTIMIZERS
+
+    uses = optimizer in OPTIMIZERS and getattr(OPTIMIZERS[optimizer], "uses_gradient", False)
+    return gradient if uses else "fd"
 
 
 def _accepted(registry, name, options) -> tuple:
@@ -400,10 +442,21 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
     from .problem import TrackingProblem
     from .torques import make_torque
 
+    from .torques import TORQUES
+
     settings = spec.settings()
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
     warm_up()
     optimizer.warm_up()
+    TORQUES[spec.torque].warm_up()
+    if spec.gradient == "exact":
+        from .gradient import warm_up as gradient_warm_up
+
+        gradient_warm_up()
+    if spec.optimizer == "cmaes" and settings.integrator == "rk4":
+        from .population import warm_up as population_warm_up
+
+        population_warm_up()
     if on_start:
         on_start(spec.budget)
     start = time.perf_counter()
@@ -417,7 +470,10 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
         torque_options["hidden"], extra["hidden_fits"] = select_hidden(inv.t, inv.torque)
     torque = make_torque(spec.torque, **torque_options)
     problem = TrackingProblem(torque, settings, spec.feedforward, spec.penalty_weight)
-    opt = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation)
+    gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
+    batch = problem.objectives_scaled if problem.batched else None
+    opt = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
+                             batch)
     params = opt.x * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - start
@@ -428,7 +484,7 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
         evaluations=opt.evaluations, best_objective=opt.fun, stop_reason=opt.stop_reason,
         n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
         torque_options=_options_text(sorted(torque_options.items())),
-        optimizer_options=_options_text(spec.optimizer_options),
+        optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
     )
     record["initial_objective"] = problem.objective(problem.p0)
     return RunOutcome(record, result, reference, opt.history, params, extra)

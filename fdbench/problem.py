@@ -36,10 +36,12 @@ class TrackingProblem:
         self.scale = np.asarray(torque.scale(), dtype=float)
         self.x0 = self.p0 / self.scale
         self._fast = False
+        self._jacobian, self._dtheta, self._population = None, None, None
         if settings.integrator == "rk4":
             n = steps(settings.dt, self.duration)
             half, _, _ = half_step_reference(n, settings.kinematics)
             self._on_grid = torque.on_grid(half)
+            self._jacobian = torque.on_grid_jacobian(half)  # d tau / d p for exact gradients, or None
             self._ff_half = np.array(self._ff(half)) if feedforward else np.zeros_like(half)
             self._fast = settings.motion.uniform and n % (len(self.inverse.t) - 1) == 0
             if self._fast:  # buffers for the kernel, reused by every evaluation
@@ -88,6 +90,10 @@ class TrackingProblem:
         states, qdd, applied = self._buffers
         _, done, _ = dynamics.rk4(initial_state(settings.kinematics, settings.model), self.duration / self._n, self._n,
                                   tau, ref_th, ref_w, 0.0, 0.0, constants(settings), states, qdd, applied)
+        return self._objective_of_states(states, done)
+
+    def _objective_of_states(self, states, done: int) -> float:
+        """Eq. 18 from the kernel's states, shape (n+1, 6), filled up to step ``done``."""
         theta = states[: done + 1 : self._every, 2]
         error = np.degrees(theta - self.inverse.theta[: len(theta)])
         rmse = float(np.sqrt(np.mean(error**2)))
@@ -97,6 +103,50 @@ class TrackingProblem:
 
     def objective_scaled(self, x) -> float:
         return self.objective(np.asarray(x) * self.scale)
+
+    @property
+    def batched(self) -> bool:
+        """True when ``objectives`` runs a population in one compiled call (RK4 on the samples'
+        grid); else it evaluates the candidates one by one."""
+        return self._fast
+
+    def objectives(self, P) -> np.ndarray:
+        """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the simulations in one
+        parallel compiled call (``population.rk4_population``). Equal, to the last bit, to
+        ``objective`` of each row."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        if not self._fast:
+            return np.array([self.objective(p) for p in P])
+        from .population import rk4_population
+
+        settings, n = self.settings, self._n
+        _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+        lam = len(P)
+        with np.errstate(all="ignore"):
+            tau = np.empty((lam, 2 * n + 1))
+            for c in range(lam):  # row by row: the same arithmetic as a single evaluation
+                tau[c] = self._ff_half + self._on_grid(P[c])
+        if self._population is None or self._population[0].shape[0] < lam:
+            self._population = (np.empty((lam, n + 1, 6)), np.empty((lam, n + 1, 3)), np.empty((lam, n + 1)))
+        states, qdd, applied = (buffer[:lam] for buffer in self._population)
+        done = np.empty(lam, dtype=np.int64)
+        rk4_population(initial_state(settings.kinematics, settings.model), self.duration / n, n, tau, ref_th, ref_w,
+                       constants(settings), states, qdd, applied, done)
+        return np.array([self._objective_of_states(states[c], int(done[c])) for c in range(lam)])
+
+    def objectives_scaled(self, X) -> np.ndarray:
+        return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
+
+    def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
+        """Eq. 18 and its exact gradient with respect to p, shape (n_params,) (see ``gradient``)."""
+        from .gradient import value_and_gradient
+
+        return value_and_gradient(self, np.asarray(p, dtype=float))
+
+    def value_and_gradient_scaled(self, x) -> tuple[float, np.ndarray]:
+        """``value_and_gradient`` on the scaled parameters x = p / scale."""
+        f, g = self.value_and_gradient(np.asarray(x, dtype=float) * self.scale)
+        return f, g * self.scale
 
     def indicators(self, result: SimulationResult) -> dict:
         return {

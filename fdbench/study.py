@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .benchmark import INDICATORS, Cell, succeeded
-from .experiment import RunSpec, control_spec, optimize_spec
+from .experiment import RunSpec, control_spec, gradient_for, optimize_spec
 
 KINDS = ("noise", "mismatch")
 MAX_LEVELS = 50
@@ -64,7 +64,7 @@ def method_label(cell: Cell | None) -> str:
 
 def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, kd: float, budget: int,
                torque_options: dict, optimizer_options: dict, penalty_weight: float, param: str | None = None,
-               **common) -> Sweep:
+               gradient: str = "fd", **common) -> Sweep:
     """The specs of a study: for each level, PD control (one run per seed when the runs differ by
     their noise, else one) and each optimisation cell (seeds 0..seeds-1)."""
     from .model import forearm_with
@@ -90,10 +90,11 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
             specs[(label, level)] = runs
             methods.append(label)
         for cell in cells:
-            label = method_label(cell)
+            label = method_label(cell) + (", exact gradient" if gradient_for(cell.optimizer, gradient) == "exact" else "")
             specs[(label, level)] = tuple(
                 optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
-                              optimizer_options, penalty_weight=penalty_weight, **base)
+                              optimizer_options, penalty_weight=penalty_weight,
+                              gradient=gradient_for(cell.optimizer, gradient), **base)
                 for seed in range(seeds))
             methods.append(label)
     return Sweep(kind, param, tuple(levels), tuple(dict.fromkeys(methods)), specs)

@@ -1,8 +1,10 @@
 """The optimiser interface, its registry, and the evaluation budget every optimiser obeys.
 
-An optimiser sees only an objective f(x) -> float, a start x0 (shape (n,)), a budget of
-objective evaluations, a seed and its own options. ``Budgeted`` counts every call, gradient
-evaluations by finite differences included, stops the optimiser by raising ``BudgetExhausted``
+An optimiser sees only an objective f(x) -> float (and, for a gradient-based optimiser asked
+for exact gradients, a value-and-gradient function x -> (f, df/dx)), a start x0 (shape (n,)), a
+budget of objective evaluations, a seed and its own options. ``Budgeted`` counts every call,
+gradient evaluations by finite differences included (one value-and-gradient pass counts as one
+evaluation: it is one simulation with its sensitivities), stops the optimiser by raising ``BudgetExhausted``
 when the budget is spent, and remembers the best point evaluated, which is the result whatever
 the optimiser itself reports.
 """
@@ -39,8 +41,10 @@ class Budgeted:
 
     ``on_evaluation(count, best)`` is called after every evaluation (progress display)."""
 
-    def __init__(self, objective: Objective, budget: int, on_evaluation=None):
+    def __init__(self, objective: Objective, budget: int, on_evaluation=None, gradient=None, batch=None):
         self.objective, self.budget, self.on_evaluation = objective, budget, on_evaluation
+        self.gradient = gradient  # x -> (f, df/dx, shape (n,)), or None
+        self.batch = batch  # X, shape (lam, n) -> f of each row, shape (lam,), or None
         self.count = 0
         self.best_x: np.ndarray | None = None
         self.best_f = math.inf
@@ -54,7 +58,32 @@ class Budgeted:
         if self.count >= self.budget:
             raise BudgetExhausted
         x = np.array(x, dtype=float)
-        f = float(self.objective(x))
+        return self._record(x, float(self.objective(x)))
+
+    def many(self, xs) -> list[float]:
+        """f of each of the points xs (a population), in order, counted as len(xs) evaluations;
+        the same numbers and the same bookkeeping as calling f on each in turn, in one call of
+        ``batch`` when given. Evaluates at most the remaining budget's worth of points."""
+        if self.count >= self.budget:
+            raise BudgetExhausted
+        xs = [np.array(x, dtype=float) for x in xs][: self.remaining]
+        if self.batch is None:
+            return [self(x) for x in xs]
+        values = self.batch(np.array(xs))
+        return [self._record(x, float(f)) for x, f in zip(xs, values)]
+
+    def value_and_gradient(self, x) -> tuple[float, np.ndarray]:
+        """f(x) and its gradient, shape (n,), counted as one evaluation (needs ``gradient``);
+        where f is not finite the gradient is zero."""
+        if self.count >= self.budget:
+            raise BudgetExhausted
+        x = np.array(x, dtype=float)
+        f, g = self.gradient(x)
+        f = self._record(x, float(f))
+        g = np.array(g, dtype=float)
+        return f, (g if math.isfinite(f) and np.all(np.isfinite(g)) else np.zeros_like(x))
+
+    def _record(self, x, f) -> float:
         if not math.isfinite(f):
             f = math.inf
         self.count += 1
@@ -77,16 +106,24 @@ class Optimizer(ABC):
 
     name: str = ""
     summary: str = ""
+    uses_gradient: bool = False  # True: run() uses f.value_and_gradient when f.gradient is given
 
     @abstractmethod
     def run(self, f: Budgeted, x0: np.ndarray, seed: int) -> str:
         """Minimise f from x0 until it converges or raises BudgetExhausted; return a stop reason
         (used when the budget is not spent)."""
 
-    def minimize(self, objective: Objective, x0, budget: int, seed: int = 0, on_evaluation=None) -> OptimizationResult:
+    def minimize(self, objective: Objective, x0, budget: int, seed: int = 0, on_evaluation=None,
+                 gradient=None, batch=None) -> OptimizationResult:
+        """Minimise objective from x0 within budget evaluations. ``gradient``: x -> (f(x), df/dx),
+        the exact gradient, used by gradient-based optimisers instead of finite differences.
+        ``batch``: X (lam, n) -> f of each row, the same numbers as ``objective`` row by row,
+        used by population-based optimisers to evaluate a generation in one call."""
         if budget < 1:
             raise ValueError(f"budget must be >= 1, got {budget}")
-        f = Budgeted(objective, budget, on_evaluation)
+        if gradient is not None and not self.uses_gradient:
+            raise ValueError(f"optimizer {self.name!r} uses no gradient; exact gradients serve bfgs and lbfgsb")
+        f = Budgeted(objective, budget, on_evaluation, gradient, batch)
         x0 = np.asarray(x0, dtype=float)
         try:
             reason = self.run(f, x0, seed)

@@ -39,10 +39,9 @@ class CMAES(Optimizer):
             while not es.stop():
                 candidates = es.ask()
                 if f.remaining < len(candidates):
-                    for x in candidates[: f.remaining]:
-                        f(x)
+                    f.many(candidates)  # the budget's last evaluations
                     break
-                es.tell(candidates, [f(x) for x in candidates])
+                es.tell(candidates, f.many(candidates))  # one generation, in one call where batched
         except ValueError as exc:  # cma refusing its own state: the best point so far is the result
             return f"cma stopped: {' '.join(str(exc).split())}"
         stop = es.stop()

@@ -15,10 +15,17 @@ class ScipyMinimize(Optimizer):
     method = ""
     options: dict = {}
 
+    def warm_up(self):
+        import scipy.optimize  # noqa: F401  (its import is not part of the runtime)
+
     def run(self, f: Budgeted, x0, seed):
         from scipy.optimize import minimize
 
-        result = minimize(f, np.asarray(x0, dtype=float), method=self.method,
+        if self.uses_gradient and f.gradient is not None:  # exact gradients: one pass per evaluation
+            fun, jac = f.value_and_gradient, True
+        else:
+            fun, jac = f, None
+        result = minimize(fun, np.asarray(x0, dtype=float), method=self.method, jac=jac,
                           options={"maxiter": 100 * f.budget, **self.options})
         return str(result.message)
 
@@ -26,15 +33,17 @@ class ScipyMinimize(Optimizer):
 @OPTIMIZERS.register("bfgs")
 class BFGS(ScipyMinimize):
     name = "bfgs"
-    summary = "BFGS quasi-Newton (scipy), gradients by forward differences"
+    summary = "BFGS quasi-Newton (scipy), gradients by forward differences or exact (--gradient exact)"
     method = "BFGS"
+    uses_gradient = True
 
 
 @OPTIMIZERS.register("lbfgsb")
 class LBFGSB(ScipyMinimize):
     name = "lbfgsb"
-    summary = "L-BFGS-B limited-memory quasi-Newton (scipy), gradients by forward differences"
+    summary = "L-BFGS-B limited-memory quasi-Newton (scipy), gradients by forward differences or exact (--gradient exact)"
     method = "L-BFGS-B"
+    uses_gradient = True
     options = {"maxfun": 10**9}
 
 

@@ -16,6 +16,7 @@ from .base import TORQUES, TorqueParameterisation, check_count
 PRETRAIN_SEED = 0  # the pre-training's restarts are drawn from this fixed seed
 PRETRAIN_RESTARTS = 6
 AUTO_MAX_HIDDEN = 10
+OUTPUT_SCALE = 0.3  # typical magnitude of the output weights and bias (scaled units), see AnnTorque.scale
 AUTO_TOLERANCE = 1e-3  # fit RMSE / torque range that counts as good enough for --hidden auto
 
 
@@ -78,6 +79,8 @@ def select_hidden(t, target, max_hidden=AUTO_MAX_HIDDEN, tolerance=AUTO_TOLERANC
 @TORQUES.register("ann")
 class AnnTorque(TorqueParameterisation):
     name = "ann"
+    # CMA-ES in the scaling of ``scale``: steps of 0.2 on the hidden layer, 0.06 on the output
+    optimizer_defaults = {"cmaes": {"sigma0": 0.2, "popsize": 8}}
     summary = "neural network, one hidden layer of --hidden tanh neurons (default 4), 3N+1 parameters"
 
     def __init__(self, hidden: int = 4):
@@ -90,6 +93,10 @@ class AnnTorque(TorqueParameterisation):
     def _scaling(self, target):
         lo, hi = float(np.min(target)), float(np.max(target))
         return (lo + hi) / 2, max((hi - lo) / 2, 1e-9)
+
+    @classmethod
+    def warm_up(cls):
+        import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
 
     def prepare(self, t, target, feedforward):
         t, target = np.asarray(t, dtype=float), np.asarray(target, dtype=float)
@@ -120,3 +127,14 @@ class AnnTorque(TorqueParameterisation):
             return self.offset + self.span * (hidden @ p[2 * n_h : 3 * n_h] + p[3 * n_h])
 
         return evaluate
+
+    def scale(self):
+        """Typical magnitudes: 1 for the hidden layer's weights and biases (scaled input), 0.3 for
+        the output weights and bias (scaled output; a change of 0.3 in one output weight moves the
+        torque by up to 30% of its half range, so the output layer gets the finer steps)."""
+        return np.concatenate([np.ones(2 * self.hidden), np.full(self.hidden + 1, OUTPUT_SCALE)])
+
+    def on_grid_jacobian(self, t):
+        x = 2 * np.asarray(t, dtype=float) / self.duration - 1
+        n_h = self.hidden
+        return lambda p: self.span * _residual_jacobian(np.asarray(p, dtype=float), x, n_h)

@@ -24,6 +24,9 @@ class TorqueParameterisation(ABC):
     name: str = ""
     summary: str = ""
     n_params: int
+    # default options of optimisers on this parameterisation, {optimizer: {option: value}}
+    # (in the scaled parameters of ``scale``); an option given by the user wins
+    optimizer_defaults: dict = {}
 
     @abstractmethod
     def prepare(self, t: np.ndarray, target: np.ndarray, feedforward: bool) -> np.ndarray:
@@ -42,6 +45,15 @@ class TorqueParameterisation(ABC):
     def on_grid(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """A fast evaluator p -> torque on the fixed times t (override to precompute)."""
         return lambda p: self.evaluate(p, t)
+
+    @classmethod
+    def warm_up(cls) -> None:
+        """Import what the parameterisation needs, so that a run's timing excludes start-up costs."""
+
+    def on_grid_jacobian(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray] | None:
+        """An evaluator p -> d torque / d p on the fixed times t, shape (n, n_params) (N m per
+        parameter unit), for exact gradients; None where the parameterisation gives none."""
+        return None
 
 
 TORQUES: Registry[type[TorqueParameterisation]] = Registry("torque")

@@ -14,6 +14,9 @@ class CubicSplineTorque(TorqueParameterisation):
     not-a-knot cubic spline (as MATLAB's ``spline``) in between."""
 
     name = "cs"
+    # CMA-ES: steps of 5% of half the torque range; a population of 8 gives 25 generations in 200
+    # evaluations (median of 5 seeds, Table 2: 0.37 deg against 0.64 with cma's 0.1 and 11)
+    optimizer_defaults = {"cmaes": {"sigma0": 0.05, "popsize": 8}}
     summary = "cubic spline through the torque at --knots equally spaced instants (default 11)"
 
     def __init__(self, knots: int = 11):
@@ -21,6 +24,10 @@ class CubicSplineTorque(TorqueParameterisation):
         self.n_params = self.knots
         self.t_knots = np.linspace(0.0, 1.0, self.knots)
         self._scale = 1.0
+
+    @classmethod
+    def warm_up(cls):
+        import scipy.interpolate  # noqa: F401  (its import is not part of a run's runtime)
 
     def prepare(self, t, target, feedforward):
         self.t_knots = np.linspace(0.0, float(t[-1]) if t[-1] > 0 else 1.0, self.knots)
@@ -43,6 +50,10 @@ class CubicSplineTorque(TorqueParameterisation):
     def on_grid(self, t):
         basis = np.ascontiguousarray(self.basis(t))
         return lambda p: basis @ p
+
+    def on_grid_jacobian(self, t):
+        basis = np.ascontiguousarray(self.basis(t))  # the spline is linear in p: a constant Jacobian
+        return lambda p: basis
 
     def scale(self):
         return np.full(self.n_params, self._scale)

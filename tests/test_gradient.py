@@ -1,0 +1,121 @@
+"""Exact gradients (forward sensitivities of the RK4 map) against central differences."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from typer.testing import CliRunner
+
+from fdbench.cli import app
+from fdbench.dynamics import accelerations, kernel_constants
+from fdbench.experiment import optimize_spec
+from fdbench.model import Forearm, Penalty
+from fdbench.optimizers import make_optimizer
+from fdbench.problem import TrackingProblem
+from fdbench.sensitivity import acceleration_jacobian
+from fdbench.torques import make_torque
+
+CONSTS = kernel_constants(Forearm(), Penalty())
+
+
+def richardson(f, x, h=1e-3):
+    """Central differences with one Richardson extrapolation (error O(h^4)), shape (n,)."""
+    def cd(step):
+        return np.array([(f(x + step * e) - f(x - step * e)) / (2 * step) for e in np.eye(len(x))])
+    return (4 * cd(h / 2) - cd(h)) / 3
+
+
+@settings(max_examples=200, deadline=None)
+@given(th=st.floats(-1.4, 1.4), w=st.floats(-10, 10), vx=st.floats(-1, 1), vy=st.floats(-1, 1),
+       dx=st.floats(-1e-4, 1e-4), dy=st.floats(-1e-4, 1e-4), tau=st.floats(-20, 20))
+def test_acceleration_jacobian_matches_the_complex_step_derivative(th, w, vx, vy, dx, dy, tau):
+    """The complex step Im f(z + i h e_m) / h has no subtractive cancellation (alpha = 1e7 makes
+    real differences too noisy here): a reference accurate to rounding."""
+    import cmath
+
+    import fdbench.dynamics as dynamics
+
+    L = CONSTS[1]
+    z = np.array([L * np.cos(th) + dx, L * np.sin(th) + dy, th, vx, vy, w, tau])
+    jac = np.empty((3, 7))
+    acceleration_jacobian(*z, CONSTS, jac)
+    h = 1e-30
+    real_math = dynamics.math
+    dynamics.math = cmath  # the kernel's Python source, run on complex numbers
+    try:
+        for m in range(7):
+            args = z.astype(complex)
+            args[m] += 1j * h
+            reference = np.array(accelerations.py_func(*args, CONSTS)[:3]).imag / h
+            assert np.allclose(jac[:, m], reference, rtol=1e-6, atol=1e-7 * (np.max(np.abs(jac)) + 1)), m
+    finally:
+        dynamics.math = real_math
+
+
+@pytest.mark.parametrize("torque", ["cs", "pf", "ann"])
+@pytest.mark.parametrize("feedforward", [False, True])
+def test_gradient_matches_central_differences(torque, feedforward):
+    problem = TrackingProblem(make_torque(torque), feedforward=feedforward)
+    x = problem.x0 + 0.01 * np.random.default_rng(1).standard_normal(problem.n_params)
+    f, g = problem.value_and_gradient_scaled(x)
+    assert f == problem.objective_scaled(x)  # the same simulation, to the last bit
+    assert problem.simulate(x * problem.scale).success
+    fd = richardson(problem.objective_scaled, x)
+    assert np.max(np.abs(g - fd)) / np.max(np.abs(fd)) < 1e-6
+
+
+def test_failing_simulation_gradient_is_the_rmse_gradient_over_the_samples_reached():
+    problem = TrackingProblem(make_torque("cs"), feedforward=True)
+    x = np.linspace(2.5, 3.5, problem.n_params)  # a torque that drives theta to pi/2 early
+    result = problem.simulate(x * problem.scale)
+    assert not result.success and 0 < result.t_end < 1
+    f, g = problem.value_and_gradient_scaled(x)
+    assert f == problem.objective_scaled(x)
+    penalty = 1.0 - result.t_end
+    assert f > penalty and np.any(g != 0)
+    h = 1e-4  # small enough that the failure stays in the same step: the penalty term is constant
+    for e in np.eye(problem.n_params)[:: 3]:
+        assert problem.simulate((x + h * e) * problem.scale).t_end == result.t_end
+    fd = richardson(problem.objective_scaled, x, h)
+    # close to the singular leading matrix the differences are noisier than where the run is smooth
+    assert np.max(np.abs(g - fd)) / np.max(np.abs(fd)) < 1e-5
+
+
+def test_a_value_and_gradient_pass_counts_as_one_evaluation():
+    calls = []
+
+    def value_and_gradient(x):
+        calls.append(1)
+        return float(x @ x), 2 * x
+
+    for name in ("bfgs", "lbfgsb"):
+        calls.clear()
+        result = make_optimizer(name).minimize(lambda x: float(x @ x), np.ones(3), 7, gradient=value_and_gradient)
+        assert result.evaluations == len(calls) <= 7
+        assert result.fun < 1e-12  # a quadratic with its exact gradient: found at once
+
+
+def test_exact_gradient_beats_finite_differences_on_the_spline():
+    from fdbench.experiment import run
+
+    exact = run(optimize_spec("cs", "bfgs", budget=200, gradient="exact")).record
+    fd = run(optimize_spec("cs", "bfgs", budget=200)).record
+    assert exact["evaluations"] <= 200 and exact["gradient"] == "exact"
+    assert exact["rmse_rot_deg"] <= 0.005 < fd["rmse_rot_deg"]
+
+
+def test_exact_gradient_runs_hash_apart_and_default_runs_keep_their_hash():
+    default = optimize_spec("cs", "bfgs")
+    assert "gradient" not in default.canonical()
+    assert optimize_spec("cs", "bfgs", gradient="exact").hash() != default.hash()
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--opt", "cmaes", "--gradient", "exact"], "gradient-based"),
+    (["--gradient", "sometimes"], "--gradient must be one of fd, exact"),
+    (["--gradient", "exact", "--integrator", "rk45"], "needs --integrator rk4"),
+])
+def test_bad_gradient_options_are_one_line_errors(args, words):
+    result = CliRunner().invoke(app, ["optimize", *args])
+    assert result.exit_code == 2
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and words in lines[0]
