@@ -1,0 +1,150 @@
+"""Inverse and forward dynamics of the two-segment arm on a desired joint motion: the arm's
+counterparts of ``fdbench.inverse`` and ``fdbench.integrate`` (compiled fixed-step RK4, torques
+and references on the half-step grid, per-joint PD feedback plus feedforward).
+
+A simulation never raises on a physical failure: it stops where it cannot go on and says why in
+``status`` (``fdbench.integrate.Status``); ``t_end`` is the time reached.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..integrate import Status, steps
+from ..model import Penalty
+from .arm2 import Arm2
+from .arm2_motion import JointMotion, as_joint_motion
+
+
+@dataclass(frozen=True)
+class ArmInverse:
+    """Histories on the time grid ``t`` (s): angles (rad), velocities (rad/s), accelerations
+    (rad/s^2) and joint torques (N m), each of shape (n, 2) [shoulder, elbow]."""
+
+    t: np.ndarray
+    angles: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    torque: np.ndarray
+    motion: str
+
+
+def inverse_dynamics(t=None, model: Arm2 = Arm2(), motion: str | JointMotion = "reach") -> ArmInverse:
+    """The joint torques of ``motion`` at times t (s) (default: the motion's samples)."""
+    motion = as_joint_motion(motion)
+    t = motion.samples if t is None else np.asarray(t, dtype=float)
+    z, w, dw = motion(t)
+    return ArmInverse(t, z, w, dw, model.joint_torques(z, w, dw), motion.name)
+
+
+@dataclass
+class ArmSimulation:
+    """A forward simulation on the motion's samples; histories of shape (n, 6) (q, q') or (n, 2)
+    (joint angles, torques); samples after ``t_end`` are NaN."""
+
+    t: np.ndarray  # s
+    q: np.ndarray  # [x1, y1, x2, y2 (m), shoulder, elbow (rad)]
+    qd: np.ndarray  # their derivatives, m/s and rad/s
+    torque: np.ndarray  # total applied joint torques, N m
+    t_end: float  # s
+    status: Status
+    max_violation: float  # max |Phi_i| reached, m^2 or m
+    runtime_s: float = 0.0
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Joint angles [shoulder, elbow] (rad), shape (n, 2)."""
+        return self.q[:, 4:6]
+
+    @property
+    def reached(self) -> np.ndarray:
+        return np.isfinite(self.q[:, 4])
+
+    @property
+    def success(self) -> bool:
+        return self.status is Status.SUCCESS
+
+
+def initial_state(model: Arm2, motion: JointMotion) -> np.ndarray:
+    """[q, q'] on the desired motion at t = 0, shape (12,)."""
+    z, w, dw = motion(np.array(0.0))
+    q, qd, _ = model.coordinates(z, w, dw)
+    return np.concatenate([q, qd])
+
+
+def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", kp=0.0, kd=0.0, *,
+             penalty: Penalty = Penalty(), dt: float = 1e-3, start=None) -> ArmSimulation:
+    """Forward dynamics over the motion's span driven by the feedforward ``torque`` plus PD
+    feedback of each joint towards the desired motion.
+
+    torque: a function of times (s), shape (k,) -> joint torques (N m), shape (k, 2), or None for
+    zero. kp (N m/rad), kd (N m s/rad): one number for both joints or one per joint (zero: open
+    loop). ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0)."""
+    from . import arm2_kernels as kernels
+
+    motion = as_joint_motion(motion)
+    began = time.perf_counter()
+    n = steps(dt, motion.duration)
+    half = np.linspace(0.0, motion.duration, 2 * n + 1)
+    ref, ref_w, _ = motion(half)
+    tau = np.zeros((2 * n + 1, 2)) if torque is None else np.array(torque(half), dtype=float).reshape(2 * n + 1, 2)
+    kp, kd = (np.broadcast_to(np.asarray(g, dtype=float), (2,)).copy() for g in (kp, kd))
+    y0 = initial_state(model, motion) if start is None else np.array(start, dtype=float)
+    if y0.shape != (12,) or not np.all(np.isfinite(y0)):
+        raise ValueError(f"the initial state must be 12 finite numbers [q, q'], got {y0}")
+    states, qdd, applied = np.full((n + 1, 12), np.nan), np.full((n + 1, 6), np.nan), np.full((n + 1, 2), np.nan)
+    code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, np.ascontiguousarray(ref),
+                                          np.ascontiguousarray(ref_w), kp, kd,
+                                          kernels.kernel_constants(model, penalty), states, qdd, applied)
+    grid = np.linspace(0.0, motion.duration, n + 1)
+    ts = motion.samples
+    y = _hermite(grid, states, qdd, done, ts)
+    tau_s = np.stack([np.interp(ts, grid[: done + 1], applied[: done + 1, j], right=np.nan) for j in range(2)], -1)
+    status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
+    return ArmSimulation(ts, y[:, :6], y[:, 6:], tau_s, done * motion.duration / n, status, float(max_viol),
+                         time.perf_counter() - began)
+
+
+def _hermite(grid, states, qdd, done, ts) -> np.ndarray:
+    """States on the integrator grid -> times ts (cubic Hermite between steps), NaN beyond step
+    ``done``; shape (len(ts), 12)."""
+    out = np.full((len(ts), states.shape[1]), np.nan)
+    inside = ts <= grid[done] + 1e-12
+    if done == 0:
+        out[inside] = states[0]
+        return out
+    i = np.clip(np.searchsorted(grid, ts[inside], side="right") - 1, 0, done - 1)
+    h = grid[1] - grid[0]
+    s = ((ts[inside] - grid[i]) / h)[:, None]
+    rate = np.concatenate([states[:, 6:], qdd], axis=1)  # d/dt of the state
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    out[inside] = h00 * states[i] + h10 * h * rate[i] + h01 * states[i + 1] + h11 * h * rate[i + 1]
+    return out
+
+
+def feedforward(model: Arm2 = Arm2(), motion: str | JointMotion = "reach"):
+    """The inverse-dynamics joint torques of ``model`` on ``motion`` as a torque function."""
+    motion = as_joint_motion(motion)
+    return lambda t: inverse_dynamics(t, model, motion).torque
+
+
+def rmse_deg(result: ArmSimulation, desired: np.ndarray) -> tuple[float, np.ndarray]:
+    """RMSE (deg) of the joint angles against ``desired`` (rad, shape (n, 2)) over the samples
+    reached: over all joints and samples, and per joint (shape (2,))."""
+    reached = result.reached
+    if not reached.any():
+        return float("nan"), np.full(2, np.nan)
+    error = np.degrees(result.angles[reached] - desired[reached])
+    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+
+
+def rmse_torque_nm(result: ArmSimulation, torque: np.ndarray) -> tuple[float, np.ndarray]:
+    """RMSE (N m) of the applied joint torques against ``torque`` (shape (n, 2)), overall and per joint."""
+    reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
+    if not reached.any():
+        return float("nan"), np.full(2, np.nan)
+    error = result.torque[reached] - torque[reached]
+    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
