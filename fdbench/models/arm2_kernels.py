@@ -3,7 +3,7 @@
 The leading matrix M + alpha Phi_q^T Phi_q is 6x6, but its angle rows hold no mass: they say that
 the multipliers of the angle constraints are lambda_3 = -(tau_s - tau_e) / (L01 cos s) and
 lambda_4 = -tau_e / (L12 cos(s + e)). With them known, the point accelerations solve a 4x4
-symmetric positive definite system (Cholesky below), and the angle accelerations follow from the
+symmetric positive definite system (an L D L^T factorisation below), and the angle accelerations follow from the
 angle constraints' rows. This is the forearm kernel's elimination (``fdbench.dynamics``) once per
 segment, and gives the same numbers as a dense solve of eq. 12.
 
@@ -53,8 +53,9 @@ def accelerations(y, tau_s, tau_e, consts, out):
     c2 = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - L12 * L12)
     c3 = L01 * ss * ws * ws + txo * (vy1 - L01 * cs * ws) + om2 * (y1 - L01 * ss)
     c4 = L12 * sa * wa * wa + txo * (dvy - L12 * ca * wa) + om2 * (dy - L12 * sa)
-    lam3 = -(tau_s - tau_e) / (L01 * cs)
-    lam4 = -tau_e / (L12 * ca)
+    ics, ica = 1.0 / (L01 * cs), 1.0 / (L12 * ca)
+    lam3 = -(tau_s - tau_e) * ics
+    lam4 = -tau_e * ica
     # the 4x4 system of the points, A = M_p + alpha (J1^T J1 + J2^T J2), J1 = 2 [x1, y1, 0, 0],
     # J2 = 2 [-dx, -dy, dx, dy]; lower triangle only
     p, r = 4 * alpha, 2 * alpha
@@ -72,27 +73,28 @@ def accelerations(y, tau_s, tau_e, consts, out):
     b1 = consts[5] - r * (y1 * c1 - dy * c2) - lam3 + lam4
     b2 = -r * dx * c2
     b3 = consts[6] - r * dy * c2 - lam4
-    # Cholesky A = L L^T
-    l00 = math.sqrt(a00)
-    l10 = a10 / l00
-    l20 = a20 / l00
-    l30 = a30 / l00
-    l11 = math.sqrt(a11 - l10 * l10)
-    l21 = (a21 - l20 * l10) / l11
-    l31 = (a31 - l30 * l10) / l11
-    l22 = math.sqrt(a22 - l20 * l20 - l21 * l21)
-    l32 = (a32 - l30 * l20 - l31 * l21) / l22
-    l33 = math.sqrt(a33 - l30 * l30 - l31 * l31 - l32 * l32)
-    z0 = b0 / l00
-    z1 = (b1 - l10 * z0) / l11
-    z2 = (b2 - l20 * z0 - l21 * z1) / l22
-    z3 = (b3 - l30 * z0 - l31 * z1 - l32 * z2) / l33
-    u3 = z3 / l33
-    u2 = (z2 - l32 * u3) / l22
-    u1 = (z1 - l21 * u2 - l31 * u3) / l11
-    u0 = (z0 - l10 * u1 - l20 * u2 - l30 * u3) / l00
-    dws = (u1 - lam3 / alpha + c3) / (L01 * cs)
-    dwa = (u3 - u1 - lam4 / alpha + c4) / (L12 * ca)
+    # A = L D L^T (L unit lower triangular), with the reciprocals of D: four divisions in all
+    d0 = a00
+    i0 = 1.0 / d0
+    l10, l20, l30 = a10 * i0, a20 * i0, a30 * i0
+    d1 = a11 - l10 * l10 * d0
+    i1 = 1.0 / d1
+    l21 = (a21 - l20 * l10 * d0) * i1
+    l31 = (a31 - l30 * l10 * d0) * i1
+    d2 = a22 - l20 * l20 * d0 - l21 * l21 * d1
+    i2 = 1.0 / d2
+    l32 = (a32 - l30 * l20 * d0 - l31 * l21 * d1) * i2
+    d3 = a33 - l30 * l30 * d0 - l31 * l31 * d1 - l32 * l32 * d2
+    z0 = b0
+    z1 = b1 - l10 * z0
+    z2 = b2 - l20 * z0 - l21 * z1
+    z3 = b3 - l30 * z0 - l31 * z1 - l32 * z2
+    u3 = z3 / d3
+    u2 = z2 * i2 - l32 * u3
+    u1 = z1 * i1 - l21 * u2 - l31 * u3
+    u0 = z0 * i0 - l10 * u1 - l20 * u2 - l30 * u3
+    dws = (u1 - lam3 / alpha + c3) * ics
+    dwa = (u3 - u1 - lam4 / alpha + c4) * ica
     out[6], out[7], out[8], out[9], out[10], out[11] = u0, u1, u2, u3, dws, dwa - dws
     return cs, ca
 

@@ -100,12 +100,23 @@ def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", 
                                           np.ascontiguousarray(ref_w), kp, kd,
                                           kernels.kernel_constants(model, penalty), states, qdd, applied)
     grid = np.linspace(0.0, motion.duration, n + 1)
-    ts = motion.samples
-    y = _hermite(grid, states, qdd, done, ts)
-    tau_s = np.stack([np.interp(ts, grid[: done + 1], applied[: done + 1, j], right=np.nan) for j in range(2)], -1)
+    y, tau_s = _on_samples(grid, states, qdd, applied, done, motion.samples)
     status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
-    return ArmSimulation(ts, y[:, :6], y[:, 6:], tau_s, done * motion.duration / n, status, float(max_viol),
+    return ArmSimulation(motion.samples, y[:, :6], y[:, 6:], tau_s, done * motion.duration / n, status, float(max_viol),
                          time.perf_counter() - began)
+
+
+def _on_samples(grid, states, qdd, applied, done, ts):
+    """States (n, 12) and applied torques (n, 2) on the motion's samples ts: taken from the grid
+    where the samples lie on it, else interpolated (cubic Hermite for the states)."""
+    every = (len(grid) - 1) // max(len(ts) - 1, 1)
+    if every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=1e-12):
+        y, tau = states[::every].copy(), applied[::every].copy()
+        beyond = np.arange(len(ts)) * every > done
+        y[beyond], tau[beyond] = np.nan, np.nan
+        return y, tau
+    tau = np.stack([np.interp(ts, grid[: done + 1], applied[: done + 1, j], right=np.nan) for j in range(2)], -1)
+    return _hermite(grid, states, qdd, done, ts), tau
 
 
 def _hermite(grid, states, qdd, done, ts) -> np.ndarray:
@@ -125,10 +136,27 @@ def _hermite(grid, states, qdd, done, ts) -> np.ndarray:
     return out
 
 
-def feedforward(model: Arm2 = Arm2(), motion: str | JointMotion = "reach"):
+class Feedforward:
+    """The inverse-dynamics joint torques of ``model`` on ``motion`` as a torque function
+    t (s), shape (k,) -> (k, 2) N m, remembering the last grid it was evaluated on."""
+
+    def __init__(self, model: Arm2 = Arm2(), motion: str | JointMotion = "reach"):
+        self.model, self.motion = model, as_joint_motion(motion)
+        self._last: tuple = (b"", None)
+
+    def __call__(self, t) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        key = t.tobytes()
+        if key != self._last[0]:
+            torque = inverse_dynamics(t, self.model, self.motion).torque
+            torque.flags.writeable = False
+            self._last = (key, torque)
+        return self._last[1]
+
+
+def feedforward(model: Arm2 = Arm2(), motion: str | JointMotion = "reach") -> Feedforward:
     """The inverse-dynamics joint torques of ``model`` on ``motion`` as a torque function."""
-    motion = as_joint_motion(motion)
-    return lambda t: inverse_dynamics(t, model, motion).torque
+    return Feedforward(model, motion)
 
 
 def rmse_deg(result: ArmSimulation, desired: np.ndarray) -> tuple[float, np.ndarray]:
