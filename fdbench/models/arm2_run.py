@@ -55,6 +55,12 @@ def read_arm_motion_csv(path, option: str = "--motion", radians: bool = False, *
 
 def arm_motion(name: str, radians: bool = False, **estimate) -> JointMotion:
     """'reach' or a motion file; BadFile for a file that cannot be used."""
+    from ..motion import KINEMATICS
+
+    if name in KINEMATICS:
+        from ..registry import unknown_name_message
+
+        raise ValueError("--motion: " + unknown_name_message("arm2 motion", name, list(MOTIONS)) + " or a CSV file")
     return as_joint_motion(name) if name in MOTIONS else read_arm_motion_csv(name, "--motion", radians, **estimate)
 
 
@@ -102,8 +108,11 @@ def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0
     """A forward simulation of the arm: open loop under ``torque`` (a function, default the
     inverse-dynamics torques) for 'simulate', or PD per joint plus computed feedforward for
     'control'. Returns (record, CSV header, history rows)."""
+    from ..integrate import Settings
+
     arm = arm2_with(model_pairs)
     penalty = Penalty(alpha, xi, omega)
+    Settings(penalty=penalty, dt=dt)  # the forearm's checks of the step and the penalty parameters
     inv = sim.inverse_dynamics(None, arm, motion)
     drive = sim.feedforward(arm, motion) if torque is None else torque
     result = sim.simulate(drive, arm, motion, kp, kd, penalty=penalty, dt=dt)
