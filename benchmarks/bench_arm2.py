@@ -48,12 +48,13 @@ def arm_kernel():
     arm, motion = Arm2(), arm2_sim.as_joint_motion("reach")
     n = steps(1e-3, motion.duration)
     half = np.linspace(0.0, motion.duration, 2 * n + 1)
-    ref, ref_w, _ = motion(half)
+    ref, ref_w, ref_a = motion(half)
     tau = arm2_sim.inverse_dynamics(half, arm, motion).torque
     y0, consts = arm2_sim.initial_state(arm, motion), arm2_kernels.kernel_constants(arm, Penalty())
     states, qdd, applied = np.empty((n + 1, 12)), np.empty((n + 1, 6)), np.empty((n + 1, 2))
     kp, kd = np.full(2, 80.0), np.full(2, 0.3)
-    return n, lambda: arm2_kernels.rk4_pd(y0, 1.0 / n, n, tau, ref, ref_w, kp, kd, consts, states, qdd, applied)
+    return n, lambda: arm2_kernels.rk4_pd(y0, 1.0 / n, n, tau, ref, ref_w, ref_a, kp, kd, False, consts, states, qdd,
+                                                    applied)
 
 
 def main() -> None:

@@ -712,12 +712,12 @@ def control(
     from .experiment import control_spec, run
 
     if conditions["_model_name"] != "forearm":
-        _arm_only(integrator=(integrator, "rk4"), controller=(controller, "pd"), db=(db, None))
-        check = {"--kp": kp, "--kd": kd}
-        if not all(math.isfinite(v) and v >= 0 for v in check.values()):
-            raise BadInput("--kp and --kd must be non-negative finite numbers")
+        _arm_only(integrator=(integrator, "rk4"), db=(db, None))
+        if controller not in ("pd", "computed-torque"):
+            raise BadInput("--controller: not available with --model arm2 yet (only pd, computed-torque)")
+        _check_controller(controller, dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping))
         return _arm("control", conditions, kinematics, fmt, output, save_history, quiet, kp=kp, kd=kd, dt=dt,
-                    alpha=alpha, xi=xi, omega=omega)
+                    alpha=alpha, xi=xi, omega=omega, controller=controller, bandwidth=bandwidth, damping=damping)
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
     _check_controller(controller, options)

@@ -124,6 +124,22 @@ def test_singular_configuration_stops_the_simulation():
     assert np.all(np.isnan(result.angles[~result.reached]))
 
 
+@pytest.mark.parametrize("bandwidth", [10.0, 20.0])
+def test_computed_torque_imposes_the_error_dynamics(bandwidth):
+    """Computed-torque control with the full mass matrix from 2 and -3 deg off the reach, critically
+    damped: each joint's error follows e0 (1 + w t) exp(-w t) (the closed form of
+    e'' + 2 w e' + w^2 e = 0 from rest) however the joints couple."""
+    z, w, dw = REACH(np.array(0.0))
+    offset = np.radians([2.0, -3.0])
+    q, qd, _ = ARM.coordinates(z + offset, w, dw)
+    result = sim.simulate(None, ARM, REACH, bandwidth**2, 2 * bandwidth, start=np.concatenate([q, qd]), computed=True)
+    assert result.success
+    t = result.t[:, None]
+    expected = -offset * (1 + bandwidth * t) * np.exp(-bandwidth * t)
+    error = sim.inverse_dynamics(None, ARM, REACH).angles - result.angles
+    assert np.degrees(np.abs(error - expected)).max() < 1e-5
+
+
 # ----------------------------------------------------------------------------- inverse dynamics
 
 

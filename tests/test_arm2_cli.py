@@ -54,6 +54,12 @@ def test_control_reports_overall_and_per_joint_indicators(tmp_path):
     assert record["rmse_rot_deg"] == pytest.approx(math.sqrt(np.mean(error**2)), rel=1e-3)  # 10 digits written
 
 
+def test_computed_torque_on_the_arm():
+    record = as_json("control", "--model", "arm2", "--controller", "computed-torque", "--bandwidth", "15")
+    assert record["controller"] == "computed-torque" and "bandwidth=15.0" in record["controller_options"]
+    assert record["status"] == "success" and record["rmse_rot_deg"] < 1e-5 and record["kp"] is None
+
+
 def test_simulate_reads_one_torque_column_per_joint(tmp_path):
     motion = Reach()
     t = np.linspace(0.0, 1.0, 2001)
@@ -89,7 +95,8 @@ def test_the_forearm_is_the_default_model():
     (["--model", "arm3"], "valid: forearm, arm2"), (["--model", "arm2", "--model", "forearm"], "one model"),
     (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
     (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45"], "--integrator"),
-    (["--model", "arm2", "--controller", "lqr"], "--controller"), (["--model", "arm2", "--noise-deg", "1"], "--noise-deg"),
+    (["--model", "arm2", "--controller", "lqr"], "--controller"),
+    (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--noise-deg", "1"], "--noise-deg"),
     (["--model", "arm2", "--dt", "5"], "--dt"), (["--model", "arm2", "--kp", "-1"], "--kp"),
     (["--model", "arm2", "--motion", "missing.csv"], "missing.csv"),
 ])

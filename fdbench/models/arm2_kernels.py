@@ -108,11 +108,34 @@ def constraint_violation(y, L01, L12):
 
 
 @njit
-def _derivative(y, half, tau_half, ref_half, refw_half, kp, kd, consts, cs0, ca0, out, applied):
-    """State derivative at grid index ``half`` with the per-joint PD law added to the feedforward;
-    the applied torques go to applied (2,). Returns a status code."""
-    for j in range(2):
-        applied[j] = tau_half[half, j] + kp[j] * (ref_half[half, j] - y[4 + j]) + kd[j] * (refw_half[half, j] - y[10 + j])
+def inverse_torques(y, vs, ve, consts, out):
+    """The joint torques (N m) that give the joint accelerations vs, ve (rad/s^2) at the state y on
+    the constraint manifold: R^T (M q'' - Q_ext), the points' accelerations from the joint angles
+    and velocities of y (the model's inverse dynamics, ``Arm2.joint_torques``), into out (2,)."""
+    m11, m12, m22, L01, L12 = consts[0], consts[1], consts[2], consts[3], consts[4]
+    s, a, ws, wa, va = y[4], y[4] + y[5], y[10], y[10] + y[11], vs + ve
+    cs, ss, ca, sa = math.cos(s), math.sin(s), math.cos(a), math.sin(a)
+    ax1, ay1 = -L01 * (cs * ws * ws + ss * vs), L01 * (-ss * ws * ws + cs * vs)
+    ax2, ay2 = ax1 - L12 * (ca * wa * wa + sa * va), ay1 + L12 * (-sa * wa * wa + ca * va)
+    f1x, f1y = m11 * ax1 + m12 * ax2, m11 * ay1 + m12 * ay2 - consts[5]
+    f2x, f2y = m12 * ax1 + m22 * ax2, m12 * ay1 + m22 * ay2 - consts[6]
+    out[1] = L12 * (ca * f2y - sa * f2x)
+    out[0] = L01 * (cs * (f1y + f2y) - ss * (f1x + f2x)) + out[1]
+
+
+@njit(inline="always")
+def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, out, applied):
+    """State derivative at grid index ``half`` under the feedback law (see ``rk4_pd``); the applied
+    torques go to applied (2,). Returns a status code."""
+    if computed:
+        vs = acc_half[half, 0] + kp[0] * (ref_half[half, 0] - y[4]) + kd[0] * (refw_half[half, 0] - y[10])
+        ve = acc_half[half, 1] + kp[1] * (ref_half[half, 1] - y[5]) + kd[1] * (refw_half[half, 1] - y[11])
+        inverse_torques(y, vs, ve, consts, applied)
+        applied[0] += tau_half[half, 0]
+        applied[1] += tau_half[half, 1]
+    else:
+        for j in range(2):
+            applied[j] = tau_half[half, j] + kp[j] * (ref_half[half, j] - y[4 + j]) + kd[j] * (refw_half[half, j] - y[10 + j])
     cs, ca = accelerations(y, applied[0], applied[1], consts, out)
     if not (math.isfinite(cs) and math.isfinite(ca)):
         return NONFINITE
@@ -123,13 +146,18 @@ def _derivative(y, half, tau_half, ref_half, refw_half, kp, kd, consts, cs0, ca0
 
 
 @njit
-def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, kp, kd, consts, states, qdd, applied):
-    """Classical RK4 over n_steps steps of dt (s) under per-joint PD feedback plus feedforward.
+def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, states, qdd,
+           applied):
+    """Classical RK4 over n_steps steps of dt (s) under per-joint PD feedback plus feedforward, or
+    computed-torque control.
 
-    tau_half, ref_half, refw_half: shape (2 n_steps + 1, 2), the feedforward torques (N m), the
-    reference angles (rad) and velocities (rad/s) of [shoulder, elbow] on the half-step grid
-    t_k = k dt / 2. kp (N m/rad), kd (N m s/rad): shape (2,), one gain per joint. The applied torque
-    of joint j is tau_j + kp_j (ref_j - z_j) + kd_j (ref_j' - z_j').
+    tau_half, ref_half, refw_half, acc_half: shape (2 n_steps + 1, 2), the feedforward torques
+    (N m), the reference angles (rad), velocities (rad/s) and accelerations (rad/s^2) of
+    [shoulder, elbow] on the half-step grid t_k = k dt / 2; kp, kd: shape (2,), one gain per joint.
+    computed False (PD): the applied torque of joint j is tau_j + kp_j (ref_j - z_j) +
+    kd_j (ref_j' - z_j') (kp in N m/rad, kd in N m s/rad). computed True: the torques of the model's
+    inverse dynamics at the current state for the joint accelerations ref'' + kp e + kd e'
+    (kp in 1/s^2, kd in 1/s), plus tau: feedback linearisation with the full mass matrix.
     Fills states (n+1, 12), qdd (n+1, 6) and applied (n+1, 2) up to the last step reached.
     Returns (status, steps_done, max constraint violation).
     """
@@ -141,7 +169,7 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, kp, kd, consts, state
     for i in range(n_steps + 1):
         j = 2 * i
         cs0, ca0 = math.cos(y[4]), math.cos(y[4] + y[5])
-        code = _derivative(y, j, tau_half, ref_half, refw_half, kp, kd, consts, cs0, ca0, k1, torque)
+        code = _derivative(y, j, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k1, torque)
         for m in range(N_STATE):
             states[i, m] = y[m]
         for m in range(6):
@@ -153,15 +181,15 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, kp, kd, consts, state
             break
         for m in range(N_STATE):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, kp, kd, consts, cs0, ca0, k2, torque)
+        code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k2, torque)
         if code == OK:
             for m in range(N_STATE):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, kp, kd, consts, cs0, ca0, k3, torque)
+            code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k3, torque)
         if code == OK:
             for m in range(N_STATE):
                 tmp[m] = y[m] + dt * k3[m]
-            code = _derivative(tmp, j + 2, tau_half, ref_half, refw_half, kp, kd, consts, cs0, ca0, k4, torque)
+            code = _derivative(tmp, j + 2, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k4, torque)
         if code != OK:
             return code, i, max_viol
         finite = True

@@ -104,29 +104,41 @@ def inverse_run(model_pairs, motion: JointMotion) -> tuple[dict, list[str], np.n
 
 
 def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0.0, torque=None, dt=1e-3,
-                 alpha=1e7, xi=1.0, omega=10.0) -> tuple[dict, list[str], np.ndarray]:
+                 alpha=1e7, xi=1.0, omega=10.0, controller: str = "pd", bandwidth: float = 20.0,
+                 damping: float = 1.0) -> tuple[dict, list[str], np.ndarray]:
     """A forward simulation of the arm: open loop under ``torque`` (a function, default the
-    inverse-dynamics torques) for 'simulate', or PD per joint plus computed feedforward for
-    'control'. Returns (record, CSV header, history rows)."""
+    inverse-dynamics torques) for 'simulate'; for 'control', PD per joint (kp N m/rad, kd N m s/rad)
+    plus computed feedforward, or ``controller`` 'computed-torque': the arm's inverse dynamics with
+    its full mass matrix at the current state, for error dynamics of natural frequency
+    ``bandwidth`` (rad/s) and damping ratio ``damping`` on both joints.
+    Returns (record, CSV header, history rows)."""
     from ..integrate import Settings
 
     arm = arm2_with(model_pairs)
     penalty = Penalty(alpha, xi, omega)
     Settings(penalty=penalty, dt=dt)  # the forearm's checks of the step and the penalty parameters
     inv = sim.inverse_dynamics(None, arm, motion)
-    drive = sim.feedforward(arm, motion) if torque is None else torque
-    result = sim.simulate(drive, arm, motion, kp, kd, penalty=penalty, dt=dt)
+    computed = command == "control" and controller == "computed-torque"
+    if computed:
+        drive, kp, kd = None, bandwidth**2, 2 * damping * bandwidth
+    else:
+        drive = sim.feedforward(arm, motion) if torque is None else torque
+    result = sim.simulate(drive, arm, motion, kp, kd, penalty=penalty, dt=dt, computed=computed)
     rot, rot_j = sim.rmse_deg(result, inv.angles)
     trq, trq_j = sim.rmse_torque_nm(result, inv.torque)
     closed = command == "control"
     record = {
         "command": command, "model": "arm2", "kinematics": motion.name, "integrator": "rk4", "dt": dt,
-        "torque": "inverse" if torque is None else "file", "optimizer": None, "feedforward": closed or torque is None,
-        "kp": kp if closed else None, "kd": kd if closed else None, "seed": None, "budget": None,
+        "torque": "M(z)*z_ddot_d+h(z,z_dot)" if computed else "inverse" if torque is None else "file",
+        "optimizer": None, "feedforward": closed or torque is None,
+        "kp": kp if closed and not computed else None, "kd": kd if closed and not computed else None,
+        "seed": None, "budget": None,
         "rmse_rot_deg": rot, **_per_joint("rmse_rot_deg", rot_j), "rmse_torque_nm": trq,
         **_per_joint("rmse_torque_nm", trq_j), "runtime_s": result.runtime_s, "evaluations": 1,
         "t_end": result.t_end, "status": result.status.code, "message": _message(result),
         "max_violation": result.max_violation, "alpha": alpha, "xi": xi, "omega": omega, "motion": motion.name,
+        **({"controller": controller, "controller_options": f"bandwidth={bandwidth} damping={damping}" if computed
+            else f"kp={kp} kd={kd}"} if closed else {}),
         "fdbench_version": __version__,
     }
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in JOINTS]

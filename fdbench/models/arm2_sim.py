@@ -76,28 +76,31 @@ def initial_state(model: Arm2, motion: JointMotion) -> np.ndarray:
 
 
 def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", kp=0.0, kd=0.0, *,
-             penalty: Penalty = Penalty(), dt: float = 1e-3, start=None) -> ArmSimulation:
+             penalty: Penalty = Penalty(), dt: float = 1e-3, start=None, computed: bool = False) -> ArmSimulation:
     """Forward dynamics over the motion's span driven by the feedforward ``torque`` plus PD
-    feedback of each joint towards the desired motion.
+    feedback of each joint towards the desired motion, or by computed-torque control.
 
     torque: a function of times (s), shape (k,) -> joint torques (N m), shape (k, 2), or None for
     zero. kp (N m/rad), kd (N m s/rad): one number for both joints or one per joint (zero: open
-    loop). ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0)."""
+    loop). ``computed``: computed-torque control instead of PD, the model's inverse dynamics at the
+    current state for the accelerations z''_d + kp e + kd e' (kp in 1/s^2, kd in 1/s; the error
+    obeys e'' + kd e' + kp e = 0 but for the penalty formulation's small deviations), plus torque.
+    ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0)."""
     from . import arm2_kernels as kernels
 
     motion = as_joint_motion(motion)
     began = time.perf_counter()
     n = steps(dt, motion.duration)
     half = np.linspace(0.0, motion.duration, 2 * n + 1)
-    ref, ref_w, _ = motion(half)
+    ref, ref_w, ref_a = motion(half)
     tau = np.zeros((2 * n + 1, 2)) if torque is None else np.array(torque(half), dtype=float).reshape(2 * n + 1, 2)
     kp, kd = (np.broadcast_to(np.asarray(g, dtype=float), (2,)).copy() for g in (kp, kd))
     y0 = initial_state(model, motion) if start is None else np.array(start, dtype=float)
     if y0.shape != (12,) or not np.all(np.isfinite(y0)):
         raise ValueError(f"the initial state must be 12 finite numbers [q, q'], got {y0}")
     states, qdd, applied = np.full((n + 1, 12), np.nan), np.full((n + 1, 6), np.nan), np.full((n + 1, 2), np.nan)
-    code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, np.ascontiguousarray(ref),
-                                          np.ascontiguousarray(ref_w), kp, kd,
+    ref, ref_w, ref_a = (np.ascontiguousarray(r, dtype=float) for r in (ref, ref_w, ref_a))
+    code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, ref, ref_w, ref_a, kp, kd, bool(computed),
                                           kernels.kernel_constants(model, penalty), states, qdd, applied)
     grid = np.linspace(0.0, motion.duration, n + 1)
     y, tau_s = _on_samples(grid, states, qdd, applied, done, motion.samples)
