@@ -253,7 +253,7 @@ CONDITIONS = {
 }
 
 
-ARM_COMMANDS = ("inverse", "simulate", "control")  # the commands that take --model arm2 so far
+ARM_COMMANDS = ("inverse", "simulate", "control", "optimize")  # the commands that take --model arm2 so far
 
 
 def _with_conditions(command):
@@ -557,10 +557,12 @@ def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **ru
         if conditions[name] != default:
             raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 yet")
     torque_file = run.pop("torque_file", None)
+    convergence = run.pop("convergence", None)
     inputs = dict(conditions["_inputs"])
     if kinematics not in ("paper", "reach"):
         inputs["--motion"] = Path(kinematics)
-    _check_outputs(fmt, output=output, save_history=save_history, inputs={**inputs, "--torque-file": torque_file})
+    _check_outputs(fmt, output=output, save_history=save_history, history=convergence,
+                   inputs={**inputs, "--torque-file": torque_file})
     from .models import arm2_run
 
     estimate = dict(cutoff_hz=conditions["cutoff_hz"], smoothing=conditions["smoothing"],
@@ -569,6 +571,11 @@ def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **ru
         motion = arm2_run.arm_motion("reach" if kinematics == "paper" else kinematics, conditions["radians"], **estimate)
         if command == "inverse":
             record, header, rows = arm2_run.inverse_run(conditions["model"], motion)
+        elif command == "optimize":
+            with _progress(quiet, f"arm2: {run['torque']} + {run['optimizer']}") as progress:
+                progress.start(run["budget"])
+                record, header, rows, best = arm2_run.optimize_run(conditions["model"], motion,
+                                                                   on_evaluation=progress.update, **run)
         else:
             torque = None if torque_file is None else arm2_run.read_arm_torque_csv(torque_file, motion.duration)
             record, header, rows = arm2_run.tracking_run(command, conditions["model"], motion, torque=torque, **run)
@@ -580,10 +587,13 @@ def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **ru
     if command == "inverse" and fmt == "csv":
         _emit(history, output)
         return
-    if save_history is not None:
-        from .files import write_atomic
+    from .files import write_atomic
 
+    if save_history is not None:
         write_atomic(save_history, history, OUTPUT_LABELS["save_history"])
+    if convergence is not None:
+        write_atomic(convergence, csv_text(["evaluation", "best_objective"], enumerate(best, start=1)),
+                     OUTPUT_LABELS["history"])
     _finish(record, fmt, output, f"fdbench {command} (arm2)", quiet)
 
 
@@ -912,10 +922,20 @@ def optimize(
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
-    spec = _validated(optimize_spec(
+    arm = conditions["_model_name"] != "forearm"
+    spec = _validated(optimize_spec(  # for the arm: the checks of names, budget, seed and settings
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
+        penalty_weight=penalty_weight, **_common("paper" if arm else kinematics, integrator, dt, rtol, atol, alpha,
+                                                 xi, omega, {**conditions, "model": ()} if arm else conditions),
     ))
+    if arm:
+        _arm_only(integrator=(integrator, "rk4"), db=(db, None), save_params=(save_params, None))
+        if hidden == "auto":
+            raise BadInput("--hidden auto: not available with --model arm2 yet (give a number of neurons)")
+        return _arm("optimize", conditions, kinematics, fmt, output, save_history, quiet, convergence=history,
+                    torque=torque, optimizer=opt, feedforward=feedforward, seed=seed, budget=budget,
+                    torque_options=torque_options, optimizer_options=optimizer_options,
+                    penalty_weight=penalty_weight, dt=dt, alpha=alpha, xi=xi, omega=omega)
     _check_store(db)
     with _progress(quiet, f"{torque} + {opt}") as progress:
         outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)

@@ -113,7 +113,26 @@ def test_a_motion_file_without_a_joint_column_is_refused(tmp_path):
     assert "elbow" in result.stderr and len(result.stderr.splitlines()) == 1
 
 
-@pytest.mark.parametrize("command", [["optimize"], ["collocate"], ["report"], ["study", "noise"]])
+def test_optimize_on_the_arm(tmp_path):
+    convergence = tmp_path / "c.csv"
+    record = as_json("optimize", "--model", "arm2", "--torque", "pf", "--terms", "3", "--feedforward", "--opt", "bfgs",
+                     "--budget", "40", "--save-convergence", convergence)
+    assert record["model"] == "arm2" and record["n_params"] == 18 and record["evaluations"] == 40
+    assert record["best_objective"] <= record["initial_objective"] and record["status"] == "success"
+    assert record["best_objective"] == pytest.approx(record["rmse_rot_deg"], rel=1e-12)
+    assert {"rmse_rot_deg_shoulder", "rmse_rot_deg_elbow"} <= set(record)
+    best = pd.read_csv(convergence).best_objective
+    assert len(best) == 40 and best.iloc[-1] == pytest.approx(record["best_objective"]) and best.is_monotonic_decreasing
+
+
+def test_optimize_on_the_arm_refuses_what_it_lacks():
+    for args, word in ((["--hidden", "auto", "--torque", "ann"], "--hidden auto"), (["--budget", "0"], "--budget"),
+                       (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator")):
+        result = invoke("optimize", "--model", "arm2", *args, code=2)
+        assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("command", [["collocate"], ["report"], ["study", "noise"]])
 def test_commands_without_the_arm_say_so(command):
     result = invoke(*command, "--model", "arm2", code=2)
     assert "not available" in result.stderr and len(result.stderr.splitlines()) == 1

@@ -89,14 +89,16 @@ def _interp(grid, values, t):
     return np.stack([np.interp(t, grid, values[:, j]) for j in range(values.shape[1])], axis=-1)
 
 
-def optimize(problem: ArmTrackingProblem, optimizer: str = "cmaes", budget: int = 200, seed: int = 0, **options):
+def optimize(problem: ArmTrackingProblem, optimizer: str = "cmaes", budget: int = 200, seed: int = 0,
+             on_evaluation=None, **options):
     """Minimise the problem's objective with a registered optimiser within ``budget`` forward
-    simulations; returns (the best parameters p, the OptimizationResult, the final simulation,
+    simulations (``on_evaluation(count, best)`` after each); returns (the best parameters p, the OptimizationResult, the final simulation,
     runtime in s)."""
     from ..optimizers import make_optimizer
 
     began = time.perf_counter()
-    found = make_optimizer(optimizer, **options).minimize(problem.objective_scaled, problem.x0, budget, seed)
+    found = make_optimizer(optimizer, **options).minimize(problem.objective_scaled, problem.x0, budget, seed,
+                                                                 on_evaluation)
     p = np.asarray(found.x) * problem.scale
     result = problem.simulate(p)
     return p, found, result, time.perf_counter() - began

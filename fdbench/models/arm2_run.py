@@ -152,3 +152,41 @@ def _message(result) -> str:
         text = text.replace("theta reached +-pi/2", "the shoulder or the forearm reached +-90 deg")
         text += f" (stopped at t = {result.t_end:.4g} s)"
     return text
+
+
+def optimize_run(model_pairs, motion: JointMotion, *, torque="cs", optimizer="bfgs", feedforward=False, seed=0,
+                 budget=200, torque_options=None, optimizer_options=None, penalty_weight=1.0, dt=1e-3, alpha=1e7,
+                 xi=1.0, omega=10.0, on_evaluation=None) -> tuple[dict, list[str], np.ndarray, list[float]]:
+    """Shooting optimisation on the arm (``arm2_problem``): (record, CSV header, history rows,
+    best objective per evaluation); ``on_evaluation(count, best)`` after each evaluation."""
+    from ..integrate import Settings
+    from .arm2_problem import ArmTrackingProblem, optimize
+
+    arm = arm2_with(model_pairs)
+    penalty = Penalty(alpha, xi, omega)
+    Settings(penalty=penalty, dt=dt)
+    options = {k: v for k, v in (torque_options or {}).items() if v is not None}
+    problem = ArmTrackingProblem(torque, arm, motion, feedforward, penalty_weight, penalty, dt, **options)
+    began = time.perf_counter()
+    initial = problem.objective(problem.p0)
+    p, found, result, _ = optimize(problem, optimizer, budget, seed, on_evaluation,
+                                   **{k: v for k, v in (optimizer_options or {}).items() if v is not None})
+    runtime = time.perf_counter() - began
+    inv = problem.inverse
+    rot, rot_j = sim.rmse_deg(result, inv.angles)
+    trq, trq_j = sim.rmse_torque_nm(result, inv.torque)
+    record = {
+        "command": "optimize", "model": "arm2", "kinematics": motion.name, "integrator": "rk4", "dt": dt,
+        "torque": torque, "optimizer": optimizer, "feedforward": feedforward, "kp": None, "kd": None, "seed": seed,
+        "budget": budget, "rmse_rot_deg": rot, **_per_joint("rmse_rot_deg", rot_j), "rmse_torque_nm": trq,
+        **_per_joint("rmse_torque_nm", trq_j), "runtime_s": runtime, "evaluations": found.evaluations,
+        "best_objective": found.fun, "initial_objective": initial, "t_end": result.t_end,
+        "status": result.status.code, "message": _message(result), "stop_reason": found.stop_reason,
+        "max_violation": result.max_violation, "n_params": problem.n_params,
+        "torque_options": " ".join(f"{k}={v}" for k, v in sorted(options.items())),
+        "alpha": alpha, "xi": xi, "omega": omega, "penalty_weight": penalty_weight, "motion": motion.name,
+        "fdbench_version": __version__,
+    }
+    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in JOINTS]
+    rows = np.column_stack([result.t, result.angles, inv.angles, result.torque, inv.torque])
+    return record, header, rows, list(found.history)
