@@ -553,9 +553,12 @@ def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **ru
     """inverse, simulate and control on the two-segment arm (fdbench.models.arm2_run)."""
     from .files import BadFile, csv_text
 
-    for name, default in (("sample_dt", None), ("noise_deg", 0.0), ("plant", ())):
+    refused = {"sample_dt": None, "noise_deg": 0.0, **({"plant": ()} if command == "optimize" else {})}
+    for name, default in refused.items():
         if conditions[name] != default:
-            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 yet")
+            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 {command} yet")
+    if command in ("simulate", "control"):
+        run["plant_pairs"] = conditions["plant"]
     torque_file = run.pop("torque_file", None)
     convergence = run.pop("convergence", None)
     inputs = dict(conditions["_inputs"])
@@ -923,10 +926,11 @@ def optimize(
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
     arm = conditions["_model_name"] != "forearm"
+    checked = {**conditions, "model": (), "plant": ()} if arm else conditions  # the arm's constants: checked later
     spec = _validated(optimize_spec(  # for the arm: the checks of names, budget, seed and settings
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
         penalty_weight=penalty_weight, **_common("paper" if arm else kinematics, integrator, dt, rtol, atol, alpha,
-                                                 xi, omega, {**conditions, "model": ()} if arm else conditions),
+                                                 xi, omega, checked),
     ))
     if arm:
         _arm_only(integrator=(integrator, "rk4"), db=(db, None), save_params=(save_params, None))

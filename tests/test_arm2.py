@@ -140,6 +140,17 @@ def test_computed_torque_imposes_the_error_dynamics(bandwidth):
     assert np.degrees(np.abs(error - expected)).max() < 1e-5
 
 
+def test_computed_torque_believes_the_nominal_model():
+    """With a heavier upper arm than the law believes, the error no longer decays as designed;
+    with the same arm passed as both, the results are those of the default."""
+    same = sim.simulate(None, ARM, REACH, 400.0, 40.0, computed=True, nominal=Arm2())
+    default = sim.simulate(None, ARM, REACH, 400.0, 40.0, computed=True)
+    assert np.array_equal(same.angles, default.angles)
+    heavy = sim.simulate(None, Arm2(m0=3.0), REACH, 400.0, 40.0, computed=True, nominal=ARM)
+    desired = sim.inverse_dynamics(None, ARM, REACH).angles
+    assert sim.rmse_deg(heavy, desired)[0] > 100 * sim.rmse_deg(default, desired)[0]
+
+
 # ----------------------------------------------------------------------------- inverse dynamics
 
 

@@ -60,6 +60,19 @@ def test_computed_torque_on_the_arm():
     assert record["status"] == "success" and record["rmse_rot_deg"] < 1e-5 and record["kp"] is None
 
 
+def test_plant_mismatch_on_the_arm():
+    """--plant changes the simulated body only: the feedforward (and computed torque) keep the
+    nominal model, so tracking degrades; --model changes both and tracking stays exact."""
+    both = as_json("control", "--model", "arm2", "--model", "m0=2.5")
+    plant = as_json("control", "--model", "arm2", "--plant", "m0=2.5")
+    ct = as_json("control", "--model", "arm2", "--plant", "m0=2.5", "--controller", "computed-torque")
+    assert both["rmse_rot_deg"] < 1e-5 and both["model_options"] == "m0=2.5" and both["plant"] is None
+    assert plant["plant"] == "m0=2.5" and plant["rmse_rot_deg"] > 0.1 and ct["rmse_rot_deg"] > 0.1
+    direct = sim.simulate(sim.feedforward(Arm2(), Reach()), Arm2(m0=2.5), Reach(), 80.0, 0.3)
+    rot, _ = sim.rmse_deg(direct, sim.inverse_dynamics(None, Arm2(), Reach()).angles)
+    assert plant["rmse_rot_deg"] == pytest.approx(rot, rel=1e-12)
+
+
 def test_simulate_reads_one_torque_column_per_joint(tmp_path):
     motion = Reach()
     t = np.linspace(0.0, 1.0, 2001)
@@ -127,7 +140,8 @@ def test_optimize_on_the_arm(tmp_path):
 
 def test_optimize_on_the_arm_refuses_what_it_lacks():
     for args, word in ((["--hidden", "auto", "--torque", "ann"], "--hidden auto"), (["--budget", "0"], "--budget"),
-                       (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator")):
+                       (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator"),
+                       (["--plant", "m0=2"], "--plant")):
         result = invoke("optimize", "--model", "arm2", *args, code=2)
         assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr
 

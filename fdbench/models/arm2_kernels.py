@@ -124,13 +124,14 @@ def inverse_torques(y, vs, ve, consts, out):
 
 
 @njit(inline="always")
-def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, out, applied):
+def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal, cs0, ca0, out,
+                applied):
     """State derivative at grid index ``half`` under the feedback law (see ``rk4_pd``); the applied
     torques go to applied (2,). Returns a status code."""
     if computed:
         vs = acc_half[half, 0] + kp[0] * (ref_half[half, 0] - y[4]) + kd[0] * (refw_half[half, 0] - y[10])
         ve = acc_half[half, 1] + kp[1] * (ref_half[half, 1] - y[5]) + kd[1] * (refw_half[half, 1] - y[11])
-        inverse_torques(y, vs, ve, consts, applied)
+        inverse_torques(y, vs, ve, nominal, applied)
         applied[0] += tau_half[half, 0]
         applied[1] += tau_half[half, 1]
     else:
@@ -146,8 +147,8 @@ def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, comput
 
 
 @njit
-def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, states, qdd,
-           applied):
+def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal, states,
+           qdd, applied):
     """Classical RK4 over n_steps steps of dt (s) under per-joint PD feedback plus feedforward, or
     computed-torque control.
 
@@ -158,6 +159,8 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
     kd_j (ref_j' - z_j') (kp in N m/rad, kd in N m s/rad). computed True: the torques of the model's
     inverse dynamics at the current state for the joint accelerations ref'' + kp e + kd e'
     (kp in 1/s^2, kd in 1/s), plus tau: feedback linearisation with the full mass matrix.
+    consts: the simulated arm's constants (``kernel_constants``); nominal: those of the model the
+    computed-torque law believes (the same array when plant and nominal model agree).
     Fills states (n+1, 12), qdd (n+1, 6) and applied (n+1, 2) up to the last step reached.
     Returns (status, steps_done, max constraint violation).
     """
@@ -169,7 +172,8 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
     for i in range(n_steps + 1):
         j = 2 * i
         cs0, ca0 = math.cos(y[4]), math.cos(y[4] + y[5])
-        code = _derivative(y, j, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k1, torque)
+        code = _derivative(y, j, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
+                           cs0, ca0, k1, torque)
         for m in range(N_STATE):
             states[i, m] = y[m]
         for m in range(6):
@@ -181,15 +185,18 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
             break
         for m in range(N_STATE):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k2, torque)
+        code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
+                           cs0, ca0, k2, torque)
         if code == OK:
             for m in range(N_STATE):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k3, torque)
+            code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
+                               cs0, ca0, k3, torque)
         if code == OK:
             for m in range(N_STATE):
                 tmp[m] = y[m] + dt * k3[m]
-            code = _derivative(tmp, j + 2, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, cs0, ca0, k4, torque)
+            code = _derivative(tmp, j + 2, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
+                               cs0, ca0, k4, torque)
         if code != OK:
             return code, i, max_viol
         finite = True

@@ -81,6 +81,10 @@ def read_arm_torque_csv(path, duration: float, option: str = "--torque-file"):
     return lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)
 
 
+def _pairs_text(pairs) -> str:
+    return " ".join(f"{k}={float(v):g}" for k, v in pairs)
+
+
 def _per_joint(prefix: str, values) -> dict:
     return {f"{prefix}_{joint}": float(v) for joint, v in zip(JOINTS, values)}
 
@@ -105,16 +109,19 @@ def inverse_run(model_pairs, motion: JointMotion) -> tuple[dict, list[str], np.n
 
 def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0.0, torque=None, dt=1e-3,
                  alpha=1e7, xi=1.0, omega=10.0, controller: str = "pd", bandwidth: float = 20.0,
-                 damping: float = 1.0) -> tuple[dict, list[str], np.ndarray]:
+                 damping: float = 1.0, plant_pairs=()) -> tuple[dict, list[str], np.ndarray]:
     """A forward simulation of the arm: open loop under ``torque`` (a function, default the
     inverse-dynamics torques) for 'simulate'; for 'control', PD per joint (kp N m/rad, kd N m s/rad)
     plus computed feedforward, or ``controller`` 'computed-torque': the arm's inverse dynamics with
     its full mass matrix at the current state, for error dynamics of natural frequency
-    ``bandwidth`` (rad/s) and damping ratio ``damping`` on both joints.
+    ``bandwidth`` (rad/s) and damping ratio ``damping`` on both joints. ``model_pairs`` change the
+    nominal model and the simulated body, ``plant_pairs`` the simulated body only: inverse dynamics,
+    feedforward and computed torque keep the nominal model (model-mismatch studies).
     Returns (record, CSV header, history rows)."""
     from ..integrate import Settings
 
     arm = arm2_with(model_pairs)
+    plant = arm2_with(tuple(model_pairs) + tuple(plant_pairs))
     penalty = Penalty(alpha, xi, omega)
     Settings(penalty=penalty, dt=dt)  # the forearm's checks of the step and the penalty parameters
     inv = sim.inverse_dynamics(None, arm, motion)
@@ -123,7 +130,7 @@ def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0
         drive, kp, kd = None, bandwidth**2, 2 * damping * bandwidth
     else:
         drive = sim.feedforward(arm, motion) if torque is None else torque
-    result = sim.simulate(drive, arm, motion, kp, kd, penalty=penalty, dt=dt, computed=computed)
+    result = sim.simulate(drive, plant, motion, kp, kd, penalty=penalty, dt=dt, computed=computed, nominal=arm)
     rot, rot_j = sim.rmse_deg(result, inv.angles)
     trq, trq_j = sim.rmse_torque_nm(result, inv.torque)
     closed = command == "control"
@@ -137,6 +144,7 @@ def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0
         **_per_joint("rmse_torque_nm", trq_j), "runtime_s": result.runtime_s, "evaluations": 1,
         "t_end": result.t_end, "status": result.status.code, "message": _message(result),
         "max_violation": result.max_violation, "alpha": alpha, "xi": xi, "omega": omega, "motion": motion.name,
+        "model_options": _pairs_text(model_pairs) or None, "plant": _pairs_text(plant_pairs) or None,
         **({"controller": controller, "controller_options": f"bandwidth={bandwidth} damping={damping}" if computed
             else f"kp={kp} kd={kd}"} if closed else {}),
         "fdbench_version": __version__,

@@ -76,7 +76,8 @@ def initial_state(model: Arm2, motion: JointMotion) -> np.ndarray:
 
 
 def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", kp=0.0, kd=0.0, *,
-             penalty: Penalty = Penalty(), dt: float = 1e-3, start=None, computed: bool = False) -> ArmSimulation:
+             penalty: Penalty = Penalty(), dt: float = 1e-3, start=None, computed: bool = False,
+             nominal: Arm2 | None = None) -> ArmSimulation:
     """Forward dynamics over the motion's span driven by the feedforward ``torque`` plus PD
     feedback of each joint towards the desired motion, or by computed-torque control.
 
@@ -85,7 +86,9 @@ def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", 
     loop). ``computed``: computed-torque control instead of PD, the model's inverse dynamics at the
     current state for the accelerations z''_d + kp e + kd e' (kp in 1/s^2, kd in 1/s; the error
     obeys e'' + kd e' + kp e = 0 but for the penalty formulation's small deviations), plus torque.
-    ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0)."""
+    ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0).
+    ``model`` is the simulated body (the plant); ``nominal`` the model computed-torque control
+    believes (default: the plant)."""
     from . import arm2_kernels as kernels
 
     motion = as_joint_motion(motion)
@@ -100,8 +103,10 @@ def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", 
         raise ValueError(f"the initial state must be 12 finite numbers [q, q'], got {y0}")
     states, qdd, applied = np.full((n + 1, 12), np.nan), np.full((n + 1, 6), np.nan), np.full((n + 1, 2), np.nan)
     ref, ref_w, ref_a = (np.ascontiguousarray(r, dtype=float) for r in (ref, ref_w, ref_a))
+    consts = kernels.kernel_constants(model, penalty)
+    believed = consts if nominal is None or nominal == model else kernels.kernel_constants(nominal, penalty)
     code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, ref, ref_w, ref_a, kp, kd, bool(computed),
-                                          kernels.kernel_constants(model, penalty), states, qdd, applied)
+                                          consts, believed, states, qdd, applied)
     grid = np.linspace(0.0, motion.duration, n + 1)
     y, tau_s = _on_samples(grid, states, qdd, applied, done, motion.samples)
     status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
