@@ -872,12 +872,15 @@ def _methods_text() -> str:
 
     lines += ["controllers (control --controller):"]
     lines += [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
+    from .models import MODELS, summary
+
+    lines += ["models (--model):"] + [f"  {name:<12} {summary(name)}" for name in MODELS]
     return "\n".join(lines) + "\n"
 
 
 @app.command()
 def methods():
-    """List the registered torque parameterisations, optimisers and controllers, one line each."""
+    """List the registered torque parameterisations, optimisers, controllers and models, one line each."""
     _emit(_methods_text(), None)
 
 

@@ -150,3 +150,8 @@ def test_optimize_on_the_arm_refuses_what_it_lacks():
 def test_commands_without_the_arm_say_so(command):
     result = invoke(*command, "--model", "arm2", code=2)
     assert "not available" in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+def test_methods_lists_the_models():
+    text = invoke("methods").stdout
+    assert "models (--model):" in text and "  arm2 " in text and "  forearm " in text
