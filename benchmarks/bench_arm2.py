@@ -53,8 +53,9 @@ def arm_kernel():
     y0, consts = arm2_sim.initial_state(arm, motion), arm2_kernels.kernel_constants(arm, Penalty())
     states, qdd, applied = np.empty((n + 1, 12)), np.empty((n + 1, 6)), np.empty((n + 1, 2))
     kp, kd = np.full(2, 80.0), np.full(2, 0.3)
-    return n, lambda: arm2_kernels.rk4_pd(y0, 1.0 / n, n, tau, ref, ref_w, ref_a, kp, kd, False, consts, consts, states,
-                                                    qdd, applied)
+    no_gains = np.zeros((1, 2, 4))
+    return n, lambda: arm2_kernels.rk4_pd(y0, 1.0 / n, n, tau, ref, ref_w, ref_a, kp, kd, 0, no_gains, consts, consts,
+                                          states, qdd, applied)
 
 
 def main() -> None:

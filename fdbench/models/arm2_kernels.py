@@ -124,11 +124,17 @@ def inverse_torques(y, vs, ve, consts, out):
 
 
 @njit(inline="always")
-def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal, cs0, ca0, out,
-                applied):
+def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains, consts, nominal, cs0, ca0,
+                out, applied):
     """State derivative at grid index ``half`` under the feedback law (see ``rk4_pd``); the applied
     torques go to applied (2,). Returns a status code."""
-    if computed:
+    if computed == 2:
+        e0, e1 = ref_half[half, 0] - y[4], ref_half[half, 1] - y[5]
+        e2, e3 = refw_half[half, 0] - y[10], refw_half[half, 1] - y[11]
+        for j in range(2):
+            applied[j] = tau_half[half, j] + (gains[half, j, 0] * e0 + gains[half, j, 1] * e1 + gains[half, j, 2] * e2
+                                              + gains[half, j, 3] * e3)
+    elif computed == 1:
         vs = acc_half[half, 0] + kp[0] * (ref_half[half, 0] - y[4]) + kd[0] * (refw_half[half, 0] - y[10])
         ve = acc_half[half, 1] + kp[1] * (ref_half[half, 1] - y[5]) + kd[1] * (refw_half[half, 1] - y[11])
         inverse_torques(y, vs, ve, nominal, applied)
@@ -136,7 +142,8 @@ def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, comput
         applied[1] += tau_half[half, 1]
     else:
         for j in range(2):
-            applied[j] = tau_half[half, j] + kp[j] * (ref_half[half, j] - y[4 + j]) + kd[j] * (refw_half[half, j] - y[10 + j])
+            applied[j] = (tau_half[half, j] + kp[j] * (ref_half[half, j] - y[4 + j])
+                          + kd[j] * (refw_half[half, j] - y[10 + j]))
     cs, ca = accelerations(y, applied[0], applied[1], consts, out)
     if not (math.isfinite(cs) and math.isfinite(ca)):
         return NONFINITE
@@ -147,7 +154,7 @@ def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, comput
 
 
 @njit
-def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal, states,
+def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains, consts, nominal, states,
            qdd, applied):
     """Classical RK4 over n_steps steps of dt (s) under per-joint PD feedback plus feedforward, or
     computed-torque control.
@@ -155,10 +162,12 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
     tau_half, ref_half, refw_half, acc_half: shape (2 n_steps + 1, 2), the feedforward torques
     (N m), the reference angles (rad), velocities (rad/s) and accelerations (rad/s^2) of
     [shoulder, elbow] on the half-step grid t_k = k dt / 2; kp, kd: shape (2,), one gain per joint.
-    computed False (PD): the applied torque of joint j is tau_j + kp_j (ref_j - z_j) +
-    kd_j (ref_j' - z_j') (kp in N m/rad, kd in N m s/rad). computed True: the torques of the model's
+    computed 0 (PD): the applied torque of joint j is tau_j + kp_j (ref_j - z_j) +
+    kd_j (ref_j' - z_j') (kp in N m/rad, kd in N m s/rad). computed 1: the torques of the model's
     inverse dynamics at the current state for the joint accelerations ref'' + kp e + kd e'
     (kp in 1/s^2, kd in 1/s), plus tau: feedback linearisation with the full mass matrix.
+    computed 2: tau + K e with a full gain matrix K = gains[k], shape (2, 4), on the half-step grid
+    (gains of shape (2 n_steps + 1, 2, 4); N m/rad and N m s/rad) for e = [ref - z, ref' - z'].
     consts: the simulated arm's constants (``kernel_constants``); nominal: those of the model the
     computed-torque law believes (the same array when plant and nominal model agree).
     Fills states (n+1, 12), qdd (n+1, 6) and applied (n+1, 2) up to the last step reached.
@@ -172,8 +181,8 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
     for i in range(n_steps + 1):
         j = 2 * i
         cs0, ca0 = math.cos(y[4]), math.cos(y[4] + y[5])
-        code = _derivative(y, j, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
-                           cs0, ca0, k1, torque)
+        code = _derivative(y, j, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains,
+                           consts, nominal, cs0, ca0, k1, torque)
         for m in range(N_STATE):
             states[i, m] = y[m]
         for m in range(6):
@@ -185,18 +194,18 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
             break
         for m in range(N_STATE):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
-                           cs0, ca0, k2, torque)
+        code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains,
+                           consts, nominal, cs0, ca0, k2, torque)
         if code == OK:
             for m in range(N_STATE):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
-                               cs0, ca0, k3, torque)
+            code = _derivative(tmp, j + 1, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains,
+                               consts, nominal, cs0, ca0, k3, torque)
         if code == OK:
             for m in range(N_STATE):
                 tmp[m] = y[m] + dt * k3[m]
-            code = _derivative(tmp, j + 2, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, consts, nominal,
-                               cs0, ca0, k4, torque)
+            code = _derivative(tmp, j + 2, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains,
+                               consts, nominal, cs0, ca0, k4, torque)
         if code != OK:
             return code, i, max_viol
         finite = True

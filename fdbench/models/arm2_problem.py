@@ -92,13 +92,13 @@ def _interp(grid, values, t):
 def optimize(problem: ArmTrackingProblem, optimizer: str = "cmaes", budget: int = 200, seed: int = 0,
              on_evaluation=None, **options):
     """Minimise the problem's objective with a registered optimiser within ``budget`` forward
-    simulations (``on_evaluation(count, best)`` after each); returns (the best parameters p, the OptimizationResult, the final simulation,
-    runtime in s)."""
+    simulations (``on_evaluation(count, best)`` after each); returns (the best parameters p, the
+    OptimizationResult, the final simulation, runtime in s)."""
     from ..optimizers import make_optimizer
 
     began = time.perf_counter()
     found = make_optimizer(optimizer, **options).minimize(problem.objective_scaled, problem.x0, budget, seed,
-                                                                 on_evaluation)
+                                                          on_evaluation)
     p = np.asarray(found.x) * problem.scale
     result = problem.simulate(p)
     return p, found, result, time.perf_counter() - began

@@ -77,7 +77,7 @@ def initial_state(model: Arm2, motion: JointMotion) -> np.ndarray:
 
 def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", kp=0.0, kd=0.0, *,
              penalty: Penalty = Penalty(), dt: float = 1e-3, start=None, computed: bool = False,
-             nominal: Arm2 | None = None) -> ArmSimulation:
+             nominal: Arm2 | None = None, gains=None) -> ArmSimulation:
     """Forward dynamics over the motion's span driven by the feedforward ``torque`` plus PD
     feedback of each joint towards the desired motion, or by computed-torque control.
 
@@ -88,7 +88,9 @@ def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", 
     obeys e'' + kd e' + kp e = 0 but for the penalty formulation's small deviations), plus torque.
     ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0).
     ``model`` is the simulated body (the plant); ``nominal`` the model computed-torque control
-    believes (default: the plant)."""
+    believes (default: the plant). ``gains``: instead of kp and kd, a full gain matrix K(t) (2, 4)
+    as a function of times (s), shape (k,) -> (k, 2, 4), applied to [z_d - z, z'_d - z']
+    (N m/rad, N m s/rad), e.g. time-varying LQR (``arm2_lqr``)."""
     from . import arm2_kernels as kernels
 
     motion = as_joint_motion(motion)
@@ -105,7 +107,9 @@ def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", 
     ref, ref_w, ref_a = (np.ascontiguousarray(r, dtype=float) for r in (ref, ref_w, ref_a))
     consts = kernels.kernel_constants(model, penalty)
     believed = consts if nominal is None or nominal == model else kernels.kernel_constants(nominal, penalty)
-    code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, ref, ref_w, ref_a, kp, kd, bool(computed),
+    mode = 2 if gains is not None else 1 if computed else 0
+    k_half = np.zeros((1, 2, 4)) if gains is None else np.ascontiguousarray(gains(half), dtype=float)
+    code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, ref, ref_w, ref_a, kp, kd, mode, k_half,
                                           consts, believed, states, qdd, applied)
     grid = np.linspace(0.0, motion.duration, n + 1)
     y, tau_s = _on_samples(grid, states, qdd, applied, done, motion.samples)
