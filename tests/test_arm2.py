@@ -151,6 +151,41 @@ def test_computed_torque_believes_the_nominal_model():
     assert sim.rmse_deg(heavy, desired)[0] > 100 * sim.rmse_deg(default, desired)[0]
 
 
+def test_lqr_gains_at_a_held_posture_are_the_algebraic_riccati_solution():
+    """Holding a posture, the time-varying Riccati solution stays at the algebraic one: its gains
+    equal those of scipy's ARE solver on a linearisation of the test's own Lagrange model."""
+    from scipy.linalg import solve_continuous_are
+
+    from fdbench.models.arm2_lqr import lqr_gains
+
+    z0 = np.radians([-10.0, 40.0])
+    M, h = lagrange(ARM, z0, [0.0, 0.0])
+    step = 1e-6
+    A = np.zeros((4, 4))
+    A[:2, 2:] = np.eye(2)
+    for i in range(2):
+        e = step * np.eye(2)[i]
+        plus, minus = lagrange(ARM, z0 + e, [0.0, 0.0]), lagrange(ARM, z0 - e, [0.0, 0.0])
+        acc = [np.linalg.solve(Mi, h - hi) for Mi, hi in (plus, minus)]  # tau = h(z0) holds z0
+        A[2:, i] = (acc[0] - acc[1]) / (2 * step)
+    B = np.vstack([np.zeros((2, 2)), np.linalg.inv(M)])
+    Q = np.diag([1e4, 1e4, 1.0, 1.0])
+    expected = B.T @ solve_continuous_are(A, B, Q, np.eye(2))
+    gains = lqr_gains(ARM, PerJoint(tuple(z0)), q_angle=1e4, q_rate=1.0, r_torque=1.0)(np.array([0.0, 0.5, 1.0]))
+    assert np.allclose(gains, expected, rtol=1e-5, atol=1e-6)
+
+
+def test_lqr_brings_the_arm_back_to_the_reach():
+    from fdbench.models.arm2_lqr import lqr_gains
+
+    z, w, dw = REACH(np.array(0.0))
+    q, qd, _ = ARM.coordinates(z + np.radians([2.0, -3.0]), w, dw)
+    result = sim.simulate(sim.feedforward(ARM, REACH), ARM, REACH, start=np.concatenate([q, qd]),
+                          gains=lqr_gains(ARM, REACH))
+    error = np.degrees(np.abs(sim.inverse_dynamics(None, ARM, REACH).angles - result.angles))
+    assert result.success and error[0].max() == pytest.approx(3.0) and error[-300:].max() < 1e-3
+
+
 # ----------------------------------------------------------------------------- inverse dynamics
 
 
