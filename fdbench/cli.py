@@ -726,11 +726,13 @@ def control(
 
     if conditions["_model_name"] != "forearm":
         _arm_only(integrator=(integrator, "rk4"), db=(db, None))
-        if controller not in ("pd", "computed-torque"):
-            raise BadInput("--controller: not available with --model arm2 yet (only pd, computed-torque)")
-        _check_controller(controller, dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping))
-        return _arm("control", conditions, kinematics, fmt, output, save_history, quiet, kp=kp, kd=kd, dt=dt,
-                    alpha=alpha, xi=xi, omega=omega, controller=controller, bandwidth=bandwidth, damping=damping)
+        options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate,
+                       r_torque=r_torque)
+        _check_controller(controller, options)
+        if controller not in ("pd", "computed-torque", "lqr"):
+            raise BadInput(f"--controller {controller}: not available with --model arm2 yet (pd, computed-torque, lqr)")
+        return _arm("control", conditions, kinematics, fmt, output, save_history, quiet, dt=dt, alpha=alpha, xi=xi,
+                    omega=omega, controller=controller, **options)
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
     _check_controller(controller, options)

@@ -73,6 +73,15 @@ def test_plant_mismatch_on_the_arm():
     assert plant["rmse_rot_deg"] == pytest.approx(rot, rel=1e-12)
 
 
+def test_lqr_on_the_arm():
+    record = as_json("control", "--model", "arm2", "--controller", "lqr", "--q-angle", "1e5")
+    assert record["controller"] == "lqr" and "q_angle=100000.0" in record["controller_options"]
+    assert record["status"] == "success" and record["rmse_rot_deg"] < 1e-5 and record["kp"] is None
+    heavy = as_json("control", "--model", "arm2", "--controller", "lqr", "--plant", "m0=2.5")
+    pd_heavy = as_json("control", "--model", "arm2", "--plant", "m0=2.5")
+    assert 0 < heavy["rmse_rot_deg"] < pd_heavy["rmse_rot_deg"]  # stiffer than PD 80 / 0.3
+
+
 def test_simulate_reads_one_torque_column_per_joint(tmp_path):
     motion = Reach()
     t = np.linspace(0.0, 1.0, 2001)
@@ -108,7 +117,7 @@ def test_the_forearm_is_the_default_model():
     (["--model", "arm3"], "valid: forearm, arm2"), (["--model", "arm2", "--model", "forearm"], "one model"),
     (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
     (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45"], "--integrator"),
-    (["--model", "arm2", "--controller", "lqr"], "--controller"),
+    (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
     (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--noise-deg", "1"], "--noise-deg"),
     (["--model", "arm2", "--dt", "5"], "--dt"), (["--model", "arm2", "--kp", "-1"], "--kp"),
     (["--model", "arm2", "--motion", "missing.csv"], "missing.csv"),

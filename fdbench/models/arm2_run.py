@@ -81,6 +81,14 @@ def read_arm_torque_csv(path, duration: float, option: str = "--torque-file"):
     return lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)
 
 
+CONTROLLER_OPTIONS = {"pd": ("kp", "kd"), "computed-torque": ("bandwidth", "damping"),
+                      "lqr": ("q_angle", "q_rate", "r_torque")}
+
+
+def _controller_options(controller: str, values: dict) -> str:
+    return " ".join(f"{k}={float(values[k])}" for k in CONTROLLER_OPTIONS[controller])
+
+
 def _pairs_text(pairs) -> str:
     return " ".join(f"{k}={float(v):g}" for k, v in pairs)
 
@@ -109,12 +117,15 @@ def inverse_run(model_pairs, motion: JointMotion) -> tuple[dict, list[str], np.n
 
 def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0.0, torque=None, dt=1e-3,
                  alpha=1e7, xi=1.0, omega=10.0, controller: str = "pd", bandwidth: float = 20.0,
-                 damping: float = 1.0, plant_pairs=()) -> tuple[dict, list[str], np.ndarray]:
+                 damping: float = 1.0, plant_pairs=(), q_angle: float = 1e4, q_rate: float = 1.0,
+                 r_torque: float = 1.0) -> tuple[dict, list[str], np.ndarray]:
     """A forward simulation of the arm: open loop under ``torque`` (a function, default the
     inverse-dynamics torques) for 'simulate'; for 'control', PD per joint (kp N m/rad, kd N m s/rad)
     plus computed feedforward, or ``controller`` 'computed-torque': the arm's inverse dynamics with
     its full mass matrix at the current state, for error dynamics of natural frequency
-    ``bandwidth`` (rad/s) and damping ratio ``damping`` on both joints. ``model_pairs`` change the
+    ``bandwidth`` (rad/s) and damping ratio ``damping`` on both joints, or 'lqr': computed
+    feedforward plus time-varying LQR (weights q_angle rad^-2, q_rate s^2 rad^-2, r_torque
+    (N m)^-2, ``arm2_lqr``). ``model_pairs`` change the
     nominal model and the simulated body, ``plant_pairs`` the simulated body only: inverse dynamics,
     feedforward and computed torque keep the nominal model (model-mismatch studies).
     Returns (record, CSV header, history rows)."""
@@ -126,11 +137,18 @@ def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0
     Settings(penalty=penalty, dt=dt)  # the forearm's checks of the step and the penalty parameters
     inv = sim.inverse_dynamics(None, arm, motion)
     computed = command == "control" and controller == "computed-torque"
+    lqr = command == "control" and controller == "lqr"
+    gains = None
     if computed:
         drive, kp, kd = None, bandwidth**2, 2 * damping * bandwidth
     else:
         drive = sim.feedforward(arm, motion) if torque is None else torque
-    result = sim.simulate(drive, plant, motion, kp, kd, penalty=penalty, dt=dt, computed=computed, nominal=arm)
+    if lqr:
+        from .arm2_lqr import lqr_gains
+
+        gains, kp, kd = lqr_gains(arm, motion, q_angle, q_rate, r_torque), 0.0, 0.0
+    result = sim.simulate(drive, plant, motion, kp, kd, penalty=penalty, dt=dt, computed=computed, nominal=arm,
+                          gains=gains)
     rot, rot_j = sim.rmse_deg(result, inv.angles)
     trq, trq_j = sim.rmse_torque_nm(result, inv.torque)
     closed = command == "control"
@@ -138,15 +156,15 @@ def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0
         "command": command, "model": "arm2", "kinematics": motion.name, "integrator": "rk4", "dt": dt,
         "torque": "M(z)*z_ddot_d+h(z,z_dot)" if computed else "inverse" if torque is None else "file",
         "optimizer": None, "feedforward": closed or torque is None,
-        "kp": kp if closed and not computed else None, "kd": kd if closed and not computed else None,
+        "kp": kp if controller == "pd" and closed else None, "kd": kd if controller == "pd" and closed else None,
         "seed": None, "budget": None,
         "rmse_rot_deg": rot, **_per_joint("rmse_rot_deg", rot_j), "rmse_torque_nm": trq,
         **_per_joint("rmse_torque_nm", trq_j), "runtime_s": result.runtime_s, "evaluations": 1,
         "t_end": result.t_end, "status": result.status.code, "message": _message(result),
         "max_violation": result.max_violation, "alpha": alpha, "xi": xi, "omega": omega, "motion": motion.name,
         "model_options": _pairs_text(model_pairs) or None, "plant": _pairs_text(plant_pairs) or None,
-        **({"controller": controller, "controller_options": f"bandwidth={bandwidth} damping={damping}" if computed
-            else f"kp={kp} kd={kd}"} if closed else {}),
+        **({"controller": controller, "controller_options": _controller_options(controller, locals())} if closed
+           else {}),
         "fdbench_version": __version__,
     }
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in JOINTS]
