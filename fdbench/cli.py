@@ -263,9 +263,12 @@ CONDITIONS = {
     "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angle before the derivative estimate; indicators stay measured against the noise-free motion.")),
     "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
     "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
-    "model": (Optional[list[str]], None, typer.Option("--model", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the nominal model and the simulated body (keys as --plant).", show_default=False)),
+    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|KEY=VALUE", help="The model, forearm (Table 1, default) or arm2 (shoulder + elbow; inverse, simulate and control, motion 'reach' or a file t,shoulder,elbow), and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's).", show_default=False)),
     "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
 }
+
+
+ARM_COMMANDS = ("inverse", "simulate", "control", "optimize")  # the commands that take --model arm2 so far
 
 
 def _with_conditions(command):
@@ -283,7 +286,11 @@ def _with_conditions(command):
     @functools.wraps(command)
     def wrapper(**kwargs):
         values = {name: kwargs.pop(name) for name in CONDITIONS}
-        return command(conditions=_conditions(**values), **kwargs)
+        conditions = _conditions(**values)
+        if conditions["_model_name"] != "forearm" and command.__name__ not in ARM_COMMANDS:
+            raise BadInput(f"--model {conditions['_model_name']}: not available with '{command.__name__}' yet "
+                           f"(only {', '.join(ARM_COMMANDS)})")
+        return command(conditions=conditions, **kwargs)
 
     wrapper.__signature__ = signature.replace(parameters=kept + added)
     wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
@@ -293,12 +300,27 @@ def _with_conditions(command):
 def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
                 model_file) -> dict:
     """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
+    names = [item.strip() for item in model or [] if "=" not in item]
     pairs = _model_file(model_file) if model_file is not None else []
-    pairs += _key_values("--model", model or [])
+    pairs += _key_values("--model", [item for item in model or [] if "=" in item])
     return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
                 sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
                 plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file})
+                _inputs={"--model-file": model_file}, _model_name=_model_name(names))
+
+
+def _model_name(names: list) -> str:
+    """The one model named by --model (default: forearm)."""
+    from .models import MODELS
+
+    if len(set(names)) > 1:
+        raise BadInput(f"--model: name one model, got {', '.join(names)}")
+    name = names[0] if names else "forearm"
+    if name not in MODELS:
+        from .registry import unknown_name_message
+
+        raise BadInput(f"--model: {unknown_name_message('model', name, list(MODELS))} (or KEY=VALUE)")
+    return name
 
 
 def _key_values(option: str, items) -> list:
@@ -535,6 +557,64 @@ def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
     _say(quiet, f"stored in {db}")
 
 
+def _arm_only(**options) -> None:
+    """Options the arm does not take yet (value, the only value allowed): bad input otherwise."""
+    for name, (value, allowed) in options.items():
+        if value != allowed:
+            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 yet (only {allowed})")
+
+
+def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **run) -> None:
+    """inverse, simulate and control on the two-segment arm (fdbench.models.arm2_run)."""
+    from .files import BadFile, csv_text
+
+    refused = {"sample_dt": None, "noise_deg": 0.0, **({"plant": ()} if command == "optimize" else {})}
+    for name, default in refused.items():
+        if conditions[name] != default:
+            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 {command} yet")
+    if command in ("simulate", "control"):
+        run["plant_pairs"] = conditions["plant"]
+    torque_file = run.pop("torque_file", None)
+    convergence = run.pop("convergence", None)
+    inputs = dict(conditions["_inputs"])
+    if kinematics not in ("paper", "reach"):
+        inputs["--motion"] = Path(kinematics)
+    _check_outputs(fmt, output=output, save_history=save_history, history=convergence,
+                   inputs={**inputs, "--torque-file": torque_file})
+    from .models import arm2_run
+
+    estimate = dict(cutoff_hz=conditions["cutoff_hz"], smoothing=conditions["smoothing"],
+                    spline_lambda=conditions["spline_lambda"])
+    try:
+        motion = arm2_run.arm_motion("reach" if kinematics == "paper" else kinematics, conditions["radians"], **estimate)
+        if command == "inverse":
+            record, header, rows = arm2_run.inverse_run(conditions["model"], motion)
+        elif command == "optimize":
+            with _progress(quiet, f"arm2: {run['torque']} + {run['optimizer']}") as progress:
+                progress.start(run["budget"])
+                record, header, rows, best = arm2_run.optimize_run(conditions["model"], motion,
+                                                                   on_evaluation=progress.update, **run)
+        else:
+            torque = None if torque_file is None else arm2_run.read_arm_torque_csv(torque_file, motion.duration)
+            record, header, rows = arm2_run.tracking_run(command, conditions["model"], motion, torque=torque, **run)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+    history = csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
+    if command == "inverse" and fmt == "csv":
+        _emit(history, output)
+        return
+    from .files import write_atomic
+
+    if save_history is not None:
+        write_atomic(save_history, history, OUTPUT_LABELS["save_history"])
+    if convergence is not None:
+        write_atomic(convergence, csv_text(["evaluation", "best_objective"], enumerate(best, start=1)),
+                     OUTPUT_LABELS["history"])
+    _finish(record, fmt, output, f"fdbench {command} (arm2)", quiet)
+
+
 # ---- commands ---------------------------------------------------------------------------------
 
 
@@ -553,6 +633,8 @@ def inverse(
     The table and JSON give a summary; --format csv gives the whole history (t, theta, theta_dot, theta_ddot, torque on the motion's samples, SI units; eq. 5: 1001 rows)."""
     from .experiment import RunSpec
 
+    if conditions["_model_name"] != "forearm":
+        return _arm("inverse", conditions, kinematics, fmt, output, None, quiet)
     _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))
     spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
                               **_common(kinematics, "rk4", 1e-3, 1e-6, 1e-9, 1e7, 1.0, 10.0, conditions)))
@@ -606,6 +688,10 @@ def simulate(
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from .experiment import RunSpec
 
+    if conditions["_model_name"] != "forearm":
+        _arm_only(integrator=(integrator, "rk4"), params=(params, None))
+        return _arm("simulate", conditions, kinematics, fmt, output, save_history, quiet, torque_file=torque_file,
+                    dt=dt, alpha=alpha, xi=xi, omega=omega)
     _check_outputs(fmt, output=output, save_history=save_history,
                    inputs=_spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
     if torque_file is not None and params is not None:
@@ -653,6 +739,15 @@ def control(
     """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
     from .experiment import control_spec, run
 
+    if conditions["_model_name"] != "forearm":
+        _arm_only(integrator=(integrator, "rk4"), db=(db, None))
+        options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate,
+                       r_torque=r_torque)
+        _check_controller(controller, options)
+        if controller not in ("pd", "computed-torque", "lqr"):
+            raise BadInput(f"--controller {controller}: not available with --model arm2 yet (pd, computed-torque, lqr)")
+        return _arm("control", conditions, kinematics, fmt, output, save_history, quiet, dt=dt, alpha=alpha, xi=xi,
+                    omega=omega, controller=controller, **options)
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
     _check_controller(controller, options)
@@ -801,12 +896,15 @@ def _methods_text() -> str:
 
     lines += ["controllers (control --controller):"]
     lines += [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
+    from .models import MODELS, summary
+
+    lines += ["models (--model):"] + [f"  {name:<12} {summary(name)}" for name in MODELS]
     return "\n".join(lines) + "\n"
 
 
 @app.command()
 def methods():
-    """List the registered torque parameterisations, optimisers and controllers, one line each."""
+    """List the registered torque parameterisations, optimisers, controllers and models, one line each."""
     _emit(_methods_text(), None)
 
 
@@ -859,10 +957,22 @@ def optimize(
     _check_gradient(gradient)
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
-    spec = _validated(optimize_spec(
+    arm = conditions["_model_name"] != "forearm"
+    checked = {**conditions, "model": (), "plant": ()} if arm else conditions  # the arm's constants: checked later
+    spec = _validated(optimize_spec(  # for the arm: the checks of names, budget, seed and settings
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, gradient=gradient, **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
+        penalty_weight=penalty_weight, gradient=gradient, **_common("paper" if arm else kinematics, integrator, dt, rtol,
+                                                                    atol, alpha, xi, omega, checked),
     ))
+    if arm:
+        _arm_only(integrator=(integrator, "rk4"), db=(db, None), save_params=(save_params, None),
+                  gradient=(gradient, "fd"))
+        if hidden == "auto":
+            raise BadInput("--hidden auto: not available with --model arm2 yet (give a number of neurons)")
+        return _arm("optimize", conditions, kinematics, fmt, output, save_history, quiet, convergence=history,
+                    torque=torque, optimizer=opt, feedforward=feedforward, seed=seed, budget=budget,
+                    torque_options=torque_options, optimizer_options=optimizer_options,
+                    penalty_weight=penalty_weight, dt=dt, alpha=alpha, xi=xi, omega=omega)
     _check_store(db)
     if opt == "cmaes":
         from .population import set_threads

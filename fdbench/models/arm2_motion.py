@@ -1,0 +1,122 @@
+"""Desired motions of several joints: objects that know their duration, their sample times and
+the angles (rad), velocities (rad/s) and accelerations (rad/s^2) of every joint at any time t (s).
+
+* ``Reach`` (the default ``arm2`` motion, named ``reach``): a minimum-jerk point-to-point movement
+  of both joints in 1 s, sampled every 1 ms, from rest to rest:
+
+      z(t) = z0 + (z1 - z0) (10 u^3 - 15 u^4 + 6 u^5),  u = t / T,
+
+  shoulder from -20 deg to 15 deg, elbow from 30 deg to 55 deg, so the forearm's absolute angle
+  goes from 10 deg to 70 deg. Both stay at least 20 deg away from the mixed coordinates' singular
+  configurations (shoulder or shoulder + elbow at +-90 deg) and the elbow never straightens
+  (elbow = 0, the arm's own singularity).
+* ``PerJoint``: one single-joint motion (``fdbench.motion.Motion``) or a constant angle per joint,
+  e.g. the shoulder held at 0 while the elbow follows the paper's eq. 5.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..motion import SAMPLE_DT, Motion, as_motion
+
+
+class JointMotion:
+    """A desired motion of n joints over [0, duration] s."""
+
+    name: str = ""
+    joints: tuple[str, ...] = ()
+
+    @property
+    def samples(self) -> np.ndarray:
+        """The reporting grid, times (s) from 0 to the duration, shape (n,)."""
+        raise NotImplementedError
+
+    def __call__(self, t):
+        """Angles (rad), velocities (rad/s), accelerations (rad/s^2) at times t (s), each of shape
+        t.shape + (n_joints,)."""
+        raise NotImplementedError
+
+    @property
+    def duration(self) -> float:
+        return float(self.samples[-1])
+
+    def describe(self) -> dict:
+        return {"motion": self.name}
+
+
+def _grid(duration: float, dt: float = SAMPLE_DT) -> np.ndarray:
+    t = np.linspace(0.0, duration, int(round(duration / dt)) + 1)
+    t.flags.writeable = False
+    return t
+
+
+class Reach(JointMotion):
+    """Minimum-jerk movement of every joint from ``start`` to ``goal`` (rad) in ``duration`` s."""
+
+    name = "reach"
+
+    def __init__(self, start=(math.radians(-20.0), math.radians(30.0)), goal=(math.radians(15.0), math.radians(55.0)),
+                 duration: float = 1.0, joints=("shoulder", "elbow")):
+        self.start, self.goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
+        if self.start.shape != self.goal.shape or self.start.shape != (len(joints),):
+            raise ValueError("start and goal need one angle per joint")
+        if not duration > 0:
+            raise ValueError(f"the duration must be positive, got {duration}")
+        self.T, self.joints = float(duration), tuple(joints)
+        self._samples = _grid(self.T)
+
+    @property
+    def samples(self) -> np.ndarray:
+        return self._samples
+
+    def __call__(self, t):
+        u = np.clip(np.asarray(t, dtype=float) / self.T, 0.0, 1.0)[..., None]
+        span = self.goal - self.start
+        shape = 10 * u**3 - 15 * u**4 + 6 * u**5
+        rate = (30 * u**2 - 60 * u**3 + 30 * u**4) / self.T
+        curvature = (60 * u - 180 * u**2 + 120 * u**3) / self.T**2
+        return self.start + span * shape, span * rate, span * curvature
+
+
+class PerJoint(JointMotion):
+    """One single-joint motion (a ``Motion`` or a name such as 'paper') or a constant angle (rad)
+    per joint; the samples are those of the first motion given (a constant has none)."""
+
+    def __init__(self, parts, joints=("shoulder", "elbow")):
+        if len(parts) != len(joints):
+            raise ValueError("one motion or angle per joint is needed")
+        self.parts = [float(p) if isinstance(p, (int, float)) else as_motion(p) for p in parts]
+        motions = [p for p in self.parts if isinstance(p, Motion)]
+        self._samples = motions[0].samples if motions else _grid(1.0)
+        self.joints = tuple(joints)
+        self.name = "+".join(p.name if isinstance(p, Motion) else f"{math.degrees(p):g}deg" for p in self.parts)
+
+    @property
+    def samples(self) -> np.ndarray:
+        return self._samples
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        out = [np.zeros(t.shape + (len(self.parts),)) for _ in range(3)]
+        for j, part in enumerate(self.parts):
+            values = part(t) if isinstance(part, Motion) else (np.full(t.shape, part), 0.0, 0.0)
+            for k in range(3):
+                out[k][..., j] = values[k]
+        return tuple(out)
+
+
+MOTIONS = {"reach": Reach}
+
+
+def as_joint_motion(motion) -> JointMotion:
+    """A JointMotion, or the name of one ('reach')."""
+    if isinstance(motion, JointMotion):
+        return motion
+    if motion in MOTIONS:
+        return MOTIONS[motion]()
+    from ..registry import unknown_name_message
+
+    raise ValueError(unknown_name_message("arm motion", str(motion), list(MOTIONS)))

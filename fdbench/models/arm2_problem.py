@@ -1,0 +1,104 @@
+"""The tracking problem of section 4 on the two-segment arm: one block of torque parameters per
+joint (each joint its own instance of the parameterisation, prepared on that joint's
+inverse-dynamics torque), the blocks concatenated into one parameter vector, and
+
+    f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end / T)
+
+with RMSE_rot_deg over both joints and all samples reached (eq. 18 for n joints). Optimisers see
+one objective of scaled parameters x = p / scale and work unchanged; budgets keep their meaning
+(one evaluation, one forward simulation).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..model import Penalty
+from .arm2 import JOINTS, Arm2
+from .arm2_motion import JointMotion, as_joint_motion
+from . import arm2_sim as sim
+
+
+class ArmTrackingProblem:
+    """Optimise per-joint torque parameters so that the simulated arm tracks ``motion``.
+
+    ``torque``: a registered parameterisation's name, made once per joint with ``options``.
+    With ``feedforward`` the parameterised torques are added to the inverse-dynamics torques
+    (eq. 19); without, they are the whole drive torques (eq. 15)."""
+
+    def __init__(self, torque: str, model: Arm2 = Arm2(), motion: str | JointMotion = "reach",
+                 feedforward: bool = False, penalty_weight: float = 1.0, penalty: Penalty = Penalty(),
+                 dt: float = 1e-3, **options):
+        from ..integrate import steps
+        from ..torques import make_torque
+
+        if not (math.isfinite(penalty_weight) and penalty_weight >= 0):
+            raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
+        self.model, self.motion, self.penalty, self.dt = model, as_joint_motion(motion), penalty, dt
+        self.feedforward, self.penalty_weight = feedforward, penalty_weight
+        self.inverse = sim.inverse_dynamics(None, model, self.motion)
+        self.duration = self.motion.duration
+        self.parts = [make_torque(torque, **options) for _ in JOINTS]
+        p0 = [np.asarray(part.prepare(self.inverse.t, self.inverse.torque[:, j], feedforward), dtype=float)
+              for j, part in enumerate(self.parts)]
+        self.blocks = np.cumsum([0] + [len(p) for p in p0])
+        self.p0 = np.concatenate(p0)
+        self.scale = np.concatenate([np.asarray(part.scale(), dtype=float) for part in self.parts])
+        self.x0 = self.p0 / self.scale
+        n = steps(dt, self.duration)
+        self._half = np.linspace(0.0, self.duration, 2 * n + 1)
+        self._on_grid = [part.on_grid(self._half) for part in self.parts]
+        self._ff_half = (np.array(sim.inverse_dynamics(self._half, model, self.motion).torque) if feedforward
+                         else np.zeros((2 * n + 1, len(JOINTS))))
+
+    @property
+    def n_params(self) -> int:
+        return int(self.blocks[-1])
+
+    def torques_on_grid(self, p) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for parameters p, shape (2 n + 1, 2)."""
+        p = np.asarray(p, dtype=float)
+        with np.errstate(all="ignore"):
+            own = np.stack([f(p[a:b]) for f, a, b in zip(self._on_grid, self.blocks[:-1], self.blocks[1:])], axis=-1)
+        return self._ff_half + own
+
+    def simulate(self, p) -> sim.ArmSimulation:
+        tau = self.torques_on_grid(p)
+        half = self._half
+        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.model, self.motion,
+                            penalty=self.penalty, dt=self.dt)
+
+    def objective_of(self, result: sim.ArmSimulation) -> float:
+        """Eq. 18 for a finished simulation."""
+        rmse, _ = sim.rmse_deg(result, self.inverse.angles)
+        if not math.isfinite(rmse):
+            rmse = 0.0  # nothing reached beyond t = 0: the penalty term says it all
+        return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
+
+    def objective(self, p) -> float:
+        return self.objective_of(self.simulate(p))
+
+    def objective_scaled(self, x) -> float:
+        return self.objective(np.asarray(x) * self.scale)
+
+
+def _interp(grid, values, t):
+    return np.stack([np.interp(t, grid, values[:, j]) for j in range(values.shape[1])], axis=-1)
+
+
+def optimize(problem: ArmTrackingProblem, optimizer: str = "cmaes", budget: int = 200, seed: int = 0,
+             on_evaluation=None, **options):
+    """Minimise the problem's objective with a registered optimiser within ``budget`` forward
+    simulations (``on_evaluation(count, best)`` after each); returns (the best parameters p, the
+    OptimizationResult, the final simulation, runtime in s)."""
+    from ..optimizers import make_optimizer
+
+    began = time.perf_counter()
+    found = make_optimizer(optimizer, **options).minimize(problem.objective_scaled, problem.x0, budget, seed,
+                                                          on_evaluation)
+    p = np.asarray(found.x) * problem.scale
+    result = problem.simulate(p)
+    return p, found, result, time.perf_counter() - began

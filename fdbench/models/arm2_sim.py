@@ -1,0 +1,190 @@
+"""Inverse and forward dynamics of the two-segment arm on a desired joint motion: the arm's
+counterparts of ``fdbench.inverse`` and ``fdbench.integrate`` (compiled fixed-step RK4, torques
+and references on the half-step grid, per-joint PD feedback plus feedforward).
+
+A simulation never raises on a physical failure: it stops where it cannot go on and says why in
+``status`` (``fdbench.integrate.Status``); ``t_end`` is the time reached.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..integrate import Status, steps
+from ..model import Penalty
+from .arm2 import Arm2
+from .arm2_motion import JointMotion, as_joint_motion
+
+
+@dataclass(frozen=True)
+class ArmInverse:
+    """Histories on the time grid ``t`` (s): angles (rad), velocities (rad/s), accelerations
+    (rad/s^2) and joint torques (N m), each of shape (n, 2) [shoulder, elbow]."""
+
+    t: np.ndarray
+    angles: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    torque: np.ndarray
+    motion: str
+
+
+def inverse_dynamics(t=None, model: Arm2 = Arm2(), motion: str | JointMotion = "reach") -> ArmInverse:
+    """The joint torques of ``motion`` at times t (s) (default: the motion's samples)."""
+    motion = as_joint_motion(motion)
+    t = motion.samples if t is None else np.asarray(t, dtype=float)
+    z, w, dw = motion(t)
+    return ArmInverse(t, z, w, dw, model.joint_torques(z, w, dw), motion.name)
+
+
+@dataclass
+class ArmSimulation:
+    """A forward simulation on the motion's samples; histories of shape (n, 6) (q, q') or (n, 2)
+    (joint angles, torques); samples after ``t_end`` are NaN."""
+
+    t: np.ndarray  # s
+    q: np.ndarray  # [x1, y1, x2, y2 (m), shoulder, elbow (rad)]
+    qd: np.ndarray  # their derivatives, m/s and rad/s
+    torque: np.ndarray  # total applied joint torques, N m
+    t_end: float  # s
+    status: Status
+    max_violation: float  # max |Phi_i| reached, m^2 or m
+    runtime_s: float = 0.0
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Joint angles [shoulder, elbow] (rad), shape (n, 2)."""
+        return self.q[:, 4:6]
+
+    @property
+    def reached(self) -> np.ndarray:
+        return np.isfinite(self.q[:, 4])
+
+    @property
+    def success(self) -> bool:
+        return self.status is Status.SUCCESS
+
+
+def initial_state(model: Arm2, motion: JointMotion) -> np.ndarray:
+    """[q, q'] on the desired motion at t = 0, shape (12,)."""
+    z, w, dw = motion(np.array(0.0))
+    q, qd, _ = model.coordinates(z, w, dw)
+    return np.concatenate([q, qd])
+
+
+def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", kp=0.0, kd=0.0, *,
+             penalty: Penalty = Penalty(), dt: float = 1e-3, start=None, computed: bool = False,
+             nominal: Arm2 | None = None, gains=None) -> ArmSimulation:
+    """Forward dynamics over the motion's span driven by the feedforward ``torque`` plus PD
+    feedback of each joint towards the desired motion, or by computed-torque control.
+
+    torque: a function of times (s), shape (k,) -> joint torques (N m), shape (k, 2), or None for
+    zero. kp (N m/rad), kd (N m s/rad): one number for both joints or one per joint (zero: open
+    loop). ``computed``: computed-torque control instead of PD, the model's inverse dynamics at the
+    current state for the accelerations z''_d + kp e + kd e' (kp in 1/s^2, kd in 1/s; the error
+    obeys e'' + kd e' + kp e = 0 but for the penalty formulation's small deviations), plus torque.
+    ``start``: the initial state [q, q'], shape (12,) (default: on the motion at t = 0).
+    ``model`` is the simulated body (the plant); ``nominal`` the model computed-torque control
+    believes (default: the plant). ``gains``: instead of kp and kd, a full gain matrix K(t) (2, 4)
+    as a function of times (s), shape (k,) -> (k, 2, 4), applied to [z_d - z, z'_d - z']
+    (N m/rad, N m s/rad), e.g. time-varying LQR (``arm2_lqr``)."""
+    from . import arm2_kernels as kernels
+
+    motion = as_joint_motion(motion)
+    began = time.perf_counter()
+    n = steps(dt, motion.duration)
+    half = np.linspace(0.0, motion.duration, 2 * n + 1)
+    ref, ref_w, ref_a = motion(half)
+    tau = np.zeros((2 * n + 1, 2)) if torque is None else np.array(torque(half), dtype=float).reshape(2 * n + 1, 2)
+    kp, kd = (np.broadcast_to(np.asarray(g, dtype=float), (2,)).copy() for g in (kp, kd))
+    y0 = initial_state(model, motion) if start is None else np.array(start, dtype=float)
+    if y0.shape != (12,) or not np.all(np.isfinite(y0)):
+        raise ValueError(f"the initial state must be 12 finite numbers [q, q'], got {y0}")
+    states, qdd, applied = np.full((n + 1, 12), np.nan), np.full((n + 1, 6), np.nan), np.full((n + 1, 2), np.nan)
+    ref, ref_w, ref_a = (np.ascontiguousarray(r, dtype=float) for r in (ref, ref_w, ref_a))
+    consts = kernels.kernel_constants(model, penalty)
+    believed = consts if nominal is None or nominal == model else kernels.kernel_constants(nominal, penalty)
+    mode = 2 if gains is not None else 1 if computed else 0
+    k_half = np.zeros((1, 2, 4)) if gains is None else np.ascontiguousarray(gains(half), dtype=float)
+    code, done, max_viol = kernels.rk4_pd(y0, motion.duration / n, n, tau, ref, ref_w, ref_a, kp, kd, mode, k_half,
+                                          consts, believed, states, qdd, applied)
+    grid = np.linspace(0.0, motion.duration, n + 1)
+    y, tau_s = _on_samples(grid, states, qdd, applied, done, motion.samples)
+    status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
+    return ArmSimulation(motion.samples, y[:, :6], y[:, 6:], tau_s, done * motion.duration / n, status, float(max_viol),
+                         time.perf_counter() - began)
+
+
+def _on_samples(grid, states, qdd, applied, done, ts):
+    """States (n, 12) and applied torques (n, 2) on the motion's samples ts: taken from the grid
+    where the samples lie on it, else interpolated (cubic Hermite for the states)."""
+    every = (len(grid) - 1) // max(len(ts) - 1, 1)
+    if every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=1e-12):
+        y, tau = states[::every].copy(), applied[::every].copy()
+        beyond = np.arange(len(ts)) * every > done
+        y[beyond], tau[beyond] = np.nan, np.nan
+        return y, tau
+    tau = np.stack([np.interp(ts, grid[: done + 1], applied[: done + 1, j], right=np.nan) for j in range(2)], -1)
+    return _hermite(grid, states, qdd, done, ts), tau
+
+
+def _hermite(grid, states, qdd, done, ts) -> np.ndarray:
+    """States on the integrator grid -> times ts (cubic Hermite between steps), NaN beyond step
+    ``done``; shape (len(ts), 12)."""
+    out = np.full((len(ts), states.shape[1]), np.nan)
+    inside = ts <= grid[done] + 1e-12
+    if done == 0:
+        out[inside] = states[0]
+        return out
+    i = np.clip(np.searchsorted(grid, ts[inside], side="right") - 1, 0, done - 1)
+    h = grid[1] - grid[0]
+    s = ((ts[inside] - grid[i]) / h)[:, None]
+    rate = np.concatenate([states[:, 6:], qdd], axis=1)  # d/dt of the state
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    out[inside] = h00 * states[i] + h10 * h * rate[i] + h01 * states[i + 1] + h11 * h * rate[i + 1]
+    return out
+
+
+class Feedforward:
+    """The inverse-dynamics joint torques of ``model`` on ``motion`` as a torque function
+    t (s), shape (k,) -> (k, 2) N m, remembering the last grid it was evaluated on."""
+
+    def __init__(self, model: Arm2 = Arm2(), motion: str | JointMotion = "reach"):
+        self.model, self.motion = model, as_joint_motion(motion)
+        self._last: tuple = (b"", None)
+
+    def __call__(self, t) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        key = t.tobytes()
+        if key != self._last[0]:
+            torque = inverse_dynamics(t, self.model, self.motion).torque
+            torque.flags.writeable = False
+            self._last = (key, torque)
+        return self._last[1]
+
+
+def feedforward(model: Arm2 = Arm2(), motion: str | JointMotion = "reach") -> Feedforward:
+    """The inverse-dynamics joint torques of ``model`` on ``motion`` as a torque function."""
+    return Feedforward(model, motion)
+
+
+def rmse_deg(result: ArmSimulation, desired: np.ndarray) -> tuple[float, np.ndarray]:
+    """RMSE (deg) of the joint angles against ``desired`` (rad, shape (n, 2)) over the samples
+    reached: over all joints and samples, and per joint (shape (2,))."""
+    reached = result.reached
+    if not reached.any():
+        return float("nan"), np.full(2, np.nan)
+    error = np.degrees(result.angles[reached] - desired[reached])
+    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+
+
+def rmse_torque_nm(result: ArmSimulation, torque: np.ndarray) -> tuple[float, np.ndarray]:
+    """RMSE (N m) of the applied joint torques against ``torque`` (shape (n, 2)), overall and per joint."""
+    reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
+    if not reached.any():
+        return float("nan"), np.full(2, np.nan)
+    error = result.torque[reached] - torque[reached]
+    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))

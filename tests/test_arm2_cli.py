@@ -1,0 +1,166 @@
+"""The two-segment arm through the command line: --model arm2 on inverse, simulate and control,
+arm motion and torque files, per-joint indicators, and bad input as one line with exit 2."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from fdbench.cli import app
+from fdbench.models import arm2_sim as sim
+from fdbench.models.arm2 import Arm2
+from fdbench.models.arm2_motion import Reach
+
+runner = CliRunner()
+
+
+def invoke(*args, code=0):
+    result = runner.invoke(app, [str(a) for a in args])
+    assert result.exit_code == code, result.stderr
+    return result
+
+
+def as_json(*args):
+    return json.loads(invoke(*args, "--format", "json").stdout)
+
+
+def test_inverse_history_is_the_models_joint_torques():
+    table = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--format", "csv").stdout))
+    assert len(table) == 1001 and {"shoulder", "elbow", "shoulder_torque", "elbow_torque"} <= set(table.columns)
+    z = table[["shoulder", "elbow"]].to_numpy()
+    w = table[["shoulder_dot", "elbow_dot"]].to_numpy()
+    dw = table[["shoulder_ddot", "elbow_ddot"]].to_numpy()
+    expected = Arm2(m0=2.5).joint_torques(z, w, dw)
+    changed = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--model", "m0=2.5", "--format", "csv").stdout))
+    np.testing.assert_allclose(changed[["shoulder_torque", "elbow_torque"]].to_numpy(), expected, rtol=1e-8)
+    np.testing.assert_allclose(changed.elbow_torque, table.elbow_torque, rtol=1e-8)  # m0 acts on the shoulder only
+
+
+def test_control_reports_overall_and_per_joint_indicators(tmp_path):
+    history = tmp_path / "h.csv"
+    record = as_json("control", "--model", "arm2", "--kp", "80", "--kd", "0.3", "--save-trajectory", history)
+    assert record["model"] == "arm2" and record["status"] == "success" and record["t_end"] == pytest.approx(1.0)
+    per = np.array([record["rmse_rot_deg_shoulder"], record["rmse_rot_deg_elbow"]])
+    assert record["rmse_rot_deg"] == pytest.approx(math.sqrt(np.mean(per**2)), rel=1e-12)
+    assert record["rmse_rot_deg"] < 1e-5  # the reach is kinematically consistent: PD + feedforward tracks it
+    table = pd.read_csv(history)
+    error = np.degrees(table[["shoulder", "elbow"]].to_numpy() - table[["shoulder_desired", "elbow_desired"]].to_numpy())
+    assert record["rmse_rot_deg"] == pytest.approx(math.sqrt(np.mean(error**2)), rel=1e-3)  # 10 digits written
+
+
+def test_computed_torque_on_the_arm():
+    record = as_json("control", "--model", "arm2", "--controller", "computed-torque", "--bandwidth", "15")
+    assert record["controller"] == "computed-torque" and "bandwidth=15.0" in record["controller_options"]
+    assert record["status"] == "success" and record["rmse_rot_deg"] < 1e-5 and record["kp"] is None
+
+
+def test_plant_mismatch_on_the_arm():
+    """--plant changes the simulated body only: the feedforward (and computed torque) keep the
+    nominal model, so tracking degrades; --model changes both and tracking stays exact."""
+    both = as_json("control", "--model", "arm2", "--model", "m0=2.5")
+    plant = as_json("control", "--model", "arm2", "--plant", "m0=2.5")
+    ct = as_json("control", "--model", "arm2", "--plant", "m0=2.5", "--controller", "computed-torque")
+    assert both["rmse_rot_deg"] < 1e-5 and both["model_options"] == "m0=2.5" and both["plant"] is None
+    assert plant["plant"] == "m0=2.5" and plant["rmse_rot_deg"] > 0.1 and ct["rmse_rot_deg"] > 0.1
+    direct = sim.simulate(sim.feedforward(Arm2(), Reach()), Arm2(m0=2.5), Reach(), 80.0, 0.3)
+    rot, _ = sim.rmse_deg(direct, sim.inverse_dynamics(None, Arm2(), Reach()).angles)
+    assert plant["rmse_rot_deg"] == pytest.approx(rot, rel=1e-12)
+
+
+def test_lqr_on_the_arm():
+    record = as_json("control", "--model", "arm2", "--controller", "lqr", "--q-angle", "1e5")
+    assert record["controller"] == "lqr" and "q_angle=100000.0" in record["controller_options"]
+    assert record["status"] == "success" and record["rmse_rot_deg"] < 1e-5 and record["kp"] is None
+    heavy = as_json("control", "--model", "arm2", "--controller", "lqr", "--plant", "m0=2.5")
+    pd_heavy = as_json("control", "--model", "arm2", "--plant", "m0=2.5")
+    assert 0 < heavy["rmse_rot_deg"] < pd_heavy["rmse_rot_deg"]  # stiffer than PD 80 / 0.3
+
+
+def test_simulate_reads_one_torque_column_per_joint(tmp_path):
+    motion = Reach()
+    t = np.linspace(0.0, 1.0, 2001)
+    torque = sim.inverse_dynamics(t, Arm2(), motion).torque + np.array([0.05, -0.02])
+    path = tmp_path / "torque.csv"
+    pd.DataFrame({"t": t, "shoulder": torque[:, 0], "elbow": torque[:, 1]}).to_csv(path, index=False)
+    record = as_json("simulate", "--model", "arm2", "--torque-file", path)
+    expected = sim.simulate(lambda s: np.stack([np.interp(s, t, torque[:, j]) for j in range(2)], -1), Arm2(), motion)
+    rot, _ = sim.rmse_deg(expected, sim.inverse_dynamics(None, Arm2(), motion).angles)
+    assert record["torque"] == "file" and record["rmse_rot_deg"] == pytest.approx(rot, rel=1e-9)
+    assert record["rmse_rot_deg"] > 0.1  # the offsets drive the arm off the reach
+
+
+def test_a_motion_file_in_degrees_gives_the_reach(tmp_path):
+    motion = Reach()
+    z, w, dw = motion(motion.samples)
+    frame = {"t": motion.samples}
+    for j, joint in enumerate(("shoulder", "elbow")):
+        frame.update({joint: np.degrees(z[:, j]), f"{joint}_vel": np.degrees(w[:, j]), f"{joint}_acc": np.degrees(dw[:, j])})
+    path = tmp_path / "reach.csv"
+    pd.DataFrame(frame).to_csv(path, index=False, float_format="%.12g")
+    from_file = as_json("control", "--model", "arm2", "--motion", path)
+    named = as_json("control", "--model", "arm2")
+    assert from_file["motion"] == "file:reach.csv" and from_file["status"] == "success"
+    assert from_file["rmse_rot_deg"] < 1e-4 and named["rmse_rot_deg"] < 1e-4
+
+
+def test_the_forearm_is_the_default_model():
+    assert as_json("control", "--model", "forearm")["rmse_rot_deg"] == as_json("control")["rmse_rot_deg"]
+
+
+@pytest.mark.parametrize("args, word", [
+    (["--model", "arm3"], "valid: forearm, arm2"), (["--model", "arm2", "--model", "forearm"], "one model"),
+    (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
+    (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45"], "--integrator"),
+    (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
+    (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--noise-deg", "1"], "--noise-deg"),
+    (["--model", "arm2", "--dt", "5"], "--dt"), (["--model", "arm2", "--kp", "-1"], "--kp"),
+    (["--model", "arm2", "--motion", "missing.csv"], "missing.csv"),
+])
+def test_bad_arm_input_is_one_line_exit_2(args, word):
+    result = invoke("control", *args, code=2)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and word in lines[0], lines
+
+
+def test_a_motion_file_without_a_joint_column_is_refused(tmp_path):
+    path = tmp_path / "m.csv"
+    path.write_text("t,shoulder\n0,1\n1,2\n")
+    result = invoke("inverse", "--model", "arm2", "--motion", path, code=2)
+    assert "elbow" in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+def test_optimize_on_the_arm(tmp_path):
+    convergence = tmp_path / "c.csv"
+    record = as_json("optimize", "--model", "arm2", "--torque", "pf", "--terms", "3", "--feedforward", "--opt", "bfgs",
+                     "--budget", "40", "--save-convergence", convergence)
+    assert record["model"] == "arm2" and record["n_params"] == 18 and record["evaluations"] == 40
+    assert record["best_objective"] <= record["initial_objective"] and record["status"] == "success"
+    assert record["best_objective"] == pytest.approx(record["rmse_rot_deg"], rel=1e-12)
+    assert {"rmse_rot_deg_shoulder", "rmse_rot_deg_elbow"} <= set(record)
+    best = pd.read_csv(convergence).best_objective
+    assert len(best) == 40 and best.iloc[-1] == pytest.approx(record["best_objective"]) and best.is_monotonic_decreasing
+
+
+def test_optimize_on_the_arm_refuses_what_it_lacks():
+    for args, word in ((["--hidden", "auto", "--torque", "ann"], "--hidden auto"), (["--budget", "0"], "--budget"),
+                       (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator"),
+                       (["--plant", "m0=2"], "--plant")):
+        result = invoke("optimize", "--model", "arm2", *args, code=2)
+        assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("command", [["collocate"], ["report"], ["study", "noise"]])
+def test_commands_without_the_arm_say_so(command):
+    result = invoke(*command, "--model", "arm2", code=2)
+    assert "not available" in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+def test_methods_lists_the_models():
+    text = invoke("methods").stdout
+    assert "models (--model):" in text and "  arm2 " in text and "  forearm " in text
