@@ -314,7 +314,7 @@ class DaskBackend(Backend):
                 where = "local Dask cluster"
                 self.cluster = distributed.LocalCluster(
                     n_workers=max(1, min(self.jobs, n_runs)), threads_per_worker=1, processes=True,
-                    host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR,
+                    host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL,
                 )
                 self.client = distributed.Client(self.cluster, set_as_default=False)
             try:
@@ -369,12 +369,23 @@ class DaskBackend(Backend):
     def stop(self) -> None:
         client, cluster = self.client, self.cluster
         self.client = self.cluster = None
+        if client is not None or cluster is not None:
+            _quiet_shutdown()
         for thing in (client, cluster):
             if thing is not None:
                 try:
                     thing.close()
                 except Exception:  # noqa: BLE001 - closing after a failure must not hide it
                     pass
+
+
+def _quiet_shutdown() -> None:
+    """Closing a cluster with tasks in flight (Ctrl-C, SIGTERM) makes Dask and asyncio log the
+    broken connections with tracebacks: what stopped the command is said once, by fdbench."""
+    import logging
+
+    for name in ("distributed", "asyncio", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
 def auto_batch(n_runs: int, workers: int) -> int:
