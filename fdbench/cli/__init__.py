@@ -1,0 +1,12 @@
+"""The ``fdbench`` command line, one module per job: ``app`` (the typer app and the contract's
+error handling), ``options`` (options declared once and shared), ``common`` (checks, rendering,
+writing, the store), ``runs`` (the commands of one run) and ``sweeps`` (report and study).
+
+Rendering with rich happens here only; heavy imports are made inside the commands so that
+``fdbench --help`` is instant.
+"""
+
+from . import runs, sweeps  # noqa: F401  (registration of the commands)
+from .app import BadInput, app, main
+
+__all__ = ["BadInput", "app", "main"]

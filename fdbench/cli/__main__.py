@@ -1,0 +1,5 @@
+"""``python -m fdbench.cli``: the command line."""
+
+from . import main
+
+main()

@@ -1,0 +1,220 @@
+"""The ``fdbench`` application: the typer app, its error handling (the command-line contract:
+results on stdout, one-line errors on stderr, exit codes 0/1/2/130/141/143) and --help choices."""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from typing import Annotated
+
+import typer
+from typer.core import TyperGroup
+
+from .. import __version__
+from ..registry import PluginError
+
+
+_STARTED = time.perf_counter()
+
+
+FORMATS = ("table", "json", "csv")
+
+
+MAX_SEEDS = 1000  # runs per cell of a report
+
+
+MAX_JOBS = 256  # worker processes
+
+
+KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper), 'exact' (eq. 5 "
+                   "differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: columns t (s) "
+                   "and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any duration and "
+                   "sampling. --kinematics is an older name.")
+
+
+INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
+
+
+class BadInput(Exception):
+    """Bad usage or input: exit code 2 with this one-line message."""
+
+
+class FdbenchGroup(TyperGroup):
+    """Routes every error to one line on stderr with the contract's exit codes."""
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except BrokenPipeError:  # before click turns it into a silent exit code 1
+            raise _StdoutClosed from None
+
+    def main(self, args=None, prog_name=None, **extra):
+        extra.pop("standalone_mode", None)
+        self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
+        code = 0
+        import warnings
+
+        # numerical trouble (overflow in a torque of 1e308...) is reported by a run's status, once
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
+        try:
+            returned = super().main(args=args, prog_name=prog_name or "fdbench", standalone_mode=False, **extra)
+            code = returned if isinstance(returned, int) else 0
+            if code == 130:
+                _error("interrupted")
+        except BadInput as exc:
+            code = _error(str(exc), 2)
+        except PluginError as exc:
+            code = _error(str(exc), 2)
+        except KeyboardInterrupt:
+            code = _error("interrupted", 130)
+        except (BrokenPipeError, _StdoutClosed):
+            code = _closed_stdout()
+        except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback
+            if hasattr(exc, "exit_code") and hasattr(exc, "format_message"):  # click usage errors
+                message = exc.format_message().strip()
+                if not message:  # no arguments: the help was shown, nothing more to say
+                    sys.exit(exc.exit_code)
+                context = getattr(exc, "ctx", None)
+                where = f"{context.command_path}: " if context is not None else ""
+                code = _error(where + message, exc.exit_code)
+            elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
+                code = _error(f"--db: {exc}", 2)
+            elif os.environ.get("FDBENCH_DEBUG"):
+                raise
+            else:
+                code = _error(f"{type(exc).__name__}: {exc}", 1)
+        sys.exit(code)
+
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and getattr(self, "help_requested", False):
+            _show_choices(command, ctx)
+        return command
+
+    def format_help(self, ctx, formatter):
+        _show_choices(self, ctx)
+        return super().format_help(ctx, formatter)
+
+
+def _choices(name: str, command: str):
+    """The valid values of an option, from the registries (plugins included), for --help."""
+    if name == "torque":
+        from ..torques import TORQUES
+
+        return list(TORQUES)
+    if name == "opt":
+        from ..optimizers import OPTIMIZERS
+
+        return list(OPTIMIZERS)
+    if name == "integrator":
+        from ..integrate import INTEGRATORS
+
+        return list(INTEGRATORS)
+    if name == "smoothing":
+        from ..motion import SMOOTHING
+
+        return list(SMOOTHING)
+    if name == "kinematics":
+        from ..motion import KINEMATICS
+
+        return list(KINEMATICS) + ["FILE"]
+    if name == "backend":
+        from ..execution import BACKENDS
+
+        return list(BACKENDS)
+    if name == "controller":
+        from ..controllers import CONTROLLERS
+
+        return list(CONTROLLERS)
+    if name == "scheme":
+        from ..collocation import SCHEMES
+
+        return list(SCHEMES)
+    if name == "fmt":
+        return list(REPORT_FORMATS if command == "report" else FORMATS)
+    return None
+
+
+def _show_choices(command, ctx) -> None:
+    """Help only: show registered names as an option's choices ('[ann|cs|pf]') and no type for
+    on/off flags (computed when help is asked for, so plugins appear and other commands stay fast)."""
+    params = list(getattr(command, "params", []))
+    help_option = command.get_help_option(ctx) if hasattr(command, "get_help_option") else None
+    for param in params + ([help_option] if help_option is not None else []):
+        if getattr(param, "is_flag", False) and getattr(param, "metavar", None) is None:
+            param.metavar = ""
+            continue
+        if getattr(param, "param_type_name", None) != "option" or param.metavar is not None:
+            continue
+        if param.name == "hidden":
+            param.metavar = "<int>|auto"
+            continue
+        try:
+            choices = _choices(param.name, command.name)
+        except PluginError:
+            return  # the command itself reports it
+        if choices:
+            param.metavar = "[" + "|".join(choices) + "]"
+
+
+class _StdoutClosed(Exception):
+    """Standard output was closed (``>&-``): nothing can be written there."""
+
+
+SIGPIPE_EXIT = 141  # 128 + SIGPIPE: what a shell tool exits with when its reader went away
+
+
+def _closed_stdout() -> int:
+    """A reader that stopped reading (``| head``) or a closed stdout is a normal end: no message,
+    and no second failure when Python flushes stdout at exit."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+    except OSError:
+        pass
+    return SIGPIPE_EXIT
+
+
+def _error(message: str, code: int = 1) -> int:
+    message = " ".join(message.split())  # one line, whatever a path or a library put in it
+    sys.stderr.write(f"fdbench: error: {message}\n")
+    sys.stderr.flush()
+    return code
+
+
+app = typer.Typer(
+    cls=FdbenchGroup,
+    help="Benchmark of trajectory-tracking methods for the forward dynamic simulation of a 1-DOF forearm: "
+    "PD control with computed feedforward against optimised torque histories (ANN, cubic spline, "
+    "parametric function) by CMA-ES, BFGS and more. Run 'fdbench report' for the paper's whole comparison.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+
+def _version(value: bool):
+    if value:
+        typer.echo(f"fdbench {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")] = False,
+):
+    """fdbench: trajectory tracking in forward dynamics, benchmarked."""
+
+
+MAX_THREADS = 1024
+
+
+REPORT_FORMATS = ("md", "csv", "json")
+
+
+def main() -> None:
+    """Console-script entry point."""
+    typer.main.get_command(app).main(prog_name="fdbench")

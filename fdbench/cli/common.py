@@ -1,0 +1,342 @@
+"""Helpers of every command: input and output checks, rendering, writing, the results store,
+method-option checks and the progress bar."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+
+from .app import BadInput, FORMATS, _STARTED, _StdoutClosed
+
+
+def _check_choice(option: str, value: str, valid) -> str:
+    if value not in valid:
+        from ..registry import unknown_name_message
+
+        raise BadInput(f"{option}: " + unknown_name_message("value", value, list(valid)))
+    return value
+
+
+# output options with two names: errors name both
+OUTPUT_LABELS = {"save_history": "--save-trajectory (--save-history)", "history": "--save-convergence (--history)"}
+
+
+def _check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None, **paths) -> None:
+    """Validate --format and every output path before any work starts: each can be written, and
+    none names an input file, the results database ``db`` or another output."""
+    from ..files import BadFile, check_distinct, check_writable
+
+    _check_choice("--format", fmt, valid)
+    outputs = {OUTPUT_LABELS.get(option, "--" + option.replace("_", "-")): path for option, path in paths.items()
+               if not (option == "output" and str(path) == "-")}  # '-o -' is stdout
+    try:
+        for option, path in outputs.items():
+            if path is not None:
+                check_writable(path, option)
+        check_distinct(outputs, inputs, db)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _validated(spec):
+    try:
+        return spec.validate()
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+
+
+def _with_option(message: str) -> str:
+    """Messages from the library name parameters plainly (dt, kp); name them as options."""
+    for name in ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd"):
+        if message.startswith(name + " "):
+            return f"--{name}: " + message[len(name) + 1 :]
+    for name in ("kinematics", "integrator", "torque", "optimizer"):
+        if message.startswith(f"unknown {name} "):
+            option = "--opt" if name == "optimizer" else f"--{name}"
+            return f"{option}: {message}"
+    return message
+
+
+def _console(stderr: bool = True):
+    from rich.console import Console
+
+    return Console(stderr=stderr, highlight=False)
+
+
+def _say(quiet: bool, text: str) -> None:
+    if not quiet:
+        _console().print(text, soft_wrap=True)
+
+
+def _jsonable(record: dict) -> dict:
+    from ..files import finite_or_none
+
+    return {k: finite_or_none(float(v)) if isinstance(v, float) else v for k, v in record.items()}
+
+
+def _render(record: dict, fmt: str, title: str) -> str:
+    if fmt == "json":
+        return json.dumps(_jsonable(record), indent=2) + "\n"
+    if fmt == "csv":
+        from ..files import csv_text
+
+        return csv_text(list(record), [["" if v is None else v for v in record.values()]])
+    from rich.table import Table
+
+    table = Table(title=title, show_header=True)
+    table.add_column("field")
+    table.add_column("value", overflow="fold")
+    for key, value in record.items():
+        if value is None or value == "":
+            continue
+        table.add_row(key, _format_value(value))
+    console = _console(stderr=False)
+    with console.capture() as capture:
+        console.print(table)
+    return capture.get()
+
+
+def _format_value(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    return str(value)
+
+
+def _emit(text: str, output: Optional[Path]) -> None:
+    if output is None or str(output) == "-":
+        if sys.stdout is None:
+            raise _StdoutClosed
+        sys.stdout.write(text)
+        sys.stdout.flush()
+    else:
+        from ..files import write_atomic
+
+        write_atomic(output, text)
+
+
+def _finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
+    record["command_time_s"] = time.perf_counter() - _STARTED
+    _emit(_render(record, fmt, title), output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output}")
+    if record.get("status") not in (None, "success"):
+        _say(quiet, f"[yellow]warning:[/] {record['message']}")
+
+
+def _history_text(outcome) -> str:
+    import numpy as np
+
+    from ..files import csv_text
+
+    r, inv = outcome.result, outcome.inverse
+    columns = [r.t, r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]]
+    rows = np.column_stack(columns)
+    header = ["t", "theta", "theta_desired", "theta_dot", "theta_dot_desired", "torque", "torque_inverse", "x2", "y2"]
+    return csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
+
+
+def _save_history(outcome, path) -> None:
+    if path is not None:
+        from ..files import write_atomic
+
+        write_atomic(path, _history_text(outcome), OUTPUT_LABELS["save_history"])
+
+
+def _check_store(db: Optional[Path]) -> None:
+    """Refuse an unusable --db before any work starts: not a database, damaged, read-only,
+    locked."""
+    if db is not None:
+        from ..store import StoreError, open_store
+
+        try:
+            with open_store(db) as store:
+                store.check_usable()
+        except StoreError as exc:
+            raise BadInput(f"--db: {exc}") from None
+
+
+def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
+    if db is None:
+        return
+    from ..store import StoreError, open_store
+
+    try:
+        with open_store(db) as store:
+            store.add(spec, outcome)
+    except StoreError as exc:
+        raise BadInput(f"--db: {exc}") from None
+    _say(quiet, f"stored in {db}")
+
+
+def _arm_only(**options) -> None:
+    """Options the arm does not take yet (value, the only value allowed): bad input otherwise."""
+    for name, (value, allowed) in options.items():
+        if value != allowed:
+            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 yet (only {allowed})")
+
+
+def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **run) -> None:
+    """inverse, simulate and control on the two-segment arm (fdbench.models.arm2_run)."""
+    from ..files import BadFile, csv_text
+
+    refused = {"sample_dt": None, "noise_deg": 0.0, **({"plant": ()} if command == "optimize" else {})}
+    for name, default in refused.items():
+        if conditions[name] != default:
+            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 {command} yet")
+    if command in ("simulate", "control"):
+        run["plant_pairs"] = conditions["plant"]
+    torque_file = run.pop("torque_file", None)
+    convergence = run.pop("convergence", None)
+    inputs = dict(conditions["_inputs"])
+    if kinematics not in ("paper", "reach"):
+        inputs["--motion"] = Path(kinematics)
+    _check_outputs(fmt, output=output, save_history=save_history, history=convergence,
+                   inputs={**inputs, "--torque-file": torque_file})
+    from ..models import arm2_run
+
+    estimate = dict(cutoff_hz=conditions["cutoff_hz"], smoothing=conditions["smoothing"],
+                    spline_lambda=conditions["spline_lambda"])
+    try:
+        motion = arm2_run.arm_motion("reach" if kinematics == "paper" else kinematics, conditions["radians"], **estimate)
+        if command == "inverse":
+            record, header, rows = arm2_run.inverse_run(conditions["model"], motion)
+        elif command == "optimize":
+            with _progress(quiet, f"arm2: {run['torque']} + {run['optimizer']}") as progress:
+                progress.start(run["budget"])
+                record, header, rows, best = arm2_run.optimize_run(conditions["model"], motion,
+                                                                   on_evaluation=progress.update, **run)
+        else:
+            torque = None if torque_file is None else arm2_run.read_arm_torque_csv(torque_file, motion.duration)
+            record, header, rows = arm2_run.tracking_run(command, conditions["model"], motion, torque=torque, **run)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+    history = csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
+    if command == "inverse" and fmt == "csv":
+        _emit(history, output)
+        return
+    from ..files import write_atomic
+
+    if save_history is not None:
+        write_atomic(save_history, history, OUTPUT_LABELS["save_history"])
+    if convergence is not None:
+        write_atomic(convergence, csv_text(["evaluation", "best_objective"], enumerate(best, start=1)),
+                     OUTPUT_LABELS["history"])
+    _finish(record, fmt, output, f"fdbench {command} (arm2)", quiet)
+
+
+def _check_gradient(gradient: str) -> None:
+    from ..experiment import GRADIENTS
+
+    if gradient not in GRADIENTS:
+        raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+
+
+def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
+    """Reject an out-of-range method option even when the chosen method does not use it
+    (``--terms 0`` with ``--torque cs``): every registered class that takes it checks it."""
+    import inspect
+
+    from ..optimizers import OPTIMIZERS
+    from ..torques import TORQUES
+
+    for registry, options in ((TORQUES, torque_options), (OPTIMIZERS, optimizer_options)):
+        for _, cls in registry.items():
+            accepted = inspect.signature(cls).parameters
+            given = {k: v for k, v in options.items() if k in accepted and v is not None and v != "auto"}
+            if given:
+                try:
+                    cls(**given)
+                except ValueError as exc:
+                    raise BadInput(str(exc)) from None
+
+
+def _check_finite(**values) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise BadInput(f"--{name.replace('_', '-')} must be a finite number, got {value}")
+
+
+def _parse_hidden(hidden: str):
+    if hidden == "auto":
+        return "auto"
+    try:
+        value = int(hidden)
+    except ValueError:
+        raise BadInput(f"--hidden must be an integer >= 1 or 'auto', got {hidden!r}") from None
+    if value < 1:
+        raise BadInput(f"--hidden must be an integer >= 1 or 'auto', got {value}")
+    return value
+
+
+def _methods_text() -> str:
+    from ..optimizers import OPTIMIZERS
+    from ..torques import TORQUES
+
+    lines = ["torques (--torque):"]
+    lines += [f"  {name:<12} {cls.summary}" for name, cls in TORQUES.items()]
+    lines += ["optimizers (--opt):"]
+    lines += [f"  {name:<12} {cls.summary}" for name, cls in OPTIMIZERS.items()]
+    from ..controllers import CONTROLLERS
+
+    lines += ["controllers (control --controller):"]
+    lines += [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
+    from ..models import MODELS, summary
+
+    lines += ["models (--model):"] + [f"  {name:<12} {summary(name)}" for name in MODELS]
+    return "\n".join(lines) + "\n"
+
+
+def _check_names(torques, optimizers) -> None:
+    from ..optimizers import OPTIMIZERS
+    from ..registry import UnknownName
+    from ..torques import TORQUES
+
+    try:
+        for name in torques or ():
+            TORQUES[name]
+        for name in optimizers or ():
+            OPTIMIZERS[name]
+    except UnknownName as exc:
+        raise BadInput(_with_option(str(exc))) from None
+
+
+class _progress:
+    """A rich progress bar on stderr: evaluations done and the best objective so far."""
+
+    def __init__(self, quiet: bool, label: str):
+        self.quiet, self.label = quiet, label
+        self.bar = self.task = None
+
+    def __enter__(self):
+        return self
+
+    def start(self, total: int, show_best: bool = True) -> None:
+        if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
+            return
+        from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
+                                   TimeRemainingColumn)
+
+        columns = [TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn()]
+        if show_best:
+            columns.append(TextColumn("best {task.fields[best]}"))
+        # elapsed and time left from the first evaluations on: a slow integrator shows at once
+        columns += [TimeElapsedColumn(), TextColumn("left"), TimeRemainingColumn()]
+        self.bar = Progress(*columns, console=_console(), transient=True, speed_estimate_period=10)
+        self.task = self.bar.add_task(self.label, total=total, best="-")
+        self.bar.start()
+
+    def update(self, count: int, best: float | None = None) -> None:
+        if self.bar is not None:
+            self.bar.update(self.task, completed=count, best="-" if best is None else f"{best:.4g}")
+
+    def __exit__(self, *exc):
+        if self.bar is not None:
+            self.bar.stop()
+        return False

@@ -1,0 +1,266 @@
+"""Options shared by several commands, declared once: simulation settings, outputs, method
+options, execution, and the conditions (motion, noise, model) added by ``_with_conditions``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .app import BadInput, INTEGRATOR_HELP, KINEMATICS_HELP, MAX_THREADS
+
+
+Kinematics = Annotated[str, typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP)]
+
+
+Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
+
+
+Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in [1e-6, 0.1].")]
+
+
+Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [2.2e-14, 1).")]
+
+
+Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators), in [1e-30, 1].")]
+
+
+Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12, in [1, 1e15].")]
+
+
+Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12.")]
+
+
+Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
+
+
+Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
+
+
+Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
+
+
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; one row per sample of the motion, 1001 for eq. 5), as CSV to FILE. --save-history is an older name.")]
+
+
+Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
+
+
+NoiseSeed = Annotated[int, typer.Option("--seed", help="Seed of the --noise-deg noise; the same seed gives the same noisy motion.")]
+
+
+Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
+
+
+Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, in [1, 1000000], gradient evaluations included.")]
+
+
+Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
+
+
+Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span (eq. 5: [0, 1] s).")]
+
+
+Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
+
+
+Sigma0 = Annotated[Optional[float], typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units (default: per torque, cs 0.05, ann 0.2, pf 0.03).", show_default=False)]
+
+
+Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: per torque, cs and ann 8, pf cma's 4 + 3 ln n).")]
+
+
+Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads evaluating a CMA-ES population at once, in [1, {MAX_THREADS}] (default: the cores available); the numbers do not depend on it.", show_default=False)]
+
+
+Gradient = Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")]
+
+
+PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
+
+
+# Execution of many runs (report, study): where they run and how many at once.
+BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install 'fdbench\\[dask]').")]
+
+
+Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version).", show_default=False)]
+
+
+Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once, in [1, 256]: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)]
+
+
+# Options of the commands that run many specs (report, study)
+TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")]
+
+
+OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")]
+
+
+FeedforwardSelection = Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with feedforward (Table 3) or without (Table 2); default both.", show_default=False)]
+
+
+WithControl = Annotated[bool, typer.Option("--control/--no-control", help="Include PD control.")]
+
+
+AllCells = Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")]
+
+
+StoreDb = Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)]
+
+
+Rerun = Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")]
+
+
+Kp = Annotated[float, typer.Option("--kp", help="PD proportional gain, N m/rad.")]
+
+
+Kd = Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad.")]
+
+
+# Options of the motion, its noise and the model, shared by every command that simulates: declared once
+# here and added to a command by @_with_conditions, which hands them over as one dict ``conditions``
+# of RunSpec fields.
+CONDITIONS = {
+    "radians": (bool, False, typer.Option("--radians", help="The motion file's angles (and derivatives) are in radians, not degrees.")),
+    "cutoff_hz": (float, 6.0, typer.Option("--cutoff", help="Derivative estimate: -3 dB frequency (Hz) of the zero-lag 4th-order Butterworth low-pass (Winter's), applied to a recorded or noisy angle before an interpolating spline is differentiated.")),
+    "smoothing": (str, "butterworth", typer.Option("--smoothing", help="Derivative estimate: 'butterworth' (low-pass, then spline) or 'spline' (a smoothing spline, factor by generalised cross-validation or --spline-lambda).")),
+    "spline_lambda": (Optional[float], None, typer.Option("--spline-lambda", help="Smoothing factor of --smoothing spline (> 0; default: chosen by generalised cross-validation).", show_default=False)),
+    "sample_dt": (Optional[float], None, typer.Option("--sample-dt", help="Report the histories and indicators every SAMPLE_DT s (default: the motion's own samples; eq. 5: 1 ms).", show_default=False)),
+    "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angle before the derivative estimate; indicators stay measured against the noise-free motion.")),
+    "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
+    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
+    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|KEY=VALUE", help="The model, forearm (Table 1, default) or arm2 (shoulder + elbow; inverse, simulate and control, motion 'reach' or a file t,shoulder,elbow), and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's).", show_default=False)),
+    "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
+}
+
+
+ARM_COMMANDS = ("inverse", "simulate", "control", "optimize")  # the commands that take --model arm2 so far
+
+
+def _with_conditions(command):
+    """Add the CONDITIONS options to a command; it receives them as ``conditions`` (a dict of
+    RunSpec fields), the motion and model files among ``conditions['_inputs']``."""
+    import functools
+    import inspect
+
+    signature = inspect.signature(command, eval_str=True)  # the annotations as objects, as typer reads them
+    added = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default,
+                               annotation=Annotated[kind, option])
+             for name, (kind, default, option) in CONDITIONS.items()]
+    kept = [p for p in signature.parameters.values() if p.name != "conditions"]
+
+    @functools.wraps(command)
+    def wrapper(**kwargs):
+        values = {name: kwargs.pop(name) for name in CONDITIONS}
+        conditions = _conditions(**values)
+        if conditions["_model_name"] != "forearm" and command.__name__ not in ARM_COMMANDS:
+            raise BadInput(f"--model {conditions['_model_name']}: not available with '{command.__name__}' yet "
+                           f"(only {', '.join(ARM_COMMANDS)})")
+        return command(conditions=conditions, **kwargs)
+
+    wrapper.__signature__ = signature.replace(parameters=kept + added)
+    wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
+    return wrapper
+
+
+def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
+                model_file) -> dict:
+    """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
+    names = [item.strip() for item in model or [] if "=" not in item]
+    pairs = _model_file(model_file) if model_file is not None else []
+    pairs += _key_values("--model", [item for item in model or [] if "=" in item])
+    return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
+                sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
+                plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
+                _inputs={"--model-file": model_file}, _model_name=_model_name(names))
+
+
+def _model_name(names: list) -> str:
+    """The one model named by --model (default: forearm)."""
+    from ..models import MODELS
+
+    if len(set(names)) > 1:
+        raise BadInput(f"--model: name one model, got {', '.join(names)}")
+    name = names[0] if names else "forearm"
+    if name not in MODELS:
+        from ..registry import unknown_name_message
+
+        raise BadInput(f"--model: {unknown_name_message('model', name, list(MODELS))} (or KEY=VALUE)")
+    return name
+
+
+def _key_values(option: str, items) -> list:
+    pairs = []
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g), got {item!r}")
+        try:
+            pairs.append((key.strip(), float(value)))
+        except ValueError:
+            raise BadInput(f"{option}: {key.strip()} must be a number, got {value!r}") from None
+    return pairs
+
+
+def _model_file(path: Path) -> list:
+    """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
+    from ..files import BadFile, read_input_text
+
+    try:
+        text = read_input_text(path, "--model-file", 2**20)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    try:
+        if path.suffix.lower() == ".json":
+            data = json.loads(text)
+        else:
+            import tomllib
+
+            data = tomllib.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise BadInput(f"--model-file: cannot read {path} as {'JSON' if path.suffix.lower() == '.json' else 'TOML'}: "
+                       f"{' '.join(str(exc).split())[:200]}") from None
+    if isinstance(data, dict) and len(data) == 1 and isinstance(next(iter(data.values())), dict):
+        data = next(iter(data.values()))  # [forearm] L12 = 0.3 ...
+    if not isinstance(data, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                             for v in data.values()):
+        raise BadInput(f"--model-file: {path} must hold KEY = number pairs (keys L12, L1G, m, I1, F_ext, g)")
+    return [(str(k), float(v)) for k, v in data.items()]
+
+
+def _spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
+    """The input files of a command (for the output checks): the motion file, the model file, others."""
+    from ..motion import KINEMATICS
+
+    inputs = dict(conditions.get("_inputs", {}))
+    if kinematics not in KINEMATICS:
+        inputs["--motion"] = Path(kinematics)
+    return {**inputs, **others}
+
+
+def _fields(conditions: dict) -> dict:
+    return {k: v for k, v in conditions.items() if not k.startswith("_")}
+
+
+def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions: dict | None = None) -> dict:
+    """RunSpec fields shared by every command that simulates (a motion file enters by its digest)."""
+    fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
+                  omega=omega, **_fields(conditions or {}))
+    from ..motion import KINEMATICS
+
+    if kinematics not in KINEMATICS:
+        from ..experiment import motion_digest
+        from ..files import BadFile
+
+        try:
+            fields["inputs"] = (("--motion", motion_digest(kinematics)),)
+        except BadFile as exc:
+            raise BadInput(str(exc)) from None
+    return fields
+
+
+def _noise_seed(conditions: dict, seed: int) -> dict:
+    """The seed field of a command whose only randomness is the motion's noise (none without it)."""
+    return {"seed": seed} if conditions.get("noise_deg") else {}

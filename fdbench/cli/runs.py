@@ -1,0 +1,339 @@
+"""Commands that carry out one run: inverse, simulate, control, collocate, optimize, methods."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .. import __version__
+from .app import BadInput, MAX_THREADS, app
+from .options import (
+    Alpha, Atol, Budget, Db, Dt, Format, Gradient, Hidden, Integrator, Kinematics, Knots, NoiseSeed, Omega,
+    Output, PenaltyWeight, Popsize, Quiet, Rtol, SaveHistory, Sigma0, Terms, Threads, Xi, _common,
+    _noise_seed, _spec_inputs, _with_conditions,
+)
+from .common import (
+    OUTPUT_LABELS, _arm, _arm_only, _check_finite, _check_gradient, _check_method_options, _check_outputs,
+    _check_store, _emit, _finish, _methods_text, _parse_hidden, _progress, _save_history, _say, _store,
+    _validated,
+)
+
+
+@app.command()
+@_with_conditions
+def inverse(
+    kinematics: Kinematics = "paper",
+    seed: NoiseSeed = 0,
+    fmt: Format = "table",
+    output: Output = None,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Inverse dynamics (eq. 3): the elbow torque that should produce the desired motion, with the nominal model.
+
+    The table and JSON give a summary; --format csv gives the whole history (t, theta, theta_dot, theta_ddot, torque on the motion's samples, SI units; eq. 5: 1001 rows)."""
+    from ..experiment import RunSpec
+
+    if conditions["_model_name"] != "forearm":
+        return _arm("inverse", conditions, kinematics, fmt, output, None, quiet)
+    _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))
+    spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
+                              **_common(kinematics, "rk4", 1e-3, 1e-6, 1e-9, 1e7, 1.0, 10.0, conditions)))
+    import numpy as np
+
+    from ..inverse import inverse_dynamics
+
+    settings = spec.settings()
+    desired, _ = spec.motions()
+    start = time.perf_counter()
+    inv = inverse_dynamics(desired.samples, settings.nominal_model, desired)
+    runtime = time.perf_counter() - start
+    if fmt == "csv":
+        from ..files import csv_text
+
+        rows = np.column_stack([inv.t, inv.theta, inv.theta_dot, inv.theta_ddot, inv.torque])
+        text = csv_text(["t", "theta", "theta_dot", "theta_ddot", "torque"], ([f"{v:.10g}" for v in row] for row in rows))
+        _emit(text, output)
+        return
+    record = {
+        "command": "inverse", "kinematics": kinematics, **spec.describe(),
+        "theta_start_deg": float(np.degrees(inv.theta[0])), "theta_end_deg": float(np.degrees(inv.theta[-1])),
+        "torque_min_nm": float(inv.torque.min()), "torque_max_nm": float(inv.torque.max()),
+        "torque_start_nm": float(inv.torque[0]), "torque_end_nm": float(inv.torque[-1]),
+        "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
+        "fdbench_version": __version__,
+    }
+    _finish(record, fmt, output, "fdbench inverse", quiet)
+
+
+@app.command()
+@_with_conditions
+def simulate(
+    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and torque (N m) covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
+    params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    seed: NoiseSeed = 0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
+    from ..experiment import RunSpec
+
+    if conditions["_model_name"] != "forearm":
+        _arm_only(integrator=(integrator, "rk4"), params=(params, None))
+        return _arm("simulate", conditions, kinematics, fmt, output, save_history, quiet, torque_file=torque_file,
+                    dt=dt, alpha=alpha, xi=xi, omega=omega)
+    _check_outputs(fmt, output=output, save_history=save_history,
+                   inputs=_spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
+    if torque_file is not None and params is not None:
+        raise BadInput("--torque-file and --params: give one of them, not both")
+    spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
+                              **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
+    from ..experiment import run_simulation
+    from ..files import BadFile
+
+    try:
+        outcome = run_simulation(spec, torque_file=torque_file, params_file=params)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    _save_history(outcome, save_history)
+    _finish(outcome.record, fmt, output, "fdbench simulate", quiet)
+
+
+@app.command()
+@_with_conditions
+def control(
+    controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods').")] = "pd",
+    kp: Annotated[float, typer.Option("--kp", help="pd: proportional gain, N m/rad (paper: 80).")] = 80.0,
+    kd: Annotated[float, typer.Option("--kd", help="pd: derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
+    bandwidth: Annotated[float, typer.Option("--bandwidth", help="computed-torque: error-dynamics natural frequency omega_n, rad/s.")] = 20.0,
+    damping: Annotated[float, typer.Option("--damping", help="computed-torque: error-dynamics damping ratio zeta.")] = 1.0,
+    q_angle: Annotated[float, typer.Option("--q-angle", help="lqr: weight of the squared angle error, rad^-2 (1e4: 0.01 rad costs as much as 1 N m).")] = 1e4,
+    q_rate: Annotated[float, typer.Option("--q-rate", help="lqr: weight of the squared rate error, s^2 rad^-2.")] = 1.0,
+    r_torque: Annotated[float, typer.Option("--r-torque", help="lqr: weight of the squared torque correction, (N m)^-2; positive.")] = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    db: Db = None,
+    seed: NoiseSeed = 0,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
+    from ..experiment import control_spec, run
+
+    if conditions["_model_name"] != "forearm":
+        _arm_only(integrator=(integrator, "rk4"), db=(db, None))
+        options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate,
+                       r_torque=r_torque)
+        _check_controller(controller, options)
+        if controller not in ("pd", "computed-torque", "lqr"):
+            raise BadInput(f"--controller {controller}: not available with --model arm2 yet (pd, computed-torque, lqr)")
+        return _arm("control", conditions, kinematics, fmt, output, save_history, quiet, dt=dt, alpha=alpha, xi=xi,
+                    omega=omega, controller=controller, **options)
+    _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
+    options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
+    _check_controller(controller, options)
+    spec = _validated(control_spec(kp, kd, controller, options, **_noise_seed(conditions, seed),
+                                   **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
+    _check_store(db)
+    outcome = run(spec)
+    _save_history(outcome, save_history)
+    _store(outcome, spec, db, quiet)
+    _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _check_controller(name: str, options: dict) -> None:
+    """An unknown --controller, or an out-of-range option of any registered controller that
+    takes it (``--bandwidth -1`` with ``--controller pd`` too), is bad input."""
+    import inspect
+
+    from ..controllers import CONTROLLERS
+    from ..registry import UnknownName
+
+    try:
+        CONTROLLERS[name]
+    except UnknownName as exc:
+        raise BadInput(f"--controller: {exc}") from None
+    for _, cls in CONTROLLERS.items():
+        accepted = inspect.signature(cls).parameters
+        given = {k: v for k, v in options.items() if k in accepted and v is not None}
+        if given:
+            try:
+                cls(**given)
+            except ValueError as exc:
+                raise BadInput(str(exc)) from None
+
+
+@app.command()
+@_with_conditions
+def collocate(
+    nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over the motion's span (eq. 5: [0, 1] s), >= 2.")] = 100,
+    scheme: Annotated[str, typer.Option("--scheme", help="Transcription: hermite-simpson (piecewise-quadratic torque) or trapezoidal (piecewise-linear).")] = "hermite-simpson",
+    regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
+    max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
+    max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
+    save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    db: Db = None,
+    seed: NoiseSeed = 0,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and torque are the unknowns of one sparse problem solved by IPOPT; the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
+    from ..experiment import collocate_spec, run
+
+    _check_outputs(fmt, output=output, save_history=save_history, save_torque=save_torque, db=db,
+                   inputs=_spec_inputs(conditions, kinematics))
+    spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, **_noise_seed(conditions, seed),
+                                     **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
+    try:
+        import casadi  # noqa: F401
+    except ImportError as exc:
+        raise ImportError(f"'fdbench collocate' needs casadi (pip install casadi): {exc}") from None
+    _check_store(db)
+    outcome = run(spec)
+    _save_history(outcome, save_history)
+    if save_torque is not None:
+        from ..files import write_atomic
+
+        write_atomic(save_torque, _collocation_torque_text(outcome.extra["collocation"], spec), "--save-torque")
+    _store(outcome, spec, db, quiet)
+    _finish(outcome.record, fmt, output, "fdbench collocate", quiet)
+
+
+def _collocation_torque_text(solution, spec) -> str:
+    """The torque found on the half-step grid of the run's RK4 (so that 'simulate --torque-file'
+    with the same --dt replays exactly what collocate replayed), as CSV t (s), torque (N m)."""
+    from ..files import csv_text
+    from ..integrate import half_step_reference, steps
+
+    half, _, _ = half_step_reference(steps(spec.dt), spec.kinematics)
+    torque = solution.torque_samples(half)
+    return csv_text(["t", "torque"], ([f"{t:.17g}", f"{q:.17g}"] for t, q in zip(half, torque)))
+
+
+@app.command()
+def methods():
+    """List the registered torque parameterisations, optimisers, controllers and models, one line each."""
+    _emit(_methods_text(), None)
+
+
+@app.command()
+@_with_conditions
+def optimize(
+    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods').")] = "cs",
+    opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods').")] = "bfgs",
+    feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
+    budget: Budget = 200,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
+    hidden: Hidden = "4",
+    knots: Knots = 11,
+    terms: Terms = 4,
+    sigma0: Sigma0 = None,
+    popsize: Popsize = None,
+    gradient: Gradient = "fd",
+    threads: Threads = None,
+    penalty_weight: PenaltyWeight = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Format = "table",
+    output: Output = None,
+    save_history: SaveHistory = None,
+    history: Annotated[Optional[Path], typer.Option("--save-convergence", "--history", help="Write the convergence, the best-so-far objective per evaluation, as CSV to FILE. --history is an older name.")] = None,
+    save_params: Annotated[Optional[Path], typer.Option("--save-params", help="Write the best parameters as JSON to FILE (reusable by 'fdbench simulate --params').")] = None,
+    list_methods: Annotated[bool, typer.Option("--list", help="List the registered torques and optimisers and exit.")] = False,
+    db: Db = None,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Forward dynamic optimisation (section 4): tune a parameterised torque history so the simulated rotation tracks the desired one (objective of eq. 18)."""
+    if list_methods:
+        _emit(_methods_text(), None)
+        return
+    from ..experiment import optimize_spec, run
+
+    _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db,
+                   inputs=_spec_inputs(conditions, kinematics))
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
+    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
+    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
+    _check_method_options(torque_options, optimizer_options)
+    _check_gradient(gradient)
+    if threads is not None and not 1 <= threads <= MAX_THREADS:
+        raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
+    arm = conditions["_model_name"] != "forearm"
+    checked = {**conditions, "model": (), "plant": ()} if arm else conditions  # the arm's constants: checked later
+    spec = _validated(optimize_spec(  # for the arm: the checks of names, budget, seed and settings
+        torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
+        penalty_weight=penalty_weight, gradient=gradient, **_common("paper" if arm else kinematics, integrator, dt, rtol,
+                                                                    atol, alpha, xi, omega, checked),
+    ))
+    if arm:
+        _arm_only(integrator=(integrator, "rk4"), db=(db, None), save_params=(save_params, None),
+                  gradient=(gradient, "fd"))
+        if hidden == "auto":
+            raise BadInput("--hidden auto: not available with --model arm2 yet (give a number of neurons)")
+        return _arm("optimize", conditions, kinematics, fmt, output, save_history, quiet, convergence=history,
+                    torque=torque, optimizer=opt, feedforward=feedforward, seed=seed, budget=budget,
+                    torque_options=torque_options, optimizer_options=optimizer_options,
+                    penalty_weight=penalty_weight, dt=dt, alpha=alpha, xi=xi, omega=omega)
+    _check_store(db)
+    if opt == "cmaes":
+        from ..population import set_threads
+
+        set_threads(threads)
+    with _progress(quiet, f"{torque} + {opt}") as progress:
+        outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)
+    if "hidden_fits" in outcome.extra:
+        fits = ", ".join(f"{n}: {err:.2e}" for n, err in outcome.extra["hidden_fits"])
+        _say(quiet, f"--hidden auto: fit RMSE / torque range by neurons: {fits}")
+    _save_history(outcome, save_history)
+    if history is not None:
+        from ..files import csv_text, write_atomic
+
+        write_atomic(history, csv_text(["evaluation", "best_objective"], enumerate(outcome.history, start=1)), OUTPUT_LABELS["history"])
+    if save_params is not None:
+        from ..files import write_atomic
+        from ..params_file import params_json
+
+        write_atomic(save_params, params_json(spec, outcome), "--save-params")
+    _store(outcome, spec, db, quiet)
+    _finish(outcome.record, fmt, output, "fdbench optimize", quiet)

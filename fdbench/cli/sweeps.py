@@ -1,0 +1,377 @@
+"""Commands that carry out many runs through an execution backend and the results store:
+report and study."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from .. import __version__
+from .app import BadInput, MAX_JOBS, MAX_SEEDS, REPORT_FORMATS, _error, app
+from .options import (
+    AllCells, Alpha, Atol, BackendName, Budget, Dt, FeedforwardSelection, Gradient, Hidden, Integrator, Jobs,
+    Kd, Kinematics, Knots, Kp, Omega, OptSelection, Output, PenaltyWeight, Popsize, Quiet, Rerun, Rtol,
+    Scheduler, Sigma0, StoreDb, Terms, TorqueSelection, WithControl, Xi, _common, _spec_inputs,
+    _with_conditions,
+)
+from .common import (
+    _check_choice, _check_finite, _check_gradient, _check_method_options, _check_names, _check_outputs, _emit,
+    _parse_hidden, _progress, _say, _validated, _with_option,
+)
+
+
+@app.command()
+@_with_conditions
+def report(
+    torque: TorqueSelection = None,
+    opt: OptSelection = None,
+    feedforward: FeedforwardSelection = None,
+    control: WithControl = True,
+    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation.")] = True,
+    all_cells: AllCells = False,
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
+    budget: Budget = 200,
+    jobs: Jobs = None,
+    backend: BackendName = "local",
+    scheduler: Scheduler = None,
+    db: StoreDb = None,
+    rerun: Rerun = False,
+    figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
+    kp: Kp = 80.0,
+    kd: Kd = 0.3,
+    hidden: Hidden = "4",
+    knots: Knots = 11,
+    terms: Terms = 4,
+    sigma0: Sigma0 = None,
+    popsize: Popsize = None,
+    gradient: Gradient = "fd",
+    penalty_weight: PenaltyWeight = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Annotated[str, typer.Option("--format", "-f", help="Report format: md (Markdown), csv (one row per cell) or json (settings and cells with medians, IQRs, success counts and the ids of their stored runs).")] = "md",
+    output: Output = None,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown or CSV.
+
+    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
+    from ..benchmark import default_cells, make_plan
+    from ..store import default_path
+
+    db_path = db if db is not None else default_path()
+    _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
+    if figures is not None:
+        _check_figures_dir(figures, output, db_path)
+    torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
+                                                       penalty_weight)
+    executor = _backend(backend, jobs, scheduler)
+    cells = default_cells(torque, opt, feedforward, all_cells)
+    if not cells and not control and not beyond:
+        raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
+    _check_gradient(gradient)
+    plan = make_plan(
+        cells, seeds, budget, control, kp, kd, torque_options=torque_options,
+        optimizer_options=optimizer_options, penalty_weight=penalty_weight,
+        **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
+    )  # Tables 2 and 3 keep the paper's finite differences; exact gradients go to "Beyond the paper"
+    for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
+        _validated(spec)
+    from ..store import open_store
+
+    jobs = jobs or os.cpu_count() or 1
+    methods = None
+    if beyond:
+        from ..beyond import beyond_methods
+
+        methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+    if gradient == "exact":
+        from ..beyond import exact_gradient_methods
+
+        methods = (methods or []) + exact_gradient_methods(
+            plan.cells, budget, torque_options, optimizer_options, penalty_weight,
+            **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+        for method in methods:
+            _validated(method.spec)
+    extra = [m.spec for m in methods] if methods else []
+    runs = _run_specs(plan.all_specs() + extra, db_path, db is None, executor, rerun, quiet)
+    from ..report import build_rows
+
+    start = time.perf_counter()
+    inverse = (plan.control or plan.all_specs()[0]).reference()
+    inverse_runtime = time.perf_counter() - start
+    with open_store(db_path) as store:
+        made = store.provenance(runs)
+    rows = build_rows(plan, runs, made)
+    extra_rows = []
+    if methods:
+        from ..beyond import beyond_rows
+
+        extra_rows = beyond_rows(methods, runs)
+    _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
+                       _parallelism(backend, jobs, scheduler), figures, output, quiet), output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+
+
+@app.command()
+@_with_conditions
+def study(
+    kind: Annotated[str, typer.Argument(help="noise: the motion captured with white noise of each level (deg); mismatch: one constant of the simulated body changed by each level (percent) while the methods keep the nominal model.", metavar="noise|mismatch")],
+    levels: Annotated[str, typer.Option("--levels", help="The levels, comma-separated: deg for noise (e.g. 0,0.25,0.5,1,2), percent for mismatch (e.g. -20,-10,0,10,20).")] = "",
+    param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g.")] = "I1",
+    torque: TorqueSelection = None,
+    opt: OptSelection = None,
+    feedforward: FeedforwardSelection = None,
+    control: WithControl = True,
+    all_cells: AllCells = False,
+    seeds: Annotated[int, typer.Option("--seeds", help="Runs per method and level, in [1, 1000]: seeds 0..N-1 (the noise realisation and the optimiser's seed).")] = 5,
+    budget: Budget = 200,
+    jobs: Jobs = None,
+    backend: BackendName = "local",
+    scheduler: Scheduler = None,
+    db: StoreDb = None,
+    rerun: Rerun = False,
+    figures: Annotated[Optional[Path], typer.Option("--figures", help="Write one PNG per indicator into DIR (created if missing): level on x, median and IQR band per method.")] = None,
+    kp: Kp = 80.0,
+    kd: Kd = 0.3,
+    hidden: Hidden = "4",
+    knots: Knots = 11,
+    terms: Terms = 4,
+    sigma0: Sigma0 = None,
+    popsize: Popsize = None,
+    gradient: Gradient = "fd",
+    penalty_weight: PenaltyWeight = 1.0,
+    kinematics: Kinematics = "paper",
+    integrator: Integrator = "rk4",
+    dt: Dt = 1e-3,
+    rtol: Rtol = 1e-6,
+    atol: Atol = 1e-9,
+    alpha: Alpha = 1e7,
+    xi: Xi = 1.0,
+    omega: Omega = 10.0,
+    fmt: Annotated[str, typer.Option("--format", "-f", help="md (tables per indicator) or csv (one row per method and level).")] = "md",
+    output: Output = None,
+    quiet: Quiet = False,
+    conditions: dict = None,
+):
+    """Sweep one condition over the methods: 'fdbench study noise --levels 0,0.25,0.5,1,2 --seeds 10' or 'fdbench study mismatch --param I1 --levels -20,-10,0,10,20'.
+
+    Runs are stored and reused like a report's (resume, --jobs, --rerun); the table gives the median and IQR of each indicator per method and level."""
+    from .. import study as studies
+    from ..benchmark import default_cells
+    from ..store import default_path
+
+    _check_choice("study", kind, studies.KINDS)
+    db_path = db if db is not None else default_path()
+    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
+    if not levels:
+        raise BadInput("--levels: give the levels to sweep, e.g. --levels " + ("0,0.5,1,2" if kind == "noise" else "-20,0,20"))
+    try:
+        parsed = studies.parse_levels(levels, kind)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    if kind == "noise" and conditions["noise_deg"]:
+        raise BadInput("--noise-deg: the noise study sets the noise itself (--levels)")
+    if kind == "mismatch":
+        from ..model import MODEL_KEYS
+
+        _check_choice("--param", param, MODEL_KEYS)
+    if figures is not None:
+        _check_study_figures(figures, output, db_path)
+    torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
+                                                       penalty_weight)
+    executor = _backend(backend, jobs, scheduler)
+    cells = default_cells(torque, opt, feedforward, all_cells)
+    if not cells and not control:
+        raise BadInput("nothing to run: the options select no cell and --no-control")
+    _check_gradient(gradient)
+    try:
+        sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, budget, torque_options,
+                                   optimizer_options, penalty_weight, param if kind == "mismatch" else None,
+                                   gradient=gradient,
+                                   **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+    for key in sweep.specs:
+        _validated(sweep.specs[key][0])
+    jobs = jobs or os.cpu_count() or 1
+    runs = _run_specs(sweep.all_specs(), db_path, db is None, executor, rerun, quiet)
+    rows = studies.summary(sweep, runs)
+    if fmt == "csv":
+        from ..files import csv_text
+
+        _emit(csv_text(list(studies.CSV_COLUMNS), studies.csv_rows(sweep, rows)), output)
+    else:
+        links = None
+        if figures is not None:
+            written = studies.write_figures(sweep, rows, figures)
+            base = output.parent if output is not None else Path(".")
+            links = {title: os.path.relpath(path, base) for title, path in written.items()}
+            _say(quiet, f"wrote {len(written)} figures to {figures}")
+        settings = _study_settings(sweep, seeds, budget, _parallelism(backend, jobs, scheduler), kinematics, integrator, dt)
+        _emit(studies.markdown(sweep, rows, settings, links), output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
+
+
+def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> dict:
+    from ..store import machine
+
+    spec = sweep.all_specs()[0]
+    described = spec.describe()
+    return {
+        "study": sweep.kind + (f" of {sweep.param}" if sweep.param else ""),
+        "levels": ", ".join(f"{v:g}" for v in sweep.levels) + f" {'deg' if sweep.kind == 'noise' else '%'}",
+        "motion": f"{kinematics} ({described['duration_s']:g} s, {described['samples']} samples)",
+        "derivative estimate": ("Butterworth zero-lag, then spline" if spec.smoothing == "butterworth"
+                                else "smoothing spline") + (f", cutoff {spec.cutoff_hz:g} Hz" if spec.smoothing == "butterworth" else ""),
+        "integrator": integrator + (f" (dt = {dt} s)" if integrator == "rk4" else ""),
+        "seeds": f"{seeds} per method and level (PD: one run where the runs would be identical)",
+        "budget": f"{budget} evaluations per optimisation",
+        "runs": str(len(sweep.all_specs())),
+        "parallel jobs": str(jobs),
+        "fdbench": __version__,
+        "machine": machine(),
+    }
+
+
+def _check_study_figures(directory: Path, output: Optional[Path], db: Path) -> None:
+    """As for the report's --figures: refuse before the work a folder that cannot take them."""
+    from ..study import FIGURE_NAMES
+
+    _check_figures_dir(directory, output, db, FIGURE_NAMES)
+
+
+def _sweep_options(seeds, jobs, torques, optimizers, hidden, knots, terms, sigma0, popsize, penalty_weight):
+    """The checks shared by the commands that run many specs (report, study), before any work;
+    returns the (torque options, optimizer options) of their cells."""
+    if not 1 <= seeds <= MAX_SEEDS:
+        raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
+    if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+        raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
+    _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
+    _check_names(torques, optimizers)
+    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
+    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
+    _check_method_options(torque_options, optimizer_options)
+    return torque_options, optimizer_options
+
+
+def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:
+    """Make sure every spec is stored in the database (missing runs carried out by the backend,
+    each stored as it finishes), with a progress bar; {spec hash: stored run}. An unusable
+    database or backend is bad input; SIGTERM ends the command like Ctrl-C, exit 143."""
+    from ..execution import BackendError, Terminated, execute_specs, sigterm_as_interrupt
+    from ..store import StoreError, open_store
+
+    existed = db_path.exists()
+    try:
+        with sigterm_as_interrupt(), open_store(db_path) as store:
+            store.check_usable()
+            if not existed:
+                _say_creating(db_path, default_db, quiet)
+            with _progress(quiet, "runs") as progress:
+
+                def on_done(done, total):
+                    if progress.bar is None:
+                        progress.start(total, show_best=False)
+                    progress.update(done)
+
+                return execute_specs(specs, store, executor, rerun, on_done)
+    except StoreError as exc:
+        raise BadInput(f"--db: {exc}") from None
+    except BackendError as exc:
+        raise BadInput(str(exc)) from None
+    except Terminated:
+        _error("terminated")
+        raise typer.Exit(143) from None
+
+
+def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
+    """One line on stderr when a report has created its results database."""
+    hint = " (choose another with --db or $FDBENCH_DB)" if default else ""
+    _say(quiet, f"creating results database {db_path}{hint}")
+
+
+def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds, jobs, figures, output,
+                 quiet) -> str:
+    from ..report import settings_table
+
+    if fmt == "csv":
+        from ..beyond import beyond_csv_rows
+        from ..files import csv_text
+        from ..report import CSV_COLUMNS, csv_rows
+
+        return csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows))
+    if fmt == "json":
+        from ..report import json_report
+
+        return json.dumps(json_report(rows + extra_rows, settings_table(plan, seeds, jobs)), indent=2) + "\n"
+    from ..beyond import beyond_markdown
+    from ..report import markdown
+
+    links = None
+    if figures is not None:
+        from ..figures import write_report_figures
+
+        links = write_report_figures(plan, runs, rows, inverse, figures, output.parent if output is not None else Path("."))
+        _say(quiet, f"wrote {len(links)} figures to {figures}")
+    section = beyond_markdown(extra_rows, methods) if methods else None
+    return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section)
+
+
+def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=None) -> None:
+    """Refuse, before the work, a --figures folder that cannot take the figures: a file, the
+    report's own output, a missing parent, an unwritable folder, or a figure file in it that
+    would be refused (read-only, a directory, the database)."""
+    from ..figures import FIGURE_FILES
+    from ..files import BadFile, check_distinct, check_writable, same_file
+
+    if directory.exists() and not directory.is_dir():
+        raise BadInput(f"--figures: {directory} exists and is not a directory")
+    if output is not None and same_file(directory, output):
+        raise BadInput(f"--figures: {directory} is also the report's --output; give the figures a folder of their own")
+    if not directory.exists():
+        if not directory.parent.is_dir():
+            raise BadInput(f"--figures: directory {directory.parent} does not exist")
+        if not os.access(directory.parent, os.W_OK):
+            raise BadInput(f"--figures: directory {directory.parent} is not writable")
+        return
+    if not os.access(directory, os.W_OK):
+        raise BadInput(f"--figures: directory {directory} is not writable")
+    try:
+        paths = {f"--figures ({name})": directory / name for name in (names or FIGURE_FILES)}
+        for option, path in paths.items():
+            check_writable(path, option)
+        check_distinct({"--output": output, **paths}, database=db)
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _parallelism(name: str, jobs: int, scheduler: Optional[str]):
+    """How the runs were carried out, for the report's settings."""
+    if name != "dask":
+        return jobs
+    return f"Dask scheduler {scheduler}" if scheduler is not None else f"{jobs} (local Dask cluster)"
+
+
+def _backend(name: str, jobs: Optional[int], scheduler: Optional[str]):
+    """The execution backend of --backend/--jobs/--scheduler, checked before any work."""
+    from ..execution import BackendError, make_backend
+
+    try:
+        return make_backend(name, jobs=jobs, scheduler=scheduler)
+    except BackendError as exc:
+        raise BadInput(str(exc)) from None
