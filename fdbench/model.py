@@ -86,25 +86,30 @@ MODEL_KEYS = ("L12", "L1G", "m", "I1", "F_ext", "g")
 POSITIVE_KEYS = ("L12", "L1G", "m", "I1")
 
 
-def forearm_with(changes=()) -> Forearm:
-    """Table 1's forearm with some constants changed: ``changes`` are (key, value) pairs of the
-    keys L12, L1G, m, I1 (positive) and F_ext, g (any finite value). ValueError otherwise."""
+def checked_constants(kind: str, keys, positive, changes) -> dict:
+    """{key: float} from (key, value) pairs of a model's constants: keys among ``keys``, those in
+    ``positive`` positive, all finite and of magnitude at most 1e6. ValueError otherwise."""
     values = {}
     for key, value in changes:
-        if key not in MODEL_KEYS:
+        if key not in keys:
             from .registry import unknown_name_message
 
-            raise ValueError(unknown_name_message("model constant", key, list(MODEL_KEYS)))
+            raise ValueError(unknown_name_message(f"{kind} constant", key, list(keys)))
         try:
             value = float(value)
         except (TypeError, ValueError):
             raise ValueError(f"{key} must be a number, got {value!r}") from None
-        if not math.isfinite(value) or (key in POSITIVE_KEYS and value <= 0) or abs(value) > 1e6:
-            kind = "a positive number" if key in POSITIVE_KEYS else "a finite number"
-            raise ValueError(f"{key} must be {kind} of at most 1e6, got {value}")
+        if not math.isfinite(value) or (key in positive and value <= 0) or abs(value) > 1e6:
+            what = "a positive number" if key in positive else "a finite number"
+            raise ValueError(f"{key} must be {what} of at most 1e6, got {value}")
         values[key] = value
-    if "L1G" in values or "L12" in values:
-        merged = {**{k: getattr(Forearm(), k) for k in MODEL_KEYS}, **values}
-        if merged["L1G"] > merged["L12"]:
-            raise ValueError(f"L1G ({merged['L1G']:g} m) must not exceed L12 ({merged['L12']:g} m)")
-    return Forearm(**values)
+    return values
+
+
+def forearm_with(changes=()) -> Forearm:
+    """Table 1's forearm with some constants changed: ``changes`` are (key, value) pairs of the
+    keys L12, L1G, m, I1 (positive) and F_ext, g (any finite value). ValueError otherwise."""
+    forearm = Forearm(**checked_constants("model", MODEL_KEYS, POSITIVE_KEYS, changes))
+    if forearm.L1G > forearm.L12:
+        raise ValueError(f"L1G ({forearm.L1G:g} m) must not exceed L12 ({forearm.L12:g} m)")
+    return forearm

@@ -160,20 +160,9 @@ def arm2_with(changes=()) -> Arm2:
     """The default arm with some constants changed: ``changes`` are (key, value) pairs; lengths,
     masses and inertias positive, F_ext and g any finite number, all of magnitude at most 1e6, and
     the centres of mass on their segments. ValueError otherwise."""
-    values = {}
-    for key, value in changes:
-        if key not in MODEL_KEYS:
-            from ..registry import unknown_name_message
+    from ..model import checked_constants
 
-            raise ValueError(unknown_name_message("arm2 constant", key, list(MODEL_KEYS)))
-        try:
-            value = float(value)
-        except (TypeError, ValueError):
-            raise ValueError(f"{key} must be a number, got {value!r}") from None
-        if not math.isfinite(value) or (key in POSITIVE_KEYS and value <= 0) or abs(value) > 1e6:
-            kind = "a positive number" if key in POSITIVE_KEYS else "a finite number"
-            raise ValueError(f"{key} must be {kind} of at most 1e6, got {value}")
-        values[key] = value
+    values = checked_constants("arm2", MODEL_KEYS, POSITIVE_KEYS, changes)
     arm = Arm2(**values)
     for com, length in (("L0G", "L01"), ("L1G", "L12")):
         if getattr(arm, com) > getattr(arm, length):
