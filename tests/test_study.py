@@ -87,6 +87,7 @@ def test_bad_levels_are_refused(text, kind):
     (["noise", "--levels", "0,1", "--seeds", "0"], "--seeds"),
     (["noise", "--levels", "0,1", "--no-control", "--torque", "cs", "--opt", "nope"], "--opt"),
     (["noise", "--levels", "0,1", "-o", "s.sqlite", "--db", "s.sqlite"], "database"),
+    (["noise", "--levels", "0,1", "--gradient", "exact", "--opt", "cmaes"], "gradient-based"),
 ])
 def test_bad_study_input_is_one_line_exit_2(tmp_path, monkeypatch, args, word):
     monkeypatch.chdir(tmp_path)

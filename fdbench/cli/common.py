@@ -231,11 +231,20 @@ def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **ru
     _finish(record, fmt, output, f"fdbench {command} (arm2)", quiet)
 
 
-def _check_gradient(gradient: str) -> None:
+def _check_gradient(gradient: str, optimizers=None) -> None:
+    """A valid --gradient; for the commands that select optimisers (``optimizers``: the names
+    given, None for the default set), exact gradients need one that uses them."""
     from ..experiment import GRADIENTS
 
     if gradient not in GRADIENTS:
         raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
+    if gradient == "exact" and optimizers:
+        from ..optimizers import OPTIMIZERS
+
+        users = [n for n, c in OPTIMIZERS.items() if getattr(c, "uses_gradient", False)]
+        if not any(name in users for name in optimizers):
+            raise BadInput(f"--gradient exact applies to gradient-based optimisers ({', '.join(users)}); "
+                           f"none is selected by --opt {' --opt '.join(optimizers)}")
 
 
 def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:

@@ -80,7 +80,7 @@ def report(
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control and not beyond:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
-    _check_gradient(gradient)
+    _check_gradient(gradient, opt)
     plan = make_plan(
         cells, seeds, budget, control, kp, kd, torque_options=torque_options,
         optimizer_options=optimizer_options, penalty_weight=penalty_weight,
@@ -196,7 +196,7 @@ def study(
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
-    _check_gradient(gradient)
+    _check_gradient(gradient, opt)
     try:
         sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, budget, torque_options,
                                    optimizer_options, penalty_weight, param if kind == "mismatch" else None,
