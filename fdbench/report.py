@@ -218,11 +218,16 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     ``figures`` maps figure names to relative paths of written PNG files; ``rerun_command`` is the
     command that refreshes every run."""
     out = ["# fdbench report", ""]
+    if any(row.paper for row in rows):
+        intro = ("reproducing Tables 2 and 3 of the paper. The paper's published figures stand beside ours, with a "
+                 "judgement per cell; the section *Where we differ from the paper, and why* explains the differences "
+                 "from these runs.")
+    else:
+        intro = ("laid out as Tables 2 and 3 of the paper. These runs use other conditions than the paper's (the "
+                 "motion, its noise or the model: see the settings), so the paper's figures are not set beside them.")
     out += [
         "Trajectory tracking in the forward dynamic simulation of a 1-DOF forearm: PD control with "
-        "computed feedforward against optimised torque histories, reproducing Tables 2 and 3 of the "
-        "paper. The paper's published figures stand beside ours, with a judgement per cell; the section "
-        "*Where we differ from the paper, and why* explains the differences from these runs.",
+        f"computed feedforward against optimised torque histories, {intro}",
         "",
     ]
     out += ["## Settings", "", "| setting | value |", "|---|---|"]
