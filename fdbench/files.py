@@ -195,23 +195,32 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
     return {name: np.array(column) for name, column in values.items()}
 
 
-def read_torque_csv(path: str | os.PathLike, option: str = "--torque-file", duration: float = 1.0
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """A torque history from a CSV file with a header and columns ``t`` (s) and ``torque`` (N m).
+def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """A history from a CSV file with a header, a column ``t`` (s) and the named ``columns``.
 
-    Times must be finite and strictly increasing and cover [0, duration] s; returns (t, torque)."""
+    Times must be finite and strictly increasing and cover [0, duration] s; returns t, shape (n,),
+    and the columns' values, shape (n, len(columns))."""
     path = Path(path)
-    columns = read_columns(path, option, ("t", "torque"))
-    t, q = columns["t"], columns["torque"]
+    read = read_columns(path, option, ("t",) + tuple(columns))
+    t, values = read["t"], np.stack([read[c] for c in columns], axis=-1)
     if len(t) < 2:
         raise BadFile(f"{option}: {path} needs at least 2 rows of data, found {len(t)}")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))):
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(values))):
         raise BadFile(f"{option}: {path} holds non-finite values")
     if np.any(np.diff(t) <= 0):
         raise BadFile(f"{option}: {path}: times must be strictly increasing")
     if t[0] > 1e-9 or t[-1] < duration - 1e-9:
         raise BadFile(f"{option}: {path} covers [{t[0]:g}, {t[-1]:g}] s; it must cover [0, {duration:g}] s")
-    return t, q
+    return t, values
+
+
+def read_torque_csv(path: str | os.PathLike, option: str = "--torque-file", duration: float = 1.0
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """A torque history from a CSV file with a header and columns ``t`` (s) and ``torque`` (N m),
+    covering [0, duration] s; returns (t, torque), each shape (n,)."""
+    t, values = read_history_csv(path, option, duration, ("torque",))
+    return t, values[:, 0]
 
 
 def finite_or_none(value):

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..files import BadFile, read_columns
+from ..files import BadFile, read_columns, read_history_csv
 from ..model import Penalty
 from .arm2 import JOINTS, arm2_with
 from .arm2_motion import MOTIONS, JointMotion, PerJoint, as_joint_motion
@@ -66,18 +66,7 @@ def arm_motion(name: str, radians: bool = False, **estimate) -> JointMotion:
 
 def read_arm_torque_csv(path, duration: float, option: str = "--torque-file"):
     """A joint-torque history from a CSV file as a function t (s), shape (k,) -> (k, 2) N m."""
-    path = Path(path)
-    columns = read_columns(path, option, ("t",) + JOINTS)
-    t = columns["t"]
-    values = np.stack([columns[j] for j in JOINTS], axis=-1)
-    if len(t) < 2:
-        raise BadFile(f"{option}: {path} needs at least 2 rows of data, found {len(t)}")
-    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(values))):
-        raise BadFile(f"{option}: {path} holds non-finite values")
-    if np.any(np.diff(t) <= 0):
-        raise BadFile(f"{option}: {path}: times must be strictly increasing")
-    if t[0] > 1e-9 or t[-1] < duration - 1e-9:
-        raise BadFile(f"{option}: {path} covers [{t[0]:g}, {t[-1]:g}] s; it must cover [0, {duration:g}] s")
+    t, values = read_history_csv(path, option, duration, JOINTS)
     return lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)
 
 
