@@ -133,7 +133,8 @@ def succeeded(record: dict) -> bool:
 def summarise(records: list[dict]) -> dict:
     """Median and interquartile range of each indicator, and the success rate."""
     out = {"runs": len(records)}
-    for name in INDICATORS:
+    per_joint = dict.fromkeys(k for r in records for k in r if k.startswith(("rmse_rot_deg_", "rmse_torque_nm_")))
+    for name in tuple(INDICATORS) + tuple(per_joint):  # per joint: rmse_rot_deg_<joint>, of a model with joints
         values = np.array([r.get(name) if r.get(name) is not None else np.nan for r in records], dtype=float)
         values = values[np.isfinite(values)]
         if values.size:

@@ -27,7 +27,7 @@ RECORD_FIELDS = (
     "kp", "kd", "seed", "budget", "rmse_rot_deg", "rmse_torque_nm", "runtime_s", "evaluations",
     "best_objective", "initial_objective", "t_end", "status", "message", "stop_reason", "max_violation", "n_params",
     "torque_options", "optimizer_options", "gradient", "alpha", "xi", "omega", "penalty_weight", "motion", "derivatives",
-    "noise_deg", "model", "plant", "spec_hash", "fdbench_version",
+    "noise_deg", "model", "model_options", "plant", "spec_hash", "fdbench_version",
 )
 
 
@@ -68,10 +68,19 @@ class RunSpec:
     plant: tuple = ()  # (key, value) pairs changing the simulated body only
     model: tuple = ()  # (key, value) pairs changing the nominal model and the simulated body
     gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
+    model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.MODELS``
+
+    def _runs(self):
+        """The module carrying out this spec's runs when its model is not the forearm, else None."""
+        from .models import runs
+
+        return runs(self.model_name)
 
     def settings(self) -> Settings:
         """The simulation settings: the plant simulated, the nominal model that inverse dynamics
-        and model-based controllers believe, and the desired motion they are given."""
+        and model-based controllers believe, and the desired motion they are given (the forearm's)."""
+        if self._runs() is not None:
+            raise ValueError(f"the {self.model_name} model has no forearm settings")
         desired, _ = self.motions()
         nominal = forearm_with(self.model)
         plant = forearm_with(self.model + self.plant) if self.plant else nominal
@@ -81,25 +90,32 @@ class RunSpec:
     def motions(self):
         """(desired, true) motions: the motion given to every method (a noisy capture when
         ``noise_deg`` > 0) and the one its indicators are measured against."""
+        if self._runs() is not None:
+            return self._runs().motions(self)
         return _motions(self.kinematics, self.radians, self.cutoff_hz, self.smoothing, self.spline_lambda,
                         self.sample_dt, self.noise_deg, self.seed or 0, self.capture_hz, dict(self.inputs).get("--motion"))
 
     def reference(self):
         """The inverse dynamics of the nominal model on the true motion, on its samples: what the
-        indicators are measured against (InverseResult)."""
+        indicators are measured against (InverseResult; the model's own for another model)."""
         from .inverse import inverse_dynamics
 
+        if self._runs() is not None:
+            return self._runs().reference(self)
         _, truth = self.motions()
         return inverse_dynamics(None, forearm_with(self.model), truth)
 
     def describe(self) -> dict:
-        """The record's fields that say which motion, noise, filter and plant a run used."""
+        """The record's fields that say which motion, noise, filter, model and plant a run used."""
+        if self._runs() is not None:
+            return self._runs().describe(self)
         desired, truth = self.motions()
         out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
         if self.kinematics not in KINEMATICS or self.noise_deg:
             out["derivatives"] = desired.describe().get("derivatives")
         out["noise_deg"] = self.noise_deg
-        out["model"] = _options_text(self.model) or None
+        out["model"] = self.model_name
+        out["model_options"] = _options_text(self.model) or None
         out["plant"] = _options_text(self.plant) or None
         return out
 
@@ -109,7 +125,10 @@ class RunSpec:
             raise ValueError(f"unknown command {self.command!r}; valid: {', '.join(COMMANDS)}")
         check_integrator(self.integrator)
         check_conditions(self)
-        self.settings()
+        if self._runs() is not None:
+            self._runs().check(self)
+        else:
+            self.settings()
         if self.command == "control" and self.controller not in (None, "pd"):
             from .controllers import make_controller
 
@@ -217,8 +236,11 @@ def check_conditions(spec: "RunSpec") -> None:
         raise ValueError(f"--capture-hz must be in [1, {MAX_CAPTURE_HZ:g}] Hz, got {spec.capture_hz}")
     if spec.noise_deg and spec.seed is not None and not (isinstance(spec.seed, int) and 0 <= spec.seed < MAX_SEED):
         raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {spec.seed}")
-    forearm_with(spec.model)
-    forearm_with(spec.model + spec.plant)
+    from .models import MODELS, with_changes
+
+    MODELS[spec.model_name]
+    with_changes(spec.model_name, spec.model)
+    with_changes(spec.model_name, spec.model + spec.plant)
 
 
 @lru_cache(maxsize=64)
@@ -248,14 +270,17 @@ def with_motion_file(spec: "RunSpec") -> "RunSpec":
     """The spec with its recorded motion's content digest among its inputs (none for eq. 5)."""
     from dataclasses import replace
 
-    if spec.kinematics in KINEMATICS:
+    from .models import named_motions
+
+    if spec.kinematics in named_motions(spec.model_name):
         return spec
     inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.kinematics)),)
     return replace(spec, inputs=tuple(sorted(inputs)))
 # fields a spec's hash leaves out while they hold these values (added after the first results schema)
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
                       "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
-                      "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd"}
+                      "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd",
+                      "model_name": "forearm"}
 
 
 def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
@@ -325,6 +350,17 @@ class RunOutcome:
     history: list = field(default_factory=list)  # best-so-far objective per evaluation
     params: np.ndarray | None = None  # best parameters (optimize)
     extra: dict = field(default_factory=dict)
+    table: tuple | None = None  # the trajectory as (CSV header, rows (n, k)) when not the forearm's
+
+    def trajectory(self) -> tuple[list, np.ndarray]:
+        """The run's time history on the motion's samples: (CSV header, rows of shape (n, k))."""
+        if self.table is not None:
+            return self.table
+        r, inv = self.result, self.inverse
+        columns = [r.t, r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]]
+        header = ["t", "theta", "theta_desired", "theta_dot", "theta_dot_desired", "torque", "torque_inverse", "x2",
+                  "y2"]
+        return header, np.column_stack(columns)
 
 
 def _options_text(pairs) -> str:
@@ -359,6 +395,8 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
     """Carry out a control or optimisation run. ``on_evaluation(count, best)`` reports progress;
     ``on_start(budget)`` is called once compilation and imports are done."""
     spec.validate()
+    if spec._runs() is not None:
+        return spec._runs().run(spec, on_evaluation, on_start)
     if spec.command == "control":
         return _run_control(spec)
     if spec.command == "optimize":
@@ -499,6 +537,8 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     from .integrate import simulate, warm_up
     from .inverse import Feedforward
 
+    if spec._runs() is not None:
+        return spec._runs().run_simulation(spec, torque_file, params_file)
     settings = spec.settings()
     if torque_file is not None:
         from .files import read_torque_csv
@@ -535,3 +575,27 @@ def replay(spec: RunSpec, params) -> SimulationResult:
         options["hidden"] = (len(params) - 1) // 3
     problem = TrackingProblem(make_torque(spec.torque, **options), settings, spec.feedforward, spec.penalty_weight)
     return problem.simulate(np.asarray(params, dtype=float))
+
+
+def inverse_run(spec: RunSpec) -> tuple[dict, list, np.ndarray]:
+    """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows on
+    the motion's samples)."""
+    if spec._runs() is not None:
+        return spec._runs().inverse_run(spec)
+    from .inverse import inverse_dynamics
+
+    settings = spec.settings()
+    desired, _ = spec.motions()
+    start = time.perf_counter()
+    inv = inverse_dynamics(desired.samples, settings.nominal_model, desired)
+    runtime = time.perf_counter() - start
+    record = {
+        "command": "inverse", "kinematics": spec.kinematics, **spec.describe(),
+        "theta_start_deg": float(np.degrees(inv.theta[0])), "theta_end_deg": float(np.degrees(inv.theta[-1])),
+        "torque_min_nm": float(inv.torque.min()), "torque_max_nm": float(inv.torque.max()),
+        "torque_start_nm": float(inv.torque[0]), "torque_end_nm": float(inv.torque[-1]),
+        "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
+        "fdbench_version": __version__,
+    }
+    rows = np.column_stack([inv.t, inv.theta, inv.theta_dot, inv.theta_ddot, inv.torque])
+    return record, ["t", "theta", "theta_dot", "theta_ddot", "torque"], rows

@@ -17,7 +17,7 @@ TORQUE_LABELS = {"ann": "ANN ({hidden} hidden neurons)", "cs": "CS ({knots} poin
 OPTIMIZER_LABELS = {"cmaes": "CMA-ES", "bfgs": "BFGS quasi-Newton"}
 
 CSV_COLUMNS = (
-    "cell", "table", "torque", "optimizer", "feedforward", "in_paper", "kinematics", "integrator", "dt",
+    "cell", "table", "torque", "optimizer", "feedforward", "in_paper", "model", "kinematics", "integrator", "dt",
     "budget", "seeds", "runs", "rmse_rot_deg_median", "rmse_rot_deg_iqr", "rmse_torque_nm_median",
     "rmse_torque_nm_iqr", "runtime_s_median", "runtime_s_iqr", "success_rate", "paper_rmse_rot_deg",
     "paper_rmse_torque_nm", "paper_runtime_s", "speedup_vs_paper",
@@ -172,6 +172,21 @@ def _row_judgements(row: Row) -> dict:
     }
 
 
+def _is_per_joint(key: str) -> bool:
+    """A summary key of one joint's indicator: rmse_rot_deg_<joint>_median, ..._iqr (and torque)."""
+    for prefix in ("rmse_rot_deg_", "rmse_torque_nm_"):
+        if key.startswith(prefix) and key[len(prefix):] not in ("median", "iqr"):
+            return True
+    return False
+
+
+def joints(rows: list[Row]) -> list[str]:
+    """The joints whose indicators the rows' runs report separately (none for the forearm)."""
+    keys = [k for row in rows for k in row.summary if _is_per_joint(k) and k.startswith("rmse_rot_deg_")
+            and k.endswith("_median")]
+    return list(dict.fromkeys(k[len("rmse_rot_deg_"):-len("_median")] for k in keys))
+
+
 def _spread(row: Row, name: str) -> str:
     """'median ± half IQR', or the one value of a single or deterministic run."""
     med, iqr = row.summary.get(f"{name}_median"), row.summary.get(f"{name}_iqr")
@@ -189,6 +204,9 @@ def first_reached(history, level: float) -> int | None:
 
 
 # ---- Markdown --------------------------------------------------------------------------------
+
+JOINTS_LEGEND = ("- With several joints, RMSE_rot and RMSE_torque are root mean squares over all joints and samples; "
+                 "a column per joint gives that joint's RMSE_rot.")
 
 LEGEND = [
     "How to read the tables:",
@@ -218,32 +236,33 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     ``figures`` maps figure names to relative paths of written PNG files; ``rerun_command`` is the
     command that refreshes every run."""
     out = ["# fdbench report", ""]
-    if any(row.paper for row in rows):
+    arm = getattr(inverse, "torque", np.zeros(1)).ndim > 1  # a model of several joints
+    if arm:
+        intro = ("laid out as Tables 2 and 3 of the paper. The paper has no figures for this model, so none stand "
+                 "beside ours; `fdbench report` gives the forearm's.")
+    elif any(row.paper for row in rows):
         intro = ("reproducing Tables 2 and 3 of the paper. The paper's published figures stand beside ours, with a "
                  "judgement per cell; the section *Where we differ from the paper, and why* explains the differences "
                  "from these runs.")
     else:
         intro = ("laid out as Tables 2 and 3 of the paper. These runs use other conditions than the paper's (the "
                  "motion, its noise or the model: see the settings), so the paper's figures are not set beside them.")
+    body = (f"the planar two-segment arm ({', '.join(inverse.joints)})" if arm else "a 1-DOF forearm")
     out += [
-        "Trajectory tracking in the forward dynamic simulation of a 1-DOF forearm: PD control with "
-        f"computed feedforward against optimised torque histories, {intro}",
+        f"Trajectory tracking in the forward dynamic simulation of {body}: PD control{' per joint' if arm else ''} "
+        f"with computed feedforward against optimised torque histories, {intro}",
         "",
     ]
     out += ["## Settings", "", "| setting | value |", "|---|---|"]
     out += [f"| {key} | {value} |" for key, value in settings.items()]
-    out += ["", "## Inverse dynamics (Figure 2)", ""]
-    out += [
-        f"Elbow torque from {_num(float(inverse.torque.min()))} to {_num(float(inverse.torque.max()))} N m over "
-        f"{len(inverse.t)} samples of [0, {float(inverse.t[-1]):g}] s ({inverse.kinematics} kinematics); computed in "
-        f"{_num(inverse_runtime_s * 1e3)} ms (paper: {PAPER_INVERSE_RUNTIME_S} s).",
-        "",
-    ]
+    out += ["", "## Inverse dynamics" + ("" if arm else " (Figure 2)"), ""] + _inverse_text(inverse, inverse_runtime_s)
+    out += [""]
     control = [r for r in rows if r.table == "control"]
+    legend = LEGEND + ([JOINTS_LEGEND] if arm else [])
     if control:
         rec = control[0].records[0]
-        out += ["## PD control with computed feedforward (section 3)", ""] + LEGEND + [""]
-        out += [f"Kp = {rec['kp']} N m/rad, Kd = {rec['kd']} N m s/rad.", ""]
+        out += ["## PD control with computed feedforward (section 3)", ""] + legend + [""]
+        out += [f"Kp = {rec['kp']} N m/rad, Kd = {rec['kd']} N m s/rad{' on every joint' if arm else ''}.", ""]
         out += _table(control, with_success=False) + [""]
     for table, title in ((2, "Table 2: optimisation without computed feedforward"),
                          (3, "Table 3: optimisation with computed feedforward")):
@@ -251,7 +270,7 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
         if cells:
             out += [f"## {title}", ""]
             if not control and table == min(r.table for r in rows if r.table != "control"):
-                out += LEGEND + [""]  # defined where first read
+                out += legend + [""]  # defined where first read
             out += _table(cells, with_success=True)
             notes = []
             if any(r.cell and not r.cell.in_paper for r in cells):
@@ -273,7 +292,21 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     return "\n".join(out).rstrip() + "\n"
 
 
+def _inverse_text(inverse, runtime_s: float) -> list[str]:
+    """The inverse-dynamics paragraph: the torque's range per joint, the samples, the runtime."""
+    span = f"{len(inverse.t)} samples of [0, {float(inverse.t[-1]):g}] s"
+    took = f"computed in {_num(runtime_s * 1e3)} ms"
+    if inverse.torque.ndim == 1:
+        return [f"Elbow torque from {_num(float(inverse.torque.min()))} to {_num(float(inverse.torque.max()))} N m over "
+                f"{span} ({inverse.kinematics} kinematics); {took} (paper: {PAPER_INVERSE_RUNTIME_S} s)."]
+    ranges = ", ".join(f"{joint} from {_num(float(inverse.torque[:, j].min()))} to "
+                       f"{_num(float(inverse.torque[:, j].max()))} N m" for j, joint in enumerate(inverse.joints))
+    return [f"Joint torques: {ranges}, over {span} (motion {inverse.motion}); {took}."]
+
+
 def _table(rows: list[Row], with_success: bool) -> list[str]:
+    if not any(row.paper for row in rows):
+        return _table_without_paper(rows, with_success)
     head = ("| method | RMSE_rot (deg) | paper | vs paper | RMSE_torque (N m) | paper | vs paper "
             "| runtime (s) | paper | speed-up |")
     rule = "|---|---:|---:|:--|---:|---:|:--|---:|---:|---:|"
@@ -297,13 +330,35 @@ def _table(rows: list[Row], with_success: bool) -> list[str]:
     return lines
 
 
+def _table_without_paper(rows: list[Row], with_success: bool) -> list[str]:
+    """The table of runs under other conditions than the paper's: our figures only, and each
+    joint's RMSE_rot where the model has several."""
+    names = joints(rows)
+    head = "| method | RMSE_rot (deg) |" + "".join(f" {name} (deg) |" for name in names)
+    head += " RMSE_torque (N m) | runtime (s) |"
+    rule = "|---|" + "---:|" * (len(names) + 3)
+    if with_success:
+        head += " success |"
+        rule += "---:|"
+    lines = [head, rule]
+    for row in rows:
+        star = "*" if row.cell is not None and not row.cell.in_paper else ""
+        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg')} |"
+                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}')} |" for name in names)
+                + f" {_spread(row, 'rmse_torque_nm')} | {_spread(row, 'runtime_s')} |")
+        if with_success:
+            line += f" {row.successes}/{len(row.records)}{', identical' if row.identical else ''} |"
+        lines.append(line)
+    return lines
+
+
 def _comparison(rows: list[Row]) -> list[str]:
     """A few sentences written from the numbers."""
     # cells none of whose runs reached t = 1 s are left out: eq. 18 can score an early failure
     # below a complete run, and a rotation error over a few samples says nothing of tracking
     finite = [r for r in rows if math.isfinite(r.summary.get("rmse_rot_deg_median", math.nan))
               and r.summary.get("success_rate", 0) > 0]
-    failed = [r.name for r in rows if r not in finite]
+    failed = [r.name + (f" (Table {r.table})" if r.cell else "") for r in rows if r not in finite]
     if not finite:
         return ["No method reached the end of the motion with a finite RMSE of rotation."]
     best = min(finite, key=lambda r: r.summary["rmse_rot_deg_median"])
@@ -537,7 +592,7 @@ def _flat(row: Row) -> dict:
         "cell": row.name, "table": row.table,
         "torque": cell.torque if cell else "id", "optimizer": cell.optimizer if cell else "",
         "feedforward": cell.feedforward if cell else True, "in_paper": cell.in_paper if cell else True,
-        "kinematics": rec.get("kinematics"), "integrator": rec.get("integrator"), "dt": rec.get("dt"),
+        "model": rec.get("model") or "forearm", "kinematics": rec.get("kinematics"), "integrator": rec.get("integrator"), "dt": rec.get("dt"),
         "budget": rec.get("budget") or "", "seeds": len(row.records), **row.summary,
         "paper_rmse_rot_deg": paper[0], "paper_rmse_torque_nm": paper[1], "paper_runtime_s": paper[2],
         "speedup_vs_paper": row.speedup,
@@ -558,6 +613,7 @@ def json_report(rows: list[Row], settings: dict) -> dict:
         flat = _flat(row)
         j = _row_judgements(row)
         entry = {key: _finite(flat[key]) for key in CSV_COLUMNS}
+        entry.update({k: _finite(v) for k, v in row.summary.items() if _is_per_joint(k)})
         entry["budget"] = entry["budget"] or None
         entry.update(
             successes=row.successes, identical=row.identical,
@@ -577,7 +633,11 @@ def settings_table(plan: Plan, seeds: int, jobs: int) -> dict:
     versions = dependency_versions()
     integrator = spec.integrator + (f" (dt = {spec.dt} s)" if spec.integrator == "rk4"
                                     else f" (rtol = {spec.rtol}, atol = {spec.atol})")
+    from .models import summary
+
     table = {
+        "model": f"{spec.model_name}: {summary(spec.model_name)}" + (f" ({spec.describe()['model_options']})"
+                                                                    if spec.model else ""),
         "kinematics": spec.kinematics,
         "integrator": integrator,
         "penalty formulation": f"alpha = {spec.alpha:g}, xi = {spec.xi:g}, omega = {spec.omega:g} rad/s",

@@ -67,13 +67,13 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
                gradient: str = "fd", **common) -> Sweep:
     """The specs of a study: for each level, PD control (one run per seed when the runs differ by
     their noise, else one) and each optimisation cell (seeds 0..seeds-1)."""
-    from .model import forearm_with
+    from .models import with_changes
 
     if kind not in KINDS:
         from .registry import unknown_name_message
 
         raise ValueError(unknown_name_message("study", kind, list(KINDS)))
-    nominal = forearm_with(common.get("model", ()))
+    nominal = with_changes(common.get("model_name", "forearm"), common.get("model", ()))
     specs, methods = {}, []
     for level in levels:
         if kind == "noise":

@@ -91,7 +91,7 @@ def test_simulate_reads_one_torque_column_per_joint(tmp_path):
     record = as_json("simulate", "--model", "arm2", "--torque-file", path)
     expected = sim.simulate(lambda s: np.stack([np.interp(s, t, torque[:, j]) for j in range(2)], -1), Arm2(), motion)
     rot, _ = sim.rmse_deg(expected, sim.inverse_dynamics(None, Arm2(), motion).angles)
-    assert record["torque"] == "file" and record["rmse_rot_deg"] == pytest.approx(rot, rel=1e-9)
+    assert record["torque"] == f"file:{path}" and record["rmse_rot_deg"] == pytest.approx(rot, rel=1e-9)
     assert record["rmse_rot_deg"] > 0.1  # the offsets drive the arm off the reach
 
 
@@ -118,7 +118,7 @@ def test_the_forearm_is_the_default_model():
     (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
     (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45"], "--integrator"),
     (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
-    (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--noise-deg", "1"], "--noise-deg"),
+    (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--sample-dt", "0.01"], "--sample-dt"),
     (["--model", "arm2", "--dt", "5"], "--dt"), (["--model", "arm2", "--kp", "-1"], "--kp"),
     (["--model", "arm2", "--motion", "missing.csv"], "missing.csv"),
 ])
@@ -150,17 +150,70 @@ def test_optimize_on_the_arm(tmp_path):
 def test_optimize_on_the_arm_refuses_what_it_lacks():
     for args, word in ((["--hidden", "auto", "--torque", "ann"], "--hidden auto"), (["--budget", "0"], "--budget"),
                        (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator"),
-                       (["--plant", "m0=2"], "--plant")):
+                       (["--gradient", "exact"], "--gradient"), (["--plant", "m0=-2"], "m0")):
         result = invoke("optimize", "--model", "arm2", *args, code=2)
         assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr
 
 
-@pytest.mark.parametrize("command", [["collocate"], ["report"], ["study", "noise"]])
-def test_commands_without_the_arm_say_so(command):
-    result = invoke(*command, "--model", "arm2", code=2)
+def test_collocation_on_the_arm_says_it_is_not_available():
+    result = invoke("collocate", "--model", "arm2", code=2)
     assert "not available" in result.stderr and len(result.stderr.splitlines()) == 1
 
 
 def test_methods_lists_the_models():
     text = invoke("methods").stdout
     assert "models (--model):" in text and "  arm2 " in text and "  forearm " in text
+
+
+def test_arm_runs_are_stored_and_found_again(tmp_path):
+    db = tmp_path / "r.sqlite"
+    first = as_json("control", "--model", "arm2", "--db", db)
+    again = as_json("control", "--model", "arm2", "--db", db)
+    forearm = as_json("control", "--db", db)
+    assert first["spec_hash"] == again["spec_hash"] != forearm["spec_hash"]
+    from fdbench.store import open_store
+
+    with open_store(db) as store:
+        stored = {r["spec_hash"]: r for r in store.records()}
+    assert stored[first["spec_hash"]]["model"] == "arm2" and stored[forearm["spec_hash"]]["model"] == "forearm"
+
+
+def test_the_report_on_the_arm_gives_each_joint_and_their_root_mean_square(tmp_path):
+    args = ["report", "--model", "arm2", "--torque", "cs", "--opt", "bfgs", "--opt", "cmaes", "--seeds", "2",
+            "--budget", "12", "--no-beyond", "--jobs", "1", "--db", tmp_path / "r.sqlite", "-q"]
+    report = json.loads(invoke(*args, "-f", "json").stdout)
+    assert report["settings"]["model"].startswith("arm2") and len(report["cells"]) == 5  # PD and four cells
+    for cell in report["cells"]:
+        assert cell["model"] == "arm2" and cell["paper_rmse_rot_deg"] is None
+        assert {"rmse_rot_deg_shoulder_median", "rmse_rot_deg_elbow_median"} <= set(cell)
+    from fdbench.store import open_store
+
+    with open_store(tmp_path / "r.sqlite") as store:
+        records = store.records()
+    assert len(records) == 9
+    for r in records:  # both joints have every sample: the overall RMSE is the root mean square of the joints'
+        if r["t_end"] == 1.0:
+            joints = np.array([r["rmse_rot_deg_shoulder"], r["rmse_rot_deg_elbow"]])
+            assert r["rmse_rot_deg"] == pytest.approx(np.sqrt(np.mean(joints**2)), rel=1e-12)
+    markdown = invoke(*args).stdout
+    assert "| method | RMSE_rot (deg) | shoulder (deg) | elbow (deg) |" in markdown and "two-segment arm" in markdown
+
+
+def test_a_noisy_reach_is_seeded_and_measured_against_the_true_one():
+    clean = as_json("control", "--model", "arm2")
+    noisy = [as_json("control", "--model", "arm2", "--noise-deg", "0.5", "--seed", str(s)) for s in (1, 1, 2)]
+    assert noisy[0]["rmse_rot_deg"] == noisy[1]["rmse_rot_deg"] != noisy[2]["rmse_rot_deg"]
+    assert all(n["rmse_rot_deg"] > 100 * clean["rmse_rot_deg"] for n in noisy)
+    assert "noise 0.5 deg" in noisy[0]["motion"] and noisy[0]["derivatives"]
+
+
+def test_a_mismatch_study_of_the_arm_at_level_zero_is_the_plain_run(tmp_path):
+    csv = invoke("study", "mismatch", "--model", "arm2", "--param", "m0", "--levels", "0,20", "--no-feedforward",
+                 "--torque", "cs", "--opt", "bfgs", "--seeds", "1", "--budget", "8", "--jobs", "1",
+                 "--db", tmp_path / "s.sqlite", "-f", "csv", "-q").stdout
+    table = pd.read_csv(io.StringIO(csv))
+    pd_rows = table[table.method.str.startswith("PD")].set_index("level")
+    assert pd_rows.loc[0, "rmse_rot_deg_median"] == pytest.approx(as_json("control", "--model", "arm2")["rmse_rot_deg"],
+                                                                  rel=1e-12)
+    heavier = as_json("control", "--model", "arm2", "--plant", "m0=2.4")
+    assert pd_rows.loc[20, "rmse_rot_deg_median"] == pytest.approx(heavier["rmse_rot_deg"], rel=1e-12)

@@ -128,5 +128,7 @@ def test_plugin_module_methods_reach_the_report(tmp_path):
     lines = [line for line in out.stdout.splitlines() if line.startswith("| linear + random*")]
     assert len(lines) == 2  # Table 2 and Table 3
     cells = [c.strip() for c in lines[0].strip("|").split("|")]
-    assert (cells[2], cells[3], cells[5], cells[8], cells[9]) == ("-", "-", "-", "-", "-")  # no paper figures
+    heads = [line for line in out.stdout.splitlines() if line.startswith("| method |")]
+    # no paper figures for these cells: the tables have no paper columns
+    assert len(cells) == 5 and heads and not any("paper" in head for head in heads), heads
     assert "Cells marked * are not in the paper." in out.stdout

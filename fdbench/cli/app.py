@@ -27,10 +27,11 @@ MAX_SEEDS = 1000  # runs per cell of a report
 MAX_JOBS = 256  # worker processes
 
 
-KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper), 'exact' (eq. 5 "
-                   "differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: columns t (s) "
-                   "and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any duration and "
-                   "sampling. --kinematics is an older name.")
+KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper; the default), "
+                   "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
+                   "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
+                   "duration and sampling. With --model arm2: 'reach' (the default) or a CSV file t, shoulder, elbow "
+                   "(optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
 
 
 INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
@@ -119,7 +120,7 @@ def _choices(name: str, command: str):
     if name == "kinematics":
         from ..motion import KINEMATICS
 
-        return list(KINEMATICS) + ["FILE"]
+        return list(KINEMATICS) + ["reach", "FILE"]
     if name == "backend":
         from ..execution import BACKENDS
 

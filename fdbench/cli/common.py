@@ -128,16 +128,15 @@ def _finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
         _say(quiet, f"[yellow]warning:[/] {record['message']}")
 
 
-def _history_text(outcome) -> str:
-    import numpy as np
-
+def _table_text(header, rows) -> str:
+    """CSV text of a history table: a header and rows of numbers (10 significant digits)."""
     from ..files import csv_text
 
-    r, inv = outcome.result, outcome.inverse
-    columns = [r.t, r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]]
-    rows = np.column_stack(columns)
-    header = ["t", "theta", "theta_desired", "theta_dot", "theta_dot_desired", "torque", "torque_inverse", "x2", "y2"]
     return csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
+
+
+def _history_text(outcome) -> str:
+    return _table_text(*outcome.trajectory())
 
 
 def _save_history(outcome, path) -> None:
@@ -171,64 +170,6 @@ def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
     _say(quiet, f"stored in {db}")
-
-
-def _arm_only(**options) -> None:
-    """Options the arm does not take yet (value, the only value allowed): bad input otherwise."""
-    for name, (value, allowed) in options.items():
-        if value != allowed:
-            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 yet (only {allowed})")
-
-
-def _arm(command, conditions, kinematics, fmt, output, save_history, quiet, **run) -> None:
-    """inverse, simulate and control on the two-segment arm (fdbench.models.arm2_run)."""
-    from ..files import BadFile, csv_text
-
-    refused = {"sample_dt": None, "noise_deg": 0.0, **({"plant": ()} if command == "optimize" else {})}
-    for name, default in refused.items():
-        if conditions[name] != default:
-            raise BadInput(f"--{name.replace('_', '-')}: not available with --model arm2 {command} yet")
-    if command in ("simulate", "control"):
-        run["plant_pairs"] = conditions["plant"]
-    torque_file = run.pop("torque_file", None)
-    convergence = run.pop("convergence", None)
-    inputs = dict(conditions["_inputs"])
-    if kinematics not in ("paper", "reach"):
-        inputs["--motion"] = Path(kinematics)
-    _check_outputs(fmt, output=output, save_history=save_history, history=convergence,
-                   inputs={**inputs, "--torque-file": torque_file})
-    from ..models import arm2_run
-
-    estimate = dict(cutoff_hz=conditions["cutoff_hz"], smoothing=conditions["smoothing"],
-                    spline_lambda=conditions["spline_lambda"])
-    try:
-        motion = arm2_run.arm_motion("reach" if kinematics == "paper" else kinematics, conditions["radians"], **estimate)
-        if command == "inverse":
-            record, header, rows = arm2_run.inverse_run(conditions["model"], motion)
-        elif command == "optimize":
-            with _progress(quiet, f"arm2: {run['torque']} + {run['optimizer']}") as progress:
-                progress.start(run["budget"])
-                record, header, rows, best = arm2_run.optimize_run(conditions["model"], motion,
-                                                                   on_evaluation=progress.update, **run)
-        else:
-            torque = None if torque_file is None else arm2_run.read_arm_torque_csv(torque_file, motion.duration)
-            record, header, rows = arm2_run.tracking_run(command, conditions["model"], motion, torque=torque, **run)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
-    except ValueError as exc:
-        raise BadInput(_with_option(str(exc))) from None
-    history = csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
-    if command == "inverse" and fmt == "csv":
-        _emit(history, output)
-        return
-    from ..files import write_atomic
-
-    if save_history is not None:
-        write_atomic(save_history, history, OUTPUT_LABELS["save_history"])
-    if convergence is not None:
-        write_atomic(convergence, csv_text(["evaluation", "best_objective"], enumerate(best, start=1)),
-                     OUTPUT_LABELS["history"])
-    _finish(record, fmt, output, f"fdbench {command} (arm2)", quiet)
 
 
 def _check_gradient(gradient: str, optimizers=None) -> None:

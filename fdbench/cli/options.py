@@ -12,7 +12,7 @@ import typer
 from .app import BadInput, INTEGRATOR_HELP, KINEMATICS_HELP, MAX_THREADS
 
 
-Kinematics = Annotated[str, typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP)]
+Kinematics = Annotated[Optional[str], typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP, show_default=False)]
 
 
 Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
@@ -131,17 +131,15 @@ CONDITIONS = {
     "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angle before the derivative estimate; indicators stay measured against the noise-free motion.")),
     "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
     "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
-    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|KEY=VALUE", help="The model, forearm (Table 1, default) or arm2 (shoulder + elbow; inverse, simulate and control, motion 'reach' or a file t,shoulder,elbow), and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's).", show_default=False)),
+    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|KEY=VALUE", help="The model, forearm (Table 1, default) or arm2 (shoulder + elbow, motion 'reach' or a file t,shoulder,elbow; see 'fdbench methods'), and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's).", show_default=False)),
     "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
 }
 
 
-ARM_COMMANDS = ("inverse", "simulate", "control", "optimize")  # the commands that take --model arm2 so far
-
-
 def _with_conditions(command):
     """Add the CONDITIONS options to a command; it receives them as ``conditions`` (a dict of
-    RunSpec fields), the motion and model files among ``conditions['_inputs']``."""
+    RunSpec fields, the model's name among them), the motion and model files among
+    ``conditions['_inputs']``, and ``kinematics`` set to the model's default motion if not given."""
     import functools
     import inspect
 
@@ -155,9 +153,10 @@ def _with_conditions(command):
     def wrapper(**kwargs):
         values = {name: kwargs.pop(name) for name in CONDITIONS}
         conditions = _conditions(**values)
-        if conditions["_model_name"] != "forearm" and command.__name__ not in ARM_COMMANDS:
-            raise BadInput(f"--model {conditions['_model_name']}: not available with '{command.__name__}' yet "
-                           f"(only {', '.join(ARM_COMMANDS)})")
+        if kwargs.get("kinematics") is None:
+            from ..models import default_motion
+
+            kwargs["kinematics"] = default_motion(conditions["model_name"])
         return command(conditions=conditions, **kwargs)
 
     wrapper.__signature__ = signature.replace(parameters=kept + added)
@@ -174,7 +173,7 @@ def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_d
     return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
                 sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
                 plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file}, _model_name=_model_name(names))
+                _inputs={"--model-file": model_file}, model_name=_model_name(names))
 
 
 def _model_name(names: list) -> str:
@@ -232,10 +231,10 @@ def _model_file(path: Path) -> list:
 
 def _spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
     """The input files of a command (for the output checks): the motion file, the model file, others."""
-    from ..motion import KINEMATICS
+    from ..models import named_motions
 
     inputs = dict(conditions.get("_inputs", {}))
-    if kinematics not in KINEMATICS:
+    if kinematics not in named_motions(conditions.get("model_name", "forearm")):
         inputs["--motion"] = Path(kinematics)
     return {**inputs, **others}
 
@@ -248,11 +247,20 @@ def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions
     """RunSpec fields shared by every command that simulates (a motion file enters by its digest)."""
     fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
                   omega=omega, **_fields(conditions or {}))
-    from ..motion import KINEMATICS
+    from ..models import named_motions
 
-    if kinematics not in KINEMATICS:
+    model = fields.get("model_name", "forearm")
+    if kinematics not in named_motions(model):
+        import os
+
         from ..experiment import motion_digest
         from ..files import BadFile
+
+        if model != "forearm" and not os.path.exists(kinematics):
+            from ..registry import unknown_name_message
+
+            raise BadInput(f"--motion: {unknown_name_message(f'{model} motion', kinematics, list(named_motions(model)))}"
+                           f", and no file {kinematics} exists")
 
         try:
             fields["inputs"] = (("--motion", motion_digest(kinematics)),)

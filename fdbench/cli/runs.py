@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from .. import __version__
 from .app import BadInput, MAX_THREADS, app
 from .options import (
     Alpha, Atol, Budget, Db, Dt, Format, Gradient, Hidden, Integrator, Kinematics, Knots, NoiseSeed, Omega,
@@ -16,56 +14,34 @@ from .options import (
     _noise_seed, _spec_inputs, _with_conditions,
 )
 from .common import (
-    OUTPUT_LABELS, _arm, _arm_only, _check_finite, _check_gradient, _check_method_options, _check_outputs,
+    OUTPUT_LABELS, _check_finite, _check_gradient, _check_method_options, _check_outputs,
     _check_store, _emit, _finish, _methods_text, _parse_hidden, _progress, _save_history, _say, _store,
-    _validated,
+    _table_text, _validated,
 )
 
 
 @app.command()
 @_with_conditions
 def inverse(
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     seed: NoiseSeed = 0,
     fmt: Format = "table",
     output: Output = None,
     quiet: Quiet = False,
     conditions: dict = None,
 ):
-    """Inverse dynamics (eq. 3): the elbow torque that should produce the desired motion, with the nominal model.
+    """Inverse dynamics (eq. 3): the joint torques that should produce the desired motion, with the nominal model.
 
-    The table and JSON give a summary; --format csv gives the whole history (t, theta, theta_dot, theta_ddot, torque on the motion's samples, SI units; eq. 5: 1001 rows)."""
-    from ..experiment import RunSpec
+    The table and JSON give a summary; --format csv gives the whole history (forearm: t, theta, theta_dot, theta_ddot, torque on the motion's samples, SI units; eq. 5: 1001 rows; arm2: one column of each per joint)."""
+    from ..experiment import RunSpec, inverse_run
 
-    if conditions["_model_name"] != "forearm":
-        return _arm("inverse", conditions, kinematics, fmt, output, None, quiet)
     _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))
     spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
                               **_common(kinematics, "rk4", 1e-3, 1e-6, 1e-9, 1e7, 1.0, 10.0, conditions)))
-    import numpy as np
-
-    from ..inverse import inverse_dynamics
-
-    settings = spec.settings()
-    desired, _ = spec.motions()
-    start = time.perf_counter()
-    inv = inverse_dynamics(desired.samples, settings.nominal_model, desired)
-    runtime = time.perf_counter() - start
+    record, header, rows = inverse_run(spec)
     if fmt == "csv":
-        from ..files import csv_text
-
-        rows = np.column_stack([inv.t, inv.theta, inv.theta_dot, inv.theta_ddot, inv.torque])
-        text = csv_text(["t", "theta", "theta_dot", "theta_ddot", "torque"], ([f"{v:.10g}" for v in row] for row in rows))
-        _emit(text, output)
+        _emit(_table_text(header, rows), output)
         return
-    record = {
-        "command": "inverse", "kinematics": kinematics, **spec.describe(),
-        "theta_start_deg": float(np.degrees(inv.theta[0])), "theta_end_deg": float(np.degrees(inv.theta[-1])),
-        "torque_min_nm": float(inv.torque.min()), "torque_max_nm": float(inv.torque.max()),
-        "torque_start_nm": float(inv.torque[0]), "torque_end_nm": float(inv.torque[-1]),
-        "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
-        "fdbench_version": __version__,
-    }
     _finish(record, fmt, output, "fdbench inverse", quiet)
 
 
@@ -74,7 +50,7 @@ def inverse(
 def simulate(
     torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and torque (N m) covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
     params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
     rtol: Rtol = 1e-6,
@@ -92,10 +68,6 @@ def simulate(
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from ..experiment import RunSpec
 
-    if conditions["_model_name"] != "forearm":
-        _arm_only(integrator=(integrator, "rk4"), params=(params, None))
-        return _arm("simulate", conditions, kinematics, fmt, output, save_history, quiet, torque_file=torque_file,
-                    dt=dt, alpha=alpha, xi=xi, omega=omega)
     _check_outputs(fmt, output=output, save_history=save_history,
                    inputs=_spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
     if torque_file is not None and params is not None:
@@ -124,7 +96,7 @@ def control(
     q_angle: Annotated[float, typer.Option("--q-angle", help="lqr: weight of the squared angle error, rad^-2 (1e4: 0.01 rad costs as much as 1 N m).")] = 1e4,
     q_rate: Annotated[float, typer.Option("--q-rate", help="lqr: weight of the squared rate error, s^2 rad^-2.")] = 1.0,
     r_torque: Annotated[float, typer.Option("--r-torque", help="lqr: weight of the squared torque correction, (N m)^-2; positive.")] = 1.0,
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
     rtol: Rtol = 1e-6,
@@ -143,15 +115,6 @@ def control(
     """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
     from ..experiment import control_spec, run
 
-    if conditions["_model_name"] != "forearm":
-        _arm_only(integrator=(integrator, "rk4"), db=(db, None))
-        options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate,
-                       r_torque=r_torque)
-        _check_controller(controller, options)
-        if controller not in ("pd", "computed-torque", "lqr"):
-            raise BadInput(f"--controller {controller}: not available with --model arm2 yet (pd, computed-torque, lqr)")
-        return _arm("control", conditions, kinematics, fmt, output, save_history, quiet, dt=dt, alpha=alpha, xi=xi,
-                    omega=omega, controller=controller, **options)
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
     _check_controller(controller, options)
@@ -195,7 +158,7 @@ def collocate(
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
     save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
     rtol: Rtol = 1e-6,
@@ -266,7 +229,7 @@ def optimize(
     gradient: Gradient = "fd",
     threads: Threads = None,
     penalty_weight: PenaltyWeight = 1.0,
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
     rtol: Rtol = 1e-6,
@@ -299,22 +262,13 @@ def optimize(
     _check_gradient(gradient)
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
-    arm = conditions["_model_name"] != "forearm"
-    checked = {**conditions, "model": (), "plant": ()} if arm else conditions  # the arm's constants: checked later
-    spec = _validated(optimize_spec(  # for the arm: the checks of names, budget, seed and settings
+    spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, gradient=gradient, **_common("paper" if arm else kinematics, integrator, dt, rtol,
-                                                                    atol, alpha, xi, omega, checked),
+        penalty_weight=penalty_weight, gradient=gradient,
+        **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
-    if arm:
-        _arm_only(integrator=(integrator, "rk4"), db=(db, None), save_params=(save_params, None),
-                  gradient=(gradient, "fd"))
-        if hidden == "auto":
-            raise BadInput("--hidden auto: not available with --model arm2 yet (give a number of neurons)")
-        return _arm("optimize", conditions, kinematics, fmt, output, save_history, quiet, convergence=history,
-                    torque=torque, optimizer=opt, feedforward=feedforward, seed=seed, budget=budget,
-                    torque_options=torque_options, optimizer_options=optimizer_options,
-                    penalty_weight=penalty_weight, dt=dt, alpha=alpha, xi=xi, omega=omega)
+    if save_params is not None and spec.model_name != "forearm":
+        raise BadInput(f"--save-params: not available with --model {spec.model_name} yet")
     _check_store(db)
     if opt == "cmaes":
         from ..population import set_threads

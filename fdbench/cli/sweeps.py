@@ -51,7 +51,7 @@ def report(
     popsize: Popsize = None,
     gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
     rtol: Rtol = 1e-6,
@@ -130,7 +130,7 @@ def report(
 def study(
     kind: Annotated[str, typer.Argument(help="noise: the motion captured with white noise of each level (deg); mismatch: one constant of the simulated body changed by each level (percent) while the methods keep the nominal model.", metavar="noise|mismatch")],
     levels: Annotated[str, typer.Option("--levels", help="The levels, comma-separated: deg for noise (e.g. 0,0.25,0.5,1,2), percent for mismatch (e.g. -20,-10,0,10,20).")] = "",
-    param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g.")] = "I1",
+    param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g (arm2 also L01, L0G, m0, I0).")] = "I1",
     torque: TorqueSelection = None,
     opt: OptSelection = None,
     feedforward: FeedforwardSelection = None,
@@ -153,7 +153,7 @@ def study(
     popsize: Popsize = None,
     gradient: Gradient = "fd",
     penalty_weight: PenaltyWeight = 1.0,
-    kinematics: Kinematics = "paper",
+    kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
     rtol: Rtol = 1e-6,
@@ -185,9 +185,9 @@ def study(
     if kind == "noise" and conditions["noise_deg"]:
         raise BadInput("--noise-deg: the noise study sets the noise itself (--levels)")
     if kind == "mismatch":
-        from ..model import MODEL_KEYS
+        from ..models import model_keys
 
-        _check_choice("--param", param, MODEL_KEYS)
+        _check_choice("--param", param, model_keys(conditions["model_name"]))
     if figures is not None:
         _check_study_figures(figures, output, db_path)
     torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,

@@ -3,12 +3,19 @@
 * ``forearm``: Table 1's 1-DOF forearm (``fdbench.model.Forearm``), the paper's model.
 * ``arm2``: the planar two-segment arm, shoulder + elbow (``fdbench.models.arm2.Arm2``).
 
-A new model is a new module here that registers its class: ``@MODELS.register("leg")``.
+A new model is a new module here that registers its class (``@MODELS.register("leg")``) and gives
+it the class attributes ``motions`` (its named motions, the default first), ``keys`` (the
+constants ``--model KEY=VALUE`` may change), ``with_changes`` (a function of (key, value) pairs
+returning the checked model) and ``runs`` (the module carrying out its runs: ``check``,
+``motions``, ``reference``, ``describe``, ``run``, ``run_simulation`` and ``inverse_run`` of a
+``RunSpec``; see ``arm2_run``).
 """
 
 from __future__ import annotations
 
-from ..model import Forearm
+import importlib
+
+from ..model import MODEL_KEYS, Forearm, forearm_with
 from ..registry import Registry
 
 MODELS: Registry = Registry("model")
@@ -16,6 +23,7 @@ MODELS.register("forearm")(Forearm)
 
 from . import arm2  # noqa: E402,F401 - registers "arm2"
 
+FOREARM = "forearm"
 
 SUMMARIES = {
     "forearm": "the paper's 1-DOF forearm (Table 1): the elbow fixed at the origin",
@@ -31,3 +39,31 @@ def summary(name: str) -> str:
 def model_class(name: str):
     """The class of the model registered as ``name``; UnknownName (a ValueError) lists the valid ones."""
     return MODELS[name]
+
+
+def named_motions(name: str) -> tuple:
+    """The motions model ``name`` knows by name, its default first (any other is a CSV file)."""
+    from ..motion import KINEMATICS
+
+    return tuple(KINEMATICS) if name == FOREARM else tuple(model_class(name).motions)
+
+
+def default_motion(name: str) -> str:
+    """The motion a command of model ``name`` follows when none is given."""
+    return "paper" if name == FOREARM else model_class(name).motions[0]
+
+
+def model_keys(name: str) -> tuple:
+    """The constants of model ``name`` that --model and --plant KEY=VALUE may change."""
+    return MODEL_KEYS if name == FOREARM else tuple(model_class(name).keys)
+
+
+def with_changes(name: str, pairs=()):
+    """Model ``name`` with some constants changed ((key, value) pairs); ValueError if out of range."""
+    return forearm_with(pairs) if name == FOREARM else model_class(name).with_changes(pairs)
+
+
+def runs(name: str):
+    """The module carrying out the runs of model ``name``, or None for the forearm (whose runs are
+    ``fdbench.experiment``'s own)."""
+    return None if name == FOREARM else importlib.import_module(model_class(name).runs)

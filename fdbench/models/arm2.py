@@ -50,6 +50,8 @@ class Arm2:
 
     joints = JOINTS
     n_joints = 2
+    motions = ("reach",)  # the named motions (``arm2_motion``), the default first
+    runs = "fdbench.models.arm2_run"  # the module carrying out its runs
 
     # ------------------------------------------------------------------ constant matrices
     @property
@@ -168,3 +170,7 @@ def arm2_with(changes=()) -> Arm2:
         if getattr(arm, com) > getattr(arm, length):
             raise ValueError(f"{com} ({getattr(arm, com):g} m) must not exceed {length} ({getattr(arm, length):g} m)")
     return arm
+
+
+Arm2.keys = MODEL_KEYS  # the constants --model and --plant KEY=VALUE may change
+Arm2.with_changes = staticmethod(arm2_with)

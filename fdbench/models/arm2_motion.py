@@ -120,3 +120,23 @@ def as_joint_motion(motion) -> JointMotion:
     from ..registry import unknown_name_message
 
     raise ValueError(unknown_name_message("arm motion", str(motion), list(MOTIONS)))
+
+
+def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: float, **estimate) -> PerJoint:
+    """``motion``'s joint angles captured with white Gaussian noise of ``sigma_deg`` degrees,
+    independent per joint (seeded), and estimated like a recording (``estimate``: options of
+    ``fdbench.motion.SampledMotion``). A recording keeps its own samples; an analytic motion is
+    captured every 1 / capture_hz s. The result reports on ``motion``'s samples."""
+    from ..motion import SampledMotion
+
+    recorded = isinstance(motion, PerJoint) and all(isinstance(p, SampledMotion) for p in motion.parts)
+    t = (np.array(motion.parts[0]._t) if recorded
+         else np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1))
+    angles, _, _ = motion(t)
+    measured = angles + np.radians(sigma_deg) * np.random.default_rng(seed).standard_normal(angles.shape)
+    parts = [SampledMotion(t, measured[:, j], name=joint, samples=motion.samples, **estimate)
+             for j, joint in enumerate(motion.joints)]
+    out = PerJoint(parts, motion.joints)
+    where = "" if recorded else f" at {capture_hz:g} Hz"
+    out.name = f"{motion.name}+noise {sigma_deg:g} deg{where} (seed {seed})"
+    return out

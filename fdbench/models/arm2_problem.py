@@ -27,11 +27,13 @@ class ArmTrackingProblem:
 
     ``torque``: a registered parameterisation's name, made once per joint with ``options``.
     With ``feedforward`` the parameterised torques are added to the inverse-dynamics torques
-    (eq. 19); without, they are the whole drive torques (eq. 15)."""
+    (eq. 19); without, they are the whole drive torques (eq. 15). ``model`` is the simulated body;
+    ``nominal`` (default: the same) the model whose inverse dynamics prepare the parameters, give
+    the feedforward and the objective's reference."""
 
     def __init__(self, torque: str, model: Arm2 = Arm2(), motion: str | JointMotion = "reach",
                  feedforward: bool = False, penalty_weight: float = 1.0, penalty: Penalty = Penalty(),
-                 dt: float = 1e-3, **options):
+                 dt: float = 1e-3, nominal: Arm2 | None = None, **options):
         from ..integrate import steps
         from ..torques import make_torque
 
@@ -39,7 +41,8 @@ class ArmTrackingProblem:
             raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
         self.model, self.motion, self.penalty, self.dt = model, as_joint_motion(motion), penalty, dt
         self.feedforward, self.penalty_weight = feedforward, penalty_weight
-        self.inverse = sim.inverse_dynamics(None, model, self.motion)
+        nominal = model if nominal is None else nominal
+        self.inverse = sim.inverse_dynamics(None, nominal, self.motion)
         self.duration = self.motion.duration
         self.parts = [make_torque(torque, **options) for _ in JOINTS]
         p0 = [np.asarray(part.prepare(self.inverse.t, self.inverse.torque[:, j], feedforward), dtype=float)
@@ -51,7 +54,7 @@ class ArmTrackingProblem:
         n = steps(dt, self.duration)
         self._half = np.linspace(0.0, self.duration, 2 * n + 1)
         self._on_grid = [part.on_grid(self._half) for part in self.parts]
-        self._ff_half = (np.array(sim.inverse_dynamics(self._half, model, self.motion).torque) if feedforward
+        self._ff_half = (np.array(sim.inverse_dynamics(self._half, nominal, self.motion).torque) if feedforward
                          else np.zeros((2 * n + 1, len(JOINTS))))
 
     @property

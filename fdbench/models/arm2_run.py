@@ -1,6 +1,7 @@
-"""The arm's runs as the commands report them: inverse dynamics, open-loop simulation and PD
-control with computed feedforward, each giving one flat record (the forearm's keys plus per-joint
-indicators) and a history as CSV rows.
+"""The arm's runs from a ``RunSpec`` whose ``model_name`` is 'arm2' (``fdbench.experiment`` hands
+them over here): inverse dynamics, open-loop simulation, control (PD per joint with computed
+feedforward, computed-torque, LQR) and optimisation, each giving a flat record (the forearm's keys
+plus per-joint indicators) and a trajectory.
 
 Indicators for n joints: ``rmse_rot_deg`` is the root mean square over all joints and samples of
 the angle error (deg), ``rmse_torque_nm`` likewise of the torque (N m) against the inverse-dynamics
@@ -16,8 +17,10 @@ Files (CSV with a header, names case-insensitive, any order):
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -25,8 +28,8 @@ import numpy as np
 from .. import __version__
 from ..files import BadFile, read_columns, read_history_csv
 from ..model import Penalty
-from .arm2 import JOINTS, arm2_with
-from .arm2_motion import MOTIONS, JointMotion, PerJoint, as_joint_motion
+from .arm2 import JOINTS, Arm2, arm2_with
+from .arm2_motion import MOTIONS, JointMotion, PerJoint, as_joint_motion, noisy_joints
 from . import arm2_sim as sim
 
 
@@ -64,35 +67,80 @@ def arm_motion(name: str, radians: bool = False, **estimate) -> JointMotion:
     return as_joint_motion(name) if name in MOTIONS else read_arm_motion_csv(name, "--motion", radians, **estimate)
 
 
-def read_arm_torque_csv(path, duration: float, option: str = "--torque-file"):
-    """A joint-torque history from a CSV file as a function t (s), shape (k,) -> (k, 2) N m."""
-    t, values = read_history_csv(path, option, duration, JOINTS)
-    return lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)
+@lru_cache(maxsize=32)
+def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, noise_deg, seed, capture_hz, digest):
+    from ..experiment import motion_digest
+
+    estimate = dict(cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda)
+    truth = arm_motion(source, radians, **estimate)
+    if digest is not None and digest != motion_digest(source):
+        raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
+    if not noise_deg:
+        return truth, truth
+    return noisy_joints(truth, noise_deg, seed, capture_hz, **estimate), truth
 
 
-CONTROLLER_OPTIONS = {"pd": ("kp", "kd"), "computed-torque": ("bandwidth", "damping"),
-                      "lqr": ("q_angle", "q_rate", "r_torque")}
+def motions(spec) -> tuple[JointMotion, JointMotion]:
+    """(desired, true) motions of a spec: the one given to every method (a noisy capture when
+    ``noise_deg`` > 0) and the one its indicators are measured against."""
+    return _motions(spec.kinematics, spec.radians, spec.cutoff_hz, spec.smoothing, spec.spline_lambda, spec.noise_deg,
+                    spec.seed or 0, spec.capture_hz, dict(spec.inputs).get("--motion"))
 
 
-def _controller_options(controller: str, values: dict) -> str:
-    return " ".join(f"{k}={float(values[k])}" for k in CONTROLLER_OPTIONS[controller])
+def nominal(spec) -> Arm2:
+    return arm2_with(spec.model)
 
 
-def _pairs_text(pairs) -> str:
-    return " ".join(f"{k}={float(v):g}" for k, v in pairs)
+def plant(spec) -> Arm2:
+    return arm2_with(tuple(spec.model) + tuple(spec.plant))
 
 
-def _per_joint(prefix: str, values) -> dict:
-    return {f"{prefix}_{joint}": float(v) for joint, v in zip(JOINTS, values)}
+def reference(spec) -> sim.ArmInverse:
+    """The nominal arm's inverse dynamics on the true motion, on its samples (the indicators' reference)."""
+    return sim.inverse_dynamics(None, nominal(spec), motions(spec)[1])
 
 
-def inverse_run(model_pairs, motion: JointMotion) -> tuple[dict, list[str], np.ndarray]:
-    """Inverse dynamics of the arm: (record, CSV header, rows) on the motion's samples."""
-    arm = arm2_with(model_pairs)
+def describe(spec) -> dict:
+    """The record's fields that say which motion, noise, filter, model and plant a run used."""
+    desired, truth = motions(spec)
+    out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
+    parts = getattr(desired, "parts", [])
+    if parts and hasattr(parts[0], "describe"):
+        out["derivatives"] = parts[0].describe().get("derivatives")
+    out.update(noise_deg=spec.noise_deg, model="arm2", model_options=_pairs_text(spec.model) or None,
+               plant=_pairs_text(spec.plant) or None)
+    return out
+
+
+CONTROLLERS = ("pd", "computed-torque", "lqr")
+
+
+def check(spec) -> None:
+    """ValueError (one line) for what the arm cannot run, or settings out of range; BadFile for a
+    motion file that cannot be used. No simulation is run."""
+    from ..integrate import Settings
+
+    unavailable = {"collocate": spec.command == "collocate", "--integrator": spec.integrator != "rk4",
+                   "--sample-dt": spec.sample_dt is not None, "--gradient exact": spec.gradient != "fd",
+                   "--hidden auto": dict(spec.torque_options).get("hidden") == "auto",
+                   f"--controller {spec.controller}": spec.command == "control" and (spec.controller or "pd")
+                   not in CONTROLLERS}
+    for what, refused in unavailable.items():
+        if refused:
+            only = {"--integrator": " (rk4 only)", "--controller": f" ({', '.join(CONTROLLERS)})"}
+            raise ValueError(f"{what}: not available with --model arm2 yet{only.get(what.split()[0], '')}")
+    nominal(spec), plant(spec)
+    Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt)  # the forearm's checks of dt and penalty
+    motions(spec)
+
+
+def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
+    """Inverse dynamics of the desired motion with the nominal arm: (record, CSV header, rows)."""
+    desired, _ = motions(spec)
     began = time.perf_counter()
-    inv = sim.inverse_dynamics(None, arm, motion)
+    inv = sim.inverse_dynamics(None, nominal(spec), desired)
     runtime = time.perf_counter() - began
-    record = {"command": "inverse", "model": "arm2", "kinematics": motion.name, "motion": motion.name,
+    record = {"command": "inverse", "kinematics": spec.kinematics, **describe(spec),
               **{f"{k}_{j}": float(v) for k, vals in (("torque_rms_nm", np.sqrt(np.mean(inv.torque**2, axis=0))),
                                                       ("torque_max_nm", inv.torque.max(axis=0)),
                                                       ("torque_min_nm", inv.torque.min(axis=0)))
@@ -104,61 +152,12 @@ def inverse_run(model_pairs, motion: JointMotion) -> tuple[dict, list[str], np.n
     return record, header, rows
 
 
-def tracking_run(command: str, model_pairs, motion: JointMotion, *, kp=0.0, kd=0.0, torque=None, dt=1e-3,
-                 alpha=1e7, xi=1.0, omega=10.0, controller: str = "pd", bandwidth: float = 20.0,
-                 damping: float = 1.0, plant_pairs=(), q_angle: float = 1e4, q_rate: float = 1.0,
-                 r_torque: float = 1.0) -> tuple[dict, list[str], np.ndarray]:
-    """A forward simulation of the arm: open loop under ``torque`` (a function, default the
-    inverse-dynamics torques) for 'simulate'; for 'control', PD per joint (kp N m/rad, kd N m s/rad)
-    plus computed feedforward, or ``controller`` 'computed-torque': the arm's inverse dynamics with
-    its full mass matrix at the current state, for error dynamics of natural frequency
-    ``bandwidth`` (rad/s) and damping ratio ``damping`` on both joints, or 'lqr': computed
-    feedforward plus time-varying LQR (weights q_angle rad^-2, q_rate s^2 rad^-2, r_torque
-    (N m)^-2, ``arm2_lqr``). ``model_pairs`` change the
-    nominal model and the simulated body, ``plant_pairs`` the simulated body only: inverse dynamics,
-    feedforward and computed torque keep the nominal model (model-mismatch studies).
-    Returns (record, CSV header, history rows)."""
-    from ..integrate import Settings
+def _pairs_text(pairs) -> str:
+    return " ".join(f"{k}={float(v):g}" for k, v in pairs)
 
-    arm = arm2_with(model_pairs)
-    plant = arm2_with(tuple(model_pairs) + tuple(plant_pairs))
-    penalty = Penalty(alpha, xi, omega)
-    Settings(penalty=penalty, dt=dt)  # the forearm's checks of the step and the penalty parameters
-    inv = sim.inverse_dynamics(None, arm, motion)
-    computed = command == "control" and controller == "computed-torque"
-    lqr = command == "control" and controller == "lqr"
-    gains = None
-    if computed:
-        drive, kp, kd = None, bandwidth**2, 2 * damping * bandwidth
-    else:
-        drive = sim.feedforward(arm, motion) if torque is None else torque
-    if lqr:
-        from .arm2_lqr import lqr_gains
 
-        gains, kp, kd = lqr_gains(arm, motion, q_angle, q_rate, r_torque), 0.0, 0.0
-    result = sim.simulate(drive, plant, motion, kp, kd, penalty=penalty, dt=dt, computed=computed, nominal=arm,
-                          gains=gains)
-    rot, rot_j = sim.rmse_deg(result, inv.angles)
-    trq, trq_j = sim.rmse_torque_nm(result, inv.torque)
-    closed = command == "control"
-    record = {
-        "command": command, "model": "arm2", "kinematics": motion.name, "integrator": "rk4", "dt": dt,
-        "torque": "M(z)*z_ddot_d+h(z,z_dot)" if computed else "inverse" if torque is None else "file",
-        "optimizer": None, "feedforward": closed or torque is None,
-        "kp": kp if controller == "pd" and closed else None, "kd": kd if controller == "pd" and closed else None,
-        "seed": None, "budget": None,
-        "rmse_rot_deg": rot, **_per_joint("rmse_rot_deg", rot_j), "rmse_torque_nm": trq,
-        **_per_joint("rmse_torque_nm", trq_j), "runtime_s": result.runtime_s, "evaluations": 1,
-        "t_end": result.t_end, "status": result.status.code, "message": _message(result),
-        "max_violation": result.max_violation, "alpha": alpha, "xi": xi, "omega": omega, "motion": motion.name,
-        "model_options": _pairs_text(model_pairs) or None, "plant": _pairs_text(plant_pairs) or None,
-        **({"controller": controller, "controller_options": _controller_options(controller, locals())} if closed
-           else {}),
-        "fdbench_version": __version__,
-    }
-    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in JOINTS]
-    rows = np.column_stack([result.t, result.angles, inv.angles, result.torque, inv.torque])
-    return record, header, rows
+def _per_joint(prefix: str, values) -> dict:
+    return {f"{prefix}_{joint}": float(v) for joint, v in zip(JOINTS, values)}
 
 
 def _message(result) -> str:
@@ -169,39 +168,123 @@ def _message(result) -> str:
     return text
 
 
-def optimize_run(model_pairs, motion: JointMotion, *, torque="cs", optimizer="bfgs", feedforward=False, seed=0,
-                 budget=200, torque_options=None, optimizer_options=None, penalty_weight=1.0, dt=1e-3, alpha=1e7,
-                 xi=1.0, omega=10.0, on_evaluation=None) -> tuple[dict, list[str], np.ndarray, list[float]]:
-    """Shooting optimisation on the arm (``arm2_problem``): (record, CSV header, history rows,
-    best objective per evaluation); ``on_evaluation(count, best)`` after each evaluation."""
-    from ..integrate import Settings
-    from .arm2_problem import ArmTrackingProblem, optimize
+def _outcome(spec, record: dict, result, inverse, **more):
+    """The RunOutcome of a finished simulation: indicators over both joints and per joint, the
+    trajectory table."""
+    from ..experiment import RunOutcome
 
-    arm = arm2_with(model_pairs)
-    penalty = Penalty(alpha, xi, omega)
-    Settings(penalty=penalty, dt=dt)
-    options = {k: v for k, v in (torque_options or {}).items() if v is not None}
-    problem = ArmTrackingProblem(torque, arm, motion, feedforward, penalty_weight, penalty, dt, **options)
-    began = time.perf_counter()
-    initial = problem.objective(problem.p0)
-    p, found, result, _ = optimize(problem, optimizer, budget, seed, on_evaluation,
-                                   **{k: v for k, v in (optimizer_options or {}).items() if v is not None})
-    runtime = time.perf_counter() - began
-    inv = problem.inverse
-    rot, rot_j = sim.rmse_deg(result, inv.angles)
-    trq, trq_j = sim.rmse_torque_nm(result, inv.torque)
-    record = {
-        "command": "optimize", "model": "arm2", "kinematics": motion.name, "integrator": "rk4", "dt": dt,
-        "torque": torque, "optimizer": optimizer, "feedforward": feedforward, "kp": None, "kd": None, "seed": seed,
-        "budget": budget, "rmse_rot_deg": rot, **_per_joint("rmse_rot_deg", rot_j), "rmse_torque_nm": trq,
-        **_per_joint("rmse_torque_nm", trq_j), "runtime_s": runtime, "evaluations": found.evaluations,
-        "best_objective": found.fun, "initial_objective": initial, "t_end": result.t_end,
-        "status": result.status.code, "message": _message(result), "stop_reason": found.stop_reason,
-        "max_violation": result.max_violation, "n_params": problem.n_params,
-        "torque_options": " ".join(f"{k}={v}" for k, v in sorted(options.items())),
-        "alpha": alpha, "xi": xi, "omega": omega, "penalty_weight": penalty_weight, "motion": motion.name,
-        "fdbench_version": __version__,
-    }
+    desired = inverse.angles
+    rot, rot_j = sim.rmse_deg(result, desired)
+    trq, trq_j = sim.rmse_torque_nm(result, inverse.torque)
+    record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
+                  message=_message(result), max_violation=result.max_violation,
+                  **_per_joint("rmse_rot_deg", rot_j), **_per_joint("rmse_torque_nm", trq_j))
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in JOINTS]
-    rows = np.column_stack([result.t, result.angles, inv.angles, result.torque, inv.torque])
-    return record, header, rows, list(found.history)
+    rows = np.column_stack([result.t, result.angles, desired, result.torque, inverse.torque])
+    return RunOutcome(record, result, inverse, table=(header, rows), **more)
+
+
+def _warm_up() -> None:
+    """Load (or compile) the arm's kernels, so that runtimes exclude it."""
+    spec_free = sim.simulate(None, Arm2(), as_joint_motion("reach"), dt=0.1)
+    del spec_free
+
+
+def run(spec, on_evaluation=None, on_start=None):
+    """Carry out a control or optimisation run of the arm (``RunOutcome``)."""
+    from ..experiment import base_record
+
+    if spec.command == "optimize":
+        return _optimize(spec, on_evaluation, on_start)
+    if spec.command != "control":
+        raise ValueError(f"{spec.command}: not available with --model arm2 yet")
+    _warm_up()
+    controller = spec.controller or "pd"
+    options = dict(spec.method_options)
+    arm, body = nominal(spec), plant(spec)
+    desired, _ = motions(spec)
+    penalty = Penalty(spec.alpha, spec.xi, spec.omega)
+    if controller == "lqr":
+        from .arm2_lqr import lqr_gains
+
+        lqr_gains(arm, desired, **options)  # warm-up of its imports
+    began = time.perf_counter()
+    inverse = reference(spec)
+    gains, drive, kp, kd = None, None, spec.kp or 0.0, spec.kd or 0.0
+    if controller == "computed-torque":
+        bandwidth, damping = options.get("bandwidth", 20.0), options.get("damping", 1.0)
+        kp, kd = bandwidth**2, 2 * damping * bandwidth
+    else:
+        drive = sim.feedforward(arm, desired)
+    if controller == "lqr":
+        from .arm2_lqr import lqr_gains
+
+        gains, kp, kd = lqr_gains(arm, desired, **options), 0.0, 0.0
+    result = sim.simulate(drive, body, desired, kp, kd, penalty=penalty, dt=spec.dt,
+                          computed=controller == "computed-torque", nominal=arm, gains=gains)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque="M(z)*z_ddot_d+h(z,z_dot)" if controller == "computed-torque" else "id",
+                  evaluations=1, runtime_s=runtime, controller=controller,
+                  **({"kp": spec.kp, "kd": spec.kd} if controller == "pd" else
+                     {"controller_options": " ".join(f"{k}={v}" for k, v in spec.method_options)}))
+    return _outcome(spec, record, result, inverse)
+
+
+def run_simulation(spec, torque_file=None, params_file=None):
+    """Open-loop forward dynamics of the arm driven by its inverse-dynamics torques or by a CSV
+    torque history (``t,shoulder,elbow``); BadFile for a file that cannot be used."""
+    from dataclasses import replace
+
+    from ..experiment import base_record
+
+    if params_file is not None:
+        raise BadFile("--params: not available with --model arm2 yet")
+    desired, _ = motions(spec)
+    label, drive = "id", sim.feedforward(nominal(spec), desired)
+    if torque_file is not None:
+        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS)
+        drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)  # noqa: E731
+        label = f"file:{torque_file}"
+        digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
+    _warm_up()
+    began = time.perf_counter()
+    inverse = reference(spec)
+    result = sim.simulate(drive, plant(spec), desired, penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=label, evaluations=1, runtime_s=runtime)
+    return _outcome(spec, record, result, inverse)
+
+
+def _optimize(spec, on_evaluation, on_start):
+    """Shooting optimisation of per-joint torque parameters (``arm2_problem``)."""
+    from ..experiment import _options_text, base_record
+    from ..optimizers import make_optimizer
+    from ..torques import TORQUES
+    from .arm2_problem import ArmTrackingProblem
+
+    optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
+    _warm_up()
+    optimizer.warm_up()
+    TORQUES[spec.torque].warm_up()
+    if on_start:
+        on_start(spec.budget)
+    desired, _ = motions(spec)
+    began = time.perf_counter()
+    problem = ArmTrackingProblem(spec.torque, plant(spec), desired, spec.feedforward, spec.penalty_weight,
+                                 Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec),
+                                 **dict(spec.torque_options))
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation)
+    params = np.asarray(found.x) * problem.scale
+    result = problem.simulate(params)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
+                  evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
+                  n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
+                  torque_options=_options_text(spec.torque_options),
+                  optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
+                  initial_objective=problem.objective(problem.p0))
+    return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params)

@@ -30,6 +30,7 @@ class ArmInverse:
     accelerations: np.ndarray
     torque: np.ndarray
     motion: str
+    joints: tuple = ("shoulder", "elbow")
 
 
 def inverse_dynamics(t=None, model: Arm2 = Arm2(), motion: str | JointMotion = "reach") -> ArmInverse:
