@@ -137,7 +137,8 @@ def convergence_figure(series, path: Path, title: str, reference: float | None =
 def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base: Path) -> dict:
     """Write the report's figures into ``directory`` (created if missing) for the plan's stored
     runs ({hash: stored run}) and report rows; return {title: path relative to ``base``}, the
-    directory of the report. Each tracking figure shows the run of median RMSE_rot of each cell."""
+    directory of the report. Each tracking figure shows the run of median RMSE_rot of each cell.
+    For a model of several joints only the convergence figures are drawn."""
     from .experiment import replay, run
 
     directory.mkdir(exist_ok=True)
@@ -146,13 +147,16 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
     def link(name, path):
         written[name] = os.path.relpath(path, base)
 
-    path = directory / "figure2_inverse_dynamics.png"
-    inverse_figure(inverse, path)
-    link("Figure 2: desired rotation and inverse-dynamics torque", path)
+    one_joint = np.ndim(inverse.torque) == 1
+    if one_joint:
+        path = directory / "figure2_inverse_dynamics.png"
+        inverse_figure(inverse, path)
+        link("Figure 2: desired rotation and inverse-dynamics torque", path)
     control_curves, reference = [], None
     if plan.control is not None:
-        result = run(plan.control).result
-        control_curves = [("PD control + feedforward", method_style(None), result.theta, result.torque)]
+        if one_joint:
+            result = run(plan.control).result
+            control_curves = [("PD control + feedforward", method_style(None), result.theta, result.torque)]
         reference = runs[plan.control.hash()]["record"].get("rmse_rot_deg")
     for table, name in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
         curves = list(control_curves)
@@ -166,7 +170,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
             values = np.array([r["record"]["rmse_rot_deg"] if r["record"]["rmse_rot_deg"] is not None else np.inf
                                for r in stored])
             median_seed = int(np.argsort(values)[len(values) // 2])
-            if stored[median_seed]["params"] is not None:
+            if one_joint and stored[median_seed]["params"] is not None:
                 result = replay(specs[median_seed], stored[median_seed]["params"])
                 curves.append((row.name, style, result.theta, result.torque))
             histories = [r["history"] for r in stored if r["history"]]
