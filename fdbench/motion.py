@@ -334,15 +334,8 @@ class Resampled(Motion):
     """A motion reported on another grid: every ``sample_dt`` s over its span (the end included)."""
 
     def __init__(self, motion: Motion, sample_dt: float):
-        if not (math.isfinite(sample_dt) and MIN_SAMPLE_DT <= sample_dt <= motion.duration):
-            raise ValueError(f"the sample step must be in [{MIN_SAMPLE_DT:g}, {motion.duration:g}] s, got {sample_dt}")
         self.base, self.sample_dt, self.name = motion, float(sample_dt), motion.name
-        grid = np.arange(0.0, motion.duration, sample_dt)
-        if motion.duration - grid[-1] > 1e-9 * sample_dt:
-            grid = np.append(grid, motion.duration)
-        else:
-            grid[-1] = motion.duration
-        self._samples = _read_only(grid)
+        self._samples = sample_grid(motion.duration, sample_dt)
 
     @property
     def samples(self) -> np.ndarray:
@@ -360,6 +353,19 @@ class Resampled(Motion):
 
 
 MIN_SAMPLE_DT = 1e-4  # s
+
+
+def sample_grid(duration: float, sample_dt: float) -> np.ndarray:
+    """Times every ``sample_dt`` s over [0, duration], the end included (read-only); ValueError for
+    a step outside [MIN_SAMPLE_DT, duration]."""
+    if not (math.isfinite(sample_dt) and MIN_SAMPLE_DT <= sample_dt <= duration):
+        raise ValueError(f"--sample-dt must be in [{MIN_SAMPLE_DT:g}, {duration:g}] s, got {sample_dt}")
+    grid = np.arange(0.0, duration, sample_dt)
+    if duration - grid[-1] > 1e-9 * sample_dt:
+        grid = np.append(grid, duration)
+    else:
+        grid[-1] = duration
+    return _read_only(grid)
 
 
 def load_motion(source: str, radians: bool = False, cutoff_hz: float = DEFAULT_CUTOFF_HZ,

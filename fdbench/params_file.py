@@ -17,14 +17,19 @@ MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand 
 
 
 def params_json(spec, outcome) -> str:
-    """JSON text describing the best torque of an optimisation run."""
+    """JSON text describing the best torque of an optimisation run (its model, motion, torque
+    parameterisation, feedforward and parameters)."""
+    from .models import named_motions
+
+    motion = spec.kinematics if spec.kinematics in named_motions(spec.model_name) else spec.motions()[1].name
     data = {
         "fdbench_version": __version__,
+        "model": spec.model_name,
         "torque": spec.torque,
         "torque_options": dict(spec.torque_options),
         "n_params": len(outcome.params),
         "feedforward": spec.feedforward,
-        "kinematics": spec.settings().motion.name if spec.kinematics not in KINEMATICS else spec.kinematics,
+        "kinematics": motion,
         "params": [float(v) for v in outcome.params],
         "rmse_rot_deg": outcome.record["rmse_rot_deg"],
     }
@@ -33,11 +38,11 @@ def params_json(spec, outcome) -> str:
     return json.dumps(data, indent=2) + "\n"
 
 
-def load_torque(path, settings, option: str = "--params"):
-    """The open-loop torque function (t (s) -> N m) of a saved parameter file, a label, and a
-    digest of what the file defines (the torque, its options, feedforward, kinematics, parameters)."""
-    from .torques import make_torque
-
+def read_params(path, model: str, motion_name: str, named_motions, option: str = "--params") -> dict:
+    """A saved parameter file for ``model`` (files without a model are the forearm's), checked:
+    {torque, options, feedforward, kinematics, params (array), digest}. ``kinematics`` is the named
+    motion to use, or None when the file's motion is the run's recorded one (``motion_name``).
+    Raises BadFile with a one-line message."""
     path = Path(path)
     try:
         data = json.loads(read_input_text(path, option, MAX_PARAMS_BYTES))
@@ -48,30 +53,57 @@ def load_torque(path, settings, option: str = "--params"):
         if not isinstance(data, dict):
             raise TypeError("content: a JSON object")
         name, options, ff, kinematics = data["torque"], data.get("torque_options", {}), data["feedforward"], data["kinematics"]
+        saved_model = data.get("model", "forearm")
         for key, value, kind in (("torque", name, str), ("torque_options", options, dict), ("feedforward", ff, bool),
-                                 ("kinematics", kinematics, str), ("params", data["params"], list)):
+                                 ("kinematics", kinematics, str), ("params", data["params"], list),
+                                 ("model", saved_model, str)):
             if not isinstance(value, kind):
                 raise TypeError(f"{key} ({kind.__name__})")
         if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in data["params"]):
             raise TypeError("params (a list of numbers)")
         params, options = np.asarray(data["params"], dtype=float), dict(options)
-        if kinematics in KINEMATICS:
-            settings = replace(settings, kinematics=kinematics)
-        elif kinematics != settings.motion.name:
-            raise ValueError(f"kinematics: these parameters were optimised for the motion {kinematics!r}; "
-                             f"give that motion with --motion")
     except (KeyError, TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {path} is not a saved parameter file (missing or bad {exc})") from None
+    if saved_model != model:
+        raise BadFile(f"{option}: {path} holds parameters optimised for the model {saved_model}; give --model "
+                      f"{saved_model}")
+    if kinematics not in named_motions and kinematics != motion_name:
+        raise BadFile(f"{option}: {path} holds parameters optimised for the motion {kinematics!r}; give that motion "
+                      f"with --motion")
+    if not np.all(np.isfinite(params)):
+        raise BadFile(f"{option}: {path}: the parameters must be finite numbers")
+    identity = json.dumps([name, sorted(options.items()), ff, kinematics, params.tolist()]
+                          + ([saved_model] if saved_model != "forearm" else []), default=str)
+    return {"torque": name, "options": options, "feedforward": ff, "params": params,
+            "kinematics": kinematics if kinematics in named_motions else None,
+            "digest": hashlib.sha256(identity.encode()).hexdigest(), "path": path}
+
+
+def make_saved_torque(saved: dict, option: str = "--params"):
+    """The torque parameterisation a saved file names, checked against its parameter count."""
+    from .torques import make_torque
+
     try:
-        torque = make_torque(name, **options)
+        torque = make_torque(saved["torque"], **saved["options"])
     except (TypeError, ValueError) as exc:
-        raise BadFile(f"{option}: {path}: {exc}") from None
-    if params.shape != (torque.n_params,) or not np.all(np.isfinite(params)):
+        raise BadFile(f"{option}: {saved['path']}: {exc}") from None
+    return torque
+
+
+def load_torque(path, settings, option: str = "--params"):
+    """The forearm's open-loop torque function (t (s) -> N m) of a saved parameter file, a label,
+    and a digest of what the file defines (the torque, its options, feedforward, kinematics,
+    parameters)."""
+    saved = read_params(path, "forearm", settings.motion.name, KINEMATICS, option)
+    if saved["kinematics"] is not None:
+        settings = replace(settings, kinematics=saved["kinematics"])
+    torque = make_saved_torque(saved, option)
+    params, name, ff = saved["params"], saved["torque"], saved["feedforward"]
+    if params.shape != (torque.n_params,):
         raise BadFile(f"{option}: {path}: expected {torque.n_params} finite parameters for {name}")
     from .problem import TrackingProblem
 
     # the problem restores the scaling the parameters refer to and adds the feedforward
     problem = TrackingProblem(torque, settings, ff)
-    label = f"{name} (feedforward) from {path.name}" if ff else f"{name} from {path.name}"
-    identity = json.dumps([name, sorted(options.items()), ff, kinematics, params.tolist()], default=str)
-    return problem.torque_function(params), label, hashlib.sha256(identity.encode()).hexdigest()
+    label = f"{name} (feedforward) from {saved['path'].name}" if ff else f"{name} from {saved['path'].name}"
+    return problem.torque_function(params), label, saved["digest"]

@@ -118,7 +118,7 @@ def test_the_forearm_is_the_default_model():
     (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
     (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45"], "--integrator"),
     (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
-    (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--sample-dt", "0.01"], "--sample-dt"),
+    (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--sample-dt", "5"], "--sample-dt"),
     (["--model", "arm2", "--dt", "5"], "--dt"), (["--model", "arm2", "--kp", "-1"], "--kp"),
     (["--model", "arm2", "--motion", "missing.csv"], "missing.csv"),
 ])
@@ -217,3 +217,30 @@ def test_a_mismatch_study_of_the_arm_at_level_zero_is_the_plain_run(tmp_path):
                                                                   rel=1e-12)
     heavier = as_json("control", "--model", "arm2", "--plant", "m0=2.4")
     assert pd_rows.loc[20, "rmse_rot_deg_median"] == pytest.approx(heavier["rmse_rot_deg"], rel=1e-12)
+
+
+def test_saved_arm_parameters_replay_the_optimised_run(tmp_path):
+    params = tmp_path / "p.json"
+    optimised = as_json("optimize", "--model", "arm2", "--torque", "cs", "--feedforward", "--budget", "30",
+                        "--save-params", params)
+    replayed = as_json("simulate", "--model", "arm2", "--params", params)
+    assert replayed["rmse_rot_deg"] == pytest.approx(optimised["rmse_rot_deg"], rel=1e-6)
+    assert replayed["rmse_rot_deg"] < as_json("simulate", "--model", "arm2")["rmse_rot_deg"]
+    assert json.loads(params.read_text())["model"] == "arm2"
+    forearm = invoke("simulate", "--params", params, code=2).stderr
+    assert "--model arm2" in forearm and len(forearm.splitlines()) == 1
+
+
+def test_a_coarser_reporting_grid_samples_the_same_arm_simulation(tmp_path):
+    """--sample-dt changes where the indicators are read, not the simulation: on a 10 ms grid that
+    falls on the 1 ms samples, each joint's history equals the 1 ms history at those times."""
+    tables = []
+    for name, extra in (("fine", []), ("coarse", ["--sample-dt", "0.01"])):
+        path = tmp_path / f"{name}.csv"
+        as_json("control", "--model", "arm2", "--plant", "m0=2.2", "--save-trajectory", path, *extra)
+        tables.append(pd.read_csv(path))
+    fine, coarse = tables
+    assert len(fine) == 1001 and len(coarse) == 101
+    picked = fine.iloc[::10].reset_index(drop=True)
+    for column in ("shoulder", "elbow", "shoulder_torque", "elbow_torque"):
+        assert np.allclose(coarse[column], picked[column], rtol=0, atol=1e-9), column

@@ -193,7 +193,7 @@ def test_bad_condition_options_are_one_line_exit_2(tmp_path):
                        (["--spline-lambda", "-1", "--smoothing", "spline"], "--spline-lambda"),
                        (["--plant", "I1"], "KEY=VALUE"), (["--plant", "mass=2"], "mass"),
                        (["--model", "I1=-1"], "I1"), (["--model", "L1G=0.5"], "L1G"),
-                       (["--sample-dt", "5"], "sample step"), (["--capture-hz", "0", "--noise-deg", "1"], "--capture-hz"),
+                       (["--sample-dt", "5"], "--sample-dt must be in"), (["--capture-hz", "0", "--noise-deg", "1"], "--capture-hz"),
                        (["--noise-deg", "1", "--cutoff", "80"], "cutoff")):
         result = invoke("control", *args)
         assert result.exit_code == 2, (args, result.stderr)

@@ -267,8 +267,6 @@ def optimize(
         penalty_weight=penalty_weight, gradient=gradient,
         **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
-    if save_params is not None and spec.model_name != "forearm":
-        raise BadInput(f"--save-params: not available with --model {spec.model_name} yet")
     _check_store(db)
     if opt == "cmaes":
         from ..population import set_threads

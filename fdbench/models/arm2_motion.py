@@ -140,3 +140,20 @@ def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: f
     where = "" if recorded else f" at {capture_hz:g} Hz"
     out.name = f"{motion.name}+noise {sigma_deg:g} deg{where} (seed {seed})"
     return out
+
+
+class Resampled(JointMotion):
+    """A joint motion reported on another grid: every ``sample_dt`` s over its span (the end included)."""
+
+    def __init__(self, motion: JointMotion, sample_dt: float):
+        from ..motion import sample_grid
+
+        self.base, self.sample_dt, self.name, self.joints = motion, float(sample_dt), motion.name, motion.joints
+        self._samples = sample_grid(motion.duration, sample_dt)
+
+    @property
+    def samples(self) -> np.ndarray:
+        return self._samples
+
+    def __call__(self, t):
+        return self.base(t)

@@ -42,6 +42,7 @@ class ArmTrackingProblem:
         self.model, self.motion, self.penalty, self.dt = model, as_joint_motion(motion), penalty, dt
         self.feedforward, self.penalty_weight = feedforward, penalty_weight
         nominal = model if nominal is None else nominal
+        self._nominal = nominal
         self.inverse = sim.inverse_dynamics(None, nominal, self.motion)
         self.duration = self.motion.duration
         self.parts = [make_torque(torque, **options) for _ in JOINTS]
@@ -67,6 +68,19 @@ class ArmTrackingProblem:
         with np.errstate(all="ignore"):
             own = np.stack([f(p[a:b]) for f, a, b in zip(self._on_grid, self.blocks[:-1], self.blocks[1:])], axis=-1)
         return self._ff_half + own
+
+    def torque_function(self, p):
+        """The drive torques for parameters p as a function t (s), shape (k,) -> (k, 2) N m (the
+        feedforward, if any, computed at t)."""
+        p = np.asarray(p, dtype=float)
+
+        def drive(t):
+            t = np.asarray(t, dtype=float)
+            own = np.stack([part.evaluate(p[a:b], t) for part, a, b in zip(self.parts, self.blocks[:-1], self.blocks[1:])],
+                           axis=-1)
+            return own + sim.inverse_dynamics(t, self._nominal, self.motion).torque if self.feedforward else own
+
+        return drive
 
     def simulate(self, p) -> sim.ArmSimulation:
         tau = self.torques_on_grid(p)

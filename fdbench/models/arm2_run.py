@@ -29,7 +29,7 @@ from .. import __version__
 from ..files import BadFile, read_columns, read_history_csv
 from ..model import Penalty
 from .arm2 import JOINTS, Arm2, arm2_with
-from .arm2_motion import MOTIONS, JointMotion, PerJoint, as_joint_motion, noisy_joints
+from .arm2_motion import MOTIONS, JointMotion, PerJoint, Resampled, as_joint_motion, noisy_joints
 from . import arm2_sim as sim
 
 
@@ -68,11 +68,13 @@ def arm_motion(name: str, radians: bool = False, **estimate) -> JointMotion:
 
 
 @lru_cache(maxsize=32)
-def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, noise_deg, seed, capture_hz, digest):
+def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, seed, capture_hz, digest):
     from ..experiment import motion_digest
 
     estimate = dict(cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda)
     truth = arm_motion(source, radians, **estimate)
+    if sample_dt is not None:
+        truth = Resampled(truth, sample_dt)
     if digest is not None and digest != motion_digest(source):
         raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
     if not noise_deg:
@@ -83,7 +85,8 @@ def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, noise_deg, se
 def motions(spec) -> tuple[JointMotion, JointMotion]:
     """(desired, true) motions of a spec: the one given to every method (a noisy capture when
     ``noise_deg`` > 0) and the one its indicators are measured against."""
-    return _motions(spec.kinematics, spec.radians, spec.cutoff_hz, spec.smoothing, spec.spline_lambda, spec.noise_deg,
+    return _motions(spec.kinematics, spec.radians, spec.cutoff_hz, spec.smoothing, spec.spline_lambda, spec.sample_dt,
+                    spec.noise_deg,
                     spec.seed or 0, spec.capture_hz, dict(spec.inputs).get("--motion"))
 
 
@@ -121,7 +124,7 @@ def check(spec) -> None:
     from ..integrate import Settings
 
     unavailable = {"collocate": spec.command == "collocate", "--integrator": spec.integrator != "rk4",
-                   "--sample-dt": spec.sample_dt is not None, "--gradient exact": spec.gradient != "fd",
+                   "--gradient exact": spec.gradient != "fd",
                    "--hidden auto": dict(spec.torque_options).get("hidden") == "auto",
                    f"--controller {spec.controller}": spec.command == "control" and (spec.controller or "pd")
                    not in CONTROLLERS}
@@ -238,11 +241,13 @@ def run_simulation(spec, torque_file=None, params_file=None):
 
     from ..experiment import base_record
 
-    if params_file is not None:
-        raise BadFile("--params: not available with --model arm2 yet")
     desired, _ = motions(spec)
     label, drive = "id", sim.feedforward(nominal(spec), desired)
-    if torque_file is not None:
+    if params_file is not None:
+        drive, label, digest, spec = _saved_torque(spec, params_file)
+        desired, _ = motions(spec)
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
+    elif torque_file is not None:
         t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS)
         drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)  # noqa: E731
         label = f"file:{torque_file}"
@@ -256,6 +261,27 @@ def run_simulation(spec, torque_file=None, params_file=None):
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
     return _outcome(spec, record, result, inverse)
+
+
+def _saved_torque(spec, path):
+    """(torque function, label, digest, spec) of a parameter file saved by ``optimize --model arm2
+    --save-params``; the spec follows the file's named motion. BadFile if it cannot be used."""
+    from dataclasses import replace
+
+    from ..params_file import make_saved_torque, read_params
+    from .arm2_problem import ArmTrackingProblem
+
+    saved = read_params(path, "arm2", motions(spec)[1].name, tuple(MOTIONS))
+    if saved["kinematics"] is not None and saved["kinematics"] != spec.kinematics:
+        spec = replace(spec, kinematics=saved["kinematics"], inputs=tuple(p for p in spec.inputs if p[0] != "--motion"))
+    expected = make_saved_torque(saved).n_params * len(JOINTS)
+    if saved["params"].shape != (expected,):
+        raise BadFile(f"--params: {path}: expected {expected} parameters for {saved['torque']} on {len(JOINTS)} joints")
+    problem = ArmTrackingProblem(saved["torque"], plant(spec), motions(spec)[0], saved["feedforward"],
+                                 penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt, nominal=nominal(spec),
+                                 **saved["options"])
+    name = saved["torque"] + (" (feedforward)" if saved["feedforward"] else "")
+    return problem.torque_function(saved["params"]), f"{name} from {saved['path'].name}", saved["digest"], spec
 
 
 def _optimize(spec, on_evaluation, on_start):
