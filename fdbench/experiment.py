@@ -567,6 +567,9 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
 def replay(spec: RunSpec, params) -> SimulationResult:
     """The simulation of a stored optimisation run's best parameters (for figures)."""
     from .problem import TrackingProblem
+
+    if spec._runs() is not None:
+        return spec._runs().replay(spec, params)
     from .torques import make_torque
 
     settings = spec.settings()

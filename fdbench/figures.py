@@ -108,6 +108,52 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
     plt.close(fig)
 
 
+def joints_inverse_figure(inverse, path: Path) -> None:
+    """The desired angle (deg) and inverse-dynamics torque (N m) of every joint against time (s)."""
+    plt = _pyplot()
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
+    for j, joint in enumerate(inverse.joints):
+        line = ("-", "--", ":", "-.")[j % 4]
+        top.plot(inverse.t, np.degrees(inverse.angles[:, j]), color="k", linestyle=line, label=joint)
+        bottom.plot(inverse.t, inverse.torque[:, j], color="k", linestyle=line, label=joint)
+    top.set_ylabel("joint angle (deg)")
+    top.set_title(f"Desired motion and inverse-dynamics torques (motion {inverse.motion})", fontsize=11)
+    top.legend(fontsize=7.5)
+    bottom.set_ylabel("joint torque (N m)")
+    bottom.set_xlabel("time (s)")
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+    _save(fig, path)
+    plt.close(fig)
+
+
+def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
+    """Figures 5 and 6 for a model of several joints, a column per joint against time (s): each
+    method's angle error (deg) and its applied torque (N m) against the inverse-dynamics torque.
+    ``curves`` are (label, style, angles (rad), torques (N m)), arrays of shape (samples, joints)."""
+    plt = _pyplot()
+    joints = inverse.joints
+    fig, axes = plt.subplots(2, len(joints), figsize=(5 * len(joints), 7), sharex=True, squeeze=False)
+    t = inverse.t
+    for j, joint in enumerate(joints):
+        top, bottom = axes[0, j], axes[1, j]
+        for label, style, angles, torque in curves:
+            top.plot(t, np.degrees(angles[:, j] - inverse.angles[:, j]), label=label, **style)
+            bottom.plot(t, torque[:, j], label=label, **style)
+        top.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)
+        bottom.plot(t, inverse.torque[:, j], label="inverse-dynamics torque", **INVERSE_TORQUE)
+        top.set_title(joint, fontsize=10)
+        top.set_ylabel("error (deg)")
+        bottom.set_ylabel("applied torque (N m)")
+        bottom.set_xlabel("time (s)")
+        for ax in (top, bottom):
+            ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7.5, loc="upper left")
+    fig.suptitle(title, fontsize=11)
+    _save(fig, path)
+    plt.close(fig)
+
+
 def convergence_figure(series, path: Path, title: str, reference: float | None = None) -> None:
     """Best objective (deg, eq. 18) against evaluations: series are (label, style, [history per
     seed]); the median over seeds is drawn with the interquartile range as a band. ``reference``
@@ -137,8 +183,8 @@ def convergence_figure(series, path: Path, title: str, reference: float | None =
 def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base: Path) -> dict:
     """Write the report's figures into ``directory`` (created if missing) for the plan's stored
     runs ({hash: stored run}) and report rows; return {title: path relative to ``base``}, the
-    directory of the report. Each tracking figure shows the run of median RMSE_rot of each cell.
-    For a model of several joints only the convergence figures are drawn."""
+    directory of the report. Each tracking figure shows the run of median RMSE_rot of each cell; a
+    model of several joints has a column per joint."""
     from .experiment import replay, run
 
     directory.mkdir(exist_ok=True)
@@ -148,15 +194,17 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
         written[name] = os.path.relpath(path, base)
 
     one_joint = np.ndim(inverse.torque) == 1
-    if one_joint:
-        path = directory / "figure2_inverse_dynamics.png"
-        inverse_figure(inverse, path)
-        link("Figure 2: desired rotation and inverse-dynamics torque", path)
+    path = directory / "figure2_inverse_dynamics.png"
+    (inverse_figure if one_joint else joints_inverse_figure)(inverse, path)
+    link("Figure 2: desired rotation and inverse-dynamics torque", path)
+
+    def angles(result):
+        return result.theta if one_joint else result.angles
+
     control_curves, reference = [], None
     if plan.control is not None:
-        if one_joint:
-            result = run(plan.control).result
-            control_curves = [("PD control + feedforward", method_style(None), result.theta, result.torque)]
+        result = run(plan.control).result
+        control_curves = [("PD control + feedforward", method_style(None), angles(result), result.torque)]
         reference = runs[plan.control.hash()]["record"].get("rmse_rot_deg")
     for table, name in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
         curves = list(control_curves)
@@ -170,15 +218,16 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
             values = np.array([r["record"]["rmse_rot_deg"] if r["record"]["rmse_rot_deg"] is not None else np.inf
                                for r in stored])
             median_seed = int(np.argsort(values)[len(values) // 2])
-            if one_joint and stored[median_seed]["params"] is not None:
+            if stored[median_seed]["params"] is not None:
                 result = replay(specs[median_seed], stored[median_seed]["params"])
-                curves.append((row.name, style, result.theta, result.torque))
+                curves.append((row.name, style, angles(result), result.torque))
             histories = [r["history"] for r in stored if r["history"]]
             if histories:
                 series.append((row.name, style, histories))
         if len(curves) > len(control_curves):
             path = directory / f"figure{5 if table == 2 else 6}_tracking.png"
-            tracking_figure(inverse, curves, path, f"{name}: the median run of each method")
+            (tracking_figure if one_joint else joints_tracking_figure)(inverse, curves, path,
+                                                                       f"{name}: the median run of each method")
             link(name, path)
         if series:
             path = directory / f"convergence_table{table}.png"

@@ -33,8 +33,11 @@ def params_json(spec, outcome) -> str:
         "params": [float(v) for v in outcome.params],
         "rmse_rot_deg": outcome.record["rmse_rot_deg"],
     }
-    if data["torque_options"].get("hidden") == "auto":
-        data["torque_options"]["hidden"] = (len(outcome.params) - 1) // 3
+    if data["torque_options"].get("hidden") == "auto":  # 3 n + 1 parameters per joint
+        from .models import model_class
+
+        joints = getattr(model_class(spec.model_name), "n_joints", 1)
+        data["torque_options"]["hidden"] = (len(outcome.params) // joints - 1) // 3
     return json.dumps(data, indent=2) + "\n"
 
 

@@ -148,7 +148,7 @@ def test_optimize_on_the_arm(tmp_path):
 
 
 def test_optimize_on_the_arm_refuses_what_it_lacks():
-    for args, word in ((["--hidden", "auto", "--torque", "ann"], "--hidden auto"), (["--budget", "0"], "--budget"),
+    for args, word in ((["--hidden", "0", "--torque", "ann"], "--hidden"), (["--budget", "0"], "--budget"),
                        (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator"),
                        (["--gradient", "exact"], "--gradient"), (["--plant", "m0=-2"], "m0")):
         result = invoke("optimize", "--model", "arm2", *args, code=2)
@@ -195,8 +195,12 @@ def test_the_report_on_the_arm_gives_each_joint_and_their_root_mean_square(tmp_p
         if r["t_end"] == 1.0:
             joints = np.array([r["rmse_rot_deg_shoulder"], r["rmse_rot_deg_elbow"]])
             assert r["rmse_rot_deg"] == pytest.approx(np.sqrt(np.mean(joints**2)), rel=1e-12)
-    markdown = invoke(*args).stdout
+    markdown = invoke(*args, "--figures", tmp_path / "figs").stdout
     assert "| method | RMSE_rot (deg) | shoulder (deg) | elbow (deg) |" in markdown and "two-segment arm" in markdown
+    from fdbench.figures import FIGURE_FILES
+
+    for name in FIGURE_FILES:  # every figure of the forearm's report, a column per joint
+        assert (tmp_path / "figs" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and f"figs/{name}" in markdown
 
 
 def test_a_noisy_reach_is_seeded_and_measured_against_the_true_one():
@@ -244,3 +248,22 @@ def test_a_coarser_reporting_grid_samples_the_same_arm_simulation(tmp_path):
     picked = fine.iloc[::10].reset_index(drop=True)
     for column in ("shoulder", "elbow", "shoulder_torque", "elbow_torque"):
         assert np.allclose(coarse[column], picked[column], rtol=0, atol=1e-9), column
+
+
+def test_hidden_auto_on_the_arm_is_the_smallest_count_fitting_every_joint():
+    from fdbench.torques.ann import AUTO_TOLERANCE, AnnTorque
+
+    record = as_json("optimize", "--model", "arm2", "--torque", "ann", "--hidden", "auto", "--budget", "3")
+    chosen = int(record["torque_options"].split("=")[1])
+    assert record["n_params"] == 2 * (3 * chosen + 1)
+    inv = sim.inverse_dynamics(None, Arm2(), Reach())
+
+    def fits(n):
+        errors = []
+        for j in range(2):
+            ann = AnnTorque(hidden=n)
+            ann.prepare(inv.t, inv.torque[:, j], feedforward=False)
+            errors.append(ann.fit_rmse / 2)
+        return max(errors) <= AUTO_TOLERANCE
+
+    assert fits(chosen) and (chosen == 1 or not fits(chosen - 1))

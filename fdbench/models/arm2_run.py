@@ -125,7 +125,6 @@ def check(spec) -> None:
 
     unavailable = {"collocate": spec.command == "collocate", "--integrator": spec.integrator != "rk4",
                    "--gradient exact": spec.gradient != "fd",
-                   "--hidden auto": dict(spec.torque_options).get("hidden") == "auto",
                    f"--controller {spec.controller}": spec.command == "control" and (spec.controller or "pd")
                    not in CONTROLLERS}
     for what, refused in unavailable.items():
@@ -284,6 +283,18 @@ def _saved_torque(spec, path):
     return problem.torque_function(saved["params"]), f"{name} from {saved['path'].name}", saved["digest"], spec
 
 
+def replay(spec, params) -> sim.ArmSimulation:
+    """The simulation of a stored optimisation run's best parameters (for figures)."""
+    from .arm2_problem import ArmTrackingProblem
+
+    options = dict(spec.torque_options)
+    if options.get("hidden") == "auto":  # 3 n + 1 parameters per joint
+        options["hidden"] = (len(params) // len(JOINTS) - 1) // 3
+    problem = ArmTrackingProblem(spec.torque, plant(spec), motions(spec)[0], spec.feedforward, spec.penalty_weight,
+                                 Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec), **options)
+    return problem.simulate(np.asarray(params, dtype=float))
+
+
 def _optimize(spec, on_evaluation, on_start):
     """Shooting optimisation of per-joint torque parameters (``arm2_problem``)."""
     from ..experiment import _options_text, base_record
@@ -299,9 +310,17 @@ def _optimize(spec, on_evaluation, on_start):
         on_start(spec.budget)
     desired, _ = motions(spec)
     began = time.perf_counter()
+    options, extra = dict(spec.torque_options), {}
+    if options.get("hidden") == "auto":  # the count that fits every joint's inverse-dynamics torque
+        from ..torques.ann import select_hidden
+
+        inv = sim.inverse_dynamics(None, nominal(spec), desired)
+        fits = [select_hidden(inv.t, inv.torque[:, j]) for j in range(len(JOINTS))]
+        options["hidden"] = max(n for n, _ in fits)
+        extra["hidden_fits"] = [(n, max(dict(tried).get(n, math.inf) for _, tried in fits))
+                                for n in range(1, options["hidden"] + 1)]
     problem = ArmTrackingProblem(spec.torque, plant(spec), desired, spec.feedforward, spec.penalty_weight,
-                                 Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec),
-                                 **dict(spec.torque_options))
+                                 Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec), **options)
     found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation)
     params = np.asarray(found.x) * problem.scale
     result = problem.simulate(params)
@@ -310,7 +329,7 @@ def _optimize(spec, on_evaluation, on_start):
     record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
                   evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
                   n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
-                  torque_options=_options_text(spec.torque_options),
+                  torque_options=_options_text(sorted(options.items())),
                   optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
-    return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params)
+    return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
