@@ -63,16 +63,25 @@ def _save(fig, path: Path) -> None:
 
 
 def inverse_figure(inverse, path: Path) -> None:
-    """Figure 2: desired rotation (deg) and inverse-dynamics torque (N m) against time (s)."""
+    """Figure 2: the desired angle (deg) and inverse-dynamics torque (N m) of every joint (the
+    forearm's elbow, or each joint of a larger model) against time (s)."""
     plt = _pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
-    top.plot(inverse.t, np.degrees(inverse.theta), color="k")
-    top.set_ylabel("rotation (deg)")
-    top.set_title(f"Figure 2: desired rotation and inverse-dynamics torque\n({inverse.kinematics} kinematics)",
-                  fontsize=11)
-    bottom.plot(inverse.t, inverse.torque, color="k")
-    bottom.set_ylabel("elbow torque (N m)")
+    one_joint = np.ndim(inverse.torque) == 1
+    angles = inverse.theta[:, None] if one_joint else inverse.angles
+    torques = inverse.torque[:, None] if one_joint else inverse.torque
+    joints = ("elbow",) if one_joint else inverse.joints
+    for j, joint in enumerate(joints):
+        line = ("-", "--", ":", "-.")[j % 4]
+        top.plot(inverse.t, np.degrees(angles[:, j]), color="k", linestyle=line, label=joint)
+        bottom.plot(inverse.t, torques[:, j], color="k", linestyle=line, label=joint)
+    where = f"{inverse.kinematics} kinematics" if one_joint else f"motion {inverse.motion}"
+    top.set_title(f"Figure 2: desired rotation and inverse-dynamics torque\n({where})", fontsize=11)
+    top.set_ylabel("rotation (deg)" if one_joint else "joint angle (deg)")
+    bottom.set_ylabel("elbow torque (N m)" if one_joint else "joint torque (N m)")
     bottom.set_xlabel("time (s)")
+    if not one_joint:
+        top.legend(fontsize=7.5)
     for ax in (top, bottom):
         ax.grid(alpha=0.3)
     _save(fig, path)
@@ -103,25 +112,6 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
     bottom.set_xlabel("time (s)")
     bottom.legend(handles=bottom.lines[-1:], fontsize=7.5, loc="upper left")
     for ax in (top, middle, bottom):
-        ax.grid(alpha=0.3)
-    _save(fig, path)
-    plt.close(fig)
-
-
-def joints_inverse_figure(inverse, path: Path) -> None:
-    """The desired angle (deg) and inverse-dynamics torque (N m) of every joint against time (s)."""
-    plt = _pyplot()
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
-    for j, joint in enumerate(inverse.joints):
-        line = ("-", "--", ":", "-.")[j % 4]
-        top.plot(inverse.t, np.degrees(inverse.angles[:, j]), color="k", linestyle=line, label=joint)
-        bottom.plot(inverse.t, inverse.torque[:, j], color="k", linestyle=line, label=joint)
-    top.set_ylabel("joint angle (deg)")
-    top.set_title(f"Desired motion and inverse-dynamics torques (motion {inverse.motion})", fontsize=11)
-    top.legend(fontsize=7.5)
-    bottom.set_ylabel("joint torque (N m)")
-    bottom.set_xlabel("time (s)")
-    for ax in (top, bottom):
         ax.grid(alpha=0.3)
     _save(fig, path)
     plt.close(fig)
@@ -195,7 +185,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
 
     one_joint = np.ndim(inverse.torque) == 1
     path = directory / "figure2_inverse_dynamics.png"
-    (inverse_figure if one_joint else joints_inverse_figure)(inverse, path)
+    inverse_figure(inverse, path)
     link("Figure 2: desired rotation and inverse-dynamics torque", path)
 
     def angles(result):
