@@ -187,12 +187,20 @@ def joints(rows: list[Row]) -> list[str]:
     return list(dict.fromkeys(k[len("rmse_rot_deg_"):-len("_median")] for k in keys))
 
 
-def _spread(row: Row, name: str) -> str:
+def _significant(value) -> str:
+    """Three significant digits (5.37e-07, 0.0413, 12.4): for tables without the paper's columns,
+    where small errors are the point."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return f"{value:.3g}"
+
+
+def _spread(row: Row, name: str, number=_num) -> str:
     """'median ± half IQR', or the one value of a single or deterministic run."""
     med, iqr = row.summary.get(f"{name}_median"), row.summary.get(f"{name}_iqr")
     if len(row.records) <= 1 or (row.identical and name != "runtime_s"):
-        return _num(med)
-    return f"{_num(med)} ± {_num(iqr / 2 if iqr is not None else None)}"
+        return number(med)
+    return f"{number(med)} ± {number(iqr / 2 if iqr is not None else None)}"
 
 
 def first_reached(history, level: float) -> int | None:
@@ -343,9 +351,9 @@ def _table_without_paper(rows: list[Row], with_success: bool) -> list[str]:
     lines = [head, rule]
     for row in rows:
         star = "*" if row.cell is not None and not row.cell.in_paper else ""
-        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg')} |"
-                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}')} |" for name in names)
-                + f" {_spread(row, 'rmse_torque_nm')} | {_spread(row, 'runtime_s')} |")
+        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg', _significant)} |"
+                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}', _significant)} |" for name in names)
+                + f" {_spread(row, 'rmse_torque_nm', _significant)} | {_spread(row, 'runtime_s', _significant)} |")
         if with_success:
             line += f" {row.successes}/{len(row.records)}{', identical' if row.identical else ''} |"
         lines.append(line)
@@ -354,6 +362,7 @@ def _table_without_paper(rows: list[Row], with_success: bool) -> list[str]:
 
 def _comparison(rows: list[Row]) -> list[str]:
     """A few sentences written from the numbers."""
+    number = _num if any(row.paper for row in rows) else _significant
     # cells none of whose runs reached t = 1 s are left out: eq. 18 can score an early failure
     # below a complete run, and a rotation error over a few samples says nothing of tracking
     finite = [r for r in rows if math.isfinite(r.summary.get("rmse_rot_deg_median", math.nan))
@@ -364,8 +373,8 @@ def _comparison(rows: list[Row]) -> list[str]:
     best = min(finite, key=lambda r: r.summary["rmse_rot_deg_median"])
     fastest = min(finite, key=lambda r: r.summary["runtime_s_median"])
     lines = [
-        f"- Most accurate: {best.name} (median RMSE_rot {_num(best.summary['rmse_rot_deg_median'])} deg).",
-        f"- Fastest: {fastest.name} (median runtime {_num(fastest.summary['runtime_s_median'])} s).",
+        f"- Most accurate: {best.name} (median RMSE_rot {number(best.summary['rmse_rot_deg_median'])} deg).",
+        f"- Fastest: {fastest.name} (median runtime {number(fastest.summary['runtime_s_median'])} s).",
     ]
     optimised = [r for r in finite if r.table != "control"]
     control = [r for r in finite if r.table == "control"]
@@ -373,12 +382,12 @@ def _comparison(rows: list[Row]) -> list[str]:
         c = control[0].summary["rmse_rot_deg_median"]
         beaten = [r for r in optimised if r.summary["rmse_rot_deg_median"] < c]
         lines.append(f"- {len(beaten)} of {len(optimised)} optimisation cells track more accurately than PD control "
-                     f"({_num(c)} deg) within their budget.")
+                     f"({number(c)} deg) within their budget.")
     for table in (2, 3):
         cells = [r for r in optimised if r.table == table and r.cell is not None]
         if cells:
             top = min(cells, key=lambda r: r.summary["rmse_rot_deg_median"])
-            lines.append(f"- Table {table}: best {top.name}, {_num(top.summary['rmse_rot_deg_median'])} deg.")
+            lines.append(f"- Table {table}: best {top.name}, {number(top.summary['rmse_rot_deg_median'])} deg.")
     verdicts = [_row_judgements(r)["rmse_rot_deg"]["verdict"] for r in rows if r.paper]
     judged = [v for v in verdicts if v]
     if judged:
