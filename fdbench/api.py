@@ -22,13 +22,14 @@ REPORT_OPTIMIZER_OPTIONS = {"sigma0": None, "popsize": None}  # None: each torqu
 
 
 def simulate(torque=None, **settings):
-    """Open-loop forward dynamics of the forearm over [0, 1] s; returns a ``RunOutcome`` whose
-    ``record`` holds the indicators (``rmse_rot_deg``, ``rmse_torque_nm``, ``runtime_s``,
-    ``t_end``, ``status``...) and whose ``result`` holds the histories on the 1001 samples.
+    """Open-loop forward dynamics over the motion (eq. 5: [0, 1] s); returns a ``RunOutcome``
+    whose ``record`` holds the indicators (``rmse_rot_deg``, ``rmse_torque_nm``, ``runtime_s``,
+    ``t_end``, ``status``...) and whose ``result`` holds the histories on the motion's samples.
 
     ``torque``: None for the inverse-dynamics torque, or a function of the times (s, shape
-    (n,)) returning the elbow torque (N m, shape (n,)). ``settings``: the fields of ``RunSpec``
-    (``kinematics``, ``integrator``, ``dt``, ``rtol``, ``atol``, ``alpha``, ``xi``, ``omega``);
+    (n,)) returning the elbow torque (N m, shape (n,); for ``model_name="arm2"`` the joint
+    torques, shape (n, 2)). ``settings``: the fields of ``RunSpec`` (``kinematics``,
+    ``integrator``, ``dt``, ``rtol``, ``atol``, ``alpha``, ``xi``, ``omega``, ``model_name``...);
     a bad value raises ValueError."""
     import numpy as np
 
@@ -41,6 +42,8 @@ def simulate(torque=None, **settings):
         return run_simulation(spec)
     if not callable(torque):
         raise TypeError("torque must be None or a function of time (s) returning N m")
+    if spec._runs() is not None:
+        return spec._runs().run_simulation(spec, torque=torque)
     model_settings = spec.settings()
     warm_up()
     start = time.perf_counter()

@@ -70,6 +70,12 @@ class RunSpec:
     gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
     model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.MODELS``
 
+    def __post_init__(self):
+        if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
+            from .models import default_motion
+
+            object.__setattr__(self, "kinematics", default_motion(self.model_name))
+
     def _runs(self):
         """The module carrying out this spec's runs when its model is not the forearm, else None."""
         from .models import runs

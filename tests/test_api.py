@@ -59,3 +59,18 @@ def test_load_report_equals_the_csv_report_and_load_runs_lists_every_stored_run(
         fdbench.load_report(db, torques=["cs"], optimizers=["bfgs"], seeds=3, budget=10)
     with pytest.raises(FileNotFoundError):
         fdbench.load_runs(tmp_path / "missing.sqlite")
+
+
+def test_the_arm_through_the_python_api():
+    """model_name='arm2' takes the arm's own motion; a torque function of the arm's inverse
+    dynamics gives exactly the default open-loop run."""
+    import fdbench
+    from fdbench.models.arm2 import Arm2
+    from fdbench.models.arm2_motion import Reach
+    from fdbench.models.arm2_sim import inverse_dynamics
+
+    default = fdbench.simulate(model_name="arm2")
+    given = fdbench.simulate(lambda t: inverse_dynamics(t, Arm2(), Reach()).torque, model_name="arm2")
+    assert default.record["kinematics"] == "reach" and default.record["model"] == "arm2"
+    assert given.record["rmse_rot_deg"] == default.record["rmse_rot_deg"] > 0
+    assert fdbench.RunSpec(model_name="arm2").hash() == fdbench.RunSpec(model_name="arm2", kinematics="reach").hash()

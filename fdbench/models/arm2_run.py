@@ -233,9 +233,10 @@ def run(spec, on_evaluation=None, on_start=None):
     return _outcome(spec, record, result, inverse)
 
 
-def run_simulation(spec, torque_file=None, params_file=None):
-    """Open-loop forward dynamics of the arm driven by its inverse-dynamics torques or by a CSV
-    torque history (``t,shoulder,elbow``); BadFile for a file that cannot be used."""
+def run_simulation(spec, torque_file=None, params_file=None, torque=None):
+    """Open-loop forward dynamics of the arm driven by its inverse-dynamics torques, a CSV torque
+    history (``t,shoulder,elbow``), saved parameters, or ``torque``, a function t (s), shape (k,)
+    -> joint torques (N m), shape (k, 2); BadFile for a file that cannot be used."""
     from dataclasses import replace
 
     from ..experiment import base_record
@@ -246,6 +247,8 @@ def run_simulation(spec, torque_file=None, params_file=None):
         drive, label, digest, spec = _saved_torque(spec, params_file)
         desired, _ = motions(spec)
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
+    elif torque is not None:
+        drive, label = torque, getattr(torque, "__name__", "function")
     elif torque_file is not None:
         t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS)
         drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)  # noqa: E731
