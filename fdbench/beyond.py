@@ -27,21 +27,17 @@ COLLOCATION_SUMMARY = ("states and torque are the unknowns of one sparse problem
 
 def beyond_methods(**common) -> list[Method]:
     """The methods of the table with their default options, on the settings ``common``
-    (kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions); direct collocation on
-    the forearm only."""
+    (kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions, model_name): computed
+    torque, LQR and direct collocation, on the forearm or on another model (the arm)."""
     from .collocation import DEFAULT_NODES
     from .controllers import CONTROLLERS
 
     ct, lqr = CONTROLLERS["computed-torque"], CONTROLLERS["lqr"]
-    methods = [
+    return [
         Method("Computed torque (omega_n 20 rad/s, zeta 1)", ct.summary,
                control_spec(controller="computed-torque", controller_options=dict(bandwidth=20.0, damping=1.0),
                             **common)),
         Method("Time-varying LQR (q 1e4, 1; r 1)", lqr.summary, control_spec(controller="lqr", **common)),
-    ]
-    if common.get("model_name", "forearm") != "forearm":
-        return methods
-    return methods + [
         Method(f"Direct collocation (Hermite-Simpson, {DEFAULT_NODES} intervals) + forward replay",
                COLLOCATION_SUMMARY, collocate_spec(DEFAULT_NODES, "hermite-simpson", **common)),
     ]

@@ -14,7 +14,11 @@ I1 theta'' = tau - G cos(theta) (``fdbench.minimal``, the limit of the penalty f
 The objective is the integral over the motion's span of the squared rotation error in degrees^2 plus
 ``regularization`` times the integral of tau^2 (N^2 m^2 s), by the scheme's own quadrature
 (trapezoid or Simpson). The initial state is fixed to the desired motion's at t = 0; the final
-state is free. ``casadi`` is imported here only.
+state is free. ``casadi`` is imported here only (and in the models' collocation modules).
+
+``transcribe`` is the transcription of any model with J joints whose accelerations are an
+explicit function of its angles, velocities and torques; ``collocate`` is the forearm's (J = 1),
+``fdbench.models.arm2_collocation.collocate`` the arm's (J = 2).
 """
 
 from __future__ import annotations
@@ -43,6 +47,7 @@ IPOPT_HINTS = {
     "Infeasible_Problem_Detected": "the defect constraints cannot be met; check the model and motion",
     "Restoration_Failed": "try another --nodes or --scheme",
 }
+DEG2 = (180.0 / math.pi) ** 2  # deg^2 per rad^2
 
 
 def check_options(nodes: int, scheme: str, regularization: float, max_iter: int = DEFAULT_MAX_ITER,
@@ -64,13 +69,14 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
 
 @dataclass
 class CollocationResult:
-    """IPOPT's solution of the transcribed problem. Node arrays have shape (N + 1,); ``torque_mid``
-    has shape (N,) for Hermite-Simpson and is None for the trapezoidal scheme."""
+    """IPOPT's solution of the transcribed problem. Node arrays have shape (N + 1,) for one joint
+    (the forearm) or (N + 1, J) for J joints (columns in the model's joint order); ``torque_mid``
+    has shape (N,) or (N, J) for Hermite-Simpson and is None for the trapezoidal scheme."""
 
     scheme: str
-    t: np.ndarray  # node times, s
-    theta: np.ndarray  # rad
-    theta_dot: np.ndarray  # rad/s
+    t: np.ndarray  # node times, s, shape (N + 1,)
+    angles: np.ndarray  # joint angles, rad
+    velocities: np.ndarray  # rad/s
     torque: np.ndarray  # N m
     torque_mid: np.ndarray | None  # N m, at the interval midpoints
     objective: float  # deg^2 s (+ regularisation)
@@ -78,6 +84,16 @@ class CollocationResult:
     iterations: int
     solve_time_s: float  # wall time of IPOPT's solve (the transcription excluded)
     build_time_s: float  # wall time of the transcription
+
+    @property
+    def theta(self) -> np.ndarray:
+        """The forearm's name of ``angles``: theta (rad) at the nodes."""
+        return self.angles
+
+    @property
+    def theta_dot(self) -> np.ndarray:
+        """The forearm's name of ``velocities``: theta' (rad/s) at the nodes."""
+        return self.velocities
 
     @property
     def success(self) -> bool:
@@ -92,19 +108,24 @@ class CollocationResult:
             f" ({hint})" if hint else "")
 
     def torque_function(self):
-        """The torque history t (s), shape (n,) -> N m, shape (n,), interpolated as the scheme
-        assumes: piecewise linear (trapezoidal) or piecewise quadratic (Hermite-Simpson)."""
+        """The torque history t (s), shape (k,) -> N m, shape (k,) (one joint) or (k, J),
+        interpolated as the scheme assumes: piecewise linear (trapezoidal) or piecewise quadratic
+        (Hermite-Simpson)."""
         t_nodes, u = self.t, self.torque
         h = t_nodes[1] - t_nodes[0]
         n = len(t_nodes) - 1
         if self.torque_mid is None:
-            return lambda t: np.interp(t, t_nodes, u)
+            if u.ndim == 1:
+                return lambda t: np.interp(t, t_nodes, u)
+            return lambda t: np.stack([np.interp(t, t_nodes, u[:, j]) for j in range(u.shape[1])], axis=-1)
         um = self.torque_mid
 
         def quadratic(t):
             t = np.asarray(t, dtype=float)
             k = np.clip(np.floor((t - t_nodes[0]) / h).astype(int), 0, n - 1)
             s = (t - t_nodes[k]) / h  # in [0, 1] within interval k
+            if u.ndim > 1:
+                s = s[..., None]
             # Lagrange basis through s = 0, 1/2, 1
             return (2 * (s - 0.5) * (s - 1)) * u[k] + (-4 * s * (s - 1)) * um[k] + (2 * s * (s - 0.5)) * u[k + 1]
 
@@ -114,57 +135,69 @@ class CollocationResult:
         return np.asarray(self.torque_function()(t), dtype=float)
 
 
-def collocate(settings: Settings = Settings(), nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
-              regularization: float = DEFAULT_REGULARIZATION, max_iter: int = DEFAULT_MAX_ITER,
-              max_time: float = DEFAULT_MAX_TIME) -> CollocationResult:
-    """Transcribe and solve the tracking problem of ``settings``' model and kinematics.
+def _joint_sum(terms):
+    """The sum over the columns (joints) of an SX matrix of shape (k, J): shape (k, 1)."""
+    total = terms[:, 0]
+    for j in range(1, terms.shape[1]):
+        total = total + terms[:, j]
+    return total
 
-    Never raises on a solver failure: IPOPT's status says what happened (``success``, ``message``)."""
-    check_options(nodes, scheme, regularization, max_iter, max_time)
+
+def transcribe(acceleration, t: np.ndarray, angles_d: np.ndarray, velocities_d: np.ndarray,
+               angles_mid_d: np.ndarray | None, torque_guess: np.ndarray, torque_mid_guess: np.ndarray | None,
+               scheme: str, regularization: float, max_iter: int, max_time: float,
+               began: float | None = None) -> CollocationResult:
+    """Transcribe the tracking problem of a model with J joints on the N + 1 equally spaced nodes
+    ``t`` (s) and solve it with IPOPT.
+
+    acceleration(z, w, u): the model's joint accelerations (rad/s^2) as CasADi SX of shape (k, J)
+    from its angles z (rad), velocities w (rad/s) and torques u (N m), each SX of shape (k, J).
+    angles_d (rad), velocities_d (rad/s), torque_guess (N m): the desired motion and the torque
+    of the initial guess at the nodes, shape (N + 1,) for one joint or (N + 1, J); angles_mid_d,
+    torque_mid_guess: the same at the interval midpoints, shape (N,) or (N, J) (Hermite-Simpson;
+    None for trapezoidal). The initial state is fixed to angles_d[0], velocities_d[0]; the guess
+    of the states is the desired motion. The objective is the integral of the squared angle
+    errors in deg^2 summed over the joints plus ``regularization`` times that of |tau|^2.
+    ``began``: the perf_counter time the transcription began (default now).
+
+    Never raises on a solver failure: IPOPT's status says what happened."""
     import casadi as ca
 
-    began = time.perf_counter()
-    model, kinematics = settings.nominal_model, settings.kinematics
-    G, inertia = gravity_moment(model), model.I1
-    duration = settings.motion.duration
-    n, h = int(nodes), duration / nodes
-    t = np.linspace(0.0, duration, n + 1)
-    th_d, w_d, _ = desired_motion(t, kinematics)
+    began = time.perf_counter() if began is None else began
+    one = np.ndim(angles_d) == 1
+    n, joints = len(t) - 1, 1 if one else np.shape(angles_d)[1]
+    h = float(t[1] - t[0])
     hs = scheme == "hermite-simpson"
 
-    th, w, u = ca.SX.sym("theta", n + 1), ca.SX.sym("omega", n + 1), ca.SX.sym("tau", n + 1)
-    um = ca.SX.sym("tau_mid", n) if hs else None
-    acc = (u - G * ca.cos(th)) / inertia
-    deg2 = (180.0 / math.pi) ** 2
-    lagrange = deg2 * (th - th_d) ** 2 + regularization * u**2  # integrand at the nodes
+    th, w, u = (ca.SX.sym(name, n + 1, joints) for name in ("angle", "velocity", "tau"))
+    um = ca.SX.sym("tau_mid", n, joints) if hs else None
+    acc = acceleration(th, w, u)
+    lagrange = _joint_sum(DEG2 * (th - angles_d) ** 2) + _joint_sum(regularization * u**2)  # at the nodes
     k0, k1 = slice(0, n), slice(1, n + 1)
     if hs:
-        th_m = (th[k0] + th[k1]) / 2 + h / 8 * (w[k0] - w[k1])
-        w_m = (w[k0] + w[k1]) / 2 + h / 8 * (acc[k0] - acc[k1])
-        acc_m = (um - G * ca.cos(th_m)) / inertia
-        th_md = desired_motion(t[:-1] + h / 2, kinematics)[0]
-        defects = ca.vertcat(th[k1] - th[k0] - h / 6 * (w[k0] + 4 * w_m + w[k1]),
-                             w[k1] - w[k0] - h / 6 * (acc[k0] + 4 * acc_m + acc[k1]))
-        lagrange_m = deg2 * (th_m - th_md) ** 2 + regularization * um**2
+        th_m = (th[k0, :] + th[k1, :]) / 2 + h / 8 * (w[k0, :] - w[k1, :])
+        w_m = (w[k0, :] + w[k1, :]) / 2 + h / 8 * (acc[k0, :] - acc[k1, :])
+        acc_m = acceleration(th_m, w_m, um)
+        defects = ca.vertcat(ca.vec(th[k1, :] - th[k0, :] - h / 6 * (w[k0, :] + 4 * w_m + w[k1, :])),
+                             ca.vec(w[k1, :] - w[k0, :] - h / 6 * (acc[k0, :] + 4 * acc_m + acc[k1, :])))
+        lagrange_m = _joint_sum(DEG2 * (th_m - angles_mid_d) ** 2) + _joint_sum(regularization * um**2)
         objective = h / 6 * (ca.sum1(lagrange[k0]) + 4 * ca.sum1(lagrange_m) + ca.sum1(lagrange[k1]))
-        x = ca.vertcat(th, w, u, um)
+        x = ca.vertcat(ca.vec(th), ca.vec(w), ca.vec(u), ca.vec(um))
+        guess = [angles_d, velocities_d, torque_guess, torque_mid_guess]
     else:
-        defects = ca.vertcat(th[k1] - th[k0] - h / 2 * (w[k0] + w[k1]),
-                             w[k1] - w[k0] - h / 2 * (acc[k0] + acc[k1]))
+        defects = ca.vertcat(ca.vec(th[k1, :] - th[k0, :] - h / 2 * (w[k0, :] + w[k1, :])),
+                             ca.vec(w[k1, :] - w[k0, :] - h / 2 * (acc[k0, :] + acc[k1, :])))
         objective = h / 2 * (ca.sum1(lagrange[k0]) + ca.sum1(lagrange[k1]))
-        x = ca.vertcat(th, w, u)
+        x = ca.vertcat(ca.vec(th), ca.vec(w), ca.vec(u))
+        guess = [angles_d, velocities_d, torque_guess]
 
-    # initial guess: the desired motion and the minimal model's inverse-dynamics torque
-    u_guess = inertia * desired_motion(t, kinematics)[2] + G * np.cos(th_d)
-    guess = [th_d, w_d, u_guess]
-    if hs:
-        tm = t[:-1] + h / 2
-        th_md, _, a_md = desired_motion(tm, kinematics)
-        guess.append(inertia * a_md + G * np.cos(th_md))
-    x0 = np.concatenate(guess)
+    x0 = np.concatenate([np.asarray(g, dtype=float).ravel(order="F") for g in guess])  # ca.vec is column-major
     lbx, ubx = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
-    lbx[0] = ubx[0] = th_d[0]  # theta(0)
-    lbx[n + 1] = ubx[n + 1] = w_d[0]  # theta'(0)
+    size = (n + 1) * joints  # one block of node values
+    z0, w0 = (np.atleast_1d(np.asarray(d, dtype=float)[0]) for d in (angles_d, velocities_d))
+    for j in range(joints):  # the initial state is the desired motion's
+        lbx[j * (n + 1)] = ubx[j * (n + 1)] = z0[j]
+        lbx[size + j * (n + 1)] = ubx[size + j * (n + 1)] = w0[j]
     options = {
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "verbose": False,
         "ipopt.max_iter": int(max_iter), "ipopt.max_cpu_time": float(max_time), "ipopt.tol": 1e-10,
@@ -181,8 +214,44 @@ def collocate(settings: Settings = Settings(), nodes: int = DEFAULT_NODES, schem
         z, f = np.full(x0.size, np.nan), math.nan
         status, iterations = "CasADi error: " + " ".join(str(exc).split())[:200], 0
     solved = time.perf_counter()
+
+    def block(k: int, rows: int = n + 1) -> np.ndarray:
+        values = z[k * size : k * size + rows * joints]
+        return values if one else values.reshape(joints, rows).T
+
     return CollocationResult(
-        scheme=scheme, t=t, theta=z[: n + 1], theta_dot=z[n + 1 : 2 * n + 2], torque=z[2 * n + 2 : 3 * n + 3],
-        torque_mid=z[3 * n + 3 :] if hs else None, objective=f, ipopt_status=status, iterations=iterations,
+        scheme=scheme, t=t, angles=block(0), velocities=block(1), torque=block(2),
+        torque_mid=block(3, n) if hs else None, objective=f, ipopt_status=status, iterations=iterations,
         solve_time_s=solved - built, build_time_s=built - began,
     )
+
+
+def collocate(settings: Settings = Settings(), nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
+              regularization: float = DEFAULT_REGULARIZATION, max_iter: int = DEFAULT_MAX_ITER,
+              max_time: float = DEFAULT_MAX_TIME) -> CollocationResult:
+    """Transcribe and solve the tracking problem of ``settings``' model and kinematics (the
+    forearm): node arrays of shape (N + 1,).
+
+    Never raises on a solver failure: IPOPT's status says what happened (``success``, ``message``)."""
+    check_options(nodes, scheme, regularization, max_iter, max_time)
+    import casadi as ca
+
+    began = time.perf_counter()
+    model, kinematics = settings.nominal_model, settings.kinematics
+    G, inertia = gravity_moment(model), model.I1
+    duration = settings.motion.duration
+    n, h = int(nodes), duration / nodes
+    t = np.linspace(0.0, duration, n + 1)
+    th_d, w_d, a_d = desired_motion(t, kinematics)
+    # initial guess: the desired motion and the minimal model's inverse-dynamics torque
+    u_guess = inertia * a_d + G * np.cos(th_d)
+    th_md = um_guess = None
+    if scheme == "hermite-simpson":
+        th_md, _, a_md = desired_motion(t[:-1] + h / 2, kinematics)
+        um_guess = inertia * a_md + G * np.cos(th_md)
+
+    def acceleration(theta, omega, tau):
+        return (tau - G * ca.cos(theta)) / inertia
+
+    return transcribe(acceleration, t, th_d, w_d, th_md, u_guess, um_guess, scheme, regularization, max_iter,
+                      max_time, began)

@@ -155,11 +155,6 @@ def test_optimize_on_the_arm_refuses_what_it_lacks():
         assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr
 
 
-def test_collocation_on_the_arm_says_it_is_not_available():
-    result = invoke("collocate", "--model", "arm2", code=2)
-    assert "not available" in result.stderr and len(result.stderr.splitlines()) == 1
-
-
 def test_methods_lists_the_models():
     text = invoke("methods").stdout
     assert "models (--model):" in text and "  arm2 " in text and "  forearm " in text

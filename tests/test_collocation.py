@@ -165,3 +165,17 @@ def test_fuzz_collocate_is_a_result_or_one_line(nodes, regularization, scheme, m
         assert record["command"] == "collocate" and record["ipopt_status"]
         valid = 2 <= nodes and scheme in ("hermite-simpson", "trapezoidal") and max_iter >= 1
         assert valid and math.isfinite(regularization) and regularization >= 0
+
+
+def test_save_torque_covers_a_recorded_motions_span(tmp_path):
+    """A recorded 2.5 s motion: the torque is saved on the RK4 half-step grid of the motion's
+    span, and 'simulate --torque-file' on the same motion replays what collocate replayed."""
+    from pathlib import Path
+
+    motion, path = Path(__file__).parents[1] / "examples" / "elbow_flexion.csv", tmp_path / "torque.csv"
+    record = json.loads(invoke(["collocate", "--motion", motion, "--nodes", 50, "--save-torque", path, "-f", "json",
+                                "--quiet"]).stdout)
+    t, span = np.loadtxt(path, delimiter=",", skiprows=1)[:, 0], np.loadtxt(motion, delimiter=",", skiprows=1)[-1, 0]
+    assert t[0] == 0 and t[-1] == pytest.approx(span) and len(t) == 2 * round(span / 1e-3) + 1 and span > 1
+    replay = json.loads(invoke(["simulate", "--motion", motion, "--torque-file", path, "-f", "json"]).stdout)
+    assert replay["rmse_rot_deg"] == pytest.approx(record["rmse_rot_deg"], rel=1e-9)

@@ -174,6 +174,13 @@ PROSE = [  # (pattern whose group is the printed figure, command, field)
     (r"PD control leaves an error of [\d.]+° \(paper: ([\d.]+)°\)", None, 0.116),
     (r"inverse-dynamics torque tracks to ([\de.-]+)°", "fdbench simulate --kinematics exact", "rmse_rot_deg"),
     (r"PD control to ([\de.-]+)°", "fdbench control --kinematics exact", "rmse_rot_deg"),
+    (r"`fdbench collocate --model arm2` replays\s+to\s+RMSE_rot\s+([\d.]+)°", "fdbench collocate --model arm2",
+     "rmse_rot_deg"),
+    (r"replays\s+to\s+RMSE_rot\s+[\d.]+°\s+\(its\s+own\s+nodes:\s+([\d.]+)°", "fdbench collocate --model arm2",
+     "collocation_rmse_rot_deg"),
+    (r"IPOPT\s+converges\s+in\s+(\d+)\s+iterations", "fdbench collocate --model arm2", "ipopt_iterations"),
+    (r"`--scheme\s+trapezoidal`\s+the\s+replay\s+drifts\s+by\s+([\d.]+)°",
+     "fdbench collocate --model arm2 --scheme trapezoidal", "rmse_rot_deg"),
 ]
 
 

@@ -157,7 +157,7 @@ def collocate(
     regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
-    save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
+    save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; --model arm2: t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
     kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
@@ -197,14 +197,21 @@ def collocate(
 
 
 def _collocation_torque_text(solution, spec) -> str:
-    """The torque found on the half-step grid of the run's RK4 (so that 'simulate --torque-file'
-    with the same --dt replays exactly what collocate replayed), as CSV t (s), torque (N m)."""
-    from ..files import csv_text
-    from ..integrate import half_step_reference, steps
+    """The torque found on the half-step grid of the run's RK4 over the motion's span (so that
+    'simulate --torque-file' with the same --dt replays exactly what collocate replayed), as CSV
+    t (s) and torque (N m): one column ``torque`` for the forearm, one per joint for another model
+    (the arm: t, shoulder, elbow)."""
+    import numpy as np
 
-    half, _, _ = half_step_reference(steps(spec.dt), spec.kinematics)
-    torque = solution.torque_samples(half)
-    return csv_text(["t", "torque"], ([f"{t:.17g}", f"{q:.17g}"] for t, q in zip(half, torque)))
+    from ..files import csv_text
+    from ..integrate import steps
+    from ..models import model_class
+
+    duration = spec.motions()[0].duration
+    half = np.linspace(0.0, duration, 2 * steps(spec.dt, duration) + 1)
+    torque = solution.torque_samples(half).reshape(len(half), -1)
+    names = ["torque"] if solution.torque.ndim == 1 else list(model_class(spec.model_name).joints)
+    return csv_text(["t", *names], ([f"{t:.17g}", *(f"{q:.17g}" for q in row)] for t, row in zip(half, torque)))
 
 
 @app.command()

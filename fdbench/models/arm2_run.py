@@ -1,7 +1,8 @@
 """The arm's runs from a ``RunSpec`` whose ``model_name`` is 'arm2' (``fdbench.experiment`` hands
 them over here): inverse dynamics, open-loop simulation, control (PD per joint with computed
-feedforward, computed-torque, LQR) and optimisation, each giving a flat record (the forearm's keys
-plus per-joint indicators) and a trajectory.
+feedforward, computed-torque, LQR), optimisation and direct collocation (its torque replayed by the
+arm's forward simulation), each giving a flat record (the forearm's keys plus per-joint
+indicators) and a trajectory.
 
 Indicators for n joints: ``rmse_rot_deg`` is the root mean square over all joints and samples of
 the angle error (deg), ``rmse_torque_nm`` likewise of the torque (N m) against the inverse-dynamics
@@ -123,8 +124,7 @@ def check(spec) -> None:
     motion file that cannot be used. No simulation is run."""
     from ..integrate import Settings
 
-    unavailable = {"collocate": spec.command == "collocate", "--integrator": spec.integrator != "rk4",
-                   "--gradient exact": spec.gradient != "fd",
+    unavailable = {"--integrator": spec.integrator != "rk4", "--gradient exact": spec.gradient != "fd",
                    f"--controller {spec.controller}": spec.command == "control" and (spec.controller or "pd")
                    not in CONTROLLERS}
     for what, refused in unavailable.items():
@@ -193,11 +193,13 @@ def _warm_up() -> None:
 
 
 def run(spec, on_evaluation=None, on_start=None):
-    """Carry out a control or optimisation run of the arm (``RunOutcome``)."""
+    """Carry out a control, optimisation or collocation run of the arm (``RunOutcome``)."""
     from ..experiment import base_record
 
     if spec.command == "optimize":
         return _optimize(spec, on_evaluation, on_start)
+    if spec.command == "collocate":
+        return _collocate(spec)
     if spec.command != "control":
         raise ValueError(f"{spec.command}: not available with --model arm2 yet")
     _warm_up()
@@ -336,3 +338,36 @@ def _optimize(spec, on_evaluation, on_start):
                   optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
     return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+
+
+def _collocate(spec):
+    """Direct collocation of the nominal arm on the desired motion (``arm2_collocation``), then
+    its torque replayed by the arm's forward simulation of the plant: the indicators are the
+    replay's; the collocation's own RMSE over both joints at its nodes (against the true motion),
+    IPOPT's status, iterations and solve time stand beside them. ``extra['collocation']`` holds
+    the solution (node arrays of shape (N + 1, 2))."""
+    from ..experiment import base_record
+    from .arm2_collocation import collocate
+
+    options = dict(spec.method_options)
+    _warm_up()
+    import casadi  # noqa: F401  (its import is not part of the runtime)
+
+    desired, truth = motions(spec)
+    began = time.perf_counter()
+    inverse = reference(spec)
+    solution = collocate(nominal(spec), desired, **options)
+    result = sim.simulate(solution.torque_function(), plant(spec), desired,
+                          penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt)
+    runtime = time.perf_counter() - began
+    own = float(np.sqrt(np.mean(np.degrees(solution.angles - truth(solution.t)[0]) ** 2)))
+    record = base_record(spec)
+    record.update(torque="collocation", evaluations=1, runtime_s=runtime, nodes=options["nodes"],
+                  scheme=options["scheme"], regularization=options["regularization"],
+                  collocation_rmse_rot_deg=own, ipopt_status=solution.ipopt_status,
+                  ipopt_iterations=solution.iterations, solve_time_s=solution.solve_time_s)
+    outcome = _outcome(spec, record, result, inverse, extra={"collocation": solution})
+    if not solution.success:
+        record.update(status="collocation_failed",
+                      message=f"{solution.message}; the replay of its last iterate: {record['message']}")
+    return outcome
