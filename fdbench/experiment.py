@@ -72,9 +72,10 @@ class RunSpec:
 
     def __post_init__(self):
         if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
-            from .models import default_motion
+            from .models import MODELS, default_motion
 
-            object.__setattr__(self, "kinematics", default_motion(self.model_name))
+            if self.model_name in MODELS:  # an unknown name is for ``validate`` to refuse
+                object.__setattr__(self, "kinematics", default_motion(self.model_name))
 
     def _runs(self):
         """The module carrying out this spec's runs when its model is not the forearm, else None."""
