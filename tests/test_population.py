@@ -87,8 +87,9 @@ def test_cmaes_with_population_evaluation_takes_the_same_path():
     assert batched.evaluations == plain.evaluations == 60
 
 
-def test_thread_count_does_not_change_a_run():
-    spec = optimize_spec("pf", "cmaes", True, seed=2, budget=60)
+@pytest.mark.parametrize("torque, feedforward", [("cs", False), ("pf", True), ("ann", False)])
+def test_thread_count_does_not_change_a_run(torque, feedforward):
+    spec = optimize_spec(torque, "cmaes", feedforward, seed=2, budget=60)
     records = []
     for count in (1, 2):
         set_threads(count)
