@@ -134,8 +134,9 @@ class AnnTorque(TorqueParameterisation):
             affine_rows(x, np.ascontiguousarray(P[:, :n_h]), np.ascontiguousarray(P[:, n_h : 2 * n_h]), hidden)
             np.tanh(hidden, out=hidden)
             out = np.empty((len(P), len(x)))
-            own_weighted_sums(np.ascontiguousarray(P[:, 2 * n_h : 3 * n_h]), hidden, np.ascontiguousarray(P[:, 3 * n_h]),
-                              float(self.span), float(self.offset), out)
+            output_weights = np.ascontiguousarray(P[:, 2 * n_h : 3 * n_h])
+            output_bias = np.ascontiguousarray(P[:, 3 * n_h])
+            own_weighted_sums(output_weights, hidden, output_bias, float(self.span), float(self.offset), out)
             return out
 
         return evaluate
