@@ -33,7 +33,7 @@ from fdbench.torques import make_torque
 BUDGET = 200
 CALLS = 50
 REPEATS = 7
-RUNS = 5
+RUNS = 9
 LAMBDA = 40
 CELLS = [("cs", False), ("pf", True), ("ann", False)]
 
