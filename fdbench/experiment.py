@@ -498,7 +498,7 @@ def _run_optimize(spec: RunSpec, on_evaluation, on_start) -> RunOutcome:
         from .gradient import warm_up as gradient_warm_up
 
         gradient_warm_up()
-    if spec.optimizer == "cmaes" and settings.integrator == "rk4":
+    if settings.integrator == "rk4":  # every evaluation on RK4 runs the population kernel, alone or together
         from .population import warm_up as population_warm_up
 
         population_warm_up()

@@ -2,20 +2,26 @@
 spread over threads (a compiled kernel that releases the GIL, run by a small thread pool; each
 thread takes every T-th candidate).
 
-Each candidate runs the very kernel of a single evaluation (``dynamics.rk4``) on its own torque
-history and buffers, so a population's numbers equal those of its candidates evaluated one by
-one, to the last bit, whatever the number of threads. (numba's ``parallel=True`` was measured
-too: its OpenMP workers spin while they wait, which on a loaded machine made two threads twice
-as slow as one.)
+Each candidate runs the kernel of a plain simulation (``dynamics.rk4``) on its own torque history,
+in its thread's work buffers, and eq. 18 straight from its states (``tracking_objective``). A
+single evaluation is a population of one through the same kernel, so a population's numbers equal
+those of its candidates evaluated one by one, to the last bit, whatever the number of threads.
+(numba's ``parallel=True`` was measured too: its OpenMP workers spin while they wait, which on a
+loaded machine made two threads twice as slow as one.)
 """
 
 from __future__ import annotations
 
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 
+import numpy as np
+
 from .dynamics import rk4
 from .jit import njit
+
+DEGREES_PER_RADIAN = 180.0 / math.pi
 
 _threads = {"count": None, "pool": None}
 if hasattr(os, "register_at_fork"):  # a forked worker starts without the parent's pool threads
@@ -31,16 +37,35 @@ def available_cores() -> int:
 
 
 @njit(nogil=True)
-def rk4_candidates(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, states, qdd, applied, done, first, stride):
-    """Open-loop RK4 (``dynamics.rk4`` with zero gains) for rows first, first + stride, ... of tau.
+def tracking_objective(states, done, every, theta_ref, n_steps, penalty_weight):
+    """Eq. 18 from a simulation's states, shape (n_steps+1, 6), filled up to step ``done``:
+    RMSE (deg) of theta at the motion's samples (every ``every``-th step, desired rotation
+    theta_ref (rad), one per sample) over the samples reached, plus penalty_weight times the
+    fraction of the steps not reached. The squared errors are summed sample by sample in order;
+    a non-finite RMSE counts as 0 (the penalty term says it all)."""
+    count = done // every + 1
+    total = 0.0
+    for k in range(count):
+        error = (states[k * every, 2] - theta_ref[k]) * DEGREES_PER_RADIAN
+        total += error * error
+    rmse = math.sqrt(total / count)
+    if not math.isfinite(rmse):
+        rmse = 0.0
+    return rmse + penalty_weight * (1.0 - done / n_steps)
 
-    tau: the torques (N m) on the half-step grid, shape (lam, 2 n_steps + 1); states (lam, n+1, 6),
-    qdd (lam, n+1, 3), applied (lam, n+1): each candidate's buffers; done (lam,): the steps each
-    reached (filled for the rows run). Runs without the GIL."""
+
+@njit(nogil=True)
+def rk4_candidates(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight, states,
+                   qdd, applied, objective, first, stride):
+    """Open-loop RK4 (``dynamics.rk4`` with zero gains) and eq. 18 (``tracking_objective``) for
+    rows first, first + stride, ... of tau.
+
+    tau: the torques (N m) on the half-step grid, shape (lam, 2 n_steps + 1); states (n+1, 6),
+    qdd (n+1, 3), applied (n+1,): this call's work buffers, reused candidate after candidate;
+    objective (lam,): filled for the rows run. Runs without the GIL."""
     for c in range(first, tau.shape[0], stride):
-        _, steps_done, _ = rk4(y0, dt, n_steps, tau[c], ref_th_half, ref_w_half, 0.0, 0.0, consts, states[c], qdd[c],
-                               applied[c])
-        done[c] = steps_done
+        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref_th_half, ref_w_half, 0.0, 0.0, consts, states, qdd, applied)
+        objective[c] = tracking_objective(states, done, every, theta_ref, n_steps, penalty_weight)
 
 
 def set_threads(threads: int | None) -> int:
@@ -61,14 +86,23 @@ def threads() -> int:
     return _threads["count"] or set_threads(None)
 
 
-def rk4_population(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, states, qdd, applied, done) -> None:
-    """``rk4_candidates`` for every row of tau, the rows shared among ``threads()`` threads."""
-    count = min(threads(), tau.shape[0])
-    args = (y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, states, qdd, applied, done)
-    if count <= 1:
-        rk4_candidates(*args, 0, 1)
+def workspace(n_steps: int, count: int) -> tuple:
+    """Work buffers of ``count`` threads for simulations of n_steps steps: states
+    (count, n+1, 6), qdd (count, n+1, 3), applied (count, n+1)."""
+    return np.empty((count, n_steps + 1, 6)), np.empty((count, n_steps + 1, 3)), np.empty((count, n_steps + 1))
+
+
+def rk4_population(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight, buffers,
+                   objective) -> None:
+    """``rk4_candidates`` for every row of tau, the rows shared among ``threads()`` threads (at
+    most as many as ``buffers`` holds, see ``workspace``); fills objective, shape (lam,)."""
+    count = max(1, min(threads(), tau.shape[0], buffers[0].shape[0]))
+    args = (y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight)
+    if count == 1:
+        rk4_candidates(*args, *(buffer[0] for buffer in buffers), objective, 0, 1)
         return
-    jobs = [_threads["pool"].submit(rk4_candidates, *args, k, count) for k in range(count)]
+    jobs = [_threads["pool"].submit(rk4_candidates, *args, *(buffer[k] for buffer in buffers), objective, k, count)
+            for k in range(count)]
     for job in jobs:
         job.result()
 
@@ -76,13 +110,11 @@ def rk4_population(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, states
 def warm_up() -> None:
     """Load (or compile) the population kernel and start the threads, so that later timings
     exclude both."""
-    import numpy as np
-
     from .integrate import Settings, constants, initial_state
 
     settings = Settings(dt=0.1)
     n = 10
     tau = np.zeros((2, 2 * n + 1))
     ref = np.zeros(2 * n + 1)
-    rk4_population(initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref, constants(settings),
-                   np.empty((2, n + 1, 6)), np.empty((2, n + 1, 3)), np.empty((2, n + 1)), np.empty(2, dtype=np.int64))
+    rk4_population(initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref, constants(settings), 1,
+                   ref, 1.0, workspace(n, 2), np.empty(2))

@@ -36,17 +36,31 @@ class TrackingProblem:
         self.scale = np.asarray(torque.scale(), dtype=float)
         self.x0 = self.p0 / self.scale
         self._fast = False
-        self._jacobian, self._dtheta, self._population = None, None, None
+        self._jacobian, self._dtheta, self._workspace = None, None, None
         if settings.integrator == "rk4":
             n = steps(settings.dt, self.duration)
             half, _, _ = half_step_reference(n, settings.kinematics)
-            self._on_grid = torque.on_grid(half)
-            self._jacobian = torque.on_grid_jacobian(half)  # d tau / d p for exact gradients, or None
-            self._ff_half = np.array(self._ff(half)) if feedforward else np.zeros_like(half)
+            self._half = half
+            self._on_grid_batch = torque.on_grid_batch(half)
+            self._ff_half = np.array(self._ff(half)) if feedforward else None
             self._fast = settings.motion.uniform and n % (len(self.inverse.t) - 1) == 0
-            if self._fast:  # buffers for the kernel, reused by every evaluation
+            if self._fast:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
                 self._n, self._every = n, n // (len(self.inverse.t) - 1)
+                self._theta_ref = np.ascontiguousarray(self.inverse.theta, dtype=float)
                 self._buffers = (np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1))
+                _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+                # the population kernel's arguments before the torques (see ``population.rk4_population``)
+                self._kernel_start = (initial_state(settings.kinematics, settings.model), self.duration / n, n)
+                self._kernel_rest = (ref_th, ref_w, constants(settings), self._every, self._theta_ref)
+
+    def torque_jacobian(self):
+        """The evaluator p -> d tau / d p on the RK4 half-step grid, shape (2 n + 1, n_params)
+        (N m per parameter unit), for exact gradients; None where the parameterisation (or the
+        integrator) gives none. Made on first use."""
+        if self._jacobian is None:
+            grid = self.settings.integrator == "rk4"
+            self._jacobian = (self.torque.on_grid_jacobian(self._half) if grid else None,)
+        return self._jacobian[0]
 
     @property
     def n_params(self) -> int:
@@ -58,12 +72,20 @@ class TrackingProblem:
             return lambda t: self._ff(t) + self.torque.evaluate(p, t)
         return lambda t: self.torque.evaluate(p, t)
 
+    def torques_on_grid(self, P) -> np.ndarray:
+        """The drive torques (N m) on the RK4 half-step grid for every row of P, shape
+        (lam, n_params) -> (lam, 2 n + 1): the parameterisation's population evaluator, plus the
+        inverse-dynamics torque with feedforward. Row c depends on P[c] alone, to the last bit."""
+        with np.errstate(all="ignore"):
+            tau = self._on_grid_batch(np.atleast_2d(np.asarray(P, dtype=float)))
+            if self._ff_half is not None:
+                tau += self._ff_half
+        return tau
+
     def simulate(self, p) -> SimulationResult:
         p = np.asarray(p, dtype=float)
         if self.settings.integrator == "rk4":
-            with np.errstate(all="ignore"):
-                tau = self._ff_half + self._on_grid(p)
-            return simulate_rk4_on_grid(tau, self.settings)
+            return simulate_rk4_on_grid(self.torques_on_grid(p[None])[0], self.settings)
         return simulate(self.torque_function(p), self.settings)
 
     def objective_of(self, result: SimulationResult) -> float:
@@ -74,32 +96,9 @@ class TrackingProblem:
         return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
 
     def objective(self, p) -> float:
-        if self._fast:
-            return self._objective_on_samples(np.asarray(p, dtype=float))
+        if self._fast:  # a population of one: the very numbers of a population's evaluation
+            return float(self.objectives(np.asarray(p, dtype=float)[None])[0])
         return self.objective_of(self.simulate(p))
-
-    def _objective_on_samples(self, p) -> float:
-        """Eq. 18 straight from the kernel's buffers (the same numbers as ``objective_of``
-        of ``simulate``, without building a SimulationResult)."""
-        from . import dynamics
-
-        settings = self.settings
-        _, ref_th, ref_w = half_step_reference(self._n, settings.kinematics)
-        with np.errstate(all="ignore"):
-            tau = self._ff_half + self._on_grid(p)
-        states, qdd, applied = self._buffers
-        _, done, _ = dynamics.rk4(initial_state(settings.kinematics, settings.model), self.duration / self._n, self._n,
-                                  tau, ref_th, ref_w, 0.0, 0.0, constants(settings), states, qdd, applied)
-        return self._objective_of_states(states, done)
-
-    def _objective_of_states(self, states, done: int) -> float:
-        """Eq. 18 from the kernel's states, shape (n+1, 6), filled up to step ``done``."""
-        theta = states[: done + 1 : self._every, 2]
-        error = np.degrees(theta - self.inverse.theta[: len(theta)])
-        rmse = float(np.sqrt(np.mean(error**2)))
-        if not math.isfinite(rmse):
-            rmse = 0.0
-        return rmse + self.penalty_weight * (1.0 - done / self._n)
 
     def objective_scaled(self, x) -> float:
         return self.objective(np.asarray(x) * self.scale)
@@ -111,28 +110,22 @@ class TrackingProblem:
         return self._fast
 
     def objectives(self, P) -> np.ndarray:
-        """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the simulations in one
-        parallel compiled call (``population.rk4_population``). Equal, to the last bit, to
-        ``objective`` of each row."""
+        """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
+        operations (``torques_on_grid``), the simulations and their objectives in one compiled call
+        spread over threads (``population.rk4_population``). ``objective`` is this with a
+        population of one, so the numbers equal those of the rows one by one, to the last bit."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         if not self._fast:
             return np.array([self.objective(p) for p in P])
-        from .population import rk4_population
+        from .population import rk4_population, threads, workspace
 
-        settings, n = self.settings, self._n
-        _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
-        lam = len(P)
-        with np.errstate(all="ignore"):
-            tau = np.empty((lam, 2 * n + 1))
-            for c in range(lam):  # row by row: the same arithmetic as a single evaluation
-                tau[c] = self._ff_half + self._on_grid(P[c])
-        if self._population is None or self._population[0].shape[0] < lam:
-            self._population = (np.empty((lam, n + 1, 6)), np.empty((lam, n + 1, 3)), np.empty((lam, n + 1)))
-        states, qdd, applied = (buffer[:lam] for buffer in self._population)
-        done = np.empty(lam, dtype=np.int64)
-        rk4_population(initial_state(settings.kinematics, settings.model), self.duration / n, n, tau, ref_th, ref_w,
-                       constants(settings), states, qdd, applied, done)
-        return np.array([self._objective_of_states(states[c], int(done[c])) for c in range(lam)])
+        tau = self.torques_on_grid(P)
+        count = min(threads(), len(P))
+        if self._workspace is None or self._workspace[0].shape[0] < count:
+            self._workspace = workspace(self._n, count)
+        values = np.empty(len(P))
+        rk4_population(*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight, self._workspace, values)
+        return values
 
     def objectives_scaled(self, X) -> np.ndarray:
         return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)

@@ -421,7 +421,7 @@ MEASURED = [
     "exact -f csv`)",
     "- **Budget.** The same matrix with budgets of 15, 30, 60, 100, 200, 400 and 1000 evaluations "
     "(3 seeds): every gradient method improves steadily with the budget, e.g. CS + BFGS without "
-    "feedforward 2.931, 1.699, 1.330, 0.621, 0.041, 0.004 and 0.002 deg. The paper's 0.197 deg lies "
+    "feedforward 2.931, 1.701, 1.333, 0.624, 0.058, 0.004 and 0.002 deg. The paper's 0.197 deg lies "
     "between our budgets of 100 and 200 evaluations. Our budget counts every forward simulation, "
     "finite-difference gradients included; a budget counted in iterations instead would give BFGS more "
     "simulations and lower errors still, so budget accounting does not explain why the paper's BFGS "

@@ -20,19 +20,61 @@ def restore_threads():
     set_threads(before)
 
 
-@pytest.mark.parametrize("torque, feedforward", [("cs", False), ("cs", True), ("pf", True), ("ann", False)])
-def test_population_equals_one_by_one_exactly(torque, feedforward):
-    problem = TrackingProblem(make_torque(torque), feedforward=feedforward)
-    rng = np.random.default_rng(3)
-    # small steps (full runs) and large ones (simulations that fail part-way)
-    X = problem.x0 + np.concatenate([0.02 * rng.standard_normal((6, problem.n_params)),
-                                     3.0 * rng.standard_normal((5, problem.n_params))])
+CELLS = [("cs", False), ("cs", True), ("pf", False), ("pf", True), ("ann", False), ("ann", True)]
+
+
+@pytest.fixture(scope="module")
+def problems():
+    """One tracking problem per cell, made once (pf's pre-fit takes a moment)."""
+    return {cell: TrackingProblem(make_torque(cell[0]), feedforward=cell[1]) for cell in CELLS}
+
+
+def population(problem, seed=3):
+    """Scaled candidates around the start: small steps (full runs) and large ones (simulations that
+    fail part-way), shape (11, n_params)."""
+    rng = np.random.default_rng(seed)
+    return problem.x0 + np.concatenate([0.02 * rng.standard_normal((6, problem.n_params)),
+                                        3.0 * rng.standard_normal((5, problem.n_params))])
+
+
+@pytest.mark.parametrize("cell", CELLS, ids=str)
+def test_population_equals_one_by_one_exactly(cell, problems):
+    problem = problems[cell]
+    X = population(problem)
     one_by_one = np.array([problem.objective_scaled(x) for x in X])
     reached = [problem.simulate(x * problem.scale).success for x in X]
     assert any(reached) and not all(reached)  # both kinds present
     for count in (1, 2, 3):
         set_threads(count)
         assert np.array_equal(problem.objectives_scaled(X), one_by_one)
+        # any size and order of population: each candidate's number is its own
+        assert np.array_equal(problem.objectives_scaled(X[::-1])[::-1], one_by_one)
+        assert np.array_equal(problem.objectives_scaled(X[3:5]), one_by_one[3:5])
+
+
+@pytest.mark.parametrize("cell", CELLS, ids=str)
+def test_population_objectives_are_eq18_of_each_simulation(cell, problems):
+    """Checked against eq. 18 written out here from each candidate's SimulationResult."""
+    problem = problems[cell]
+    X = population(problem, seed=5)
+    values = problem.objectives_scaled(X)
+    for x, value in zip(X, values):
+        result = problem.simulate(x * problem.scale)
+        reached = np.isfinite(result.q[:, 2])  # the motion's samples up to t_end
+        rmse = np.sqrt(np.mean(np.degrees(result.q[reached, 2] - problem.inverse.theta[reached]) ** 2))
+        assert value == pytest.approx(rmse + 1.0 - result.t_end / problem.duration, rel=1e-12, abs=1e-12)
+
+
+@pytest.mark.parametrize("cell", CELLS, ids=str)
+def test_population_torques_equal_each_candidates_exactly(cell, problems):
+    problem = problems[cell]
+    P = population(problem) * problem.scale
+    together = problem.torques_on_grid(P)
+    for c, p in enumerate(P):
+        assert np.array_equal(together[c], problem.torques_on_grid(p[None])[0])
+    if cell[1]:  # with feedforward: the inverse-dynamics torque plus the parameterisation's own
+        own = problem.torque.on_grid(problem._half)(P[0])
+        np.testing.assert_allclose(together[0], own + problem._ff(problem._half), rtol=0, atol=1e-12)
 
 
 def test_cmaes_with_population_evaluation_takes_the_same_path():
@@ -45,8 +87,9 @@ def test_cmaes_with_population_evaluation_takes_the_same_path():
     assert batched.evaluations == plain.evaluations == 60
 
 
-def test_thread_count_does_not_change_a_run():
-    spec = optimize_spec("pf", "cmaes", True, seed=2, budget=60)
+@pytest.mark.parametrize("torque, feedforward", [("cs", False), ("pf", True), ("ann", False)])
+def test_thread_count_does_not_change_a_run(torque, feedforward):
+    spec = optimize_spec(torque, "cmaes", feedforward, seed=2, budget=60)
     records = []
     for count in (1, 2):
         set_threads(count)

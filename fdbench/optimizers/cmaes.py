@@ -29,7 +29,9 @@ class CMAES(Optimizer):
     def run(self, f: Budgeted, x0, seed):
         import cma  # ~2 s to import: only here
 
-        options = {"seed": seed + 1, "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxfevals": f.budget}
+        # no signals file: cma would otherwise look for one in the working folder every generation
+        options = {"seed": seed + 1, "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxfevals": f.budget,
+                   "signals_filename": ""}
         if self.popsize:
             options["popsize"] = self.popsize
             if self.popsize == 2:  # two-point step-size adaptation needs room for its own two samples

@@ -43,8 +43,32 @@ class TorqueParameterisation(ABC):
         return np.ones(self.n_params)
 
     def on_grid(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """A fast evaluator p -> torque on the fixed times t (override to precompute)."""
+        """A fast evaluator p -> torque (N m) on the fixed times t (s), shape (n_params,) -> (n,).
+
+        Where the parameterisation has its own ``on_grid_batch``, a population of one through it,
+        so that one candidate and a population give the same numbers to the last bit; else
+        ``evaluate`` (override to precompute)."""
+        if type(self).on_grid_batch is not TorqueParameterisation.on_grid_batch:
+            batch = self.on_grid_batch(t)
+            return lambda p: batch(np.asarray(p, dtype=float).reshape(1, -1))[0]
         return lambda p: self.evaluate(p, t)
+
+    def on_grid_batch(self, t: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """A fast evaluator P -> torques (N m) on the fixed times t (s) for a whole population,
+        shape (lam, n_params) -> (lam, n). Row c depends on P[c] alone, to the last bit, whatever
+        lam. Override with array operations or a compiled kernel; this default runs ``on_grid``
+        row by row."""
+        single = self.on_grid(t)
+        count = len(t)
+
+        def evaluate(P):
+            P = np.asarray(P, dtype=float)
+            out = np.empty((len(P), count))
+            for c, p in enumerate(P):
+                out[c] = single(p)
+            return out
+
+        return evaluate
 
     @classmethod
     def warm_up(cls) -> None:

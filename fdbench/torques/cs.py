@@ -29,6 +29,10 @@ class CubicSplineTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.interpolate  # noqa: F401  (its import is not part of a run's runtime)
 
+        from .kernels import warm_up
+
+        warm_up()
+
     def prepare(self, t, target, feedforward):
         self.t_knots = np.linspace(0.0, float(t[-1]) if t[-1] > 0 else 1.0, self.knots)
         self._scale = max(float(np.ptp(target)) / 2, 1e-9)
@@ -47,9 +51,22 @@ class CubicSplineTorque(TorqueParameterisation):
 
         return CubicSpline(self.t_knots, np.asarray(p, dtype=float))(np.asarray(t, dtype=float))
 
-    def on_grid(self, t):
-        basis = np.ascontiguousarray(self.basis(t))
-        return lambda p: basis @ p
+    def on_grid_batch(self, t):
+        # the spline is linear in the knot values: each torque history is the knot values'
+        # weighted sum of the basis functions, summed knot by knot in a compiled kernel
+        from .kernels import weighted_sums
+
+        rows = np.ascontiguousarray(self.basis(t).T)  # (knots, n)
+
+        def evaluate(P):
+            P = np.ascontiguousarray(P, dtype=float)
+            if P.ndim != 2 or P.shape[1] != rows.shape[0]:
+                raise ValueError(f"expected parameters of shape (lam, {rows.shape[0]}), got {P.shape}")
+            out = np.empty((P.shape[0], rows.shape[1]))
+            weighted_sums(P, rows, out)
+            return out
+
+        return evaluate
 
     def on_grid_jacobian(self, t):
         basis = np.ascontiguousarray(self.basis(t))  # the spline is linear in p: a constant Jacobian

@@ -36,6 +36,10 @@ class GaussianSumTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
 
+        from .kernels import warm_up
+
+        warm_up()
+
     def prepare(self, t, target, feedforward):
         self._amplitude = max(float(np.max(np.abs(target))), 1e-9)
         self.duration = float(t[-1]) if t[-1] > 0 else 1.0
@@ -68,15 +72,22 @@ class GaussianSumTorque(TorqueParameterisation):
         with np.errstate(over="ignore", invalid="ignore"):
             return np.exp(-p[:, 1] * (t[..., None] - p[:, 2]) ** 2) @ p[:, 0]
 
-    def on_grid(self, t):
-        # -C (t - T)^2 = [t^2, t, 1] @ [-C, 2 C T, -C T^2]: one small matrix product per evaluation
-        t = np.asarray(t, dtype=float)
-        powers = np.column_stack([t**2, t, np.ones_like(t)])
+    def on_grid_batch(self, t):
+        from .kernels import gaussian_exponents, own_weighted_sums
 
-        def evaluate(p):
-            a, c, centre = np.asarray(p, dtype=float).reshape(-1, 3).T
+        t = np.ascontiguousarray(t, dtype=float)
+        terms = self.terms
+
+        def evaluate(P):
+            """The exponents in a kernel, their exp by numpy, the bumps' weighted sum in a kernel."""
+            P = np.ascontiguousarray(P, dtype=float).reshape(len(P), terms, 3)
+            bumps = np.empty((len(P), terms, len(t)))
+            gaussian_exponents(t, P, bumps)
             with np.errstate(over="ignore", invalid="ignore"):
-                return np.exp(powers @ np.vstack([-c, 2 * c * centre, -c * centre**2])) @ a
+                np.exp(bumps, out=bumps)
+            out = np.empty((len(P), len(t)))
+            own_weighted_sums(np.ascontiguousarray(P[:, :, 0]), bumps, np.zeros(len(P)), 1.0, 0.0, out)
+            return out
 
         return evaluate
 
