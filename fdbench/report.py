@@ -601,11 +601,19 @@ def _flat(row: Row) -> dict:
         "cell": row.name, "table": row.table,
         "torque": cell.torque if cell else "id", "optimizer": cell.optimizer if cell else "",
         "feedforward": cell.feedforward if cell else True, "in_paper": cell.in_paper if cell else True,
-        "model": rec.get("model") or "forearm", "kinematics": rec.get("kinematics"), "integrator": rec.get("integrator"), "dt": rec.get("dt"),
+        "model": _model_name(rec), "kinematics": rec.get("kinematics"), "integrator": rec.get("integrator"), "dt": rec.get("dt"),
         "budget": rec.get("budget") or "", "seeds": len(row.records), **row.summary,
         "paper_rmse_rot_deg": paper[0], "paper_rmse_torque_nm": paper[1], "paper_runtime_s": paper[2],
         "speedup_vs_paper": row.speedup,
     }
+
+
+def _model_name(record: dict) -> str:
+    """The record's model; runs stored before models had names kept their constant changes in
+    ``model`` and are the forearm's."""
+    from .models import MODELS
+
+    return record.get("model") if record.get("model") in MODELS else "forearm"
 
 
 def _finite(value):

@@ -130,7 +130,7 @@ CONDITIONS = {
     "sample_dt": (Optional[float], None, typer.Option("--sample-dt", help="Report the histories and indicators every SAMPLE_DT s (default: the motion's own samples; eq. 5: 1 ms).", show_default=False)),
     "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angle before the derivative estimate; indicators stay measured against the noise-free motion.")),
     "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
-    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
+    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
     "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|KEY=VALUE", help="The model, forearm (Table 1, default) or arm2 (shoulder + elbow, motion 'reach' or a file t,shoulder,elbow; see 'fdbench methods'), and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's).", show_default=False)),
     "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
 }
@@ -195,7 +195,8 @@ def _key_values(option: str, items) -> list:
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g), got {item!r}")
+            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0), "
+                           f"got {item!r}")
         try:
             pairs.append((key.strip(), float(value)))
         except ValueError:
@@ -225,7 +226,7 @@ def _model_file(path: Path) -> list:
         data = next(iter(data.values()))  # [forearm] L12 = 0.3 ...
     if not isinstance(data, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                              for v in data.values()):
-        raise BadInput(f"--model-file: {path} must hold KEY = number pairs (keys L12, L1G, m, I1, F_ext, g)")
+        raise BadInput(f"--model-file: {path} must hold KEY = number pairs (the constants of the model, e.g. I1 = 0.045)")
     return [(str(k), float(v)) for k, v in data.items()]
 
 
