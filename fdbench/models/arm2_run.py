@@ -326,7 +326,9 @@ def _optimize(spec, on_evaluation, on_start):
                                 for n in range(1, options["hidden"] + 1)]
     problem = ArmTrackingProblem(spec.torque, plant(spec), desired, spec.feedforward, spec.penalty_weight,
                                  Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec), **options)
-    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation)
+    batch = problem.objectives_scaled if problem.batched else None
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation,
+                               batch=batch)
     params = np.asarray(found.x) * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - began
