@@ -151,6 +151,20 @@ class ArmTrackingProblem:
         return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
 
 
+def warm_up() -> None:
+    """Load (or compile) the population kernel and start the threads, so that later timings
+    exclude both: a population of two candidates of two steps."""
+    from ..population import spread, threads, workspace
+    from . import arm2_kernels as kernels
+
+    arm, motion, n = Arm2(), as_joint_motion("reach"), 2
+    grid = np.zeros((2 * n + 1, 2))
+    count = min(threads(), 2)
+    spread(kernels.rk4_candidates, (sim.initial_state(arm, motion), 0.5, n, np.zeros((2, 2 * n + 1, 2)), grid, grid,
+                                    grid, kernels.kernel_constants(arm, Penalty()), 1, np.zeros((n + 1, 2)), 1.0),
+           workspace(n, count, ((kernels.N_STATE,), (6,), (2,))), np.empty(2))
+
+
 def _interp(grid, values, t):
     return np.stack([np.interp(t, grid, values[:, j]) for j in range(values.shape[1])], axis=-1)
 

@@ -305,10 +305,11 @@ def _optimize(spec, on_evaluation, on_start):
     from ..experiment import _options_text, base_record
     from ..optimizers import make_optimizer
     from ..torques import TORQUES
-    from .arm2_problem import ArmTrackingProblem
+    from .arm2_problem import ArmTrackingProblem, warm_up
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
     _warm_up()
+    warm_up()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
     if on_start:
