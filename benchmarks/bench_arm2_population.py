@@ -30,11 +30,8 @@ from fdbench.models.arm2 import Arm2
 from fdbench.models.arm2_problem import ArmTrackingProblem
 from fdbench.population import set_threads
 
-BUDGET = 200
-CALLS = 50
-REPEATS = 7
-RUNS = 5
-LAMBDA = 40
+# evaluations per CMA-ES run; baseline calls per round; rounds; runs per cell; the population's size
+BUDGET, CALLS, REPEATS, RUNS, LAMBDA = 200, 50, 7, 5, 40
 CELLS = [("cs", True), ("pf", True), ("ann", False)]
 
 

@@ -108,12 +108,22 @@ def spread(kernel, args, buffers, objective) -> None:
         job.result()
 
 
-def rk4_population(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight, buffers,
-                   objective) -> None:
-    """``rk4_candidates`` for every row of tau, the rows shared among threads (``spread``);
-    fills objective, shape (lam,)."""
-    spread(rk4_candidates, (y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight),
-           buffers, objective)
+class Population:
+    """Eq. 18 of whole populations by a candidate kernel (see ``spread``) whose simulations have
+    n_steps steps, keeping the threads' work buffers (``workspace`` with ``widths``) from call to
+    call."""
+
+    def __init__(self, kernel, n_steps: int, widths=((6,), (3,), ())):
+        self.kernel, self.n_steps, self.widths, self._buffers = kernel, n_steps, widths, None
+
+    def __call__(self, count: int, args) -> np.ndarray:
+        """The objectives of ``count`` candidates, shape (count,): ``kernel(*args, ...)``."""
+        used = min(threads(), count)
+        if self._buffers is None or self._buffers[0].shape[0] < used:
+            self._buffers = workspace(self.n_steps, used, self.widths)
+        values = np.empty(count)
+        spread(self.kernel, args, self._buffers, values)
+        return values
 
 
 def warm_up() -> None:
@@ -125,5 +135,5 @@ def warm_up() -> None:
     n = 10
     tau = np.zeros((2, 2 * n + 1))
     ref = np.zeros(2 * n + 1)
-    rk4_population(initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref, constants(settings), 1,
-                   ref, 1.0, workspace(n, 2), np.empty(2))
+    Population(rk4_candidates, n)(2, (initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref,
+                                     constants(settings), 1, ref, 1.0))

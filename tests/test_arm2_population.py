@@ -9,14 +9,9 @@ from fdbench.experiment import optimize_spec, run
 from fdbench.models import arm2_sim as sim
 from fdbench.models.arm2_problem import ArmTrackingProblem
 from fdbench.optimizers import make_optimizer
-from fdbench.population import set_threads, threads
-
-
-@pytest.fixture(autouse=True)
-def restore_threads():
-    before = threads()
-    yield
-    set_threads(before)
+from fdbench.population import set_threads
+from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
+                               restore_threads)
 
 
 CELLS = [("cs", False), ("cs", True), ("pf", False), ("pf", True), ("ann", False), ("ann", True)]
@@ -56,24 +51,15 @@ def test_the_arm_problem_is_batched(problems):
 def test_population_equals_one_by_one_exactly(cell, problems):
     problem = problems[cell]
     X = population(problem)
-    one_by_one = np.array([problem.objective_scaled(x) for x in X])
     t_end = [problem.simulate(x * problem.scale).t_end for x in X]
     assert min(t_end) < max(t_end)  # simulations ending at different steps
-    for count in (1, 2, 3):
-        set_threads(count)
-        assert np.array_equal(problem.objectives_scaled(X), one_by_one)
-        # any size and order of population: each candidate's number is its own
-        assert np.array_equal(problem.objectives_scaled(X[::-1])[::-1], one_by_one)
-        assert np.array_equal(problem.objectives_scaled(X[3:6]), one_by_one[3:6])
+    assert_population_equals_one_by_one(problem, X)
 
 
 @pytest.mark.parametrize("cell", CELLS, ids=str)
 def test_population_objectives_are_eq18_of_each_simulation(cell, problems):
     problem = problems[cell]
-    X = population(problem, seed=5)
-    values = problem.objectives_scaled(X)
-    for x, value in zip(X, values):
-        assert value == pytest.approx(eq18(problem, x * problem.scale), rel=1e-12, abs=1e-12)
+    assert_objectives_are(problem, population(problem, seed=5), lambda p: eq18(problem, p))
 
 
 def test_the_penalty_weight_is_the_problems():

@@ -58,7 +58,7 @@ class ArmTrackingProblem:
         self._ff_half = (np.array(sim.inverse_dynamics(self._half, nominal, self.motion).torque) if feedforward
                          else np.zeros((2 * n + 1, len(JOINTS))))
         self._every = sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), self.motion.samples)
-        self._workspace = None
+        self._population = None
         if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
             from . import arm2_kernels as kernels
 
@@ -131,21 +131,18 @@ class ArmTrackingProblem:
         """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
         operations (``torques_on_grid_batch``), the simulations and their objectives in one
         compiled call spread over threads (``arm2_kernels.rk4_candidates`` via
-        ``population.spread``). ``objective`` is this with a population of one, so the numbers
+        ``population.Population``). ``objective`` is this with a population of one, so the numbers
         equal those of the rows one by one, to the last bit, whatever the number of threads."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         if not self.batched:
             return np.array([self.objective(p) for p in P])
-        from ..population import spread, threads, workspace
-        from .arm2_kernels import N_STATE, rk4_candidates
+        if self._population is None:
+            from ..population import Population
+            from .arm2_kernels import N_STATE, rk4_candidates
 
+            self._population = Population(rk4_candidates, self._kernel_start[2], ((N_STATE,), (6,), (2,)))
         tau = self.torques_on_grid_batch(P)
-        count = min(threads(), len(P))
-        if self._workspace is None or self._workspace[0].shape[0] < count:
-            self._workspace = workspace(self._kernel_start[2], count, ((N_STATE,), (6,), (2,)))
-        values = np.empty(len(P))
-        spread(rk4_candidates, (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight), self._workspace, values)
-        return values
+        return self._population(len(P), (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight))
 
     def objectives_scaled(self, X) -> np.ndarray:
         return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
@@ -154,15 +151,14 @@ class ArmTrackingProblem:
 def warm_up() -> None:
     """Load (or compile) the population kernel and start the threads, so that later timings
     exclude both: a population of two candidates of two steps."""
-    from ..population import spread, threads, workspace
+    from ..population import Population
     from . import arm2_kernels as kernels
 
     arm, motion, n = Arm2(), as_joint_motion("reach"), 2
     grid = np.zeros((2 * n + 1, 2))
-    count = min(threads(), 2)
-    spread(kernels.rk4_candidates, (sim.initial_state(arm, motion), 0.5, n, np.zeros((2, 2 * n + 1, 2)), grid, grid,
-                                    grid, kernels.kernel_constants(arm, Penalty()), 1, np.zeros((n + 1, 2)), 1.0),
-           workspace(n, count, ((kernels.N_STATE,), (6,), (2,))), np.empty(2))
+    Population(kernels.rk4_candidates, n, ((kernels.N_STATE,), (6,), (2,)))(
+        2, (sim.initial_state(arm, motion), 0.5, n, np.zeros((2, 2 * n + 1, 2)), grid, grid, grid,
+            kernels.kernel_constants(arm, Penalty()), 1, np.zeros((n + 1, 2)), 1.0))
 
 
 def _interp(grid, values, t):
