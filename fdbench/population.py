@@ -86,25 +86,44 @@ def threads() -> int:
     return _threads["count"] or set_threads(None)
 
 
-def workspace(n_steps: int, count: int) -> tuple:
-    """Work buffers of ``count`` threads for simulations of n_steps steps: states
-    (count, n+1, 6), qdd (count, n+1, 3), applied (count, n+1)."""
-    return np.empty((count, n_steps + 1, 6)), np.empty((count, n_steps + 1, 3)), np.empty((count, n_steps + 1))
+def workspace(n_steps: int, count: int, widths=((6,), (3,), ())) -> tuple:
+    """Work buffers of ``count`` threads for simulations of n_steps steps, one per entry of
+    ``widths`` (the trailing shape of a row): by default the forearm's states (count, n+1, 6),
+    qdd (count, n+1, 3), applied (count, n+1)."""
+    return tuple(np.empty((count, n_steps + 1, *width)) for width in widths)
 
 
-def rk4_population(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight, buffers,
-                   objective) -> None:
-    """``rk4_candidates`` for every row of tau, the rows shared among ``threads()`` threads (at
-    most as many as ``buffers`` holds, see ``workspace``); fills objective, shape (lam,)."""
-    count = max(1, min(threads(), tau.shape[0], buffers[0].shape[0]))
-    args = (y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight)
+def spread(kernel, args, buffers, objective) -> None:
+    """Run ``kernel(*args, *thread's buffers, objective, first, stride)`` over the ``len(objective)``
+    candidates, shared among ``threads()`` threads (at most as many as ``buffers`` holds, see
+    ``workspace``): thread k takes candidates k, k + T, ... in its own buffers. ``kernel`` must be
+    compiled with ``nogil=True`` and fill objective[c] for the candidates it runs."""
+    count = max(1, min(threads(), len(objective), buffers[0].shape[0]))
     if count == 1:
-        rk4_candidates(*args, *(buffer[0] for buffer in buffers), objective, 0, 1)
+        kernel(*args, *(buffer[0] for buffer in buffers), objective, 0, 1)
         return
-    jobs = [_threads["pool"].submit(rk4_candidates, *args, *(buffer[k] for buffer in buffers), objective, k, count)
+    jobs = [_threads["pool"].submit(kernel, *args, *(buffer[k] for buffer in buffers), objective, k, count)
             for k in range(count)]
     for job in jobs:
         job.result()
+
+
+class Population:
+    """Eq. 18 of whole populations by a candidate kernel (see ``spread``) whose simulations have
+    n_steps steps, keeping the threads' work buffers (``workspace`` with ``widths``) from call to
+    call."""
+
+    def __init__(self, kernel, n_steps: int, widths=((6,), (3,), ())):
+        self.kernel, self.n_steps, self.widths, self._buffers = kernel, n_steps, widths, None
+
+    def __call__(self, count: int, args) -> np.ndarray:
+        """The objectives of ``count`` candidates, shape (count,): ``kernel(*args, ...)``."""
+        used = min(threads(), count)
+        if self._buffers is None or self._buffers[0].shape[0] < used:
+            self._buffers = workspace(self.n_steps, used, self.widths)
+        values = np.empty(count)
+        spread(self.kernel, args, self._buffers, values)
+        return values
 
 
 def warm_up() -> None:
@@ -116,5 +135,5 @@ def warm_up() -> None:
     n = 10
     tau = np.zeros((2, 2 * n + 1))
     ref = np.zeros(2 * n + 1)
-    rk4_population(initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref, constants(settings), 1,
-                   ref, 1.0, workspace(n, 2), np.empty(2))
+    Population(rk4_candidates, n)(2, (initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref,
+                                     constants(settings), 1, ref, 1.0))

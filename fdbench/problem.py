@@ -36,7 +36,7 @@ class TrackingProblem:
         self.scale = np.asarray(torque.scale(), dtype=float)
         self.x0 = self.p0 / self.scale
         self._fast = False
-        self._jacobian, self._dtheta, self._workspace = None, None, None
+        self._jacobian, self._dtheta, self._population = None, None, None
         if settings.integrator == "rk4":
             n = steps(settings.dt, self.duration)
             half, _, _ = half_step_reference(n, settings.kinematics)
@@ -49,7 +49,7 @@ class TrackingProblem:
                 self._theta_ref = np.ascontiguousarray(self.inverse.theta, dtype=float)
                 self._buffers = (np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1))
                 _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
-                # the population kernel's arguments before the torques (see ``population.rk4_population``)
+                # the population kernel's arguments before the torques (see ``population.rk4_candidates``)
                 self._kernel_start = (initial_state(settings.kinematics, settings.model), self.duration / n, n)
                 self._kernel_rest = (ref_th, ref_w, constants(settings), self._every, self._theta_ref)
 
@@ -112,20 +112,17 @@ class TrackingProblem:
     def objectives(self, P) -> np.ndarray:
         """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
         operations (``torques_on_grid``), the simulations and their objectives in one compiled call
-        spread over threads (``population.rk4_population``). ``objective`` is this with a
+        spread over threads (``population.Population``). ``objective`` is this with a
         population of one, so the numbers equal those of the rows one by one, to the last bit."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         if not self._fast:
             return np.array([self.objective(p) for p in P])
-        from .population import rk4_population, threads, workspace
+        if self._population is None:
+            from .population import Population, rk4_candidates
 
+            self._population = Population(rk4_candidates, self._n)
         tau = self.torques_on_grid(P)
-        count = min(threads(), len(P))
-        if self._workspace is None or self._workspace[0].shape[0] < count:
-            self._workspace = workspace(self._n, count)
-        values = np.empty(len(P))
-        rk4_population(*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight, self._workspace, values)
-        return values
+        return self._population(len(P), (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight))
 
     def objectives_scaled(self, X) -> np.ndarray:
         return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)

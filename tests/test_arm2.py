@@ -313,3 +313,30 @@ def test_a_step_off_the_sample_grid_is_interpolated():
     assert coarse.success and fine.success and fine.t_end == pytest.approx(1.0)
     assert np.degrees(np.abs(fine.angles - coarse.angles)).max() < 1e-5
     assert np.abs(fine.torque - coarse.torque).max() < 1e-3
+
+
+def test_lqr_linearisation_on_the_move_matches_the_lagrange_model():
+    """A and B of the compiled linearisation about a moving point of the reach against central
+    differences of the test's own Lagrange model under the inverse-dynamics torques."""
+    from fdbench.model import Penalty
+    from fdbench.models.arm2_kernels import kernel_constants
+    from fdbench.models.arm2_lqr import linearisation
+
+    z, w, dw = (v.reshape(2) for v in REACH(np.array(0.4)))
+    M, h = lagrange(ARM, z, w)
+    tau = M @ dw + h
+
+    def acc(zi, wi):
+        Mi, hi = lagrange(ARM, zi, wi)
+        return np.linalg.solve(Mi, tau - hi)
+
+    step = 1e-5
+    expected = np.zeros((4, 4))
+    expected[:2, 2:] = np.eye(2)
+    for i, e in enumerate(step * np.eye(2)):
+        expected[2:, i] = (acc(z + e, w) - acc(z - e, w)) / (2 * step)
+        expected[2:, 2 + i] = (acc(z, w + e) - acc(z, w - e)) / (2 * step)
+    A, B = np.empty((4, 4)), np.empty((4, 2))
+    linearisation(z, w, dw, kernel_constants(ARM, Penalty()), A, B)
+    assert np.allclose(A, expected, rtol=1e-5, atol=1e-6 * np.abs(expected).max())
+    assert np.allclose(B, np.vstack([np.zeros((2, 2)), np.linalg.inv(M)]), rtol=1e-10, atol=0)

@@ -8,16 +8,11 @@ from typer.testing import CliRunner
 from fdbench.cli import app
 from fdbench.experiment import optimize_spec, run
 from fdbench.optimizers import make_optimizer
-from fdbench.population import set_threads, threads
+from fdbench.population import set_threads
 from fdbench.problem import TrackingProblem
 from fdbench.torques import make_torque
-
-
-@pytest.fixture(autouse=True)
-def restore_threads():
-    before = threads()
-    yield
-    set_threads(before)
+from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
+                               restore_threads)
 
 
 CELLS = [("cs", False), ("cs", True), ("pf", False), ("pf", True), ("ann", False), ("ann", True)]
@@ -41,28 +36,23 @@ def population(problem, seed=3):
 def test_population_equals_one_by_one_exactly(cell, problems):
     problem = problems[cell]
     X = population(problem)
-    one_by_one = np.array([problem.objective_scaled(x) for x in X])
     reached = [problem.simulate(x * problem.scale).success for x in X]
     assert any(reached) and not all(reached)  # both kinds present
-    for count in (1, 2, 3):
-        set_threads(count)
-        assert np.array_equal(problem.objectives_scaled(X), one_by_one)
-        # any size and order of population: each candidate's number is its own
-        assert np.array_equal(problem.objectives_scaled(X[::-1])[::-1], one_by_one)
-        assert np.array_equal(problem.objectives_scaled(X[3:5]), one_by_one[3:5])
+    assert_population_equals_one_by_one(problem, X)
 
 
 @pytest.mark.parametrize("cell", CELLS, ids=str)
 def test_population_objectives_are_eq18_of_each_simulation(cell, problems):
     """Checked against eq. 18 written out here from each candidate's SimulationResult."""
     problem = problems[cell]
-    X = population(problem, seed=5)
-    values = problem.objectives_scaled(X)
-    for x, value in zip(X, values):
-        result = problem.simulate(x * problem.scale)
+
+    def eq18(p):
+        result = problem.simulate(p)
         reached = np.isfinite(result.q[:, 2])  # the motion's samples up to t_end
         rmse = np.sqrt(np.mean(np.degrees(result.q[reached, 2] - problem.inverse.theta[reached]) ** 2))
-        assert value == pytest.approx(rmse + 1.0 - result.t_end / problem.duration, rel=1e-12, abs=1e-12)
+        return rmse + 1.0 - result.t_end / problem.duration
+
+    assert_objectives_are(problem, population(problem, seed=5), eq18)
 
 
 @pytest.mark.parametrize("cell", CELLS, ids=str)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..dynamics import CONSTRAINT, COS_TOL, NONFINITE, OK, SINGULAR, VIOLATION_TOL
 from ..jit import njit
+from ..population import DEGREES_PER_RADIAN
 
 N_STATE = 12
 
@@ -30,11 +31,13 @@ def kernel_constants(model, penalty, cos_tol=COS_TOL, violation_tol=VIOLATION_TO
                      2 * penalty.xi * penalty.omega, penalty.omega**2, cos_tol, violation_tol])
 
 
-@njit
+@njit(error_model="numpy")
 def accelerations(y, tau_s, tau_e, consts, out):
     """q'' of eq. 12 for the state y (12,) and joint torques (N m) into out[6:12] (out[:6] gets
     q'). Returns (cos s, cos(s + e)); the accelerations are zero where either is below the
-    tolerance consts[10] in magnitude (a singular leading matrix)."""
+    tolerance consts[10] in magnitude (a singular leading matrix). A division by an exact zero
+    (a pivot lost to cancellation in a state far off the manifold) gives inf or NaN, which the
+    integrator reports as a non-finite state, rather than raising."""
     m11, m12, m22, L01, L12 = consts[0], consts[1], consts[2], consts[3], consts[4]
     alpha, txo, om2 = consts[7], consts[8], consts[9]
     x1, y1, x2, y2, s, e = y[0], y[1], y[2], y[3], y[4], y[5]
@@ -222,3 +225,39 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, com
         max_viol = max(max_viol, viol)
         y[:] = tmp
     return OK, n_steps, max_viol
+
+
+@njit(nogil=True)
+def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight):
+    """Eq. 18 for n joints from a simulation's states, shape (n_steps+1, 12), filled up to step
+    ``done``: the RMSE (deg) of both joint angles at the motion's samples (every ``every``-th step;
+    desired angles angles_ref (rad), shape (samples, 2)) over the samples reached, plus
+    penalty_weight times the fraction of the steps not reached. The squared errors are summed
+    sample by sample, shoulder before elbow; a non-finite RMSE counts as 0."""
+    count = done // every + 1
+    total = 0.0
+    for k in range(count):
+        for j in range(2):
+            error = (states[k * every, 4 + j] - angles_ref[k, j]) * DEGREES_PER_RADIAN
+            total += error * error
+    rmse = math.sqrt(total / (2 * count))
+    if not math.isfinite(rmse):
+        rmse = 0.0
+    return rmse + penalty_weight * (1.0 - done / n_steps)
+
+
+@njit(nogil=True)
+def rk4_candidates(y0, dt, n_steps, tau, ref_half, refw_half, acc_half, consts, every, angles_ref, penalty_weight,
+                   states, qdd, applied, objective, first, stride):
+    """Open-loop RK4 (``rk4_pd`` with zero gains) and eq. 18 (``tracking_objective``) for
+    candidates first, first + stride, ... of tau.
+
+    tau: the joint torques (N m) on the half-step grid, shape (lam, 2 n_steps + 1, 2); states
+    (n+1, 12), qdd (n+1, 6), applied (n+1, 2): this call's work buffers, reused candidate after
+    candidate; objective (lam,): filled for the candidates run. Runs without the GIL."""
+    zero = np.zeros(2)
+    no_gains = np.zeros((1, 2, 4))
+    for c in range(first, tau.shape[0], stride):
+        _, done, _ = rk4_pd(y0, dt, n_steps, tau[c], ref_half, refw_half, acc_half, zero, zero, 0, no_gains, consts,
+                            consts, states, qdd, applied)
+        objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight)

@@ -54,20 +54,44 @@ class ArmTrackingProblem:
         self.x0 = self.p0 / self.scale
         n = steps(dt, self.duration)
         self._half = np.linspace(0.0, self.duration, 2 * n + 1)
-        self._on_grid = [part.on_grid(self._half) for part in self.parts]
+        self._on_grid_batch = [part.on_grid_batch(self._half) for part in self.parts]
         self._ff_half = (np.array(sim.inverse_dynamics(self._half, nominal, self.motion).torque) if feedforward
                          else np.zeros((2 * n + 1, len(JOINTS))))
+        self._every = sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), self.motion.samples)
+        self._population = None
+        if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
+            from . import arm2_kernels as kernels
+
+            references = (np.ascontiguousarray(r, dtype=float) for r in self.motion(self._half))
+            # the population kernel's arguments before and after the torques (see ``objectives``)
+            self._kernel_start = (sim.initial_state(model, self.motion), self.duration / n, n)
+            self._kernel_rest = (*references, kernels.kernel_constants(model, penalty), self._every,
+                                 np.ascontiguousarray(self.inverse.angles, dtype=float))
 
     @property
     def n_params(self) -> int:
         return int(self.blocks[-1])
 
-    def torques_on_grid(self, p) -> np.ndarray:
-        """The drive torques (N m) on the half-step grid for parameters p, shape (2 n + 1, 2)."""
-        p = np.asarray(p, dtype=float)
+    @property
+    def batched(self) -> bool:
+        """True when ``objectives`` runs a population in one compiled call (the motion's samples
+        on the integrator's grid); else it evaluates the candidates one by one."""
+        return bool(self._every)
+
+    def torques_on_grid_batch(self, P) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for every row of P, shape
+        (lam, n_params) -> (lam, 2 n + 1, 2): each joint's population evaluator on its block, plus
+        the inverse-dynamics torques with feedforward. Row c depends on P[c] alone, to the last bit."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
         with np.errstate(all="ignore"):
-            own = np.stack([f(p[a:b]) for f, a, b in zip(self._on_grid, self.blocks[:-1], self.blocks[1:])], axis=-1)
+            own = np.stack([f(P[:, a:b]) for f, a, b in zip(self._on_grid_batch, self.blocks[:-1], self.blocks[1:])],
+                           axis=-1)
         return self._ff_half + own
+
+    def torques_on_grid(self, p) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for parameters p, shape (2 n + 1, 2)
+        (``torques_on_grid_batch`` of a population of one)."""
+        return self.torques_on_grid_batch(np.asarray(p, dtype=float)[None])[0]
 
     def torque_function(self, p):
         """The drive torques for parameters p as a function t (s), shape (k,) -> (k, 2) N m (the
@@ -96,10 +120,45 @@ class ArmTrackingProblem:
         return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
 
     def objective(self, p) -> float:
+        if self.batched:  # a population of one: the very numbers of a population's evaluation
+            return float(self.objectives(np.asarray(p, dtype=float)[None])[0])
         return self.objective_of(self.simulate(p))
 
     def objective_scaled(self, x) -> float:
         return self.objective(np.asarray(x) * self.scale)
+
+    def objectives(self, P) -> np.ndarray:
+        """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
+        operations (``torques_on_grid_batch``), the simulations and their objectives in one
+        compiled call spread over threads (``arm2_kernels.rk4_candidates`` via
+        ``population.Population``). ``objective`` is this with a population of one, so the numbers
+        equal those of the rows one by one, to the last bit, whatever the number of threads."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        if not self.batched:
+            return np.array([self.objective(p) for p in P])
+        if self._population is None:
+            from ..population import Population
+            from .arm2_kernels import N_STATE, rk4_candidates
+
+            self._population = Population(rk4_candidates, self._kernel_start[2], ((N_STATE,), (6,), (2,)))
+        tau = self.torques_on_grid_batch(P)
+        return self._population(len(P), (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight))
+
+    def objectives_scaled(self, X) -> np.ndarray:
+        return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
+
+
+def warm_up() -> None:
+    """Load (or compile) the population kernel and start the threads, so that later timings
+    exclude both: a population of two candidates of two steps."""
+    from ..population import Population
+    from . import arm2_kernels as kernels
+
+    arm, motion, n = Arm2(), as_joint_motion("reach"), 2
+    grid = np.zeros((2 * n + 1, 2))
+    Population(kernels.rk4_candidates, n, ((kernels.N_STATE,), (6,), (2,)))(
+        2, (sim.initial_state(arm, motion), 0.5, n, np.zeros((2, 2 * n + 1, 2)), grid, grid, grid,
+            kernels.kernel_constants(arm, Penalty()), 1, np.zeros((n + 1, 2)), 1.0))
 
 
 def _interp(grid, values, t):
@@ -114,8 +173,9 @@ def optimize(problem: ArmTrackingProblem, optimizer: str = "cmaes", budget: int 
     from ..optimizers import make_optimizer
 
     began = time.perf_counter()
+    batch = problem.objectives_scaled if problem.batched else None
     found = make_optimizer(optimizer, **options).minimize(problem.objective_scaled, problem.x0, budget, seed,
-                                                          on_evaluation)
+                                                          on_evaluation, batch=batch)
     p = np.asarray(found.x) * problem.scale
     result = problem.simulate(p)
     return p, found, result, time.perf_counter() - began

@@ -305,10 +305,11 @@ def _optimize(spec, on_evaluation, on_start):
     from ..experiment import _options_text, base_record
     from ..optimizers import make_optimizer
     from ..torques import TORQUES
-    from .arm2_problem import ArmTrackingProblem
+    from .arm2_problem import ArmTrackingProblem, warm_up
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
     _warm_up()
+    warm_up()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
     if on_start:
@@ -326,7 +327,9 @@ def _optimize(spec, on_evaluation, on_start):
                                 for n in range(1, options["hidden"] + 1)]
     problem = ArmTrackingProblem(spec.torque, plant(spec), desired, spec.feedforward, spec.penalty_weight,
                                  Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec), **options)
-    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation)
+    batch = problem.objectives_scaled if problem.batched else None
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation,
+                               batch=batch)
     params = np.asarray(found.x) * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - began

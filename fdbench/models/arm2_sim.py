@@ -119,11 +119,19 @@ def simulate(torque, model: Arm2 = Arm2(), motion: str | JointMotion = "reach", 
                          time.perf_counter() - began)
 
 
+def samples_on_grid(grid, ts) -> int:
+    """The number of steps between samples when the samples ts (s) lie on the integrator grid
+    (s), one every so many steps from the first step to the last; 0 when they do not."""
+    every = (len(grid) - 1) // max(len(ts) - 1, 1)
+    on_grid = every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=1e-12)
+    return every if on_grid else 0
+
+
 def _on_samples(grid, states, qdd, applied, done, ts):
     """States (n, 12) and applied torques (n, 2) on the motion's samples ts: taken from the grid
     where the samples lie on it, else interpolated (cubic Hermite for the states)."""
-    every = (len(grid) - 1) // max(len(ts) - 1, 1)
-    if every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=1e-12):
+    every = samples_on_grid(grid, ts)
+    if every:
         y, tau = states[::every].copy(), applied[::every].copy()
         beyond = np.arange(len(ts)) * every > done
         y[beyond], tau[beyond] = np.nan, np.nan
