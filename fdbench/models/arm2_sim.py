@@ -1,6 +1,7 @@
 """Inverse and forward dynamics of the two-segment arm on a desired joint motion: the arm's
-counterparts of ``fdbench.inverse`` and ``fdbench.integrate`` (compiled fixed-step RK4, torques
-and references on the half-step grid, per-joint PD feedback plus feedforward).
+counterparts of ``fdbench.inverse`` and ``fdbench.integrate``: compiled fixed-step RK4 (torques
+and references on the half-step grid) or scipy's adaptive methods (``integrate.solve_adaptive``)
+on the same compiled feedback laws (per-joint PD plus feedforward, computed torque, a gain matrix).
 
 A simulation never raises on a physical failure: it stops where it cannot go on and says why in
 ``status`` (``fdbench.integrate.Status``); ``t_end`` is the time reached.
@@ -219,7 +220,7 @@ def _simulate_adaptive(torque, motion: JointMotion, law: ArmFeedback, y0: np.nda
     applied = np.full((len(ts), 2), np.nan)
     with np.errstate(all="ignore"):
         applied[reached] = _rates(torque, motion, law, ts[reached], found.states[reached])[1]
-    max_viol = max(kernels.constraint_violation(y, L01, L12) for y in found.states[reached])
+    max_viol = np.max([kernels.constraint_violation(y, L01, L12) for y in found.states[reached]])
     return ArmSimulation(ts, found.states[:, :6], found.states[:, 6:], applied, found.t_end, found.status,
                          float(max_viol), integrator=integrator, detail=found.detail,
                          rhs_evaluations=found.evaluations)
