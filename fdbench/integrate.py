@@ -115,10 +115,7 @@ class Settings:
         check_integrator(self.integrator)
         if not (MIN_DT <= self.dt <= MAX_DT):
             raise ValueError(f"dt must be in [{MIN_DT:g}, {MAX_DT:g}] s, got {self.dt}")
-        if not (math.isfinite(self.rtol) and MIN_RTOL <= self.rtol < 1):
-            raise ValueError(f"rtol must be in [{MIN_RTOL:.2g}, 1), got {self.rtol}")
-        if not (math.isfinite(self.atol) and MIN_ATOL <= self.atol <= MAX_ATOL):
-            raise ValueError(f"atol must be in [{MIN_ATOL:g}, {MAX_ATOL:g}], got {self.atol}")
+        check_tolerances(self.rtol, self.atol)
         for name, (low, high) in PENALTY_RANGES.items():
             value = getattr(self.penalty, name)
             if not (math.isfinite(value) and low <= value <= high):
@@ -151,6 +148,14 @@ def _gain_on(gain, t) -> np.ndarray:
     if callable(gain):
         return np.array(gain(t), dtype=float).reshape(np.shape(t))
     return np.full(1, float(gain))
+
+
+def check_tolerances(rtol: float, atol: float) -> None:
+    """ValueError (one line) for a relative or absolute tolerance of the adaptive integrators out of range."""
+    if not (math.isfinite(rtol) and MIN_RTOL <= rtol < 1):
+        raise ValueError(f"rtol must be in [{MIN_RTOL:.2g}, 1), got {rtol}")
+    if not (math.isfinite(atol) and MIN_ATOL <= atol <= MAX_ATOL):
+        raise ValueError(f"atol must be in [{MIN_ATOL:g}, {MAX_ATOL:g}], got {atol}")
 
 
 def check_integrator(name: str) -> str:
@@ -285,19 +290,16 @@ def _resample(grid, states, qdd, applied, done, motion: Motion):
 
 
 def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> SimulationResult:
-    """One of scipy's adaptive methods, stepped here so that a failure keeps the steps accepted
-    before it: a non-finite torque or state, theta reaching +-pi/2, a constraint violation, a
-    solver failure, or more than MAX_RHS_EVALUATIONS right-hand side evaluations."""
-    import scipy.integrate
-    from scipy.optimize import brentq
-
+    """One of scipy's adaptive methods (``solve_adaptive``) on the forearm: stops where the state
+    or the applied torque becomes non-finite, theta reaches +-pi/2, the constraint violation
+    exceeds its tolerance, the solver fails, or it needs more than MAX_RHS_EVALUATIONS right-hand
+    side evaluations."""
     from . import dynamics
 
     consts = constants(settings)
     accel, violation = dynamics.accelerations, dynamics.constraint_violation
     motion = settings.motion
     closed_loop = law.closed_loop
-    evaluations = [0]
 
     def applied_torque(t, th, w):
         total = float(torque(np.array([t]))[0])
@@ -310,40 +312,105 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
         return total
 
     def rhs(t, y):
-        evaluations[0] += 1
-        if evaluations[0] > MAX_RHS_EVALUATIONS:
-            raise _Stop(Status.SOLVER, f"more than {MAX_RHS_EVALUATIONS} right-hand side evaluations "
-                                       "(a stiff problem: try rk4, radau or bdf)")
         tau = applied_torque(t, y[2], y[5])
         if not (math.isfinite(tau) and np.all(np.isfinite(y))):
-            raise _Stop(Status.NONFINITE, "")
+            raise StopIntegration(Status.NONFINITE, "")
         ax, ay, ath, _ = accel(y[0], y[1], y[2], y[3], y[4], y[5], tau, consts)
         return np.array([y[3], y[4], y[5], ax, ay, ath])
 
-    def failure(y):
-        """The status that a state ends the simulation with, or None."""
+    def failure(y_old, y):
+        """The status that a step from y_old to y ends the simulation with, or None."""
         if not np.all(np.isfinite(y)):
             return Status.NONFINITE
         if abs(math.cos(y[2])) < consts[6]:
             return Status.SINGULAR
         if violation(y[0], y[1], y[2], consts[1]) > consts[7]:
             return Status.CONSTRAINT
+        if math.cos(y[2]) * math.cos(y_old[2]) <= 0:  # jumped over cos(theta) = 0
+            return Status.SINGULAR
         return None
 
+    def clear_of_singular(y, y_old):  # positive while theta is on y_old's side, clear of the tolerance
+        return math.copysign(1.0, math.cos(y_old[2])) * math.cos(y[2]) - consts[6]
+
+    def clear_of_violation(y, y_old):
+        return consts[7] - violation(y[0], y[1], y[2], consts[1])
+
     y0 = np.array(_start_state(settings, start))
+    system = AdaptiveSystem(rhs, failure, {Status.SINGULAR: clear_of_singular, Status.CONSTRAINT: clear_of_violation})
+    found = solve_adaptive(system, y0, motion.duration, settings.integrator, settings.rtol, settings.atol,
+                           motion.samples)
+    ts, reached = motion.samples, found.reached
+    q, qd, applied = np.full((len(ts), 3), np.nan), np.full((len(ts), 3), np.nan), np.full(len(ts), np.nan)
+    q[reached], qd[reached] = found.states[reached, :3], found.states[reached, 3:]
+    for i in np.flatnonzero(reached):
+        applied[i] = applied_torque(ts[i], q[i, 2], qd[i, 2])
+    viol = settings.model.constraints(q[reached])
+    max_viol = float(np.max(np.abs(viol))) if viol.size else 0.0
+    return SimulationResult(ts, q, qd, applied, found.t_end, found.status, max_viol, settings.integrator,
+                            detail=found.detail, rhs_evaluations=found.evaluations)
+
+
+@dataclass(frozen=True)
+class AdaptiveSystem:
+    """A model as ``solve_adaptive`` integrates it; states have shape (m,).
+
+    rhs(t, y): the state derivative at time t (s); it may raise ``StopIntegration`` to end the integration
+    with a status (e.g. a non-finite torque). failure(y_old, y): the status that an accepted step
+    from y_old to y ends the simulation with, or None. margins[status](y, y_old): positive while
+    the state y, on a step begun at y_old, is clear of that failure, zero or negative once it is
+    not: where within the failing step the failure began (a root of the step's interpolant)."""
+
+    rhs: Callable[[float, np.ndarray], np.ndarray]
+    failure: Callable[[np.ndarray, np.ndarray], "Status | None"]
+    margins: dict
+
+
+@dataclass
+class AdaptiveSolution:
+    """The outcome of ``solve_adaptive``: the states on the samples, shape (n, m), NaN where not
+    ``reached`` (a boolean mask, shape (n,)); how and when (s) it ended; right-hand side
+    evaluations."""
+
+    states: np.ndarray
+    reached: np.ndarray
+    status: Status
+    detail: str
+    t_end: float
+    evaluations: int
+
+
+def solve_adaptive(system: AdaptiveSystem, y0: np.ndarray, duration: float, integrator: str, rtol: float,
+                   atol: float, samples: np.ndarray) -> AdaptiveSolution:
+    """Integrate ``system`` from y0 (shape (m,)) at t = 0 to ``duration`` (s) with one of scipy's
+    adaptive methods, stepped here so that a failure keeps the steps accepted before it: the
+    right-hand side stopping it, a state failing (cut at the failure's start within the step), a
+    solver failure, or more than MAX_RHS_EVALUATIONS right-hand side evaluations. The dense output
+    is read at the ``samples`` (s, shape (n,)) reached."""
+    import scipy.integrate
+
+    evaluations = [0]
+
+    def rhs(t, y):
+        evaluations[0] += 1
+        if evaluations[0] > MAX_RHS_EVALUATIONS:
+            raise StopIntegration(Status.SOLVER, f"more than {MAX_RHS_EVALUATIONS} right-hand side evaluations "
+                                       "(a stiff problem: try rk4, radau or bdf)")
+        return system.rhs(t, y)
+
     steps_t, pieces = [0.0], []
-    status, detail, t_end = Status.SUCCESS, "", motion.duration
+    status, detail, t_end = Status.SUCCESS, "", duration
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore")  # the status reports what went wrong, once
         solver, t_old = None, 0.0
         while solver is None or solver.status == "running":
             try:
                 if solver is None:  # the constructor evaluates the right-hand side too
-                    solver = getattr(scipy.integrate, SCIPY_METHODS[settings.integrator])(
-                        rhs, 0.0, y0, motion.duration, rtol=settings.rtol, atol=settings.atol)
-                t_old, cos_old = solver.t, math.cos(solver.y[2])
+                    solver = getattr(scipy.integrate, SCIPY_METHODS[integrator])(
+                        rhs, 0.0, y0, duration, rtol=rtol, atol=atol)
+                t_old, y_old = solver.t, solver.y.copy()
                 message = solver.step()
-            except _Stop as stop:
+            except StopIntegration as stop:
                 status, detail, t_end = stop.status, stop.detail, t_old
                 break
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a solver breaking down
@@ -353,48 +420,39 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
                 status, detail, t_end = Status.SOLVER, str(message), t_old
                 break
             piece = solver.dense_output()
-            ended = failure(solver.y)
-            if ended is None and math.cos(solver.y[2]) * cos_old <= 0:  # jumped over cos(theta) = 0
-                ended = Status.SINGULAR
+            ended = system.failure(y_old, solver.y)
             if ended is not None:
-                status, t_end = ended, _crossing(piece, ended, t_old, solver.t, consts, violation, brentq)
+                status, t_end = ended, _crossing(piece, system.margins.get(ended), t_old, solver.t)
                 if t_end > t_old:
                     steps_t.append(t_end)
                     pieces.append(piece)
                 break
             steps_t.append(solver.t)
             pieces.append(piece)
-    ts = motion.samples
-    q, qd, applied = np.full((len(ts), 3), np.nan), np.full((len(ts), 3), np.nan), np.full(len(ts), np.nan)
-    reached = ts <= steps_t[-1] + 1e-12
+    states = np.full((len(samples), len(y0)), np.nan)
+    reached = samples <= steps_t[-1] + 1e-12
     reached[0] = True
     if pieces and steps_t[-1] > steps_t[0]:
         keep = np.flatnonzero(np.diff(steps_t) > 0)  # a step of zero length adds nothing
         solution = scipy.integrate.OdeSolution([steps_t[0]] + [steps_t[k + 1] for k in keep], [pieces[k] for k in keep])
-        states = solution(np.minimum(ts[reached], steps_t[-1])).T
+        states[reached] = solution(np.minimum(samples[reached], steps_t[-1])).T
     else:
-        states = np.array([y0])
-    q[reached], qd[reached] = states[:, :3], states[:, 3:]
-    for i in np.flatnonzero(reached):
-        applied[i] = applied_torque(ts[i], q[i, 2], qd[i, 2])
-    viol = settings.model.constraints(q[reached])
-    max_viol = float(np.max(np.abs(viol))) if viol.size else 0.0
-    return SimulationResult(ts, q, qd, applied, t_end, status, max_viol, settings.integrator,
-                            detail=detail, rhs_evaluations=evaluations[0])
+        states[reached] = y0
+    return AdaptiveSolution(states, reached, status, detail, t_end, evaluations[0])
 
 
-def _crossing(piece, status, t_old, t_new, consts, violation, brentq) -> float:
-    """Where within the step [t_old, t_new] the failure began (by the step's interpolant)."""
-    if status is Status.SINGULAR:
-        cos_old = math.cos(piece(t_old)[2])
-        def g(t):  # noqa: E306 - positive while theta is on the starting side, clear of the tolerance
-            return math.copysign(1.0, cos_old) * math.cos(piece(t)[2]) - consts[6]
-    elif status is Status.CONSTRAINT:
-        def g(t):  # noqa: E306
-            y = piece(t)
-            return consts[7] - violation(y[0], y[1], y[2], consts[1])
-    else:
+def _crossing(piece, margin, t_old, t_new) -> float:
+    """Where within the step [t_old, t_new] (s) the failure began: the root of margin(y(t), y(t_old))
+    on the step's interpolant y, or t_old without a margin or a sign change."""
+    from scipy.optimize import brentq
+
+    if margin is None:
         return t_old
+    y_old = piece(t_old)
+
+    def g(t):
+        return margin(piece(t), y_old)
+
     try:
         if g(t_old) > 0 and g(t_new) <= 0:
             return float(brentq(g, t_old, t_new, xtol=1e-12))
@@ -403,7 +461,7 @@ def _crossing(piece, status, t_old, t_new, consts, violation, brentq) -> float:
     return t_old
 
 
-class _Stop(Exception):
+class StopIntegration(Exception):
     """Raised in the right-hand side to end an adaptive integration with a status."""
 
     def __init__(self, status: Status, detail: str):

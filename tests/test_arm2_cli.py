@@ -116,7 +116,7 @@ def test_the_forearm_is_the_default_model():
 @pytest.mark.parametrize("args, word", [
     (["--model", "arm3"], "valid: forearm, arm2"), (["--model", "arm2", "--model", "forearm"], "one model"),
     (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
-    (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45"], "--integrator"),
+    (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45", "--rtol", "0"], "--rtol"),
     (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
     (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--sample-dt", "5"], "--sample-dt"),
     (["--model", "arm2", "--dt", "5"], "--dt"), (["--model", "arm2", "--kp", "-1"], "--kp"),
@@ -149,7 +149,7 @@ def test_optimize_on_the_arm(tmp_path):
 
 def test_optimize_on_the_arm_refuses_what_it_lacks():
     for args, word in ((["--hidden", "0", "--torque", "ann"], "--hidden"), (["--budget", "0"], "--budget"),
-                       (["--torque", "xx"], "--torque"), (["--integrator", "rk45"], "--integrator"),
+                       (["--torque", "xx"], "--torque"), (["--integrator", "euler"], "--integrator"),
                        (["--gradient", "exact"], "--gradient"), (["--plant", "m0=-2"], "m0")):
         result = invoke("optimize", "--model", "arm2", *args, code=2)
         assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr

@@ -168,7 +168,7 @@ def test_an_iteration_limit_on_the_arm_is_a_status_with_a_message():
 
 @pytest.mark.parametrize("args, word", [
     (["--nodes", 1], "--nodes"), (["--scheme", "euler"], "--scheme"), (["--regularization", -1], "--regularization"),
-    (["--max-iter", 0], "--max-iter"), (["--max-time", 0], "--max-time"), (["--integrator", "rk45"], "--integrator"),
+    (["--max-iter", 0], "--max-iter"), (["--max-time", 0], "--max-time"), (["--integrator", "dop853", "--atol", 2], "--atol"),
     (["--motion", "paper"], "--motion"), (["--model", "m0=-1"], "m0"),
 ])
 def test_bad_collocate_options_on_the_arm_are_one_line_exit_2(args, word, tmp_path):

@@ -179,6 +179,9 @@ PROSE = [  # (pattern whose group is the printed figure, command, field)
     (r"replays\s+to\s+RMSE_rot\s+[\d.]+°\s+\(its\s+own\s+nodes:\s+([\d.]+)°", "fdbench collocate --model arm2",
      "collocation_rmse_rot_deg"),
     (r"IPOPT\s+converges\s+in\s+(\d+)\s+iterations", "fdbench collocate --model arm2", "ipopt_iterations"),
+    (r"--rtol\s+1e-9\s+--atol\s+1e-12`\s+replays\s+the\s+inverse-dynamics\s+torques\s+to\s+RMSE_rot\s+([\d.]+)°",
+     "fdbench simulate --model arm2 --integrator dop853 --rtol 1e-9 --atol 1e-12", "rmse_rot_deg"),
+    (r"RMSE_rot\s+[\d.]+°,\s+as\s+RK4\s+does\s+\(([\d.]+)°\)", "fdbench simulate --model arm2", "rmse_rot_deg"),
     (r"`--scheme\s+trapezoidal`\s+the\s+replay\s+drifts\s+by\s+([\d.]+)°",
      "fdbench collocate --model arm2 --scheme trapezoidal", "rmse_rot_deg"),
 ]

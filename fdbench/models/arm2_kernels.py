@@ -157,6 +157,20 @@ def _derivative(y, half, tau_half, ref_half, refw_half, acc_half, kp, kd, comput
 
 
 @njit
+def derivatives(states, tau, ref, refw, acc, kp, kd, computed, gains, consts, nominal, out, applied):
+    """The state derivatives (into out, shape (k, 12)) and the applied joint torques (N m, into
+    applied, shape (k, 2)) of k states (shape (k, 12)) under the feedback law of ``rk4_pd``, row i
+    with the feedforward torques tau[i], the references ref[i], refw[i], acc[i] (each of shape
+    (k, 2)) and, for computed 2, the gain matrix gains[i] (shape (k, 2, 4)); for the adaptive
+    integrators (one state at a time) and their histories. The accelerations are zero where the
+    leading matrix is singular; the state's failures are for the caller to check."""
+    for i in range(states.shape[0]):
+        y = states[i]
+        _derivative(y, i, tau, ref, refw, acc, kp, kd, computed, gains, consts, nominal, math.cos(y[4]),
+                    math.cos(y[4] + y[5]), out[i], applied[i])
+
+
+@njit
 def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refw_half, acc_half, kp, kd, computed, gains, consts, nominal, states,
            qdd, applied):
     """Classical RK4 over n_steps steps of dt (s) under per-joint PD feedback plus feedforward, or

@@ -29,17 +29,21 @@ class ArmTrackingProblem:
     With ``feedforward`` the parameterised torques are added to the inverse-dynamics torques
     (eq. 19); without, they are the whole drive torques (eq. 15). ``model`` is the simulated body;
     ``nominal`` (default: the same) the model whose inverse dynamics prepare the parameters, give
-    the feedforward and the objective's reference."""
+    the feedforward and the objective's reference. ``penalty``, ``dt``, ``integrator``, ``rtol``
+    and ``atol`` say how to simulate (``arm2_sim.simulate``): with rk4 the torques are computed
+    on its half-step grid at once, with an adaptive integrator at the times it asks for."""
 
     def __init__(self, torque: str, model: Arm2 = Arm2(), motion: str | JointMotion = "reach",
                  feedforward: bool = False, penalty_weight: float = 1.0, penalty: Penalty = Penalty(),
-                 dt: float = 1e-3, nominal: Arm2 | None = None, **options):
-        from ..integrate import steps
+                 dt: float = 1e-3, nominal: Arm2 | None = None, integrator: str = "rk4", rtol: float = 1e-6,
+                 atol: float = 1e-9, **options):
+        from ..integrate import check_integrator, steps
         from ..torques import make_torque
 
         if not (math.isfinite(penalty_weight) and penalty_weight >= 0):
             raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
         self.model, self.motion, self.penalty, self.dt = model, as_joint_motion(motion), penalty, dt
+        self.integrator, self.rtol, self.atol = check_integrator(integrator), rtol, atol
         self.feedforward, self.penalty_weight = feedforward, penalty_weight
         nominal = model if nominal is None else nominal
         self._nominal = nominal
@@ -57,7 +61,8 @@ class ArmTrackingProblem:
         self._on_grid_batch = [part.on_grid_batch(self._half) for part in self.parts]
         self._ff_half = (np.array(sim.inverse_dynamics(self._half, nominal, self.motion).torque) if feedforward
                          else np.zeros((2 * n + 1, len(JOINTS))))
-        self._every = sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), self.motion.samples)
+        self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), self.motion.samples)
+                       if self.integrator == "rk4" else 0)  # the population kernel is RK4's
         self._population = None
         if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
             from . import arm2_kernels as kernels
@@ -107,10 +112,14 @@ class ArmTrackingProblem:
         return drive
 
     def simulate(self, p) -> sim.ArmSimulation:
+        """The forward simulation of parameters p: RK4 on the torques of ``torques_on_grid``, or
+        an adaptive integrator on ``torque_function``."""
+        how = dict(penalty=self.penalty, dt=self.dt, integrator=self.integrator, rtol=self.rtol, atol=self.atol)
+        if self.integrator != "rk4":
+            return sim.simulate(self.torque_function(p), self.model, self.motion, **how)
         tau = self.torques_on_grid(p)
         half = self._half
-        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.model, self.motion,
-                            penalty=self.penalty, dt=self.dt)
+        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.model, self.motion, **how)
 
     def objective_of(self, result: sim.ArmSimulation) -> float:
         """Eq. 18 for a finished simulation."""

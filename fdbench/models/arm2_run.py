@@ -124,16 +124,25 @@ def check(spec) -> None:
     motion file that cannot be used. No simulation is run."""
     from ..integrate import Settings
 
-    unavailable = {"--integrator": spec.integrator != "rk4", "--gradient exact": spec.gradient != "fd",
+    unavailable = {"--gradient exact": spec.gradient != "fd",
                    f"--controller {spec.controller}": spec.command == "control" and (spec.controller or "pd")
                    not in CONTROLLERS}
     for what, refused in unavailable.items():
         if refused:
-            only = {"--integrator": " (rk4 only)", "--controller": f" ({', '.join(CONTROLLERS)})"}
+            only = {"--controller": f" ({', '.join(CONTROLLERS)})"}
             raise ValueError(f"{what}: not available with --model arm2 yet{only.get(what.split()[0], '')}")
     nominal(spec), plant(spec)
-    Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt)  # the forearm's checks of dt and penalty
+    # the forearm's checks of the integrator, its dt or tolerances, and the penalty
+    Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), integrator=spec.integrator, dt=spec.dt, rtol=spec.rtol,
+             atol=spec.atol)
     motions(spec)
+
+
+def integration(spec) -> dict:
+    """The keyword arguments of ``arm2_sim.simulate`` that say how a spec integrates: the penalty
+    parameters, the integrator, its step (rk4) or its tolerances (the adaptive ones)."""
+    return dict(penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt, integrator=spec.integrator,
+                rtol=spec.rtol, atol=spec.atol)
 
 
 def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
@@ -167,7 +176,7 @@ def _message(result) -> str:
     if not result.success:
         text = text.replace("theta reached +-pi/2", "the shoulder or the forearm reached +-90 deg")
         text += f" (stopped at t = {result.t_end:.4g} s)"
-    return text
+    return text + (f": {result.detail}" if result.detail else "")
 
 
 def _outcome(spec, record: dict, result, inverse, **more):
@@ -186,10 +195,10 @@ def _outcome(spec, record: dict, result, inverse, **more):
     return RunOutcome(record, result, inverse, table=(header, rows), **more)
 
 
-def _warm_up() -> None:
-    """Load (or compile) the arm's kernels, so that runtimes exclude it."""
-    spec_free = sim.simulate(None, Arm2(), as_joint_motion("reach"), dt=0.1)
-    del spec_free
+def _warm_up(spec) -> None:
+    """Load (or compile) the arm's kernels (and scipy's integrators for an adaptive one), so that
+    runtimes exclude it."""
+    sim.warm_up(spec.integrator != "rk4")
 
 
 def run(spec, on_evaluation=None, on_start=None):
@@ -202,12 +211,11 @@ def run(spec, on_evaluation=None, on_start=None):
         return _collocate(spec)
     if spec.command != "control":
         raise ValueError(f"{spec.command}: not available with --model arm2 yet")
-    _warm_up()
+    _warm_up(spec)
     controller = spec.controller or "pd"
     options = dict(spec.method_options)
     arm, body = nominal(spec), plant(spec)
     desired, _ = motions(spec)
-    penalty = Penalty(spec.alpha, spec.xi, spec.omega)
     if controller == "lqr":
         from .arm2_lqr import lqr_gains
 
@@ -224,8 +232,8 @@ def run(spec, on_evaluation=None, on_start=None):
         from .arm2_lqr import lqr_gains
 
         gains, kp, kd = lqr_gains(arm, desired, **options), 0.0, 0.0
-    result = sim.simulate(drive, body, desired, kp, kd, penalty=penalty, dt=spec.dt,
-                          computed=controller == "computed-torque", nominal=arm, gains=gains)
+    result = sim.simulate(drive, body, desired, kp, kd, computed=controller == "computed-torque", nominal=arm,
+                          gains=gains, **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque="M(z)*z_ddot_d+h(z,z_dot)" if controller == "computed-torque" else "id",
@@ -257,10 +265,10 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
         label = f"file:{torque_file}"
         digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
-    _warm_up()
+    _warm_up(spec)
     began = time.perf_counter()
     inverse = reference(spec)
-    result = sim.simulate(drive, plant(spec), desired, penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt)
+    result = sim.simulate(drive, plant(spec), desired, **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
@@ -282,8 +290,7 @@ def _saved_torque(spec, path):
     if saved["params"].shape != (expected,):
         raise BadFile(f"--params: {path}: expected {expected} parameters for {saved['torque']} on {len(JOINTS)} joints")
     problem = ArmTrackingProblem(saved["torque"], plant(spec), motions(spec)[0], saved["feedforward"],
-                                 penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt, nominal=nominal(spec),
-                                 **saved["options"])
+                                 nominal=nominal(spec), **integration(spec), **saved["options"])
     name = saved["torque"] + (" (feedforward)" if saved["feedforward"] else "")
     return problem.torque_function(saved["params"]), f"{name} from {saved['path'].name}", saved["digest"], spec
 
@@ -296,7 +303,7 @@ def replay(spec, params) -> sim.ArmSimulation:
     if options.get("hidden") == "auto":  # 3 n + 1 parameters per joint
         options["hidden"] = (len(params) // len(JOINTS) - 1) // 3
     problem = ArmTrackingProblem(spec.torque, plant(spec), motions(spec)[0], spec.feedforward, spec.penalty_weight,
-                                 Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec), **options)
+                                 nominal=nominal(spec), **integration(spec), **options)
     return problem.simulate(np.asarray(params, dtype=float))
 
 
@@ -308,7 +315,7 @@ def _optimize(spec, on_evaluation, on_start):
     from .arm2_problem import ArmTrackingProblem, warm_up
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
-    _warm_up()
+    _warm_up(spec)
     warm_up()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
@@ -326,7 +333,7 @@ def _optimize(spec, on_evaluation, on_start):
         extra["hidden_fits"] = [(n, max(dict(tried).get(n, math.inf) for _, tried in fits))
                                 for n in range(1, options["hidden"] + 1)]
     problem = ArmTrackingProblem(spec.torque, plant(spec), desired, spec.feedforward, spec.penalty_weight,
-                                 Penalty(spec.alpha, spec.xi, spec.omega), spec.dt, nominal=nominal(spec), **options)
+                                 nominal=nominal(spec), **integration(spec), **options)
     batch = problem.objectives_scaled if problem.batched else None
     found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation,
                                batch=batch)
@@ -353,15 +360,14 @@ def _collocate(spec):
     from .arm2_collocation import collocate
 
     options = dict(spec.method_options)
-    _warm_up()
+    _warm_up(spec)
     import casadi  # noqa: F401  (its import is not part of the runtime)
 
     desired, truth = motions(spec)
     began = time.perf_counter()
     inverse = reference(spec)
     solution = collocate(nominal(spec), desired, **options)
-    result = sim.simulate(solution.torque_function(), plant(spec), desired,
-                          penalty=Penalty(spec.alpha, spec.xi, spec.omega), dt=spec.dt)
+    result = sim.simulate(solution.torque_function(), plant(spec), desired, **integration(spec))
     runtime = time.perf_counter() - began
     own = float(np.sqrt(np.mean(np.degrees(solution.angles - truth(solution.t)[0]) ** 2)))
     record = base_record(spec)
