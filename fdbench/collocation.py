@@ -255,3 +255,17 @@ def collocate(settings: Settings = Settings(), nodes: int = DEFAULT_NODES, schem
 
     return transcribe(acceleration, t, th_d, w_d, th_md, u_guess, um_guess, scheme, regularization, max_iter,
                       max_time, began)
+
+
+def record_fields(solution: CollocationResult, options: dict, own_rmse_deg: float, replay_message: str) -> dict:
+    """The fields a collocate run adds to the record of its replay: the options, the collocation's
+    own RMSE_rot at its nodes (deg), IPOPT's status, iterations and solve time (s); status
+    'collocation_failed' when IPOPT did not solve the problem."""
+    fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],
+                  regularization=options["regularization"], collocation_rmse_rot_deg=own_rmse_deg,
+                  ipopt_status=solution.ipopt_status, ipopt_iterations=solution.iterations,
+                  solve_time_s=solution.solve_time_s)
+    if not solution.success:
+        fields.update(status="collocation_failed",
+                      message=f"{solution.message}; the replay of its last iterate: {replay_message}")
+    return fields

@@ -455,7 +455,7 @@ def _run_collocate(spec: RunSpec) -> RunOutcome:
     """Direct collocation, then the torque found replayed by fdbench's own forward simulation:
     the three indicators are the replay's; the collocation's own tracking error, IPOPT's status,
     iterations and solve time stand beside them. ``extra['collocation']`` holds the solution."""
-    from .collocation import collocate
+    from .collocation import collocate, record_fields
     from .integrate import simulate, warm_up
 
     settings = spec.settings()
@@ -471,13 +471,7 @@ def _run_collocate(spec: RunSpec) -> RunOutcome:
     record = fill_result(base_record(spec), result, inverse)
     theta_d = np.interp(solution.t, inverse.t, inverse.theta)
     own = float(np.sqrt(np.mean(np.degrees(solution.theta - theta_d) ** 2)))
-    record.update(torque="collocation", evaluations=1, runtime_s=runtime, nodes=options["nodes"],
-                  scheme=options["scheme"], regularization=options["regularization"],
-                  collocation_rmse_rot_deg=own, ipopt_status=solution.ipopt_status,
-                  ipopt_iterations=solution.iterations, solve_time_s=solution.solve_time_s)
-    if not solution.success:
-        record.update(status="collocation_failed", message=f"{solution.message}; the replay of its last iterate: "
-                                                             f"{result.message}")
+    record.update(runtime_s=runtime, **record_fields(solution, options, own, result.message))
     return RunOutcome(record, result, inverse, extra={"collocation": solution})
 
 

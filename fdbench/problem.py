@@ -15,7 +15,31 @@ from .inverse import Feedforward, inverse_dynamics
 from .torques import TorqueParameterisation
 
 
-class TrackingProblem:
+class ShootingProblem:
+    """Eq. 18 of a shooting problem, whatever the model: a subclass gives ``simulate(p)``,
+    ``rmse_deg(result)`` (the RMSE of rotation over the samples reached, deg), ``objectives(P)``,
+    ``batched``, ``scale``, ``duration`` and ``penalty_weight``."""
+
+    def objective_of(self, result) -> float:
+        """Eq. 18 for a finished simulation."""
+        rmse = self.rmse_deg(result)
+        if not math.isfinite(rmse):
+            rmse = 0.0  # nothing reached beyond t = 0: the penalty term says it all
+        return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
+
+    def objective(self, p) -> float:
+        if self.batched:  # a population of one: the very numbers of a population's evaluation
+            return float(self.objectives(np.asarray(p, dtype=float)[None])[0])
+        return self.objective_of(self.simulate(p))
+
+    def objective_scaled(self, x) -> float:
+        return self.objective(np.asarray(x) * self.scale)
+
+    def objectives_scaled(self, X) -> np.ndarray:
+        return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
+
+
+class TrackingProblem(ShootingProblem):
     """Optimise the parameters of ``torque`` so the simulated rotation tracks the desired one.
 
     With ``feedforward`` the parameterised torque is added to the inverse-dynamics torque
@@ -88,20 +112,9 @@ class TrackingProblem:
             return simulate_rk4_on_grid(self.torques_on_grid(p[None])[0], self.settings)
         return simulate(self.torque_function(p), self.settings)
 
-    def objective_of(self, result: SimulationResult) -> float:
-        """Eq. 18 for a finished simulation."""
-        rmse = rmse_rot_deg(result, self.inverse.theta)
-        if not math.isfinite(rmse):
-            rmse = 0.0  # nothing reached beyond t = 0: the penalty term says it all
-        return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
-
-    def objective(self, p) -> float:
-        if self._fast:  # a population of one: the very numbers of a population's evaluation
-            return float(self.objectives(np.asarray(p, dtype=float)[None])[0])
-        return self.objective_of(self.simulate(p))
-
-    def objective_scaled(self, x) -> float:
-        return self.objective(np.asarray(x) * self.scale)
+    def rmse_deg(self, result: SimulationResult) -> float:
+        """RMSE of rotation (deg) against the reference, over the samples reached."""
+        return rmse_rot_deg(result, self.inverse.theta)
 
     @property
     def batched(self) -> bool:
@@ -123,9 +136,6 @@ class TrackingProblem:
             self._population = Population(rk4_candidates, self._n)
         tau = self.torques_on_grid(P)
         return self._population(len(P), (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight))
-
-    def objectives_scaled(self, X) -> np.ndarray:
-        return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
 
     def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
         """Eq. 18 and its exact gradient with respect to p, shape (n_params,) (see ``gradient``)."""

@@ -6,9 +6,10 @@
 A new model is a new module here that registers its class (``@MODELS.register("leg")``) and gives
 it the class attributes ``motions`` (its named motions, the default first), ``keys`` (the
 constants ``--model KEY=VALUE`` may change), ``with_changes`` (a function of (key, value) pairs
-returning the checked model) and ``runs`` (the module carrying out its runs: ``check``,
-``motions``, ``reference``, ``describe``, ``run``, ``run_simulation`` and ``inverse_run`` of a
-``RunSpec``; see ``arm2_run``).
+returning the checked model) and ``runs``: the name of the module carrying out its runs
+(``check``, ``motions``, ``reference``, ``describe``, ``run``, ``run_simulation``,
+``inverse_run`` and ``replay`` of a ``RunSpec``; see ``arm2_run``), None for the forearm, whose
+runs are ``fdbench.experiment``'s own.
 """
 
 from __future__ import annotations
@@ -16,14 +17,17 @@ from __future__ import annotations
 import importlib
 
 from ..model import MODEL_KEYS, Forearm, forearm_with
+from ..motion import KINEMATICS
 from ..registry import Registry
 
 MODELS: Registry = Registry("model")
 MODELS.register("forearm")(Forearm)
+Forearm.motions = KINEMATICS  # eq. 5 as printed (the default) or differentiated exactly
+Forearm.keys = MODEL_KEYS
+Forearm.with_changes = staticmethod(forearm_with)
+Forearm.runs = None  # its runs are fdbench.experiment's own
 
 from . import arm2  # noqa: E402,F401 - registers "arm2"
-
-FOREARM = "forearm"
 
 SUMMARIES = {
     "forearm": "the paper's 1-DOF forearm (Table 1): the elbow fixed at the origin",
@@ -43,27 +47,26 @@ def model_class(name: str):
 
 def named_motions(name: str) -> tuple:
     """The motions model ``name`` knows by name, its default first (any other is a CSV file)."""
-    from ..motion import KINEMATICS
-
-    return tuple(KINEMATICS) if name == FOREARM else tuple(model_class(name).motions)
+    return tuple(model_class(name).motions)
 
 
 def default_motion(name: str) -> str:
     """The motion a command of model ``name`` follows when none is given."""
-    return "paper" if name == FOREARM else model_class(name).motions[0]
+    return model_class(name).motions[0]
 
 
 def model_keys(name: str) -> tuple:
     """The constants of model ``name`` that --model and --plant KEY=VALUE may change."""
-    return MODEL_KEYS if name == FOREARM else tuple(model_class(name).keys)
+    return tuple(model_class(name).keys)
 
 
 def with_changes(name: str, pairs=()):
     """Model ``name`` with some constants changed ((key, value) pairs); ValueError if out of range."""
-    return forearm_with(pairs) if name == FOREARM else model_class(name).with_changes(pairs)
+    return model_class(name).with_changes(pairs)
 
 
 def runs(name: str):
     """The module carrying out the runs of model ``name``, or None for the forearm (whose runs are
     ``fdbench.experiment``'s own)."""
-    return None if name == FOREARM else importlib.import_module(model_class(name).runs)
+    module = model_class(name).runs
+    return None if module is None else importlib.import_module(module)

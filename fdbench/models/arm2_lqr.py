@@ -140,3 +140,13 @@ def lqr_gains(model: Arm2, motion: JointMotion, q_angle: float = 1e4, q_rate: fl
         return r_inv * np.einsum("kji,kjl->kil", np.linalg.inv(M), P[:, 2:, :])  # R^-1 B^T P
 
     return gains
+
+
+def warm_up() -> None:
+    """Load (or compile) the Riccati kernels and import scipy's solvers, so that a design's
+    timing excludes them."""
+    import scipy.integrate  # noqa: F401
+    import scipy.linalg  # noqa: F401
+
+    zero = np.zeros(2)
+    riccati_rate(zero, zero, zero, np.zeros(16), kernel_constants(Arm2(), Penalty()), np.ones(4), 1.0, np.empty(16))

@@ -17,12 +17,13 @@ import time
 import numpy as np
 
 from ..model import Penalty
+from ..problem import ShootingProblem
 from .arm2 import JOINTS, Arm2
 from .arm2_motion import JointMotion, as_joint_motion
 from . import arm2_sim as sim
 
 
-class ArmTrackingProblem:
+class ArmTrackingProblem(ShootingProblem):
     """Optimise per-joint torque parameters so that the simulated arm tracks ``motion``.
 
     ``torque``: a registered parameterisation's name, made once per joint with ``options``.
@@ -121,20 +122,9 @@ class ArmTrackingProblem:
         half = self._half
         return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.model, self.motion, **how)
 
-    def objective_of(self, result: sim.ArmSimulation) -> float:
-        """Eq. 18 for a finished simulation."""
-        rmse, _ = sim.rmse_deg(result, self.inverse.angles)
-        if not math.isfinite(rmse):
-            rmse = 0.0  # nothing reached beyond t = 0: the penalty term says it all
-        return rmse + self.penalty_weight * (1.0 - result.t_end / self.duration)
-
-    def objective(self, p) -> float:
-        if self.batched:  # a population of one: the very numbers of a population's evaluation
-            return float(self.objectives(np.asarray(p, dtype=float)[None])[0])
-        return self.objective_of(self.simulate(p))
-
-    def objective_scaled(self, x) -> float:
-        return self.objective(np.asarray(x) * self.scale)
+    def rmse_deg(self, result: sim.ArmSimulation) -> float:
+        """RMSE of the joint angles (deg) over both joints and the samples reached."""
+        return sim.rmse_deg(result, self.inverse.angles)[0]
 
     def objectives(self, P) -> np.ndarray:
         """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
@@ -153,8 +143,6 @@ class ArmTrackingProblem:
         tau = self.torques_on_grid_batch(P)
         return self._population(len(P), (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight))
 
-    def objectives_scaled(self, X) -> np.ndarray:
-        return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
 
 
 def warm_up() -> None:

@@ -106,13 +106,15 @@ def reference(spec) -> sim.ArmInverse:
 
 def describe(spec) -> dict:
     """The record's fields that say which motion, noise, filter, model and plant a run used."""
+    from ..experiment import _options_text
+
     desired, truth = motions(spec)
     out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
     parts = getattr(desired, "parts", [])
     if parts and hasattr(parts[0], "describe"):
         out["derivatives"] = parts[0].describe().get("derivatives")
-    out.update(noise_deg=spec.noise_deg, model="arm2", model_options=_pairs_text(spec.model) or None,
-               plant=_pairs_text(spec.plant) or None)
+    out.update(noise_deg=spec.noise_deg, model="arm2", model_options=_options_text(spec.model) or None,
+               plant=_options_text(spec.plant) or None)
     return out
 
 
@@ -163,10 +165,6 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     return record, header, rows
 
 
-def _pairs_text(pairs) -> str:
-    return " ".join(f"{k}={float(v):g}" for k, v in pairs)
-
-
 def _per_joint(prefix: str, values) -> dict:
     return {f"{prefix}_{joint}": float(v) for joint, v in zip(JOINTS, values)}
 
@@ -203,7 +201,7 @@ def _warm_up(spec) -> None:
 
 def run(spec, on_evaluation=None, on_start=None):
     """Carry out a control, optimisation or collocation run of the arm (``RunOutcome``)."""
-    from ..experiment import base_record
+    from ..experiment import _options_text, base_record
 
     if spec.command == "optimize":
         return _optimize(spec, on_evaluation, on_start)
@@ -217,9 +215,9 @@ def run(spec, on_evaluation=None, on_start=None):
     arm, body = nominal(spec), plant(spec)
     desired, _ = motions(spec)
     if controller == "lqr":
-        from .arm2_lqr import lqr_gains
+        from .arm2_lqr import warm_up
 
-        lqr_gains(arm, desired, **options)  # warm-up of its imports
+        warm_up()
     began = time.perf_counter()
     inverse = reference(spec)
     gains, drive, kp, kd = None, None, spec.kp or 0.0, spec.kd or 0.0
@@ -239,7 +237,7 @@ def run(spec, on_evaluation=None, on_start=None):
     record.update(torque="M(z)*z_ddot_d+h(z,z_dot)" if controller == "computed-torque" else "id",
                   evaluations=1, runtime_s=runtime, controller=controller,
                   **({"kp": spec.kp, "kd": spec.kd} if controller == "pd" else
-                     {"controller_options": " ".join(f"{k}={v}" for k, v in spec.method_options)}))
+                     {"controller_options": _options_text(spec.method_options)}))
     return _outcome(spec, record, result, inverse)
 
 
@@ -357,6 +355,7 @@ def _collocate(spec):
     IPOPT's status, iterations and solve time stand beside them. ``extra['collocation']`` holds
     the solution (node arrays of shape (N + 1, 2))."""
     from ..experiment import base_record
+    from ..collocation import record_fields
     from .arm2_collocation import collocate
 
     options = dict(spec.method_options)
@@ -371,12 +370,6 @@ def _collocate(spec):
     runtime = time.perf_counter() - began
     own = float(np.sqrt(np.mean(np.degrees(solution.angles - truth(solution.t)[0]) ** 2)))
     record = base_record(spec)
-    record.update(torque="collocation", evaluations=1, runtime_s=runtime, nodes=options["nodes"],
-                  scheme=options["scheme"], regularization=options["regularization"],
-                  collocation_rmse_rot_deg=own, ipopt_status=solution.ipopt_status,
-                  ipopt_iterations=solution.iterations, solve_time_s=solution.solve_time_s)
     outcome = _outcome(spec, record, result, inverse, extra={"collocation": solution})
-    if not solution.success:
-        record.update(status="collocation_failed",
-                      message=f"{solution.message}; the replay of its last iterate: {record['message']}")
+    record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
     return outcome
