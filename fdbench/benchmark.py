@@ -123,15 +123,57 @@ INDICATORS = ("rmse_rot_deg", "rmse_torque_nm", "runtime_s")
 
 
 def succeeded(record: dict) -> bool:
-    """A run that reached the end of its motion (t = 1 s for eq. 5) and (for an optimisation) beat its unoptimised initial guess."""
+    """A run that reached the end of its motion and (for an optimisation) beat its unoptimised initial guess."""
     if record.get("status") != "success":
         return False
     best, initial = record.get("best_objective"), record.get("initial_objective")
     return best is None or initial is None or best < initial
 
 
+WORSE_THAN_START = "no-better-than-start"
+OUTCOME_TEXT = {"success": "succeeded", WORSE_THAN_START: "ended no better than their start", "singular": "singular",
+                "nonfinite": "non-finite (driven unstable)", "constraint": "constraint violated",
+                "solver": "integrator failed"}
+
+
+def outcome(record: dict) -> str:
+    """How a run ended: 'success' (see ``succeeded``), the simulation's status code when it stopped
+    before the motion's end ('singular', 'nonfinite', 'constraint', 'solver'), or
+    'no-better-than-start' (it reached the end without beating its initial guess)."""
+    if record.get("status") != "success":
+        return record.get("status") or "unknown"
+    return "success" if succeeded(record) else WORSE_THAN_START
+
+
+def outcome_counts(records: list[dict]) -> dict:
+    """{outcome: number of runs}, successes first, then the most frequent."""
+    counts = {}
+    for record in records:
+        counts[outcome(record)] = counts.get(outcome(record), 0) + 1
+    return dict(sorted(counts.items(), key=lambda item: (item[0] != "success", -item[1])))
+
+
+def outcome_text(records: list[dict], codes: bool = False) -> str:
+    """'3 singular, 2 ended no better than their start' (``codes``: '3 singular, 2 no-better-than-start')."""
+    return ", ".join(f"{n} {name if codes else OUTCOME_TEXT.get(name, name)}"
+                     for name, n in outcome_counts(records).items())
+
+
+def failure_message(records: list[dict]) -> str | None:
+    """Why the first run that did not succeed stopped (its simulation's message), or None."""
+    for record in records:
+        kind = outcome(record)
+        if kind == WORSE_THAN_START:
+            return (f"reached the end with objective {record['best_objective']:.4g} deg, not below its initial "
+                    f"guess's {record['initial_objective']:.4g} deg")
+        if kind != "success":
+            return record.get("message") or kind
+    return None
+
+
 def summarise(records: list[dict]) -> dict:
-    """Median and interquartile range of each indicator, and the success rate."""
+    """Median and interquartile range of each indicator, the success rate, how many runs reached
+    the motion's end and the median time (s) they stopped at."""
     out = {"runs": len(records)}
     per_joint = dict.fromkeys(k for r in records for k in r if k.startswith(("rmse_rot_deg_", "rmse_torque_nm_")))
     for name in tuple(INDICATORS) + tuple(per_joint):  # per joint: rmse_rot_deg_<joint>, of a model with joints
@@ -143,5 +185,8 @@ def summarise(records: list[dict]) -> dict:
         else:
             out[f"{name}_median"] = out[f"{name}_iqr"] = float("nan")
     out["success_rate"] = sum(succeeded(r) for r in records) / len(records) if records else float("nan")
+    out["reached_end"] = sum(r.get("status") == "success" for r in records)
+    ends = [r["t_end"] for r in records if isinstance(r.get("t_end"), (int, float))]
+    out["t_end"] = float(np.median(ends)) if ends else float("nan")
     return out
 

@@ -73,13 +73,14 @@ def beyond_rows(methods: list[Method], runs: dict) -> list:
     rows = []
     for method in methods:
         record = runs[method.spec.hash()]["record"]
-        rows.append(Row(method.name, "beyond", None, summarise([record]), None, [record]))
+        rows.append(Row(method.name, "beyond", None, summarise([record]), None, [record],
+                        hashes=[method.spec.hash()], specs=[method.spec]))
     return rows
 
 
 def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     """The section's Markdown lines: one sentence per method, then the table (PD's columns)."""
-    from .report import _table
+    from .report import _table, failure_lines
 
     if not rows:
         return []
@@ -97,9 +98,9 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
         out += ["", f"Direct collocation's own RMSE_rot at its nodes: {_deg(rec.get('collocation_rmse_rot_deg'))} deg; "
                     f"IPOPT: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, "
                     f"{_deg(rec.get('solve_time_s'))} s."]
-    failed = [r.name for r in rows if r.records[0].get("status") != "success"]
+    failed = failure_lines(rows)
     if failed:
-        out += ["", f"Did not succeed: {', '.join(failed)} (see `message` in the CSV or the database)."]
+        out += ["", "Did not succeed (`status`, `t_end` and `message` in the CSV and JSON):", ""] + failed
     return out + [""]
 
 

@@ -374,12 +374,20 @@ def _options_text(pairs) -> str:
     return " ".join(f"{k}={v}" for k, v in pairs)
 
 
+def noise_seed(spec: RunSpec) -> int | None:
+    """The seed a run uses: its own, or 0 for the noise of a run given none (as ``motions``
+    draws it); None for a run that draws nothing."""
+    if spec.seed is not None:
+        return spec.seed
+    return 0 if spec.noise_deg else None
+
+
 def base_record(spec: RunSpec) -> dict:
     record = dict.fromkeys(RECORD_FIELDS)
     record.update(
         command=spec.command, kinematics=spec.kinematics, integrator=spec.integrator, dt=spec.dt,
         feedforward=spec.feedforward, alpha=spec.alpha, xi=spec.xi, omega=spec.omega,
-        spec_hash=spec.hash(), fdbench_version=__version__,
+        spec_hash=spec.hash(), fdbench_version=__version__, seed=noise_seed(spec),
     )
     described = spec.describe()
     record.update({k: v for k, v in described.items() if k in record})

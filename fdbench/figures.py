@@ -62,9 +62,22 @@ def _save(fig, path: Path) -> None:
     write_atomic(path, buffer.getvalue(), "--figures")
 
 
-def inverse_figure(inverse, path: Path) -> None:
+def recorded_samples(motion) -> tuple | None:
+    """The raw samples of a recorded or noisy motion (a ``SampledMotion``, per joint for a larger
+    model, or one resampled): (t (s), angles (rad), shape (n, joints)); None for a formula."""
+    motion = getattr(motion, "base", motion)
+    parts = getattr(motion, "parts", [motion])
+    if not parts or not all(hasattr(part, "recorded") for part in parts):
+        return None
+    return np.asarray(parts[0]._t), np.column_stack([part.recorded for part in parts])
+
+
+def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str = "", reference: str = "") -> None:
     """Figure 2: the desired angle (deg) and inverse-dynamics torque (N m) of every joint (the
-    forearm's elbow, or each joint of a larger model) against time (s)."""
+    forearm's elbow, or each joint of a larger model) against time (s). ``samples``: the raw
+    samples of a recorded or noisy motion (see ``recorded_samples``), drawn as dots under the
+    angle; ``note``: a line under the title (what the indicators are measured against); ``reference``:
+    what the drawn angle is (e.g. 'filtered')."""
     plt = _pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     one_joint = np.ndim(inverse.torque) == 1
@@ -73,14 +86,19 @@ def inverse_figure(inverse, path: Path) -> None:
     joints = ("elbow",) if one_joint else inverse.joints
     for j, joint in enumerate(joints):
         line = ("-", "--", ":", "-.")[j % 4]
-        top.plot(inverse.t, np.degrees(angles[:, j]), color="k", linestyle=line, label=joint)
+        top.plot(inverse.t, np.degrees(angles[:, j]), color="k", linestyle=line,
+                 label=f"{joint}: {reference}" if reference else joint)
         bottom.plot(inverse.t, torques[:, j], color="k", linestyle=line, label=joint)
+        if samples is not None:
+            top.plot(samples[0], np.degrees(samples[1][:, j]), linestyle="none", marker=".", markersize=2.5,
+                     color="tab:orange", alpha=0.7, zorder=0, label=f"{joint}: raw samples")
     where = f"{inverse.kinematics} kinematics" if one_joint else f"motion {inverse.motion}"
-    top.set_title(f"Figure 2: desired rotation and inverse-dynamics torque\n({where})", fontsize=11)
+    top.set_title(f"Figure 2: desired rotation and inverse-dynamics torque\n({where})" + (f"\n{note}" if note else ""),
+                  fontsize=11 if not note else 9)
     top.set_ylabel("rotation (deg)" if one_joint else "joint angle (deg)")
     bottom.set_ylabel("elbow torque (N m)" if one_joint else "joint torque (N m)")
     bottom.set_xlabel("time (s)")
-    if not one_joint:
+    if not one_joint or reference:
         top.legend(fontsize=7.5)
     for ax in (top, bottom):
         ax.grid(alpha=0.3)
@@ -170,6 +188,20 @@ def convergence_figure(series, path: Path, title: str, reference: float | None =
     plt.close(fig)
 
 
+def figure2_samples(spec) -> tuple:
+    """(raw samples, note, line label) of Figure 2 for the motion of ``spec``: the samples a method
+    is given (a recording's, or the noisy capture of seed ``spec.seed or 0``) and what RMSE_rot is
+    measured against; (None, "", "") for a formula's motion or derivatives given in the file."""
+    desired, _ = spec.motions()
+    samples = recorded_samples(desired)
+    if samples is None or getattr(desired, "given_derivatives", False):
+        return None, "", ""
+    if spec.noise_deg:
+        return samples, (f"dots: the noisy capture ({spec.noise_deg:g} deg, seed {spec.seed or 0}); "
+                         "RMSE_rot is measured against the noise-free motion (the line)"), "noise-free"
+    return samples, "dots: the recorded samples; RMSE_rot is measured against the filtered angle (the line)", "filtered"
+
+
 def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base: Path) -> dict:
     """Write the report's figures into ``directory`` (created if missing) for the plan's stored
     runs ({hash: stored run}) and report rows; return {title: path relative to ``base``}, the
@@ -185,7 +217,10 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
 
     one_joint = np.ndim(inverse.torque) == 1
     path = directory / "figure2_inverse_dynamics.png"
-    inverse_figure(inverse, path)
+    spec = plan.control or plan.all_specs()[0]
+    samples, note, reference = figure2_samples(spec)
+    inverse_figure(inverse, path, samples, note, reference)
+    desired = f"\n(desired: the {reference} angle, which RMSE_rot is measured against)" if reference else ""
     link("Figure 2: desired rotation and inverse-dynamics torque", path)
 
     def angles(result):
@@ -217,7 +252,8 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
         if len(curves) > len(control_curves):
             path = directory / f"figure{5 if table == 2 else 6}_tracking.png"
             (tracking_figure if one_joint else joints_tracking_figure)(inverse, curves, path,
-                                                                       f"{name}: the median run of each method")
+                                                                       f"{name}: the median run of each method"
+                                                                       + desired)
             link(name, path)
         if series:
             path = directory / f"convergence_table{table}.png"

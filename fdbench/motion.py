@@ -131,6 +131,7 @@ class SampledMotion(Motion):
         check_samples(t, theta)
         self.name = name
         self._t = _read_only(t - t[0])
+        self.recorded = _read_only(theta.copy())  # the raw angles (rad) at times self._t, for figures
         self._samples = self._t if samples is None else _read_only(samples)
         self.cutoff_hz, self.smoothing, self.spline_lambda = cutoff_hz, smoothing, spline_lambda
         self.given_derivatives = theta_vel is not None and theta_acc is not None

@@ -329,7 +329,8 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
         links = write_report_figures(plan, runs, rows, inverse, figures, output.parent if output is not None else Path("."))
         _say(quiet, f"wrote {len(links)} figures to {figures}")
     section = beyond_markdown(extra_rows, methods) if methods else None
-    return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section)
+    return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section,
+                    extra_rows=extra_rows)
 
 
 def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=None) -> None:
