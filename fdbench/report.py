@@ -758,8 +758,7 @@ def condition_settings(spec, specs: list) -> dict:
         seeds = _seed_list([noise_seed(s) for s in specs if s.noise_deg])
         where = "its own samples" if digest else f"{spec.capture_hz:g} Hz"
         rows["noise"] = (f"{spec.noise_deg:g} deg white Gaussian on the captured angle ({where}); one realisation "
-                         f"per seed, seeds {seeds} (a run's seed draws its noise; PD control and the rows beyond "
-                         "the paper: seed 0)")
+                         f"per seed, seeds {seeds} (a run's seed draws its noise; a run without one: seed 0)")
     if spec.plant:
         rows["plant"] = (f"{described.get('plant')}: the simulated body only; inverse dynamics, the feedforward and "
                          "the model-based controllers keep the nominal model")

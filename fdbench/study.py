@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .benchmark import INDICATORS, Cell, succeeded
+from .benchmark import INDICATORS, Cell, failure_message, outcome_text, succeeded
 from .experiment import RunSpec, control_spec, gradient_for, optimize_spec
 
 KINDS = ("noise", "mismatch")
@@ -101,14 +101,20 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
 
 
 def summary(sweep: Sweep, runs: dict) -> list[dict]:
-    """One row per method and level: median and IQR of each indicator over the runs, and the
-    number of successful runs."""
+    """One row per method and level: median and IQR of each indicator over the runs, the number
+    of successful runs and of runs that reached the end, why the others stopped (``status``:
+    '3 singular, 2 no-better-than-start'), the median ``t_end`` (s) and the first failure's
+    ``message``."""
     rows = []
     for method in sweep.methods:
         for level in sweep.levels:
             records = [runs[s.hash()]["record"] for s in sweep.specs[(method, level)]]
+            ends = [r["t_end"] for r in records if isinstance(r.get("t_end"), (int, float))]
             row = {"method": method, "level": level, "runs": len(records),
-                   "successes": sum(succeeded(r) for r in records)}
+                   "successes": sum(succeeded(r) for r in records),
+                   "reached_end": sum(r.get("status") == "success" for r in records),
+                   "status": outcome_text(records, codes=True), "why": outcome_text(records),
+                   "t_end": float(np.median(ends)) if ends else math.nan, "message": failure_message(records)}
             for name in INDICATORS:
                 values = np.array([r.get(name) if r.get(name) is not None else np.nan for r in records], dtype=float)
                 values = values[np.isfinite(values)]
@@ -118,14 +124,31 @@ def summary(sweep: Sweep, runs: dict) -> list[dict]:
     return rows
 
 
-CSV_COLUMNS = ("study", "param", "method", "level", "unit", "runs", "successes") + tuple(
+ROW_COLUMNS = ("method", "level", "runs", "successes", "reached_end", "status", "t_end", "message") + tuple(
     f"{name}_{stat}" for name in INDICATORS for stat in ("median", "q1", "q3"))
+# the conditions every row shares (see ``conditions``)
+CONDITION_COLUMNS = ("model", "model_options", "plant", "motion", "motion_sha256", "derivatives", "noise_deg")
+CSV_COLUMNS = ("study", "param", "unit") + CONDITION_COLUMNS + ROW_COLUMNS
+
+
+def conditions(sweep: Sweep) -> dict:
+    """What every run of the study tracked and simulated apart from the swept condition: the
+    model and its changes, the plant's changes (a mismatch study adds its own), the motion (a
+    file's SHA-256) and the derivative estimate."""
+    spec = sweep.all_specs()[0]
+    described = spec.describe()
+    _, truth = spec.motions()
+    plant = described.get("plant")
+    if sweep.kind == "mismatch":  # the swept constant is the level; other changes stay
+        plant = " ".join(f"{k}={v}" for k, v in spec.plant if k != sweep.param) or None
+    return {"model": spec.model_name, "model_options": described.get("model_options"), "plant": plant,
+            "motion": truth.name, "motion_sha256": dict(spec.inputs).get("--motion"),
+            "derivatives": described.get("derivatives"), "noise_deg": None if sweep.kind == "noise" else spec.noise_deg}
 
 
 def csv_rows(sweep: Sweep, rows: list[dict]) -> list[list]:
-    unit = UNITS[sweep.kind]
-    return [[sweep.kind, sweep.param or "", r["method"], r["level"], unit, r["runs"], r["successes"]]
-            + [r[c] for c in CSV_COLUMNS[7:]] for r in rows]
+    shared = [sweep.kind, sweep.param or "", UNITS[sweep.kind]] + list(conditions(sweep).values())
+    return [shared + [r[c] for c in ROW_COLUMNS] for r in rows]
 
 
 def _cell(row: dict, name: str) -> str:
@@ -146,7 +169,7 @@ def markdown(sweep: Sweep, rows: list[dict], settings: dict, figures: dict | Non
     out = [f"# fdbench study: {sweep.kind}" + (f" of {sweep.param}" if sweep.param else ""), "",
            f"Each method tracks the desired motion with {what}, at each level; every figure is the median over "
            "the runs with the interquartile range [Q1, Q3] (one value: a single run, or identical runs). "
-           "RMSE_rot is measured against the true (noise-free) motion, RMSE_torque against the inverse-dynamics "
+           f"RMSE_rot is measured against {_reference(sweep)}, RMSE_torque against the inverse-dynamics "
            "torque of the nominal model on it.", "", "## Settings", "", "| setting | value |", "|---|---|"]
     out += [f"| {k} | {v} |" for k, v in settings.items()]
     titles = {"rmse_rot_deg": "RMSE of rotation (deg)", "rmse_torque_nm": "RMSE of torque (N m)",
@@ -161,10 +184,27 @@ def markdown(sweep: Sweep, rows: list[dict], settings: dict, figures: dict | Non
             done = sum(c["successes"] for c in cells)
             total = sum(c["runs"] for c in cells)
             out.append(f"| {method} | " + " | ".join(_cell(c, name) for c in cells) + f" | {done}/{total} |")
+    failures = [f"- {r['method']} at {r['level']:g} {unit}: {r['reached_end']} of {r['runs']} reached the end; "
+                f"{r['why']}" + (f". First failure: {r['message'].rstrip('.')}." if r["message"] else ".")
+                for r in rows if r["successes"] < r["runs"]]
+    if failures:
+        out += ["", "## Runs that did not succeed", "",
+                "Success: the run reached the end of the motion and (an optimisation) ended below its initial "
+                "guess's objective. The others, by why they stopped:", ""] + failures
     out += ["", "## Reading it", ""] + _reading(sweep, rows)
     if figures:
         out += ["", "## Figures", ""] + [f"![{title}]({path})" for title, path in figures.items()]
     return "\n".join(out).rstrip() + "\n"
+
+
+def _reference(sweep: Sweep) -> str:
+    """What RMSE_rot is measured against: the noise-free motion, a recording's filtered angle."""
+    spec = sweep.all_specs()[0]
+    recorded = bool(dict(spec.inputs).get("--motion"))
+    noisy = sweep.kind == "noise" or spec.noise_deg
+    if recorded:
+        return "the recording's filtered angle" + (" (noise-free: the methods are given the noisy capture)" if noisy else "")
+    return "the true (noise-free) motion" if noisy else "the desired motion"
 
 
 def _reading(sweep: Sweep, rows: list[dict]) -> list[str]:
