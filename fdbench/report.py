@@ -777,13 +777,13 @@ def rmse_reference(spec, derivatives: str | None) -> str | None:
     """What RMSE_rot is measured against when that is not simply the motion's formula: the
     noise-free motion under noise, the filtered angle of a recording (None for eq. 5 or 'reach')."""
     if spec.noise_deg:
-        base = ("the recording's filtered angle" if dict(spec.inputs).get("--motion") else "the motion's exact angle")
+        base = ("the recording's filtered angle" if dict(spec.inputs).get("--motion") else "the formula's angle")
         return (f"the noise-free motion ({base}); the methods are given the noisy capture, filtered "
-                "(see Figure 2 for its samples)")
+                "(with --figures, Figure 2 shows its samples)")
     if derivatives == "given":
         return "the recorded angle, interpolated through its samples with the velocities given (not filtered)"
     if derivatives:
-        return (f"the filtered angle ({derivatives}), not the raw samples (Figure 2 shows both): "
+        return (f"the filtered angle ({derivatives}), not the raw samples (with --figures, Figure 2 shows both): "
                 "noise in the recording does not count as a tracking error")
     return None
 

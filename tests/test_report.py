@@ -826,3 +826,124 @@ def test_the_cmaes_step_experiment_holds(tmp_path):
         medians.append(frame.iloc[0].rmse_rot_deg_median)
         successes.append(round(frame.iloc[0].success_rate * 5))
     assert medians[1] > medians[0] and successes[1] < 3
+
+
+# ----------------------------------------------------------------------------- what happened
+
+
+NOISY = ["--noise-deg", 0.5, "--plant", "I1=0.044", "--torque", "cs", "--opt", "bfgs", "--feedforward", "--seeds", 2,
+         "--budget", 5, "--jobs", 1, "--no-beyond", "-q"]
+
+
+def _settings(text: str) -> dict:
+    section = _section(text, "## Settings")
+    return dict(re.findall(r"^\| ([^|]+?) \| (.+) \|$", section, flags=re.M)[1:])
+
+
+def test_noise_and_plant_stand_in_the_settings_csv_and_json(tmp_path):
+    db = tmp_path / "noisy.sqlite"
+    settings = _settings(invoke("report", "--db", db, *NOISY).stdout)
+    assert "0.5 deg white Gaussian" in settings["noise"] and "seeds 0, 1" in settings["noise"]
+    assert settings["plant"].startswith("I1=0.044")
+    assert "noise-free" in settings["RMSE_rot against"]
+    frame = read_csv(invoke("report", "--db", db, *NOISY, "-f", "csv").stdout)
+    assert (frame.noise_deg == 0.5).all() and (frame.plant == "I1=0.044").all() and (frame.model == "forearm").all()
+    assert list(frame.noise_seeds.astype(str)) == ["0", "0, 1"]  # PD control draws seed 0's noise
+    cells = json.loads(invoke("report", "--db", db, *NOISY, "-f", "json").stdout)["cells"]
+    assert [(c["noise_deg"], c["plant"]) for c in cells] == [(0.5, "I1=0.044")] * 2
+
+
+def test_a_motion_file_stands_with_its_digest_convention_and_filtered_reference(tmp_path):
+    import hashlib
+
+    motion = Path(__file__).parents[1] / "examples" / "elbow_flexion.csv"
+    args = ["report", "--db", tmp_path / "file.sqlite", "--motion", motion, "--torque", "cs", "--opt", "bfgs",
+            "--feedforward", "--no-control", "--no-beyond", "--seeds", 1, "--budget", 2, "--jobs", 1, "-q"]
+    text = invoke(*args).stdout
+    settings = _settings(text)
+    digest = hashlib.sha256(motion.read_bytes()).hexdigest()
+    assert digest[:16] in settings["motion"] and "2.5 s" in settings["motion"]
+    assert "from the horizontal +x axis" in settings["angle convention"]
+    assert settings["RMSE_rot against"].startswith("the filtered angle")
+    assert "(t = 2.5 s)" in text and "t = 1 s" not in text
+    frame = read_csv(invoke(*args, "-f", "csv").stdout)
+    assert frame.motion_sha256.tolist() == [digest] and frame.motion.tolist() == ["file:elbow_flexion.csv"]
+
+
+def test_figure2_draws_a_recordings_raw_samples_and_says_what_rmse_is_against():
+    from fdbench.experiment import RunSpec, with_motion_file
+    from fdbench.figures import figure2_samples
+
+    motion = Path(__file__).parents[1] / "examples" / "elbow_flexion.csv"
+    raw = np.loadtxt(motion, delimiter=",", skiprows=1)
+    samples, note, reference = figure2_samples(with_motion_file(RunSpec(kinematics=str(motion))))
+    assert np.allclose(samples[1][:, 0], np.radians(raw[:, 1])) and np.allclose(samples[0], raw[:, 0] - raw[0, 0])
+    assert reference == "filtered" and "against the filtered angle" in note
+    noisy, note, reference = figure2_samples(RunSpec(noise_deg=0.5, seed=3))
+    assert len(noisy[0]) == 101 and reference == "noise-free" and "seed 3" in note
+    assert figure2_samples(RunSpec()) == (None, "", "")
+
+
+def test_a_control_run_with_noise_records_its_seed():
+    assert _json_run("control", "--noise-deg", 0.5, "--seed", 3)["seed"] == 3
+    assert _json_run("control", "--noise-deg", 0.5)["seed"] == 0
+    assert _json_run("control")["seed"] is None  # draws nothing
+
+
+def _failing_cell() -> "fdbench.report.Row":
+    """A cell of five runs: two singular, one non-finite, one that ended no better than its
+    start, one success."""
+    from fdbench.benchmark import Cell
+    from fdbench.report import Row
+
+    singular = {"status": "singular", "t_end": 0.4, "message": "theta reached +-pi/2", "rmse_rot_deg": 9.0}
+    records = [dict(singular), dict(singular, t_end=0.5),
+               {"status": "nonfinite", "t_end": 0.2, "message": "the state became non-finite", "rmse_rot_deg": 8.0},
+               {"status": "success", "t_end": 1.0, "best_objective": 3.0, "initial_objective": 3.0, "rmse_rot_deg": 3.0},
+               {"status": "success", "t_end": 1.0, "best_objective": 1.0, "initial_objective": 3.0, "rmse_rot_deg": 1.0}]
+    return Row("CS + BFGS", 2, Cell("cs", "bfgs", False), summarise(records), None, records)
+
+
+def test_a_failing_cells_outcomes_sum_to_its_runs_with_status_t_end_and_message():
+    from fdbench.report import csv_rows, failure_lines, json_report
+
+    row = _failing_cell()
+    values = dict(zip(CSV_COLUMNS, csv_rows([row])[0]))
+    counts = {name: int(n) for n, name in (part.split(" ", 1) for part in values["status"].split(", "))}
+    assert counts == {"success": 1, "singular": 2, "nonfinite": 1, "no-better-than-start": 1}
+    assert sum(counts.values()) == values["runs"] == 5 and values["reached_end"] == 2
+    assert values["t_end"] == 0.5 and values["message"] == "theta reached +-pi/2"
+    (line,) = failure_lines([row])
+    assert "2 of 5 reached the end" in line and "2 singular" in line and "1 ended no better than their start" in line
+    cell = json_report([row], {})["cells"][0]
+    assert sum(cell["status_counts"].values()) == 5 and cell["message"] == "theta reached +-pi/2"
+
+
+def test_markdown_has_no_legend_line_for_an_absent_column(tmp_path):
+    text = invoke("report", "--db", tmp_path / "noisy.sqlite", *NOISY).stdout
+    assert "vs paper" not in text and "speed-up" not in text
+    for absent in ("**paper**", "**vs paper**", "**speed-up**"):
+        assert absent not in text
+    assert "(t = 1 s)" in text
+    from fdbench.report import legend
+
+    arm = "\n".join(legend([_failing_cell()], ("shoulder", "elbow"), 1.0, "reach"))
+    assert "joint angles" in arm and "elbow rotation" not in arm and "paper's kinematics" not in arm
+
+
+def test_the_comparison_counts_every_row_and_every_cell():
+    from fdbench.benchmark import Cell
+    from fdbench.report import Row, _comparison
+
+    def row(name, table, rot, cell=None, status="success"):
+        record = {"status": status, "rmse_rot_deg": rot, "runtime_s": 0.1, "t_end": 1.0}
+        return Row(name, table, cell, summarise([record]), None, [record])
+
+    rows = [row("PD", "control", 0.1)]
+    rows += [row(f"cell {i}", 2 + i % 2, 0.05 if i < 3 else 5.0, Cell("cs", "bfgs", bool(i % 2)),
+                 "success" if i < 5 else "singular") for i in range(10)]
+    rows.append(row("Direct collocation", "beyond", 0.00015))
+    text = "\n".join(_comparison(rows))
+    assert "Most accurate of the 12 rows: Direct collocation" in text
+    assert "3 of 10 optimisation cells track more accurately than PD control" in text
+    assert "5 without a successful run" in text

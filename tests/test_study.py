@@ -108,3 +108,36 @@ def test_study_figures_have_one_per_indicator(tmp_path):
     text = (tmp_path / "s.md").read_text()
     assert "figs/study_noise_rmse_rot_deg.png" in text and "| PD + feedforward |" in text
     assert np.all([(tmp_path / "figs" / n).stat().st_size > 1000 for n in names])
+
+
+def test_a_study_row_counts_why_its_runs_stopped():
+    from fdbench.study import CSV_COLUMNS, csv_rows, markdown, summary
+
+    s = sweep("noise", (0.0, 0.5), seeds=3)
+    outcomes = iter([{"status": "singular", "t_end": 0.3, "message": "theta reached +-pi/2"},
+                     {"status": "success", "t_end": 1.0, "best_objective": 2.0, "initial_objective": 2.0},
+                     {"status": "success", "t_end": 1.0, "best_objective": 1.0, "initial_objective": 2.0}] * 10)
+    runs = {spec.hash(): {"record": {"rmse_rot_deg": 1.0, "rmse_torque_nm": 0.1, "runtime_s": 0.1, **next(outcomes)}}
+            for spec in s.all_specs()}
+    rows = summary(s, runs)
+    frame = pd.DataFrame(csv_rows(s, rows), columns=list(CSV_COLUMNS))
+    for _, row in frame.iterrows():
+        counts = [int(part.split(" ")[0]) for part in row.status.split(", ")]
+        assert sum(counts) == row.runs
+    cell = frame[(frame.method == "CS + bfgs + ff") & (frame.level == 0.5)].iloc[0]
+    assert (cell.successes, cell.reached_end) == (1, 2)
+    assert cell.message in ("theta reached +-pi/2", "reached the end with objective 2 deg, not below its initial guess's 2 deg")
+    text = markdown(s, rows, {})
+    assert "## Runs that did not succeed" in text
+    line = next(l for l in text.splitlines() if l.startswith("- CS + bfgs + ff at 0.5 deg"))
+    assert "2 of 3 reached the end" in line and "1 singular" in line and "1 ended no better than their start" in line
+
+
+def test_a_studys_conditions_stand_in_its_settings_and_columns(tmp_path):
+    args = ("mismatch", "--param", "I1", "--levels", "0", "--seeds", 1, "--torque", "cs", "--opt", "bfgs",
+            "--feedforward", "--budget", 2, "--no-control", "--noise-deg", 0.3, "--plant", "m=1.1",
+            "--db", tmp_path / "s.sqlite")
+    frame = study_frame(*args)
+    assert (frame.plant == "m=1.1").all() and (frame.noise_deg == 0.3).all() and (frame.model == "forearm").all()
+    text = invoke("study", *args, "-q", "--jobs", 1).stdout
+    assert "| noise | 0.3 deg white Gaussian" in text and "| plant | m=1.1 (the simulated body only)" in text
