@@ -20,14 +20,15 @@ OPTIMIZER_LABELS = {"cmaes": "CMA-ES", "bfgs": "BFGS quasi-Newton"}
 # the conditions a cell ran under (see ``run_conditions``)
 CONDITION_COLUMNS = ("model", "model_options", "plant", "motion", "motion_sha256", "derivatives", "noise_deg",
                      "noise_seeds")
-# how its runs ended: successes, runs that reached the motion's end, the count of each outcome
+# how its runs ended: runs that reached the motion's end, the count of each outcome
 # ('3 singular, 2 no-better-than-start'), the median time reached (s), the first failure's message
-OUTCOME_COLUMNS = ("success_rate", "reached_end", "status", "t_end", "message")
+OUTCOME_COLUMNS = ("reached_end", "status", "t_end", "message")
+# the first columns keep their places; the later ones were added after them
 CSV_COLUMNS = (
-    "cell", "table", "torque", "optimizer", "feedforward", "in_paper", *CONDITION_COLUMNS, "kinematics",
-    "integrator", "dt", "budget", "seeds", "runs", "rmse_rot_deg_median", "rmse_rot_deg_iqr", "rmse_torque_nm_median",
-    "rmse_torque_nm_iqr", "runtime_s_median", "runtime_s_iqr", *OUTCOME_COLUMNS, "paper_rmse_rot_deg",
-    "paper_rmse_torque_nm", "paper_runtime_s", "speedup_vs_paper",
+    "cell", "table", "torque", "optimizer", "feedforward", "in_paper", "model", "kinematics", "integrator", "dt",
+    "budget", "seeds", "runs", "rmse_rot_deg_median", "rmse_rot_deg_iqr", "rmse_torque_nm_median",
+    "rmse_torque_nm_iqr", "runtime_s_median", "runtime_s_iqr", "success_rate", "paper_rmse_rot_deg",
+    "paper_rmse_torque_nm", "paper_runtime_s", "speedup_vs_paper", *OUTCOME_COLUMNS, *CONDITION_COLUMNS[1:],
 )
 
 # Our median within this factor of the paper's figure (or the paper's figure within the range of

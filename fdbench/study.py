@@ -124,11 +124,12 @@ def summary(sweep: Sweep, runs: dict) -> list[dict]:
     return rows
 
 
-ROW_COLUMNS = ("method", "level", "runs", "successes", "reached_end", "status", "t_end", "message") + tuple(
-    f"{name}_{stat}" for name in INDICATORS for stat in ("median", "q1", "q3"))
+INDICATOR_COLUMNS = tuple(f"{name}_{stat}" for name in INDICATORS for stat in ("median", "q1", "q3"))
 # the conditions every row shares (see ``conditions``)
 CONDITION_COLUMNS = ("model", "model_options", "plant", "motion", "motion_sha256", "derivatives", "noise_deg")
-CSV_COLUMNS = ("study", "param", "unit") + CONDITION_COLUMNS + ROW_COLUMNS
+# the first columns keep their places; the later ones were added after them
+CSV_COLUMNS = (("study", "param", "method", "level", "unit", "runs", "successes") + INDICATOR_COLUMNS
+               + ("reached_end", "status", "t_end", "message") + CONDITION_COLUMNS)
 
 
 def conditions(sweep: Sweep) -> dict:
@@ -147,8 +148,9 @@ def conditions(sweep: Sweep) -> dict:
 
 
 def csv_rows(sweep: Sweep, rows: list[dict]) -> list[list]:
-    shared = [sweep.kind, sweep.param or "", UNITS[sweep.kind]] + list(conditions(sweep).values())
-    return [shared + [r[c] for c in ROW_COLUMNS] for r in rows]
+    shared = list(conditions(sweep).values())
+    return [[sweep.kind, sweep.param or "", r["method"], r["level"], UNITS[sweep.kind], r["runs"], r["successes"]]
+            + [r[c] for c in INDICATOR_COLUMNS + ("reached_end", "status", "t_end", "message")] + shared for r in rows]
 
 
 def _cell(row: dict, name: str) -> str:
