@@ -131,7 +131,7 @@ def test_write_error_after_the_work_is_one_line_and_keeps_the_stored_run(tmp_pat
     def disk_full(*args):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(files, "_replace", disk_full)
+    monkeypatch.setattr(files.os, "replace", disk_full)
     line = one_line_error(invoke(["control", "--db", "r.sqlite", "-o", "out.json", "-q"]))
     assert "--output" in line and "No space left" in line, line
     with open_store(tmp_path / "r.sqlite") as store:
