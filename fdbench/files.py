@@ -11,6 +11,7 @@ import os
 import re
 import signal
 import stat
+import sys
 import tempfile
 import threading
 import time
@@ -27,14 +28,16 @@ class BadFile(ValueError):
 MAX_INPUT_BYTES = 64 * 2**20  # a torque or motion CSV, a parameter file: far more than any real one
 
 
-def _stat(path) -> os.stat_result | None:
-    """os.stat following symlinks, or None where nothing exists (a dangling link included)."""
+def _stat(path, option: str | None = None) -> os.stat_result | None:
+    """os.stat following symlinks, or None where nothing exists (a dangling link included);
+    BadFile (naming ``option``) for a path that cannot be inspected (a loop of links)."""
     try:
         return os.stat(path)
     except FileNotFoundError:
         return None
     except OSError as exc:
-        raise BadFile(f"cannot inspect {path}: {exc.strerror or exc}") from None
+        where = f"{option}: " if option else ""
+        raise BadFile(f"{where}cannot inspect {path}: {exc.strerror or exc}") from None
 
 
 def _in_place(path: Path, st: os.stat_result | None) -> bool:
@@ -53,7 +56,7 @@ def check_writable(path: str | os.PathLike, option: str) -> Path:
     path = Path(path)
     if str(path) in ("", "."):
         raise BadFile(f"{option}: an empty file name")
-    st = _stat(path)
+    st = _stat(path, option)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise BadFile(f"{option}: {path} is a directory")
     if st is not None and stat.S_ISSOCK(st.st_mode):
@@ -88,6 +91,28 @@ def _probe_writable(path: Path, option: str) -> None:
         raise BadFile(f"{option}: {path} cannot be written: {exc.strerror or exc}") from None
 
 
+_FS_IOC_GETFLAGS = 0x80086601  # Linux: read a file's attributes (lsattr)
+_FS_APPEND_FL = 0x20
+
+
+def _append_only(folder: Path) -> bool:
+    """True if folder is append-only (``chattr +a``; Linux): names can be added to it but not
+    renamed or removed, so an atomic rename would fail and leave its temporary file behind."""
+    try:
+        import fcntl
+
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except (ImportError, OSError):
+        return False
+    try:
+        flags = fcntl.ioctl(fd, _FS_IOC_GETFLAGS, bytes(8))
+        return bool(int.from_bytes(flags[:4], sys.byteorder) & _FS_APPEND_FL)
+    except OSError:
+        return False  # a file system without attributes, or not Linux
+    finally:
+        os.close(fd)
+
+
 def _umask() -> int:
     mask = os.umask(0o022)
     os.umask(mask)
@@ -113,7 +138,7 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--ou
     try:
         st = _stat(path)
         target = Path(os.path.realpath(path))
-        if _in_place(path, st) or not os.access(target.parent, os.W_OK):
+        if _in_place(path, st) or not os.access(target.parent, os.W_OK) or _append_only(target.parent):
             with open(path, "wb") as handle:
                 handle.write(payload)
             return
@@ -210,7 +235,7 @@ def check_distinct(outputs: dict, inputs: dict | None = None, database=None) -> 
         protected += [("--db", Path(database))]
         protected += [("--db", Path(f"{database}{suffix}")) for suffix in ("-wal", "-shm", "-journal")]
     for i, (option, path) in enumerate(named):
-        st = _stat(path)
+        st = _stat(path, option)
         if st is not None and not stat.S_ISREG(st.st_mode):
             continue  # a device or FIFO: writing it destroys nothing
         for other, guarded in protected:

@@ -175,6 +175,21 @@ def test_append_only_or_immutable_output_is_refused_before_work(tmp_path, monkey
         _chattr(flag.replace("+", "-"), target)
 
 
+def test_output_in_an_append_only_folder_is_written_leaving_no_temporary_file(tmp_path):
+    folder = tmp_path / "log"
+    folder.mkdir()
+    (folder / "old.txt").write_text("old")
+    if not _chattr("+a", folder):
+        pytest.skip("chattr +a does not work here (needs root and a file system with attributes)")
+    try:
+        files.write_atomic(folder / "new.txt", "new")  # names can be added: as '>' does
+        files.write_atomic(folder / "old.txt", "rewritten")  # but not renamed over: written in place
+    finally:
+        _chattr("-a", folder)
+    assert (folder / "new.txt").read_text() == "new" and (folder / "old.txt").read_text() == "rewritten"
+    assert temporaries(folder) == []
+
+
 # ---- --db naming an input ------------------------------------------------------------------------
 
 

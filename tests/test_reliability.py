@@ -105,6 +105,7 @@ def prepare(folder: Path) -> None:
     view_db.close()
     (folder / "empty.toml").write_text("")  # a model file that could become a database
     os.symlink("empty.toml", folder / "link_to_empty.toml")
+    os.symlink("loop", folder / "loop")
     os.symlink("in.csv", folder / "link_to_in.csv")
     os.link(folder / "in.csv", folder / "hard_in.csv")
     os.symlink("db.sqlite", folder / "link_to_db")
@@ -152,6 +153,7 @@ MATRIX = [
     (["inverse", "-o", "missing/x.csv"], {}, ["does not exist"]),
     (["inverse", "-o", ""], {}, ["empty"]),
     (["inverse", "-f", "xml"], {}, ["--format"]),
+    (["inverse", "-o", "loop"], {}, ["--output", "cannot inspect"]),
     (["inverse", "-f", "csv", "-o", "afile/x.csv"], {}, ["afile"]),
     # simulate: outputs against inputs
     (["simulate", "--torque-file", "in.csv", "-o", "in.csv"], {}, ["--torque-file"]),
