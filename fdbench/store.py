@@ -96,8 +96,10 @@ class Store:
         self.db = None
         try:
             self.db = sqlite3.connect(self.path, timeout=OPEN_PATIENCE_S, isolation_level=None)
+            self.db.execute("BEGIN")  # one read: what the file holds, as another process may be creating it
             objects = self.db.execute("SELECT type, name FROM sqlite_master").fetchall()
             pages = self.db.execute("PRAGMA page_count").fetchone()[0]
+            self.db.execute("COMMIT")
             self.db.execute("PRAGMA busy_timeout = 60000")  # writers of a parallel report wait their turn
         except sqlite3.OperationalError as exc:
             self.close()
