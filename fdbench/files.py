@@ -91,7 +91,7 @@ def _probe_writable(path: Path, option: str) -> None:
         raise BadFile(f"{option}: {path} cannot be written: {exc.strerror or exc}") from None
 
 
-_FS_IOC_GETFLAGS = 0x80086601  # Linux: read a file's attributes (lsattr)
+_FS_IOC_GETFLAGS = 0x80086601  # 64-bit Linux: read a file's attributes, as lsattr does
 _FS_APPEND_FL = 0x20
 
 
@@ -128,11 +128,11 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--ou
 
     A regular file (or a new name) is replaced atomically by a rename, keeping its permission bits
     (and owner, where allowed): a reader sees the old file or the whole new one. A symlink is
-    written through (its target is replaced, the link stays). Devices, FIFOs, ``/dev/stdout``
-    and files with other hard links are opened and written in place. A write that fails raises
-    BadFile naming ``option``; the temporary file is removed on every exit but SIGKILL (Ctrl-C
-    and SIGTERM wait for the write to end), and the next write into that folder removes what a
-    killed writer left behind."""
+    written through (its target is replaced, the link stays). Devices, FIFOs, ``/dev/stdout``,
+    files with other hard links and files of an append-only folder are opened and written in
+    place. A write that fails raises BadFile naming ``option``; the temporary file is removed on
+    every exit but SIGKILL (Ctrl-C and SIGTERM wait for the write to end), and the next write
+    into that folder removes what a killed writer left behind."""
     path = check_writable(path, option)
     payload = data.encode() if isinstance(data, str) else bytes(data)
     try:
