@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import csv
+import errno
 import hashlib
 import io
 import math
 import os
+import re
+import signal
 import stat
+import sys
 import tempfile
+import threading
+import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -21,14 +28,16 @@ class BadFile(ValueError):
 MAX_INPUT_BYTES = 64 * 2**20  # a torque or motion CSV, a parameter file: far more than any real one
 
 
-def _stat(path) -> os.stat_result | None:
-    """os.stat following symlinks, or None where nothing exists (a dangling link included)."""
+def _stat(path, option: str | None = None) -> os.stat_result | None:
+    """os.stat following symlinks, or None where nothing exists (a dangling link included);
+    BadFile (naming ``option``) for a path that cannot be inspected (a loop of links)."""
     try:
         return os.stat(path)
     except FileNotFoundError:
         return None
     except OSError as exc:
-        raise BadFile(f"cannot inspect {path}: {exc.strerror or exc}") from None
+        where = f"{option}: " if option else ""
+        raise BadFile(f"{where}cannot inspect {path}: {exc.strerror or exc}") from None
 
 
 def _in_place(path: Path, st: os.stat_result | None) -> bool:
@@ -42,14 +51,16 @@ def _in_place(path: Path, st: os.stat_result | None) -> bool:
 
 def check_writable(path: str | os.PathLike, option: str) -> Path:
     """Fail early, before any work, if ``path`` cannot be written as an output: a directory, a
-    missing folder, a read-only file (even for root: the user protected it), an unwritable
-    folder."""
+    socket, a missing folder, a read-only, append-only or immutable file (even for root: the user
+    protected it), an unwritable folder."""
     path = Path(path)
     if str(path) in ("", "."):
         raise BadFile(f"{option}: an empty file name")
-    st = _stat(path)
+    st = _stat(path, option)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise BadFile(f"{option}: {path} is a directory")
+    if st is not None and stat.S_ISSOCK(st.st_mode):
+        raise BadFile(f"{option}: {path} is a socket; choose a file")
     if st is None:
         target = Path(os.path.realpath(path))  # a dangling link creates its target, as '>' does
         if not target.parent.is_dir():
@@ -59,9 +70,47 @@ def check_writable(path: str | os.PathLike, option: str) -> Path:
         return path
     if stat.S_ISREG(st.st_mode) and not (st.st_mode & 0o222):
         raise BadFile(f"{option}: {path} is read-only; make it writable or choose another file")
-    if not os.access(path, os.W_OK):
+    if stat.S_ISREG(st.st_mode):
+        _probe_writable(path, option)
+    elif not os.access(path, os.W_OK):
         raise BadFile(f"{option}: {path} is not writable")
     return path
+
+
+def _probe_writable(path: Path, option: str) -> None:
+    """Open a regular file for writing, changing nothing (no truncation, no byte written): the
+    only test that also sees what permission bits do not say (append-only and immutable files,
+    read-only file systems)."""
+    try:
+        os.close(os.open(path, os.O_WRONLY | getattr(os, "O_NONBLOCK", 0)))
+    except PermissionError as exc:
+        if exc.errno == errno.EPERM:
+            raise BadFile(f"{option}: {path} is append-only or immutable (see lsattr); choose another file") from None
+        raise BadFile(f"{option}: {path} is not writable") from None
+    except OSError as exc:
+        raise BadFile(f"{option}: {path} cannot be written: {exc.strerror or exc}") from None
+
+
+_FS_IOC_GETFLAGS = 0x80086601  # 64-bit Linux: read a file's attributes, as lsattr does
+_FS_APPEND_FL = 0x20
+
+
+def _append_only(folder: Path) -> bool:
+    """True if folder is append-only (``chattr +a``; Linux): names can be added to it but not
+    renamed or removed, so an atomic rename would fail and leave its temporary file behind."""
+    try:
+        import fcntl
+
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except (ImportError, OSError):
+        return False
+    try:
+        flags = fcntl.ioctl(fd, _FS_IOC_GETFLAGS, bytes(8))
+        return bool(int.from_bytes(flags[:4], sys.byteorder) & _FS_APPEND_FL)
+    except OSError:
+        return False  # a file system without attributes, or not Linux
+    finally:
+        os.close(fd)
 
 
 def _umask() -> int:
@@ -70,21 +119,39 @@ def _umask() -> int:
     return mask
 
 
+STALE_TEMPORARY_S = 15 * 60  # a temporary file of the atomic writer this old was left by a killed writer
+_TEMPORARY_NAME = re.compile(r"\.fdbench-[a-z0-9_]{8}\.tmp")  # tempfile.mkstemp(prefix=".fdbench-", suffix=".tmp")
+
+
 def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--output") -> None:
     """Write ``data`` to ``path`` as the shell's ``>`` would, made atomic where that is possible.
 
     A regular file (or a new name) is replaced atomically by a rename, keeping its permission bits
     (and owner, where allowed): a reader sees the old file or the whole new one. A symlink is
-    written through (its target is replaced, the link stays). Devices, FIFOs, ``/dev/stdout``
-    and files with other hard links are opened and written in place."""
+    written through (its target is replaced, the link stays). Devices, FIFOs, ``/dev/stdout``,
+    files with other hard links and files of an append-only folder are opened and written in
+    place. A write that fails raises BadFile naming ``option``; the temporary file is removed on
+    every exit but SIGKILL (Ctrl-C and SIGTERM wait for the write to end), and the next write
+    into that folder removes what a killed writer left behind."""
     path = check_writable(path, option)
     payload = data.encode() if isinstance(data, str) else bytes(data)
-    st = _stat(path)
-    target = Path(os.path.realpath(path))
-    if _in_place(path, st) or not os.access(target.parent, os.W_OK):
-        with open(path, "wb") as handle:
-            handle.write(payload)
-        return
+    try:
+        st = _stat(path)
+        target = Path(os.path.realpath(path))
+        if _in_place(path, st) or not os.access(target.parent, os.W_OK) or _append_only(target.parent):
+            with open(path, "wb") as handle:
+                handle.write(payload)
+            return
+        _remove_stale_temporaries(target.parent)
+        with _signals_deferred():
+            _replace(target, payload, st)
+    except OSError as exc:
+        raise BadFile(f"{option}: cannot write {path}: {exc.strerror or exc}") from None
+
+
+def _replace(target: Path, payload: bytes, st: os.stat_result | None) -> None:
+    """Write payload to a temporary file beside target, then rename it over target; the
+    temporary file is removed if anything fails."""
     # a short temporary name: the target's own name may already be as long as the system allows
     fd, tmp = tempfile.mkstemp(prefix=".fdbench-", suffix=".tmp", dir=target.parent)
     try:
@@ -98,8 +165,51 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--ou
                 pass  # not allowed: the file becomes the writer's, as with any rewrite
         os.replace(tmp, target)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass  # an append-only folder keeps it; nothing more can be done
         raise
+
+
+@contextmanager
+def _signals_deferred():
+    """Within the block, Ctrl-C (SIGINT) and SIGTERM are held back and delivered when it ends, so
+    that a write is never cut between creating its temporary file and renaming or removing it.
+    Outside the main thread, nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received = []
+    previous = {}
+    for number in (signal.SIGINT, signal.SIGTERM):
+        previous[number] = signal.signal(number, lambda signum, frame: received.append(signum))
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler if handler is not None else signal.SIG_DFL)
+        for number in dict.fromkeys(received):
+            signal.raise_signal(number)
+
+
+def _remove_stale_temporaries(folder: Path) -> None:
+    """Remove the atomic writer's temporary files (``.fdbench-XXXXXXXX.tmp``) in ``folder`` that a
+    killed writer left: regular files of this user older than STALE_TEMPORARY_S seconds."""
+    now = time.time()
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    for entry in entries:
+        if not _TEMPORARY_NAME.fullmatch(entry.name):
+            continue
+        try:
+            st = entry.stat(follow_symlinks=False)
+            if stat.S_ISREG(st.st_mode) and st.st_uid == os.geteuid() and now - st.st_mtime > STALE_TEMPORARY_S:
+                os.unlink(entry.path)
+        except OSError:
+            pass
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
@@ -114,15 +224,18 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
 def check_distinct(outputs: dict, inputs: dict | None = None, database=None) -> None:
     """Refuse, before any work, an output that would destroy something the command needs or
     another output: an output naming an input file, the results database (or its journal), or
-    another output. Keys are option names (``--output``), values paths or None. Devices such as
+    another output, and a results database naming an input file. Keys are option names (``--output``), values paths or None. Devices such as
     /dev/null may be named by several outputs."""
     named = [(o, Path(p)) for o, p in outputs.items() if p is not None]
     protected = [(o, Path(p)) for o, p in (inputs or {}).items() if p is not None]
     if database is not None and str(database) != ":memory:":
+        for other, guarded in protected:
+            if same_file(database, guarded):
+                raise BadFile(f"--db: {database} is the input of {other}; choose another file for the results")
         protected += [("--db", Path(database))]
         protected += [("--db", Path(f"{database}{suffix}")) for suffix in ("-wal", "-shm", "-journal")]
     for i, (option, path) in enumerate(named):
-        st = _stat(path)
+        st = _stat(path, option)
         if st is not None and not stat.S_ISREG(st.st_mode):
             continue  # a device or FIFO: writing it destroys nothing
         for other, guarded in protected:

@@ -3,14 +3,20 @@
 numba caches a compiled kernel next to its source by default, which puts files inside the
 installed package (left behind by ``pip uninstall``, and failing on a read-only install). fdbench
 keeps them in ``$FDBENCH_CACHE_DIR``, else ``$XDG_CACHE_HOME/fdbench``, else ``~/.cache/fdbench``;
-when none of these can be written (a read-only home), in a folder of the temporary directory, and
+when none of these can be used (a read-only home), in a folder of the temporary directory, and
 when not even that can, kernels are compiled on every run without a cache. Either fallback is
 said once on stderr.
+
+A cached kernel is code that this process loads and runs, so a cache folder must be the user's
+own: owned by the user and writable by nobody else (the folder fdbench creates is mode 0700).
+The fallback in the shared temporary directory must moreover not be a symbolic link; one that
+another user could have made (or redirected) is never used.
 """
 
 from __future__ import annotations
 
 import os
+import stat
 import sys
 import tempfile
 from pathlib import Path
@@ -25,27 +31,56 @@ def _candidates() -> list[Path]:
     return [Path(base) / "fdbench"]
 
 
-def _usable(folder: Path) -> bool:
-    """True if folder exists (or can be made) and a file can be created in it."""
+def _fallback() -> Path:
+    return Path(tempfile.gettempdir()) / f"fdbench-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
+
+
+def _not_private(folder: Path, follow_links: bool) -> str | None:
+    """Why another user could put code into folder (or None if nobody can): a symbolic link
+    (unless ``follow_links``), not a directory, owned by another user, writable by group or others."""
+    st = os.stat(folder) if follow_links else os.lstat(folder)
+    if stat.S_ISLNK(st.st_mode):
+        return f"{folder} is a symbolic link"
+    if not stat.S_ISDIR(st.st_mode):
+        return f"{folder} is not a directory"
+    if hasattr(os, "geteuid") and st.st_uid != os.geteuid():
+        return f"{folder} belongs to another user (uid {st.st_uid})"
+    if st.st_mode & 0o022:
+        return f"{folder} is writable by other users (mode {stat.S_IMODE(st.st_mode):o})"
+    return None
+
+
+def _unusable(folder: Path, follow_links: bool = True) -> str | None:
+    """Make folder (mode 0700 if it is new) and check that it is private and a file can be made
+    in it: None if so, else why not."""
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=folder):
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.mkdir(folder, 0o700)
+        except FileExistsError:
             pass
-        return True
-    except OSError:
-        return False
+        problem = _not_private(folder, follow_links)
+        if problem is None:
+            with tempfile.TemporaryFile(dir=folder):
+                pass
+        return problem
+    except OSError as exc:
+        return f"{folder}: {exc.strerror or exc}"
 
 
 def _choose_cache_dir() -> Path | None:
+    problems = []
     for folder in _candidates():
-        if _usable(folder):
+        problem = _unusable(folder)
+        if problem is None:
             return folder
-    fallback = Path(tempfile.gettempdir()) / f"fdbench-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
-    tried = ", ".join(str(c) for c in _candidates())
-    if _usable(fallback):
-        _warn(f"cannot write the kernel cache in {tried}; using {fallback} (set ${CACHE_VARIABLE} to choose)")
+        problems.append(problem)
+    fallback = _fallback()
+    problem = _unusable(fallback, follow_links=False)
+    if problem is None:
+        _warn(f"cannot use a kernel cache in {'; '.join(problems)}; using {fallback} (set ${CACHE_VARIABLE} to choose)")
         return fallback
-    _warn(f"cannot write a kernel cache in {tried} nor {fallback}; kernels are compiled on every run")
+    _warn(f"cannot use a kernel cache ({'; '.join(problems + [problem])}); kernels are compiled on every run")
     return None
 
 

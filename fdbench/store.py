@@ -4,7 +4,8 @@ A row holds the run's full settings and their hash (the seed included), the indi
 convergence history, the best parameters, the fdbench and dependency versions, the git commit if
 any, the machine and a timestamp. Every write is one transaction, so a process killed at any
 moment leaves every stored run intact; WAL journaling and a busy timeout let several processes
-write to one database. A file that is not an fdbench database is refused and never overwritten.
+write to one database. Only an empty file or a new name becomes a database: any other file
+without fdbench's metadata (another program's SQLite database included) is refused and never written.
 """
 
 from __future__ import annotations
@@ -68,25 +69,37 @@ def open_store(path=None):
         store.close()
 
 
+def check_path(path) -> Path:
+    """Refuse, without touching anything, a name that cannot be or become a results database: an
+    empty name, ``:memory:``, a directory, a device or a pipe, a missing folder; for a new name, a
+    folder that cannot be written. Raises StoreError."""
+    if str(path) in ("", ":memory:"):
+        raise StoreError(f"{str(path) or 'an empty name'} is not a file: the results database must be a file "
+                         "that keeps the runs")
+    path = Path(path)
+    if path.is_dir():
+        raise StoreError(f"{path} is a directory, not a results database")
+    if not path.parent.is_dir():
+        raise StoreError(f"directory {path.parent} of the results database does not exist")
+    if path.exists() and not path.is_file():
+        raise StoreError(f"{path} is not a regular file (a device or a pipe cannot hold results)")
+    if not path.exists() and not os.access(path.parent, os.W_OK):
+        raise StoreError(f"directory {path.parent} is not writable; the results database cannot be created there")
+    return path
+
+
 class Store:
     def __init__(self, path):
-        if str(path) in ("", ":memory:"):
-            raise StoreError(f"{str(path) or 'an empty name'} is not a file: the results database must be a file "
-                             "that keeps the runs")
-        self.path = Path(path)
-        if self.path.is_dir():
-            raise StoreError(f"{self.path} is a directory, not a results database")
-        if not self.path.parent.is_dir():
-            raise StoreError(f"directory {self.path.parent} of the results database does not exist")
-        if self.path.exists() and not self.path.is_file():
-            raise StoreError(f"{self.path} is not a regular file (a device or a pipe cannot hold results)")
-        existed = self.path.exists() and self.path.stat().st_size > 0
-        if existed:
+        self.path = check_path(path)
+        if self.path.exists() and self.path.stat().st_size > 0:
             _check_header(self.path)
         self.db = None
         try:
             self.db = sqlite3.connect(self.path, timeout=OPEN_PATIENCE_S, isolation_level=None)
-            tables = {row[0] for row in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+            self.db.execute("BEGIN")  # one read: what the file holds, as another process may be creating it
+            objects = self.db.execute("SELECT type, name FROM sqlite_master").fetchall()
+            pages = self.db.execute("PRAGMA page_count").fetchone()[0]
+            self.db.execute("COMMIT")
             self.db.execute("PRAGMA busy_timeout = 60000")  # writers of a parallel report wait their turn
         except sqlite3.OperationalError as exc:
             self.close()
@@ -97,11 +110,11 @@ class Store:
             self.close()
             raise StoreError(f"{self.path} is not an fdbench results database ({exc}); it was left untouched") from None
         try:
-            if existed and tables and "fdbench_meta" not in tables:
-                raise StoreError(f"{self.path} is an SQLite database of something else (tables: "
-                                 f"{', '.join(sorted(tables))}); it was left untouched")
-            if "fdbench_meta" in tables:
-                self._check_meta()
+            if ("table", "fdbench_meta") in objects:
+                self._check_meta({name for kind, name in objects if kind == "table"})
+            elif pages > 0:  # only an empty file or a new name becomes a results database
+                raise StoreError(f"{self.path} is an SQLite database of something else ({_contents(objects)}); "
+                                 "it was left untouched")
             else:
                 self._create()
         except sqlite3.DatabaseError as exc:
@@ -137,8 +150,9 @@ class Store:
             self.db.execute("PRAGMA busy_timeout = 60000")
 
     def _create(self):
+        """The tables in one transaction (other processes see no database or a whole one), then
+        WAL journaling."""
         try:
-            self._set_wal()
             self.db.execute("BEGIN IMMEDIATE")
             for statement in _SCHEMA.split(";"):
                 if statement.strip():
@@ -146,6 +160,7 @@ class Store:
             self.db.execute("INSERT OR IGNORE INTO fdbench_meta VALUES ('schema', ?), ('version', ?)",
                             (SCHEMA_NAME, SCHEMA_VERSION))
             self.db.execute("COMMIT")
+            self._set_wal()
         except sqlite3.Error as exc:
             raise StoreError(f"cannot create the results database {self.path}: {exc}") from None
 
@@ -162,13 +177,15 @@ class Store:
                     raise
                 time.sleep(0.02)
 
-    def _check_meta(self):
+    def _check_meta(self, tables: set):
         meta = dict(self.db.execute("SELECT key, value FROM fdbench_meta"))
         if meta.get("schema") != SCHEMA_NAME:
             raise StoreError(f"{self.path} is not an fdbench results database; it was left untouched")
         if meta.get("version") != SCHEMA_VERSION:
             raise StoreError(f"{self.path} has results schema version {meta.get('version')}; this fdbench "
                              f"reads version {SCHEMA_VERSION}: use another --db")
+        if "runs" not in tables:
+            raise StoreError(f"{self.path} has lost its table of runs; it was left untouched: use another --db")
 
     def close(self):
         if getattr(self, "db", None) is not None:
@@ -241,6 +258,16 @@ class Store:
         except sqlite3.Error as exc:
             raise StoreError(f"cannot write to the results database {self.path}: {exc}") from None
         return cursor.rowcount == 1
+
+
+def _contents(objects: list) -> str:
+    """What a foreign SQLite database holds, for a message: 'tables: a, b', 'views: v' or 'no tables'."""
+    parts = []
+    for kind in ("table", "view"):
+        names = sorted(name for k, name in objects if k == kind)
+        if names:
+            parts.append(f"{kind}s: {', '.join(names[:5])}{', ...' if len(names) > 5 else ''}")
+    return "; ".join(parts) or "no tables"
 
 
 def _check_header(path: Path) -> None:

@@ -95,6 +95,17 @@ def prepare(folder: Path) -> None:
     foreign.commit()
     foreign.close()
     (folder / "garbage.sqlite").write_text("just text\n" * 10)
+    app_db = sqlite3.connect(folder / "app_id.sqlite")  # another program's database, no table yet
+    app_db.execute("PRAGMA application_id = 1234567")
+    app_db.commit()
+    app_db.close()
+    view_db = sqlite3.connect(folder / "view.sqlite")
+    view_db.execute("CREATE VIEW v AS SELECT 1")
+    view_db.commit()
+    view_db.close()
+    (folder / "empty.toml").write_text("")  # a model file that could become a database
+    os.symlink("empty.toml", folder / "link_to_empty.toml")
+    os.symlink("loop", folder / "loop")
     os.symlink("in.csv", folder / "link_to_in.csv")
     os.link(folder / "in.csv", folder / "hard_in.csv")
     os.symlink("db.sqlite", folder / "link_to_db")
@@ -132,6 +143,8 @@ def prepared(tmp_path_factory):
     return folder
 
 
+SMALL = ["--seeds", "1", "--budget", "2", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control"]
+
 # (arguments, extra environment, words the error must contain)
 MATRIX = [
     # inverse
@@ -140,6 +153,7 @@ MATRIX = [
     (["inverse", "-o", "missing/x.csv"], {}, ["does not exist"]),
     (["inverse", "-o", ""], {}, ["empty"]),
     (["inverse", "-f", "xml"], {}, ["--format"]),
+    (["inverse", "-o", "loop"], {}, ["--output", "cannot inspect"]),
     (["inverse", "-f", "csv", "-o", "afile/x.csv"], {}, ["afile"]),
     # simulate: outputs against inputs
     (["simulate", "--torque-file", "in.csv", "-o", "in.csv"], {}, ["--torque-file"]),
@@ -179,6 +193,14 @@ MATRIX = [
     (["control", "--db", "ro.sqlite"], {}, ["read-only"]),
     (["control", "--db", "foreign.sqlite"], {}, ["something else"]),
     (["control", "--db", "garbage.sqlite"], {}, ["not"]),
+    (["control", "--db", "app_id.sqlite"], {}, ["something else", "no tables"]),
+    (["control", "--db", "view.sqlite"], {}, ["something else", "views: v"]),
+    (["control", "--model-file", "empty.toml", "--db", "empty.toml"], {}, ["--db", "--model-file"]),
+    (["optimize", "--model-file", "empty.toml", "--db", "link_to_empty.toml"], {}, ["--db", "--model-file"]),
+    (["collocate", "--model-file", "empty.toml", "--db", "empty.toml"], {}, ["--db", "--model-file"]),
+    (["report", "--model-file", "link_to_empty.toml", "--db", "empty.toml"], {}, ["--db", "--model-file"]),
+    (["study", "noise", "--levels", "0", "--model-file", "empty.toml", "--db", "empty.toml"], {},
+     ["--db", "--model-file"]),
     (["control", "--db", "corrupt.sqlite"], {}, ["damaged"]),
     (["control", "--db", "adir"], {}, ["directory"]),
     (["control", "--db", "/dev/null"], {}, ["regular file"]),
@@ -222,6 +244,11 @@ MATRIX = [
     (["report", "--db", "db.sqlite", "--figures", "figs_dir"], {}, ["directory"]),
     (["report", "--db", "db.sqlite", "--figures", "figs_db"], {}, ["database"]),
     (["report", "--db", "db.sqlite", "--figures", "adir", "-o", "adir/figure5_tracking.png"], {}, ["same file"]),
+    (["report", "--db", "db.sqlite", "--figures", "db.sqlite-wal"] + SMALL, {}, ["--figures", "database"]),
+    (["report", "--db", "db.sqlite", "--figures", "db.sqlite-journal"] + SMALL, {}, ["--figures", "database"]),
+    (["study", "noise", "--levels", "0", "--db", "db.sqlite", "--figures", "db.sqlite-shm"] + SMALL, {},
+     ["--figures", "database"]),
+    (["report", "--db", "view.sqlite"], {}, ["something else"]),
     (["report", "--db", "ro.sqlite"], {}, ["read-only"]),
     (["report", "--db", "garbage.sqlite"], {}, ["not"]),
     (["report", "--db", "corrupt.sqlite"], {}, ["damaged"]),
@@ -359,7 +386,7 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(files.os, "replace", refuse)
-    with pytest.raises(OSError):
+    with pytest.raises(files.BadFile, match="--output: cannot write .* No space left on device"):
         files.write_atomic(target, "new")
     assert target.read_text() == "old"
     assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]

@@ -347,7 +347,25 @@ def _future_version(path: Path) -> None:
     con.close()
 
 
+def _empty_sqlite_of_another_program(path: Path) -> None:
+    # a program's fresh database: its own application_id and user_version, no table yet
+    con = sqlite3.connect(path)
+    con.execute("PRAGMA application_id = 1234567")
+    con.execute("PRAGMA user_version = 3")
+    con.commit()
+    con.close()
+
+
+def _only_a_view(path: Path) -> None:
+    con = sqlite3.connect(path)
+    con.execute("CREATE VIEW answer AS SELECT 42 AS value")
+    con.commit()
+    con.close()
+
+
 FOREIGN = {
+    "empty-sqlite-of-another-program": (_empty_sqlite_of_another_program, "something else (no tables)"),
+    "only-a-view": (_only_a_view, "views: answer"),
     "random-bytes": (_random_bytes, "not an fdbench results database"),
     "text": (_text, "not an fdbench results database"),
     "foreign-sqlite": (_foreign_sqlite, "people"),
@@ -389,7 +407,8 @@ def test_refused_store_closes_its_connection(tmp_path):
     assert _snapshot(tmp_path) == before
 
 
-@pytest.mark.parametrize("kind", ["random-bytes", "text", "foreign-sqlite", "sqlite-header-garbage"])
+@pytest.mark.parametrize("kind", ["random-bytes", "text", "foreign-sqlite", "sqlite-header-garbage",
+                                  "empty-sqlite-of-another-program", "only-a-view"])
 def test_cli_report_refuses_foreign_db_with_one_line(tmp_path, kind):
     make, words = FOREIGN[kind]
     path = tmp_path / "results.sqlite"
@@ -405,6 +424,30 @@ def test_cli_report_refuses_foreign_db_with_one_line(tmp_path, kind):
     assert str(path) in lines[0] and words in lines[0]
     assert result.stdout == ""
     assert _snapshot(tmp_path) == before
+
+
+def test_empty_file_becomes_a_database_in_wal_mode(tmp_path):
+    path = tmp_path / "results.sqlite"
+    path.write_bytes(b"")
+    with open_store(path) as store:
+        assert store.count() == 0
+    con = sqlite3.connect(path)
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    con.close()
+
+
+def test_database_without_its_runs_table_is_refused_and_left_untouched(tmp_path):
+    path = tmp_path / "results.sqlite"
+    with open_store(path):
+        pass
+    con = sqlite3.connect(path)
+    con.execute("DROP TABLE runs")
+    con.commit()
+    con.close()
+    before = path.read_bytes()
+    with pytest.raises(StoreError, match="lost its table of runs"):
+        Store(path)
+    assert path.read_bytes() == before
 
 
 def test_directory_or_missing_parent_is_refused(tmp_path):

@@ -81,6 +81,8 @@ class FdbenchGroup(TyperGroup):
                 code = _error(where + message, exc.exit_code)
             elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
                 code = _error(f"--db: {exc}", 2)
+            elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
+                code = _error(str(exc), 2)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:

@@ -122,8 +122,8 @@ def control(
                                    **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     _check_store(db)
     outcome = run(spec)
+    _store(outcome, spec, db, quiet)  # the run is stored before any output is written
     _save_history(outcome, save_history)
-    _store(outcome, spec, db, quiet)
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
 
 
@@ -187,12 +187,12 @@ def collocate(
         raise ImportError(f"'fdbench collocate' needs casadi (pip install casadi): {exc}") from None
     _check_store(db)
     outcome = run(spec)
+    _store(outcome, spec, db, quiet)  # the run is stored before any output is written
     _save_history(outcome, save_history)
     if save_torque is not None:
         from ..files import write_atomic
 
         write_atomic(save_torque, _collocation_torque_text(outcome.extra["collocation"], spec), "--save-torque")
-    _store(outcome, spec, db, quiet)
     _finish(outcome.record, fmt, output, "fdbench collocate", quiet)
 
 
@@ -284,6 +284,7 @@ def optimize(
     if "hidden_fits" in outcome.extra:
         fits = ", ".join(f"{n}: {err:.2e}" for n, err in outcome.extra["hidden_fits"])
         _say(quiet, f"--hidden auto: fit RMSE / torque range by neurons: {fits}")
+    _store(outcome, spec, db, quiet)  # the run is stored before any output is written
     _save_history(outcome, save_history)
     if history is not None:
         from ..files import csv_text, write_atomic
@@ -294,5 +295,4 @@ def optimize(
         from ..params_file import params_json
 
         write_atomic(save_params, params_json(spec, outcome), "--save-params")
-    _store(outcome, spec, db, quiet)
     _finish(outcome.record, fmt, output, "fdbench optimize", quiet)

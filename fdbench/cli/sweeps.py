@@ -71,9 +71,10 @@ def report(
     from ..store import default_path
 
     db_path = db if db is not None else default_path()
-    _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
+    inputs = _spec_inputs(conditions, kinematics)
+    _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=inputs)
     if figures is not None:
-        _check_figures_dir(figures, output, db_path)
+        _check_figures_dir(figures, output, db_path, inputs)
     torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
                                                        penalty_weight)
     executor = _backend(backend, jobs, scheduler)
@@ -175,7 +176,8 @@ def study(
 
     _check_choice("study", kind, studies.KINDS)
     db_path = db if db is not None else default_path()
-    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output, inputs=_spec_inputs(conditions, kinematics))
+    inputs = _spec_inputs(conditions, kinematics)
+    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output, inputs=inputs)
     if not levels:
         raise BadInput("--levels: give the levels to sweep, e.g. --levels " + ("0,0.5,1,2" if kind == "noise" else "-20,0,20"))
     try:
@@ -189,7 +191,7 @@ def study(
 
         _check_choice("--param", param, model_keys(conditions["model_name"]))
     if figures is not None:
-        _check_study_figures(figures, output, db_path)
+        _check_study_figures(figures, output, db_path, inputs)
     torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
                                                        penalty_weight)
     executor = _backend(backend, jobs, scheduler)
@@ -263,11 +265,11 @@ def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> d
     }
 
 
-def _check_study_figures(directory: Path, output: Optional[Path], db: Path) -> None:
+def _check_study_figures(directory: Path, output: Optional[Path], db: Path, inputs: dict) -> None:
     """As for the report's --figures: refuse before the work a folder that cannot take them."""
     from ..study import FIGURE_NAMES
 
-    _check_figures_dir(directory, output, db, FIGURE_NAMES)
+    _check_figures_dir(directory, output, db, inputs, FIGURE_NAMES)
 
 
 def _sweep_options(seeds, jobs, torques, optimizers, hidden, knots, terms, sigma0, popsize, penalty_weight):
@@ -288,24 +290,33 @@ def _sweep_options(seeds, jobs, torques, optimizers, hidden, knots, terms, sigma
 def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:
     """Make sure every spec is stored in the database (missing runs carried out by the backend,
     each stored as it finishes), with a progress bar; {spec hash: stored run}. An unusable
-    database or backend is bad input; SIGTERM ends the command like Ctrl-C, exit 143."""
+    database or backend is bad input; SIGTERM ends the command like Ctrl-C, exit 143. A new
+    database is created only once the backend has its workers: a refused or unreachable backend
+    leaves no file behind."""
     from ..execution import BackendError, Terminated, execute_specs, sigterm_as_interrupt
-    from ..store import StoreError, open_store
+    from ..store import StoreError, check_path, open_store
 
     existed = db_path.exists()
     try:
-        with sigterm_as_interrupt(), open_store(db_path) as store:
-            store.check_usable()
+        with sigterm_as_interrupt():
             if not existed:
-                _say_creating(db_path, default_db, quiet)
-            with _progress(quiet, "runs") as progress:
+                check_path(db_path)
+                executor = _StartedBackend(executor, len({spec.hash() for spec in specs}))
+            try:
+                with open_store(db_path) as store:
+                    store.check_usable()
+                    if not existed:
+                        _say_creating(db_path, default_db, quiet)
+                    with _progress(quiet, "runs") as progress:
 
-                def on_done(done, total):
-                    if progress.bar is None:
-                        progress.start(total, show_best=False)
-                    progress.update(done)
+                        def on_done(done, total):
+                            if progress.bar is None:
+                                progress.start(total, show_best=False)
+                            progress.update(done)
 
-                return execute_specs(specs, store, executor, rerun, on_done)
+                        return execute_specs(specs, store, executor, rerun, on_done)
+            finally:
+                executor.stop()
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
     except BackendError as exc:
@@ -313,6 +324,21 @@ def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qu
     except Terminated:
         _error("terminated")
         raise typer.Exit(143) from None
+
+
+class _StartedBackend:
+    """A backend whose workers are acquired now, before the results database is created;
+    ``start`` then does nothing, everything else is the backend's."""
+
+    def __init__(self, backend, n_runs: int):
+        backend.start(n_runs)
+        self._backend = backend
+
+    def start(self, n_runs: int) -> None:
+        pass
+
+    def __getattr__(self, name):
+        return getattr(self._backend, name)
 
 
 def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
@@ -349,17 +375,25 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
                     extra_rows=extra_rows)
 
 
-def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=None) -> None:
-    """Refuse, before the work, a --figures folder that cannot take the figures: a file, the
-    report's own output, a missing parent, an unwritable folder, or a figure file in it that
-    would be refused (read-only, a directory, the database)."""
+def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, inputs: dict, names=None) -> None:
+    """Refuse, before the work, a --figures folder that cannot take the figures: a file, a link
+    to a missing folder, the report's own output, the database's journal, a missing parent, an
+    unwritable folder, or a figure file in it that would be refused (read-only, a directory, the
+    database, an input of the command, by any name)."""
     from ..figures import FIGURE_FILES
     from ..files import BadFile, check_distinct, check_writable, same_file
 
     if directory.exists() and not directory.is_dir():
         raise BadInput(f"--figures: {directory} exists and is not a directory")
+    if directory.is_symlink() and not directory.exists():
+        raise BadInput(f"--figures: {directory} is a symbolic link to {os.readlink(directory)}, which does not exist; "
+                       "create that folder or choose another")
     if output is not None and same_file(directory, output):
         raise BadInput(f"--figures: {directory} is also the report's --output; give the figures a folder of their own")
+    try:
+        check_distinct({"--figures": directory}, inputs, db)  # a new folder named as the database's journal
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
     if not directory.exists():
         if not directory.parent.is_dir():
             raise BadInput(f"--figures: directory {directory.parent} does not exist")
@@ -372,7 +406,7 @@ def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=
         paths = {f"--figures ({name})": directory / name for name in (names or FIGURE_FILES)}
         for option, path in paths.items():
             check_writable(path, option)
-        check_distinct({"--output": output, **paths}, database=db)
+        check_distinct({"--output": output, **paths}, inputs, db)
     except BadFile as exc:
         raise BadInput(str(exc)) from None
 
