@@ -10,7 +10,7 @@ here) to show what batching buys against the scheduler's cost per task, and the 
 starting and stopping the cluster alone. Every command runs as a subprocess in
 a temporary directory; the ratios are against the local baseline measured in the same run.
 
-Run: python benchmarks/bench_backends.py        (needs pip install 'fdbench[dask]')
+Run: python benchmarks/bench_backends.py        (needs pip install '.[dask]')
 """
 
 from __future__ import annotations
@@ -74,7 +74,7 @@ def main() -> None:
     try:
         import distributed
     except ImportError:
-        sys.exit("this benchmark needs Dask distributed: pip install 'fdbench[dask]'")
+        sys.exit("this benchmark needs Dask distributed: pip install '.[dask]' in fdbench's source folder")
     start = time.perf_counter()
     results = []
     with tempfile.TemporaryDirectory(prefix="fdbench-bench-") as tmp:
