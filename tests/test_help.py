@@ -168,3 +168,9 @@ def test_no_help_or_message_names_a_package_index_install():
     assert "fdbench[dask]" not in help_text("report") and "pip install '.[dask]'" in help_text("report")
     readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
     assert "fdbench[dask]" not in readme and "pip install '.[dask]'" in readme
+
+
+def test_every_benchmark_script_answers_help_without_running():
+    for script in sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("bench_*.py")):
+        out = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0 and out.stdout.startswith("usage:"), (script.name, out.stderr[-500:])
