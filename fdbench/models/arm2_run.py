@@ -14,7 +14,8 @@ Files (CSV with a header, names case-insensitive, any order):
   as for a recorded forearm motion (``fdbench.motion.SampledMotion``); the columns ``inverse
   --format csv`` writes, and the angles of ``--save-trajectory``;
 * a torque history: ``t`` (s) and ``shoulder``, ``elbow`` (N m), covering the motion's span,
-  linearly interpolated.
+  linearly interpolated; ``shoulder_torque``, ``elbow_torque`` where the file has them (the
+  history of ``inverse --format csv`` or ``--save-trajectory``, whose ``shoulder`` is an angle).
 """
 
 from __future__ import annotations
@@ -259,7 +260,8 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
     elif torque is not None:
         drive, label = torque, getattr(torque, "__name__", "function")
     elif torque_file is not None:
-        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS)
+        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS,
+                                     preferred=tuple(f"{joint}_torque" for joint in JOINTS))
         drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)  # noqa: E731
         label = f"file:{torque_file}"
         digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
