@@ -24,7 +24,7 @@ from typing import Iterator
 from . import __version__
 from .registry import Registry
 
-DASK_INSTALL = "pip install 'fdbench[dask]'"
+DASK_INSTALL = "pip install '.[dask]' in fdbench's source folder (or pip install 'dask[distributed]')"
 PARENT_POLL_S = 0.5  # how often a local worker checks that its parent is alive
 
 

@@ -360,14 +360,17 @@ class RunOutcome:
     table: tuple | None = None  # the trajectory as (CSV header, rows (n, k)) when not the forearm's
 
     def trajectory(self) -> tuple[list, np.ndarray]:
-        """The run's time history on the motion's samples: (CSV header, rows of shape (n, k))."""
+        """The run's time history on the motion's samples: (CSV header, rows of shape (n, k)), in the
+        units of a motion file (s, deg, deg/s, deg/s^2; torques N m, positions m), so that it can be
+        read back as ``--motion`` (the simulated theta) or ``--torque-file`` (the applied torque)."""
         if self.table is not None:
             return self.table
         r, inv = self.result, self.inverse
-        columns = [r.t, r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]]
-        header = ["t", "theta", "theta_desired", "theta_dot", "theta_dot_desired", "torque", "torque_inverse", "x2",
-                  "y2"]
-        return header, np.column_stack(columns)
+        theta_acc = np.full(len(r.t), np.nan) if r.qdd is None else r.qdd[:, 2]
+        angles = np.degrees([r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, theta_acc, inv.theta_ddot])
+        header = ["t", "theta", "theta_desired", "theta_vel", "theta_vel_desired", "theta_acc", "theta_acc_desired",
+                  "torque", "torque_inverse", "x2", "y2"]
+        return header, np.column_stack([r.t, *angles, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]])
 
 
 def _options_text(pairs) -> str:
@@ -589,9 +592,12 @@ def replay(spec: RunSpec, params) -> SimulationResult:
     return problem.simulate(np.asarray(params, dtype=float))
 
 
+INVERSE_HEADER = ("t", "theta", "theta_vel", "theta_acc", "torque")  # s, deg, deg/s, deg/s^2, N m
+
+
 def inverse_run(spec: RunSpec) -> tuple[dict, list, np.ndarray]:
     """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows on
-    the motion's samples)."""
+    the motion's samples) with the columns of a motion file (``INVERSE_HEADER``), angles in degrees."""
     if spec._runs() is not None:
         return spec._runs().inverse_run(spec)
     from .inverse import inverse_dynamics
@@ -609,5 +615,5 @@ def inverse_run(spec: RunSpec) -> tuple[dict, list, np.ndarray]:
         "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
         "fdbench_version": __version__,
     }
-    rows = np.column_stack([inv.t, inv.theta, inv.theta_dot, inv.theta_ddot, inv.torque])
-    return record, ["t", "theta", "theta_dot", "theta_ddot", "torque"], rows
+    rows = np.column_stack([inv.t, *np.degrees([inv.theta, inv.theta_dot, inv.theta_ddot]), inv.torque])
+    return record, list(INVERSE_HEADER), rows

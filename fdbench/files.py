@@ -308,14 +308,22 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
     return {name: np.array(column) for name, column in values.items()}
 
 
-def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple
+def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple, preferred: tuple = ()
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """A history from a CSV file with a header, a column ``t`` (s) and the named ``columns``.
+    """A history from a CSV file with a header, a column ``t`` (s) and the named ``columns``, or
+    the ``preferred`` names of the same columns where the file has them all (read once).
 
     Times must be finite and strictly increasing and cover [0, duration] s; returns t, shape (n,),
     and the columns' values, shape (n, len(columns))."""
     path = Path(path)
-    read = read_columns(path, option, ("t",) + tuple(columns))
+    read = read_columns(path, option, ("t",), tuple(preferred) + tuple(columns)) if preferred else None
+    if read is not None:
+        columns = preferred if all(c in read for c in preferred) else columns
+        if not all(c in read for c in columns):
+            raise BadFile(f"{option}: {path} needs columns 't', {', '.join(repr(c) for c in columns)} "
+                          f"(or {', '.join(repr(c) for c in preferred)}) in its header")
+    else:
+        read = read_columns(path, option, ("t",) + tuple(columns))
     t, values = read["t"], np.stack([read[c] for c in columns], axis=-1)
     if len(t) < 2:
         raise BadFile(f"{option}: {path} needs at least 2 rows of data, found {len(t)}")

@@ -64,6 +64,7 @@ class SimulationResult:
     runtime_s: float = 0.0
     detail: str = ""
     rhs_evaluations: int = 0
+    qdd: np.ndarray | None = None  # [x2'', y2'' (m/s^2), theta'' (rad/s^2)] (None: not recorded)
 
     @property
     def theta(self) -> np.ndarray:
@@ -250,9 +251,9 @@ def simulate_rk4_on_grid(tau: np.ndarray, settings: Settings, kp: float = 0.0, k
     status = [Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT][code]
     t_end = done * dt
     grid = np.linspace(0.0, motion.duration, n + 1)
-    q, qd, applied_s = _resample(grid, states, qdd, applied, done, motion)
+    q, qd, qdd_s, applied_s = _resample(grid, states, qdd, applied, done, motion)
     return SimulationResult(motion.samples, q, qd, applied_s, t_end, status, float(max_viol), "rk4",
-                            rhs_evaluations=4 * done + 1)
+                            rhs_evaluations=4 * done + 1, qdd=qdd_s)
 
 
 def _start_state(settings: Settings, start) -> np.ndarray:
@@ -265,14 +266,16 @@ def _start_state(settings: Settings, start) -> np.ndarray:
 
 
 def _resample(grid, states, qdd, applied, done, motion: Motion):
-    """States on the integrator grid -> the motion's samples (cubic Hermite between steps)."""
+    """States on the integrator grid -> the motion's samples (cubic Hermite between steps; the
+    accelerations and torque linear): q, q', q'', applied torque."""
     ts = motion.samples
     n = len(grid) - 1
     if motion.uniform and n % (len(ts) - 1) == 0:
         every = n // (len(ts) - 1)
-        return states[::every, :3].copy(), states[::every, 3:].copy(), applied[::every].copy()
+        return states[::every, :3].copy(), states[::every, 3:].copy(), qdd[::every].copy(), applied[::every].copy()
     q = np.full((len(ts), 3), np.nan)
     qd = np.full((len(ts), 3), np.nan)
+    acc = np.full((len(ts), 3), np.nan)
     tau = np.full(len(ts), np.nan)
     inside = ts <= grid[done] + 1e-12
     i = np.minimum(np.searchsorted(grid, ts[inside], side="right") - 1, max(done - 1, 0))
@@ -286,7 +289,8 @@ def _resample(grid, states, qdd, applied, done, motion: Motion):
     q[inside] = h00 * y0 + h10 * h * v0 + h01 * y1 + h11 * h * v1
     qd[inside] = h00 * v0 + h10 * h * a0 + h01 * v1 + h11 * h * a1
     tau[inside] = (1 - s[:, 0]) * applied[i] + s[:, 0] * applied[j]
-    return q, qd, tau
+    acc[inside] = (1 - s) * a0 + s * a1
+    return q, qd, acc, tau
 
 
 def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> SimulationResult:
@@ -343,12 +347,14 @@ def _simulate_scipy(torque, settings: Settings, law: FeedbackLaw, start) -> Simu
     ts, reached = motion.samples, found.reached
     q, qd, applied = np.full((len(ts), 3), np.nan), np.full((len(ts), 3), np.nan), np.full(len(ts), np.nan)
     q[reached], qd[reached] = found.states[reached, :3], found.states[reached, 3:]
+    qdd = np.full((len(ts), 3), np.nan)
     for i in np.flatnonzero(reached):
         applied[i] = applied_torque(ts[i], q[i, 2], qd[i, 2])
+        qdd[i] = accel(*q[i], *qd[i], applied[i], consts)[:3]
     viol = settings.model.constraints(q[reached])
     max_viol = float(np.max(np.abs(viol))) if viol.size else 0.0
     return SimulationResult(ts, q, qd, applied, found.t_end, found.status, max_viol, settings.integrator,
-                            detail=found.detail, rhs_evaluations=found.evaluations)
+                            detail=found.detail, rhs_evaluations=found.evaluations, qdd=qdd)
 
 
 @dataclass(frozen=True)

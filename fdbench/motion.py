@@ -265,21 +265,44 @@ def noisy(motion: Motion, sigma_deg: float, seed: int, capture_hz: float = DEFAU
                          samples=motion.samples)
 
 
+def rate_column_names(joint: str) -> tuple:
+    """The columns a motion file may give for ``joint``'s rates: ``<joint>_vel``, ``<joint>_acc``
+    and older fdbench's radian names ``<joint>_dot``, ``<joint>_ddot``."""
+    return tuple(f"{joint}_{suffix}" for suffix in ("vel", "acc", "dot", "ddot"))
+
+
+def given_rates(columns: dict, joint: str, path, option: str, radians: bool) -> tuple:
+    """(velocity, acceleration) of ``joint`` as a motion file gives them (in the file's units), or
+    (None, None). ``<joint>_dot``/``<joint>_ddot`` were written in radians by older fdbench: they
+    are refused unless ``radians``, where they name the rates. Raises files.BadFile."""
+    from .files import BadFile
+
+    vel_name, acc_name, dot_name, ddot_name = rate_column_names(joint)
+    if (dot_name in columns or ddot_name in columns) and not radians:
+        raise BadFile(f"{option}: {path} has a column {dot_name if dot_name in columns else ddot_name}: it looks "
+                      "like a file written in radians by an older fdbench; add --radians to read it")
+    if radians and vel_name not in columns and acc_name not in columns:
+        vel_name, acc_name = dot_name, ddot_name
+    vel, acc = columns.get(vel_name), columns.get(acc_name)
+    if (vel is None) != (acc is None):
+        raise BadFile(f"{option}: {path} gives only one of {vel_name} and {acc_name}; give both or neither")
+    return vel, acc
+
+
 def read_motion_csv(path, option: str = "--motion", radians: bool = False, **estimate) -> SampledMotion:
     """A recorded joint angle from a CSV file: columns ``t`` (s) and ``theta`` (degrees, or
     radians with ``radians``), optionally ``theta_vel`` and ``theta_acc`` (deg/s, deg/s^2, or rad
-    units), any order, any sampling. ``estimate``: options of ``SampledMotion``. Raises
-    files.BadFile with a one-line message."""
+    units), any order, any sampling: the columns ``fdbench inverse --format csv`` and
+    ``--save-trajectory`` write. ``estimate``: options of ``SampledMotion``. Raises files.BadFile
+    with a one-line message."""
     from pathlib import Path
 
     from .files import BadFile, read_columns
 
     path = Path(path)
-    columns = read_columns(path, option, required=("t", "theta"), optional=("theta_vel", "theta_acc"))
+    columns = read_columns(path, option, required=("t", "theta"), optional=rate_column_names("theta"))
     unit = 1.0 if radians else math.pi / 180
-    vel, acc = columns.get("theta_vel"), columns.get("theta_acc")
-    if (vel is None) != (acc is None):
-        raise BadFile(f"{option}: {path} gives only one of theta_vel and theta_acc; give both or neither")
+    vel, acc = given_rates(columns, "theta", path, option, radians)
     try:
         return SampledMotion(columns["t"], columns["theta"] * unit, None if vel is None else vel * unit,
                              None if acc is None else acc * unit, name=f"file:{path.name}", **estimate)

@@ -33,9 +33,9 @@ def as_json(*args):
 def test_inverse_history_is_the_models_joint_torques():
     table = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--format", "csv").stdout))
     assert len(table) == 1001 and {"shoulder", "elbow", "shoulder_torque", "elbow_torque"} <= set(table.columns)
-    z = table[["shoulder", "elbow"]].to_numpy()
-    w = table[["shoulder_dot", "elbow_dot"]].to_numpy()
-    dw = table[["shoulder_ddot", "elbow_ddot"]].to_numpy()
+    z = np.radians(table[["shoulder", "elbow"]].to_numpy())  # degrees, like a motion file
+    w = np.radians(table[["shoulder_vel", "elbow_vel"]].to_numpy())
+    dw = np.radians(table[["shoulder_acc", "elbow_acc"]].to_numpy())
     expected = Arm2(m0=2.5).joint_torques(z, w, dw)
     changed = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--model", "m0=2.5", "--format", "csv").stdout))
     np.testing.assert_allclose(changed[["shoulder_torque", "elbow_torque"]].to_numpy(), expected, rtol=1e-8)
@@ -50,8 +50,8 @@ def test_control_reports_overall_and_per_joint_indicators(tmp_path):
     assert record["rmse_rot_deg"] == pytest.approx(math.sqrt(np.mean(per**2)), rel=1e-12)
     assert record["rmse_rot_deg"] < 1e-5  # the reach is kinematically consistent: PD + feedforward tracks it
     table = pd.read_csv(history)
-    error = np.degrees(table[["shoulder", "elbow"]].to_numpy() - table[["shoulder_desired", "elbow_desired"]].to_numpy())
-    assert record["rmse_rot_deg"] == pytest.approx(math.sqrt(np.mean(error**2)), rel=1e-3)  # 10 digits written
+    error = table[["shoulder", "elbow"]].to_numpy() - table[["shoulder_desired", "elbow_desired"]].to_numpy()  # deg
+    assert record["rmse_rot_deg"] == pytest.approx(math.sqrt(np.mean(error**2)), rel=1e-6)
 
 
 def test_computed_torque_on_the_arm():
@@ -107,6 +107,47 @@ def test_a_motion_file_in_degrees_gives_the_reach(tmp_path):
     named = as_json("control", "--model", "arm2")
     assert from_file["motion"] == "file:reach.csv" and from_file["status"] == "success"
     assert from_file["rmse_rot_deg"] < 1e-4 and named["rmse_rot_deg"] < 1e-4
+
+
+def test_arm_inverse_csv_and_trajectory_read_back_as_motions(tmp_path):
+    """The arm's inverse --format csv is a motion file (degrees, <joint>_vel, <joint>_acc), and a
+    saved trajectory's angles are read back in degrees."""
+    motion = Reach()
+    z, w, dw = motion(motion.samples)
+    path = tmp_path / "m.csv"
+    path.write_text(invoke("inverse", "--model", "arm2", "--format", "csv").stdout)
+    again = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--motion", path, "--format", "csv").stdout))
+    np.testing.assert_allclose(again[["shoulder", "elbow"]], np.degrees(z), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(again[["shoulder_acc", "elbow_acc"]], np.degrees(dw), rtol=1e-12, atol=1e-9)
+    assert as_json("control", "--model", "arm2", "--motion", path)["derivatives"] == "given"
+    trajectory = tmp_path / "tr.csv"
+    as_json("control", "--model", "arm2", "--plant", "m=1.3", "--save-trajectory", trajectory)
+    saved = pd.read_csv(trajectory)
+    from_trajectory = as_json("inverse", "--model", "arm2", "--motion", trajectory)
+    assert from_trajectory["motion"] == "file:tr.csv" and saved.shoulder[0] == pytest.approx(-20.0)
+
+
+def test_the_arm_inverse_history_is_a_torque_file(tmp_path):
+    """Its <joint>_torque columns drive the simulation, not its angle columns named by joint."""
+    path = tmp_path / "tau.csv"
+    path.write_text(invoke("inverse", "--model", "arm2", "--format", "csv").stdout)
+    from_file, default = as_json("simulate", "--model", "arm2", "--torque-file", path), as_json("simulate", "--model", "arm2")
+    assert from_file["torque"] == f"file:{path}" and from_file["rmse_torque_nm"] < 1e-9
+    # open loop: linear interpolation between the 1 ms samples drifts a little more than the exact torque
+    assert default["rmse_rot_deg"] < from_file["rmse_rot_deg"] < 0.1
+
+
+def test_an_arm_file_in_radians_from_an_older_fdbench_needs_radians(tmp_path):
+    motion = Reach()
+    z, w, dw = motion(motion.samples)
+    old = tmp_path / "old.csv"
+    pd.DataFrame({"t": motion.samples, "shoulder": z[:, 0], "elbow": z[:, 1], "shoulder_dot": w[:, 0],
+                  "elbow_dot": w[:, 1], "shoulder_ddot": dw[:, 0], "elbow_ddot": dw[:, 1]}).to_csv(old, index=False)
+    lines = invoke("control", "--model", "arm2", "--motion", old, code=2).stderr.splitlines()
+    assert len(lines) == 1 and "shoulder_dot" in lines[0] and "older fdbench" in lines[0] and "--radians" in lines[0]
+    read = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--motion", old, "--radians",
+                                          "--format", "csv").stdout))
+    np.testing.assert_allclose(read[["shoulder", "elbow"]], np.degrees(z), rtol=0, atol=1e-9)
 
 
 def test_the_forearm_is_the_default_model():

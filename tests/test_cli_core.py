@@ -28,10 +28,11 @@ def closed_form_torque(theta, theta_ddot, m=Forearm()):
 @pytest.mark.parametrize("kinematics", ["paper", "exact"])
 def test_inverse_csv_is_the_whole_history(kinematics):
     table = pd.read_csv(io.StringIO(invoke("inverse", "--format", "csv", "--kinematics", kinematics).stdout))
-    assert list(table.columns) == ["t", "theta", "theta_dot", "theta_ddot", "torque"]
-    assert len(table) == 1001
+    assert list(table.columns) == ["t", "theta", "theta_vel", "theta_acc", "torque"]  # s, deg, deg/s, deg/s^2, N m
+    assert len(table) == 1001 and table.theta[0] == pytest.approx(-45.0)
     np.testing.assert_allclose(np.diff(table.t), 1e-3, atol=1e-12)
-    np.testing.assert_allclose(table.torque, closed_form_torque(table.theta, table.theta_ddot), rtol=1e-8)
+    np.testing.assert_allclose(table.torque, closed_form_torque(np.radians(table.theta), np.radians(table.theta_acc)),
+                               rtol=1e-8)
 
 
 def test_inverse_summary_formats_agree():
@@ -62,14 +63,16 @@ def test_control_history_is_consistent_with_the_indicators(tmp_path):
     record = json.loads(invoke("control", "--format", "json", "--save-history", path).stdout)
     history = pd.read_csv(path)
     assert len(history) == 1001
-    rmse_rot = math.sqrt(np.mean(np.degrees(history.theta - history.theta_desired) ** 2))
+    assert history.theta[0] == pytest.approx(-45.0)  # degrees, like a motion file
+    rmse_rot = math.sqrt(np.mean((history.theta - history.theta_desired) ** 2))
     rmse_torque = math.sqrt(np.mean((history.torque - history.torque_inverse) ** 2))
     assert rmse_rot == pytest.approx(record["rmse_rot_deg"], rel=1e-6)
     assert rmse_torque == pytest.approx(record["rmse_torque_nm"], rel=1e-6)
     # x2, y2 stay on the circle of radius L12 (the constraint of eq. 9)
     np.testing.assert_allclose(np.hypot(history.x2, history.y2), Forearm().L12, atol=1e-6)
-    # the applied torque is feedforward plus PD: torque - torque_inverse = kp e + kd e'
-    pd_term = 80 * (history.theta_desired - history.theta) + 0.3 * (history.theta_dot_desired - history.theta_dot)
+    # the applied torque is feedforward plus PD: torque - torque_inverse = kp e + kd e' (gains per rad)
+    pd_term = np.radians(80 * (history.theta_desired - history.theta)
+                         + 0.3 * (history.theta_vel_desired - history.theta_vel))
     np.testing.assert_allclose(history.torque - history.torque_inverse, pd_term, atol=1e-6)
 
 

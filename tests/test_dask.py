@@ -30,7 +30,7 @@ def _execution_field(name: str) -> bool:
 
 
 def _needs_dask():
-    pytest.importorskip("distributed", reason="Dask distributed is not installed (pip install 'fdbench[dask]')")
+    pytest.importorskip("distributed", reason="Dask distributed is not installed (pip install '.[dask]')")
 
 
 def _start(args, log: Path, cwd: Path) -> subprocess.Popen:
@@ -242,7 +242,7 @@ def test_dask_backend_without_dask_installed_exits_2_with_the_install_command(tm
     assert result.exit_code == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("fdbench: error: ")
-    assert "pip install 'fdbench[dask]'" in lines[0]
+    assert "pip install '.[dask]'" in lines[0]
     assert not db.exists()  # refused before anything was opened or run
 
 

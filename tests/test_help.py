@@ -115,3 +115,62 @@ def test_a_person_watching_sees_the_time_left_before_the_run_ends(tmp_path):
     frames = re.findall(r"(\d+)/8 best \S+ \d+:\d\d:\d\d left (\d+:\d\d:\d\d)", text)
     assert any(int(done) < 8 for done, _ in frames), text[-500:]  # an estimate while work remains
     assert (tmp_path / "run.json").is_file()
+
+
+FORMAT_COMMANDS = (["inverse"], ["simulate"], ["control"], ["optimize"], ["collocate"], ["report"], ["study", "noise"])
+
+
+def format_choices(text: str) -> list:
+    """The choices the help shows for --format ('[md|csv|json]' -> ['md', 'csv', 'json'])."""
+    return re.search(r"--format\s+-f\s+\[([a-z|]+)\]", text).group(1).split("|")
+
+
+@pytest.mark.parametrize("command", FORMAT_COMMANDS, ids=lambda c: c[0])
+def test_every_format_help_lists_exactly_the_formats_the_command_accepts(command, tmp_path):
+    shown = format_choices(help_text(*command))
+    refused = CliRunner().invoke(app, [*command, "--format", "bogus", "--db", str(tmp_path / "r.sqlite")]
+                                 if command[0] in ("report", "study") else [*command, "--format", "bogus"])
+    assert refused.exit_code == 2
+    accepted = refused.stderr.strip().split("valid: ")[1].split(", ")
+    assert shown == accepted and not list(tmp_path.iterdir())
+
+
+def test_study_writes_json_like_its_csv(tmp_path):
+    args = ["study", "noise", "--levels", "0", "--seeds", "1", "--torque", "cs", "--opt", "bfgs", "--feedforward",
+            "--budget", "5", "--jobs", "1", "-q", "--db", str(tmp_path / "s.sqlite")]
+    runner = CliRunner()
+    as_json, as_csv = (runner.invoke(app, [*args, "--format", fmt]) for fmt in ("json", "csv"))
+    assert as_json.exit_code == 0 and as_csv.exit_code == 0, as_json.stderr + as_csv.stderr
+    import io
+    import json
+
+    import pandas as pd
+
+    study, frame = json.loads(as_json.stdout), pd.read_csv(io.StringIO(as_csv.stdout))
+    assert study["settings"]["study"] == "noise" and len(study["rows"]) == len(frame) == 2
+    for row, (_, expected) in zip(study["rows"], frame.iterrows()):
+        assert list(row) == list(frame.columns) and row["method"] == expected["method"]
+        assert row["rmse_rot_deg_median"] == pytest.approx(expected["rmse_rot_deg_median"], rel=1e-9)
+
+
+def test_top_level_help_says_what_the_tool_does():
+    text = " ".join(help_text().split())
+    for what in ("forearm", "two-segment arm", "--model arm2", "--format table|json|csv", "--format md|csv|json",
+                 "collocation", "study"):
+        assert what in text, what
+
+
+def test_no_help_or_message_names_a_package_index_install():
+    """fdbench is installed from its source folder: pip install '.[dask]', not 'fdbench[dask]'."""
+    from fdbench.execution import DASK_INSTALL
+
+    assert "pip install '.[dask]'" in DASK_INSTALL
+    assert "fdbench[dask]" not in help_text("report") and "pip install '.[dask]'" in help_text("report")
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    assert "fdbench[dask]" not in readme and "pip install '.[dask]'" in readme
+
+
+def test_every_benchmark_script_answers_help_without_running():
+    for script in sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("bench_*.py")):
+        out = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0 and out.stdout.startswith("usage:"), (script.name, out.stderr[-500:])

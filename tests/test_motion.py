@@ -158,6 +158,69 @@ def test_radians_option_reads_radians(tmp_path):
     assert np.allclose(in_degrees, in_radians, atol=1e-9)
 
 
+# ---- fdbench's own files read back as motions ---------------------------------------------------
+
+
+def csv_frame(*args):
+    import pandas as pd
+
+    result = invoke(*args, "-f", "csv", "-q")
+    assert result.exit_code == 0, result.stderr
+    return pd.read_csv(io.StringIO(result.stdout))
+
+
+@pytest.mark.parametrize("kinematics", ["paper", "exact"])
+def test_inverse_csv_read_back_as_motion_is_the_same_motion(tmp_path, kinematics):
+    """inverse --format csv writes a motion file: read back as --motion, it gives the named
+    motion's angle (deg), rates and torque at the samples."""
+    path = tmp_path / "m.csv"
+    path.write_text(invoke("inverse", "--motion", kinematics, "-f", "csv").stdout)
+    named, ts = csv_frame("inverse", "--motion", kinematics), np.linspace(0, 1, 1001)
+    theta, vel, acc = eq5(ts, kinematics)
+    np.testing.assert_allclose(named.theta, np.degrees(theta), rtol=0, atol=1e-9)
+    again = csv_frame("inverse", "--motion", path)
+    np.testing.assert_allclose(again.theta, np.degrees(theta), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(again[["theta_vel", "theta_acc"]], np.degrees([vel, acc]).T, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(again.torque, named.torque, rtol=1e-12)
+    from_file, direct = run_json("control", "--motion", path), run_json("control", "--motion", kinematics)
+    assert from_file["derivatives"] == "given"
+    # RK4's half steps fall between the file's samples: Hermite interpolation there, hence 1e-3
+    assert from_file["rmse_rot_deg"] == pytest.approx(direct["rmse_rot_deg"], rel=1e-3)
+
+
+def test_saved_trajectory_read_back_as_motion_is_the_simulated_angle(tmp_path):
+    trajectory = tmp_path / "tr.csv"
+    run_json("control", "--plant", "m=1.3", "--save-trajectory", trajectory)
+    import pandas as pd
+
+    saved = pd.read_csv(trajectory)
+    assert saved.theta[0] == pytest.approx(-45.0) and np.max(np.abs(saved.theta - saved.theta_desired)) > 0.01
+    again = csv_frame("inverse", "--motion", trajectory)
+    np.testing.assert_allclose(again.theta, saved.theta, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(again[["theta_vel", "theta_acc"]], saved[["theta_vel", "theta_acc"]], rtol=0, atol=1e-9)
+    # the simulated acceleration is the simulated velocity's rate
+    np.testing.assert_allclose(np.gradient(saved.theta_vel, saved.t)[1:-1], saved.theta_acc[1:-1], rtol=0, atol=0.5)
+    # and its applied torque is a torque file
+    assert run_json("simulate", "--torque-file", trajectory)["torque"].startswith("file:")
+
+
+def test_a_file_in_radians_from_an_older_fdbench_needs_radians(tmp_path):
+    ts = np.linspace(0, 1, 1001)
+    theta, vel, acc = eq5(ts, "exact")
+    old = tmp_path / "old.csv"
+    np.savetxt(old, np.column_stack([ts, theta, vel, acc, 0 * ts]), delimiter=",", fmt="%.17g", comments="",
+               header="t,theta,theta_dot,theta_ddot,torque")
+    result = invoke("control", "--motion", old)
+    lines = result.stderr.splitlines()
+    assert result.exit_code == 2 and len(lines) == 1 and "theta_dot" in lines[0], lines
+    assert "radians by an older fdbench" in lines[0] and "--radians" in lines[0]
+    assert not list(tmp_path.glob("*.fdbench-*"))
+    read = csv_frame("inverse", "--motion", old, "--radians")
+    np.testing.assert_allclose(read.theta, np.degrees(theta), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(read.theta_acc, np.degrees(acc), rtol=1e-12, atol=1e-9)  # theta_ddot given
+    assert run_json("control", "--motion", old, "--radians")["derivatives"] == "given"
+
+
 BAD_MOTIONS = {
     "few.csv": ("t,theta\n" + "".join(f"{i / 10},{-40 + i}\n" for i in range(9)), "at least 10"),
     "backwards.csv": ("t,theta\n" + "".join(f"{t},{-40}\n" for t in [0, 0.1, 0.2, 0.2, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1]),
@@ -210,7 +273,7 @@ def test_plant_leaves_the_feedforward_unchanged_and_model_changes_it():
     model = csv_table("inverse", "--model", "I1=0.05")
     assert np.array_equal(plant, nominal)
     # the closed form: the torque changes by (I1' - I1) theta''
-    assert np.allclose(model[:, 4] - nominal[:, 4], (0.05 - Forearm().I1) * nominal[:, 3], atol=1e-8)  # 10 digits
+    assert np.allclose(model[:, 4] - nominal[:, 4], (0.05 - Forearm().I1) * np.radians(nominal[:, 3]), atol=1e-10)
 
 
 def test_plant_mismatch_makes_open_loop_worse_and_is_measured_against_the_nominal_torque():

@@ -150,7 +150,7 @@ def test_every_command_of_the_commands_table_runs_as_written(first_report, workd
     assert len(commands) == 9 and all(c.startswith("fdbench ") for c in commands)
     for command in commands:  # in order: inverse writes id.csv, simulate reads it
         sh(command, workdir)
-    assert (workdir / "id.csv").read_text().startswith("t,theta,theta_dot,theta_ddot,torque")
+    assert (workdir / "id.csv").read_text().startswith("t,theta,theta_vel,theta_acc,torque")
     assert (workdir / "conv.csv").read_text().splitlines()[0] == "evaluation,best_objective"
     assert len((workdir / "report.csv").read_text().splitlines()) == 15  # header, PD, 4 + 6 cells, 3 beyond
 
@@ -286,7 +286,11 @@ def test_the_commands_of_your_own_data_run_as_written(first_report, tmp_path):
     assert len(commands) == 6
     for command in commands:
         sh(command + " --quiet", top)
-    assert (top / "elbow_torque.csv").read_text().startswith("t,theta,theta_dot,theta_ddot,torque")
+    assert (top / "elbow_torque.csv").read_text().startswith("t,theta,theta_vel,theta_acc,torque")
+    # fdbench's output is valid input: the history read back as --motion starts where the recording does
+    again = json.loads(sh("fdbench inverse --motion elbow_torque.csv --format json", top).stdout)
+    first = json.loads(sh("fdbench inverse --motion examples/elbow_flexion.csv --format json", top).stdout)
+    assert again["theta_start_deg"] == pytest.approx(first["theta_start_deg"], abs=1e-9)
     assert len((top / "elbow_torque.csv").read_text().splitlines()) == 302  # 2.5 s at 120 Hz and a header
     assert (top / "study" / "study_noise_rmse_rot_deg.png").is_file() and (top / "mismatch.md").is_file()
     assert (ROOT / "docs" / "study_noise_rmse_rot_deg.png").is_file()

@@ -30,7 +30,7 @@ MAX_JOBS = 256  # worker processes
 KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper; the default), "
                    "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
                    "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
-                   "duration and sampling. With --model arm2: 'reach' (the default) or a CSV file t, shoulder, elbow "
+                   "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With --model arm2: 'reach' (the default) or a CSV file t, shoulder, elbow "
                    "(optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
 
 
@@ -136,7 +136,7 @@ def _choices(name: str, command: str):
 
         return list(SCHEMES)
     if name == "fmt":
-        return list(REPORT_FORMATS if command == "report" else FORMATS)
+        return list(formats_of(command))
     return None
 
 
@@ -189,9 +189,12 @@ def _error(message: str, code: int = 1) -> int:
 
 app = typer.Typer(
     cls=FdbenchGroup,
-    help="Benchmark of trajectory-tracking methods for the forward dynamic simulation of a 1-DOF forearm: "
-    "PD control with computed feedforward against optimised torque histories (ANN, cubic spline, "
-    "parametric function) by CMA-ES, BFGS and more. Run 'fdbench report' for the paper's whole comparison.",
+    help="Benchmark of trajectory-tracking methods for the forward dynamic simulation of the paper's 1-DOF forearm "
+    "and a two-segment arm (--model arm2): feedback control (PD with computed feedforward, computed-torque, LQR), "
+    "optimised torque histories (ANN, cubic spline, parametric function by CMA-ES, BFGS and more) and direct "
+    "collocation, on eq. 5's motion or your own recording. Results as a table, JSON or CSV "
+    "(--format table|json|csv); 'fdbench report' runs the paper's whole comparison and 'fdbench study' sweeps "
+    "noise or model mismatch (--format md|csv|json), stored in a results database and resumed.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -216,6 +219,12 @@ MAX_THREADS = 1024
 
 
 REPORT_FORMATS = ("md", "csv", "json")
+STUDY_FORMATS = ("md", "csv", "json")
+
+
+def formats_of(command: str) -> tuple:
+    """The --format values ``command`` accepts (its help lists exactly these)."""
+    return {"report": REPORT_FORMATS, "study": STUDY_FORMATS}.get(command, FORMATS)
 
 
 def main() -> None:

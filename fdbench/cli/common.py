@@ -129,10 +129,11 @@ def _finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
 
 
 def _table_text(header, rows) -> str:
-    """CSV text of a history table: a header and rows of numbers (10 significant digits)."""
+    """CSV text of a history table: a header and rows of numbers, each written with the digits that
+    read back as the same float (a written motion read back as ``--motion`` is the same motion)."""
     from ..files import csv_text
 
-    return csv_text(header, ([f"{v:.10g}" for v in row] for row in rows))
+    return csv_text(header, ([repr(float(v)) for v in row] for row in rows))
 
 
 def _history_text(outcome) -> str:

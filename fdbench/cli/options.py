@@ -42,7 +42,7 @@ Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for 
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
 
 
-SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (t, theta, theta_desired, torque, ...; one row per sample of the motion, 1001 for eq. 5), as CSV to FILE. --save-history is an older name.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (one row per sample of the motion, 1001 for eq. 5), as CSV to FILE in a motion file's units, so that --motion reads back the simulated angle and --torque-file the applied torque: t (s), theta, theta_desired (deg), theta_vel, theta_vel_desired (deg/s), theta_acc, theta_acc_desired (deg/s^2), torque, torque_inverse (N m), x2, y2 (m); arm2: per joint <joint>, <joint>_desired (deg), <joint>_torque, <joint>_torque_inverse (N m). --save-history is an older name.")]
 
 
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
@@ -82,7 +82,7 @@ PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal 
 
 
 # Execution of many runs (report, study): where they run and how many at once.
-BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install 'fdbench\\[dask]').")]
+BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install '.\\[dask]' in fdbench's source folder).")]
 
 
 Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version).", show_default=False)]
@@ -123,7 +123,7 @@ Kd = Annotated[float, typer.Option("--kd", help="PD derivative gain, N m s/rad."
 # here and added to a command by @_with_conditions, which hands them over as one dict ``conditions``
 # of RunSpec fields.
 CONDITIONS = {
-    "radians": (bool, False, typer.Option("--radians", help="The motion file's angles (and derivatives) are in radians, not degrees.")),
+    "radians": (bool, False, typer.Option("--radians", help="The motion file's angles (and derivatives) are in radians, not degrees; also reads an older fdbench's files, whose <joint>_dot and <joint>_ddot columns are then the rates (rad/s, rad/s^2).")),
     "cutoff_hz": (float, 6.0, typer.Option("--cutoff", help="Derivative estimate: -3 dB frequency (Hz) of the zero-lag 4th-order Butterworth low-pass (Winter's), applied to a recorded or noisy angle before an interpolating spline is differentiated.")),
     "smoothing": (str, "butterworth", typer.Option("--smoothing", help="Derivative estimate: 'butterworth' (low-pass, then spline) or 'spline' (a smoothing spline, factor by generalised cross-validation or --spline-lambda).")),
     "spline_lambda": (Optional[float], None, typer.Option("--spline-lambda", help="Smoothing factor of --smoothing spline (> 0; default: chosen by generalised cross-validation).", show_default=False)),

@@ -32,7 +32,7 @@ def inverse(
 ):
     """Inverse dynamics (eq. 3): the joint torques that should produce the desired motion, with the nominal model.
 
-    The table and JSON give a summary; --format csv gives the whole history (forearm: t, theta, theta_dot, theta_ddot, torque on the motion's samples, SI units; eq. 5: 1001 rows; arm2: one column of each per joint)."""
+    The table and JSON give a summary; --format csv gives the whole history on the motion's samples (eq. 5: 1001 rows) as a motion file that --motion and --torque-file read back: t (s), theta (deg), theta_vel (deg/s), theta_acc (deg/s^2), torque (N m); arm2: t, then <joint>, <joint>_vel, <joint>_acc, <joint>_torque for the shoulder and the elbow."""
     from ..experiment import RunSpec, inverse_run
 
     _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))

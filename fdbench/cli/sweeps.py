@@ -12,7 +12,7 @@ from typing import Annotated, Optional
 import typer
 
 from .. import __version__
-from .app import BadInput, MAX_JOBS, MAX_SEEDS, REPORT_FORMATS, _error, app
+from .app import BadInput, MAX_JOBS, MAX_SEEDS, REPORT_FORMATS, STUDY_FORMATS, _error, app
 from .options import (
     AllCells, Alpha, Atol, BackendName, Budget, Dt, FeedforwardSelection, Gradient, Hidden, Integrator, Jobs,
     Kd, Kinematics, Knots, Kp, Omega, OptSelection, Output, PenaltyWeight, Popsize, Quiet, Rerun, Rtol,
@@ -64,7 +64,7 @@ def report(
     quiet: Quiet = False,
     conditions: dict = None,
 ):
-    """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown or CSV.
+    """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown, CSV or JSON.
 
     Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
     from ..benchmark import default_cells, make_plan
@@ -162,7 +162,7 @@ def study(
     alpha: Alpha = 1e7,
     xi: Xi = 1.0,
     omega: Omega = 10.0,
-    fmt: Annotated[str, typer.Option("--format", "-f", help="md (tables per indicator) or csv (one row per method and level).")] = "md",
+    fmt: Annotated[str, typer.Option("--format", "-f", help="md (tables per indicator), csv (one row per method and level) or json (the settings and those rows).")] = "md",
     output: Output = None,
     quiet: Quiet = False,
     conditions: dict = None,
@@ -177,7 +177,7 @@ def study(
     _check_choice("study", kind, studies.KINDS)
     db_path = db if db is not None else default_path()
     inputs = _spec_inputs(conditions, kinematics)
-    _check_outputs(fmt, ("md", "csv"), db=db_path, output=output, inputs=inputs)
+    _check_outputs(fmt, STUDY_FORMATS, db=db_path, output=output, inputs=inputs)
     if not levels:
         raise BadInput("--levels: give the levels to sweep, e.g. --levels " + ("0,0.5,1,2" if kind == "noise" else "-20,0,20"))
     try:
@@ -215,6 +215,9 @@ def study(
         from ..files import csv_text
 
         _emit(csv_text(list(studies.CSV_COLUMNS), studies.csv_rows(sweep, rows)), output)
+    elif fmt == "json":
+        settings = _study_settings(sweep, seeds, budget, _parallelism(backend, jobs, scheduler), kinematics, integrator, dt)
+        _emit(_study_json(sweep, rows, settings), output)
     else:
         links = None
         if figures is not None:
@@ -226,6 +229,17 @@ def study(
         _emit(studies.markdown(sweep, rows, settings, links), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
+
+
+def _study_json(sweep, rows, settings: dict) -> str:
+    """The study as one JSON object: its settings and one object per method and level with the
+    CSV's columns (null for a statistic no run gave)."""
+    from .. import study as studies
+    from ..files import finite_or_none
+
+    table = [{name: finite_or_none(value.item() if hasattr(value, "item") else value)
+              for name, value in zip(studies.CSV_COLUMNS, row)} for row in studies.csv_rows(sweep, rows)]
+    return json.dumps({"settings": settings, "rows": table}, indent=2) + "\n"
 
 
 def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> dict:

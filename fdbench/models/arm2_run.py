@@ -11,9 +11,11 @@ torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint
 Files (CSV with a header, names case-insensitive, any order):
 * a motion: ``t`` (s) and one angle column per joint, ``shoulder``, ``elbow`` (deg, or rad), with
   optional ``<joint>_vel`` and ``<joint>_acc`` (deg/s, deg/s^2); derivatives otherwise estimated
-  as for a recorded forearm motion (``fdbench.motion.SampledMotion``);
+  as for a recorded forearm motion (``fdbench.motion.SampledMotion``); the columns ``inverse
+  --format csv`` writes, and the angles of ``--save-trajectory``;
 * a torque history: ``t`` (s) and ``shoulder``, ``elbow`` (N m), covering the motion's span,
-  linearly interpolated.
+  linearly interpolated; ``shoulder_torque``, ``elbow_torque`` where the file has them (the
+  history of ``inverse --format csv`` or ``--save-trajectory``, whose ``shoulder`` is an angle).
 """
 
 from __future__ import annotations
@@ -36,17 +38,15 @@ from . import arm2_sim as sim
 
 def read_arm_motion_csv(path, option: str = "--motion", radians: bool = False, **estimate) -> JointMotion:
     """A recorded arm motion from a CSV file (see the module's docstring). Raises BadFile."""
-    from ..motion import SampledMotion
+    from ..motion import SampledMotion, given_rates, rate_column_names
 
     path = Path(path)
-    optional = tuple(f"{j}_{d}" for j in JOINTS for d in ("vel", "acc"))
+    optional = tuple(name for joint in JOINTS for name in rate_column_names(joint))
     columns = read_columns(path, option, required=("t",) + JOINTS, optional=optional)
     unit = 1.0 if radians else math.pi / 180
     parts = []
     for joint in JOINTS:
-        vel, acc = columns.get(f"{joint}_vel"), columns.get(f"{joint}_acc")
-        if (vel is None) != (acc is None):
-            raise BadFile(f"{option}: {path} gives only one of {joint}_vel and {joint}_acc; give both or neither")
+        vel, acc = given_rates(columns, joint, path, option, radians)
         try:
             parts.append(SampledMotion(columns["t"], columns[joint] * unit, None if vel is None else vel * unit,
                                        None if acc is None else acc * unit, name=joint, **estimate))
@@ -148,7 +148,9 @@ def integration(spec) -> dict:
 
 
 def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
-    """Inverse dynamics of the desired motion with the nominal arm: (record, CSV header, rows)."""
+    """Inverse dynamics of the desired motion with the nominal arm: (record, CSV header, rows), the
+    columns of a motion file (t, <joint>, <joint>_vel, <joint>_acc in s, deg, deg/s, deg/s^2) and
+    <joint>_torque (N m)."""
     desired, _ = motions(spec)
     began = time.perf_counter()
     inv = sim.inverse_dynamics(None, nominal(spec), desired)
@@ -160,8 +162,8 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
                  for j, v in zip(JOINTS, vals)},
               "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
               "fdbench_version": __version__}
-    header = ["t"] + [f"{j}{s}" for s in ("", "_dot", "_ddot", "_torque") for j in JOINTS]
-    rows = np.column_stack([inv.t, inv.angles, inv.velocities, inv.accelerations, inv.torque])
+    header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in JOINTS]
+    rows = np.column_stack([inv.t, *np.degrees([inv.angles, inv.velocities, inv.accelerations]), inv.torque])
     return record, header, rows
 
 
@@ -189,7 +191,7 @@ def _outcome(spec, record: dict, result, inverse, **more):
                   message=_message(result), max_violation=result.max_violation,
                   **_per_joint("rmse_rot_deg", rot_j), **_per_joint("rmse_torque_nm", trq_j))
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in JOINTS]
-    rows = np.column_stack([result.t, result.angles, desired, result.torque, inverse.torque])
+    rows = np.column_stack([result.t, np.degrees(result.angles), np.degrees(desired), result.torque, inverse.torque])
     return RunOutcome(record, result, inverse, table=(header, rows), **more)
 
 
@@ -258,7 +260,8 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
     elif torque is not None:
         drive, label = torque, getattr(torque, "__name__", "function")
     elif torque_file is not None:
-        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS)
+        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, JOINTS,
+                                     preferred=tuple(f"{joint}_torque" for joint in JOINTS))
         drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(JOINTS))], axis=-1)  # noqa: E731
         label = f"file:{torque_file}"
         digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
