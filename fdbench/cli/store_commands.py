@@ -8,11 +8,23 @@ from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
+from typer.core import TyperGroup
 
-from .app import BadInput, app
+from .app import BadInput, _show_choices, app
 from .common import _check_outputs, _console, _emit, _render
 
+class _RunsGroup(TyperGroup):
+    """The ``runs`` commands' --help, shown as the other commands' (no type noise on flags)."""
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
+            _show_choices(command, ctx)
+        return command
+
+
 runs_app = typer.Typer(
+    cls=_RunsGroup,
     help="Look at stored runs without changing the database: list, show, export, compare.",
     no_args_is_help=True,
 )
@@ -23,12 +35,12 @@ SHOW_FORMATS = ("table", "json")
 EXPORT_FORMATS = ("csv", "json", "parquet")
 
 ReadDb = Annotated[Optional[Path], typer.Option("--db", help="Results database, opened read-only (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)]
-Command = Annotated[Optional[str], typer.Option("--command", help="Only runs of this command: control, optimize, collocate, ...", show_default=False)]
-Model = Annotated[Optional[str], typer.Option("--model", help="Only runs of this model: forearm, arm2, ...", show_default=False)]
-Torque = Annotated[Optional[str], typer.Option("--torque", help="Only optimisations of this torque parameterisation: ann, cs, pf, ...", show_default=False)]
-Opt = Annotated[Optional[str], typer.Option("--opt", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
-Controller = Annotated[Optional[str], typer.Option("--controller", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]
-Status = Annotated[Optional[str], typer.Option("--status", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)]
+Command = Annotated[Optional[str], typer.Option("--command", metavar="NAME", help="Only runs of this command: control, optimize, collocate, ...", show_default=False)]
+Model = Annotated[Optional[str], typer.Option("--model", metavar="NAME", help="Only runs of this model: forearm, arm2, ...", show_default=False)]
+Torque = Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help="Only optimisations of this torque parameterisation: ann, cs, pf, ...", show_default=False)]
+Opt = Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
+Controller = Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]
+Status = Annotated[Optional[str], typer.Option("--status", metavar="NAME", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)]
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write to FILE instead of stdout ('-': stdout); the database is refused.", show_default=False)]
 
 
