@@ -204,7 +204,8 @@ def show(run: dict, history: list, params) -> dict:
         "settings": run["spec"],
         "provenance": {"created_at": run["created_at"], "machine": run["machine"], "git_commit": run["git_commit"],
                        "fdbench_version": run["fdbench_version"], "jobs": run["jobs"], "versions": run["versions"]},
-        "evaluations_stored": len(history), "history": history, "params": params,
+        "evaluations_stored": len(history), "history": [_finite(v) for v in history],
+        "params": None if params is None else [_finite(v) for v in params],
     }
 
 
@@ -219,9 +220,8 @@ def export_rows(runs: list[dict], nested: bool = False) -> list[dict]:
         row.update({k: _finite(run["record"].get(k)) for k in fields if k not in row})
         row.update(spec_hash=run["spec_hash"], machine=run["machine"],
                    git_commit=run["git_commit"], versions=run["versions"], settings=run["spec"])
-        if not nested:
-            row.update(versions=json.dumps(row["versions"], sort_keys=True),
-                       settings=json.dumps(row["settings"], sort_keys=True))
+        if not nested:  # a flat table: lists and objects as JSON text
+            row = {k: json.dumps(v, sort_keys=True) if isinstance(v, (list, dict)) else v for k, v in row.items()}
         rows.append(row)
     return rows
 

@@ -390,3 +390,29 @@ def test_the_readme_commands_run_as_written(databases, tmp_path, monkeypatch):
     for line in lines:
         invoke(*shlex.split(line)[1:])
     assert len(list(csv.DictReader(open(tmp_path / "runs.csv")))) == len(stored(a))
+
+
+def strict_json(text: str):
+    """JSON as jq reads it: NaN and Infinity are not JSON."""
+    def refuse(name):
+        raise ValueError(f"{name} in the JSON output")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_a_run_that_failed_with_nan_gives_valid_json_everywhere(databases, tmp_path):
+    path = tmp_path / "failed.sqlite"
+    path.write_bytes(databases[0].read_bytes())
+    con = sqlite3.connect(path)
+    record = json.loads(con.execute("SELECT record_json FROM runs WHERE id = 3").fetchone()[0])
+    record.update(rmse_rot_deg=float("nan"), rmse_torque_nm=float("inf"), status="nonfinite")
+    con.execute("UPDATE runs SET record_json = ?, history_json = ?, status = 'nonfinite', rmse_rot_deg = NULL "
+                "WHERE id = 3", (json.dumps(record), json.dumps([float("inf"), 2.5])))
+    con.commit()
+    con.close()
+    shown = strict_json(invoke("runs", "show", "3", "--db", path, "-f", "json").stdout)
+    assert shown["record"]["rmse_rot_deg"] is None and shown["history"] == [None, 2.5]
+    listed = strict_json(invoke("runs", "list", "--db", path, "--status", "nonfinite", "-f", "json").stdout)
+    assert [row["id"] for row in listed] == [3] and listed[0]["rmse_torque_nm"] is None
+    strict_json(invoke("runs", "export", "--db", path, "-f", "json").stdout)
+    strict_json(invoke("runs", "compare", databases[0], path, "-f", "json").stdout)
