@@ -232,6 +232,7 @@ def test_parquet_round_trips(unchanged, tmp_path):
     frame = pd.read_parquet(out)
     assert list(frame["id"]) == [run["id"] for run in stored(a)]
     assert list(frame["rmse_rot_deg"]) == [run["rmse_rot_deg"] for run in stored(a)]
+    assert [None if pd.isna(v) else v for v in frame["seed"]] == [run["seed"] for run in stored(a)]
 
 
 # ---- compare ----------------------------------------------------------------------------------

@@ -12,6 +12,8 @@ from typer.core import TyperGroup
 
 from .app import BadInput, _show_choices, app
 from .common import _check_outputs, _console, _emit, _render
+from .options import Output
+
 
 class _RunsGroup(TyperGroup):
     """The ``runs`` commands' --help, shown as the other commands' (no type noise on flags)."""
@@ -41,11 +43,10 @@ Torque = Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help=
 Opt = Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
 Controller = Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]
 Status = Annotated[Optional[str], typer.Option("--status", metavar="NAME", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)]
-Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write to FILE instead of stdout ('-': stdout); the database is refused.", show_default=False)]
 
 
-def _format(choices, default_help: str):
-    return typer.Option("--format", "-f", metavar="|".join(choices), help=default_help)
+def _format(choices, help_text: str):
+    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
 
 
 def _filters(command, model, torque, opt, controller, status) -> dict:
@@ -241,16 +242,20 @@ def _check_parquet(output: Optional[Path]) -> None:
 
 
 def _parquet_bytes(rows: list[dict]) -> bytes:
-    """The rows as a Parquet file; a column holding values of several types is stored as text."""
+    """The rows as a Parquet file: whole numbers stay integers (missing values as nulls), and a
+    column holding values of several types is stored as text."""
     import io
 
     import pandas as pd
 
-    frame = pd.DataFrame(rows)
+    frame = pd.DataFrame(rows, dtype=object)
     for column in frame.columns:
-        kinds = {type(v) for v in frame[column] if v is not None}
-        if kinds & {list, dict} or (len(kinds) > 1 and not kinds <= {int, float}):
-            frame[column] = [None if v is None else str(v) for v in frame[column]]
+        values = [None if v is None or v is pd.NA else v for v in frame[column]]
+        kinds = {type(v) for v in values if v is not None}
+        if kinds == {int}:
+            frame[column] = pd.array(values, dtype="Int64")
+        elif kinds & {list, dict} or (len(kinds) > 1 and not kinds <= {int, float}):
+            frame[column] = [None if v is None else str(v) for v in values]
     buffer = io.BytesIO()
     frame.to_parquet(buffer, index=False)
     return buffer.getvalue()
