@@ -1,0 +1,327 @@
+"""Reading a results database without changing it (``fdbench runs``): its stored runs as rows to
+list, show, export and compare.
+
+The database is opened read-only (an SQLite ``mode=ro`` URI): nothing is created, no journal
+mode is switched, nothing is written. SQLite itself may leave the ``-wal`` and ``-shm``
+companions of a WAL database behind, as any reader of one does; the next writer removes them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import sqlite3
+from pathlib import Path
+from urllib.parse import quote
+
+from .store import OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, StoreError, _check_header
+
+# the columns of ``fdbench runs list``, in order
+LIST_COLUMNS = ("id", "created_at", "command", "model", "method", "seed", "rmse_rot_deg", "rmse_torque_nm",
+                "runtime_s", "t_end", "status")
+
+# what ``fdbench runs`` can filter on: option -> what it is called in messages
+FILTERS = {"command": "command", "model": "model", "torque": "torque", "opt": "optimizer",
+           "controller": "controller", "status": "status"}
+
+INDICATORS = ("rmse_rot_deg", "rmse_torque_nm", "runtime_s")
+
+# the columns of ``fdbench runs compare`` (CSV): per indicator its median in A and in B and B / A
+COMPARE_COLUMNS = ("method", "conditions", "found", "runs_a", "runs_b") + tuple(
+    f"{name}_{side}" for name in INDICATORS for side in ("a", "b", "ratio")) + ("cell_a", "cell_b")
+
+_COLUMNS = ("id", "spec_hash", "command", "seed", "spec_json", "record_json", "created_at", "machine", "git_commit",
+            "fdbench_version", "jobs", "versions_json", "status")
+
+
+class BadQuery(ValueError):
+    """A filter or run id that matches nothing stored; the message says what is there."""
+
+
+# ---- opening --------------------------------------------------------------------------------
+
+
+def open_read_only(path) -> sqlite3.Connection:
+    """A read-only connection to the fdbench results database at ``path``; StoreError with one
+    line for a missing file, a directory, a device, or a file that is not an fdbench database."""
+    path = Path(path)
+    if str(path) in ("", ":memory:"):
+        raise StoreError(f"{str(path) or 'an empty name'} is not a results database file")
+    if not path.exists():
+        raise StoreError(f"no results database at {path}")
+    if path.is_dir():
+        raise StoreError(f"{path} is a directory, not a results database")
+    if not path.is_file():
+        raise StoreError(f"{path} is not a regular file (a device or a pipe holds no results)")
+    if path.stat().st_size == 0:
+        raise StoreError(f"{path} is empty: no runs are stored there")
+    _check_header(path)
+    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    try:
+        db = sqlite3.connect(uri, uri=True, timeout=OPEN_PATIENCE_S, isolation_level=None)
+    except sqlite3.Error as exc:
+        raise StoreError(f"{path} cannot be opened ({exc})") from None
+    try:
+        db.execute("PRAGMA query_only = 1")
+        _check_fdbench(db, path)
+    except sqlite3.OperationalError as exc:
+        db.close()
+        if "locked" in str(exc) or "busy" in str(exc):
+            raise StoreError(f"{path} is locked by another program; try again when it is done") from None
+        raise StoreError(f"{path} cannot be read ({exc})") from None
+    except sqlite3.DatabaseError as exc:
+        db.close()
+        raise StoreError(f"{path} is not an fdbench results database ({exc})") from None
+    except BaseException:
+        db.close()
+        raise
+    return db
+
+
+def _check_fdbench(db: sqlite3.Connection, path: Path) -> None:
+    tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+    if "fdbench_meta" not in tables or "runs" not in tables:
+        found = f"tables: {', '.join(sorted(tables))}" if tables else "no tables"
+        raise StoreError(f"{path} is not an fdbench results database ({found})")
+    meta = dict(db.execute("SELECT key, value FROM fdbench_meta"))
+    if meta.get("schema") != SCHEMA_NAME:
+        raise StoreError(f"{path} is not an fdbench results database")
+    if meta.get("version") != SCHEMA_VERSION:
+        raise StoreError(f"{path} has results schema version {meta.get('version')}; this fdbench reads "
+                         f"version {SCHEMA_VERSION}")
+
+
+# ---- reading --------------------------------------------------------------------------------
+
+
+def read_runs(path) -> list[dict]:
+    """Every stored run of the database at ``path``, oldest first: its id, settings hash,
+    command, seed, settings (``spec``), record, when, where and by what it was made."""
+    db = open_read_only(path)
+    try:
+        rows = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs ORDER BY id").fetchall()
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(f"cannot read the results database {path}: {exc}") from None
+    finally:
+        db.close()
+    return [_run(dict(zip(_COLUMNS, row))) for row in rows]
+
+
+def _run(row: dict) -> dict:
+    spec = json.loads(row.pop("spec_json"))
+    record = json.loads(row.pop("record_json"))
+    versions = json.loads(row.pop("versions_json") or "null")
+    run = dict(row, spec=spec, record=record, versions=versions)
+    run["status"] = row["status"] if row["status"] is not None else record.get("status")
+    run["model"] = spec.get("model_name") or "forearm"
+    run["method"] = method_label(spec)
+    return run
+
+
+def read_run_data(path, run_id: int) -> tuple[list, list | None]:
+    """The convergence history (best objective per evaluation, deg) and the best parameters of
+    stored run ``run_id`` (None for a run without parameters)."""
+    db = open_read_only(path)
+    try:
+        row = db.execute("SELECT history_json, params_json FROM runs WHERE id = ?", (run_id,)).fetchone()
+    except sqlite3.DatabaseError as exc:
+        raise StoreError(f"cannot read the results database {path}: {exc}") from None
+    finally:
+        db.close()
+    return json.loads(row[0]), json.loads(row[1]) if row[1] else None
+
+
+def method_label(spec: dict) -> str:
+    """A run's method in a few words: 'cs + bfgs + ff' (torque + optimiser, with feedforward),
+    the controller ('pd', 'lqr'), 'collocation', or the command."""
+    command = spec.get("command")
+    if command == "optimize":
+        return f"{spec.get('torque')} + {spec.get('optimizer')}" + (" + ff" if spec.get("feedforward") else "")
+    if command == "control":
+        return spec.get("controller") or "pd"
+    if command == "collocate":
+        return "collocation"
+    return str(command)
+
+
+def filter_value(run: dict, option: str):
+    """The value of ``run`` that the filter ``--option`` compares (None where it does not apply)."""
+    spec = run["spec"]
+    if option == "torque":
+        return spec.get("torque") if run["command"] == "optimize" else None
+    if option == "opt":
+        return spec.get("optimizer") if run["command"] == "optimize" else None
+    if option == "controller":
+        return (spec.get("controller") or "pd") if run["command"] == "control" else None
+    return run[option]
+
+
+def select(runs: list[dict], filters: dict, present_in: list[dict] | None = None) -> list[dict]:
+    """The runs matching every filter ({option: value or None}); BadQuery for a value that no
+    run of ``present_in`` (default: ``runs``) has, naming the values present."""
+    pool = runs if present_in is None else present_in
+    for option, wanted in filters.items():
+        if wanted is None:
+            continue
+        present = sorted({str(v) for v in (filter_value(r, option) for r in pool) if v is not None})
+        if wanted not in present:
+            raise BadQuery(f"--{option}: no stored run has {FILTERS[option]} {wanted!r}; "
+                           f"present: {', '.join(present) or 'none'}")
+        runs = [r for r in runs if str(filter_value(r, option)) == wanted]
+    return runs
+
+
+def find_run(runs: list[dict], key: str) -> dict:
+    """The run with id ``key`` (an integer) or settings hash ``key``; BadQuery if none."""
+    for run in runs:
+        if key == str(run["id"]) or key == run["spec_hash"]:
+            return run
+    ids = [r["id"] for r in runs]
+    held = f"ids {min(ids)} to {max(ids)}" if ids else "no runs"
+    raise BadQuery(f"no stored run has id or settings hash {key!r} (the database holds {held})")
+
+
+# ---- rows -----------------------------------------------------------------------------------
+
+
+def list_row(run: dict) -> dict:
+    """One row of ``fdbench runs list``: the columns of LIST_COLUMNS."""
+    record = run["record"]
+    out = {"id": run["id"], "created_at": run["created_at"], "command": run["command"], "model": run["model"],
+           "method": run["method"], "seed": run["seed"]}
+    out.update({name: _finite(record.get(name)) for name in ("rmse_rot_deg", "rmse_torque_nm", "runtime_s", "t_end")})
+    out["status"] = run["status"]
+    return out
+
+
+def show(run: dict, history: list, params) -> dict:
+    """Everything stored about one run: its record, settings and provenance, its convergence
+    history and best parameters."""
+    return {
+        "id": run["id"], "spec_hash": run["spec_hash"], "method": run["method"],
+        "record": {k: _finite(v) for k, v in run["record"].items()},
+        "settings": run["spec"],
+        "provenance": {"created_at": run["created_at"], "machine": run["machine"], "git_commit": run["git_commit"],
+                       "fdbench_version": run["fdbench_version"], "jobs": run["jobs"], "versions": run["versions"]},
+        "evaluations_stored": len(history), "history": [_finite(v) for v in history],
+        "params": None if params is None else [_finite(v) for v in params],
+    }
+
+
+def export_rows(runs: list[dict], nested: bool = False) -> list[dict]:
+    """One row per run: its id, when, its method, every field of its record (the union over the
+    runs, None where a run has none), where and by what it was made, and its dependency versions
+    and settings: as JSON text for a flat table, or as objects if ``nested``."""
+    fields = list(dict.fromkeys(k for run in runs for k in run["record"]))
+    rows = []
+    for run in runs:
+        row = {"id": run["id"], "created_at": run["created_at"], "method": run["method"]}
+        row.update({k: _finite(run["record"].get(k)) for k in fields if k not in row})
+        row.update(spec_hash=run["spec_hash"], machine=run["machine"],
+                   git_commit=run["git_commit"], versions=run["versions"], settings=run["spec"])
+        if not nested:  # a flat table: lists and objects as JSON text
+            row = {k: json.dumps(v, sort_keys=True) if isinstance(v, (list, dict)) else v for k, v in row.items()}
+        rows.append(row)
+    return rows
+
+
+# ---- comparing two databases ----------------------------------------------------------------
+
+
+def cell_key(spec: dict) -> str:
+    """The digest of a run's canonical settings without its seed (16 hex digits): the runs of one
+    cell, one per seed, share it, in any database."""
+    from .experiment import RunSpec
+
+    try:
+        canonical = RunSpec(**spec).canonical()
+    except (TypeError, ValueError):  # settings of another fdbench version: taken as stored
+        canonical = dict(spec)
+    canonical.pop("seed", None)
+    return hashlib.sha256(json.dumps(canonical, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def conditions_text(run: dict) -> str:
+    """The conditions of a run in a few words: model, motion, budget, and whatever else differs
+    from the defaults (noise, plant, model constants, integrator, step)."""
+    spec, record = run["spec"], run["record"]
+    parts = [run["model"], str(record.get("motion") or spec.get("kinematics"))]
+    if spec.get("budget"):
+        parts.append(f"budget {spec['budget']}")
+    if spec.get("noise_deg"):
+        parts.append(f"noise {spec['noise_deg']:g} deg")
+    if record.get("plant"):
+        parts.append(f"plant {record['plant']}")
+    if record.get("model_options"):
+        parts.append(f"model {record['model_options']}")
+    if spec.get("integrator", "rk4") != "rk4":
+        parts.append(spec["integrator"])
+    elif spec.get("dt", 1e-3) != 1e-3:
+        parts.append(f"dt {spec['dt']:g} s")
+    return ", ".join(parts)
+
+
+def _cells(runs: list[dict]) -> dict:
+    """{cell key: runs of the cell}, in the order of their first run."""
+    cells: dict = {}
+    for run in runs:
+        cells.setdefault(cell_key(run["spec"]), []).append(run)
+    return cells
+
+
+def compare(runs_a: list[dict], runs_b: list[dict]) -> list[dict]:
+    """The cells of two databases side by side: matched by their settings (seed aside) or, failing
+    that, by method and conditions where that pairs one cell with one; per cell the runs, the
+    median of each indicator in A and in B and the ratio B / A; cells of one database only are
+    listed with ``found`` saying so."""
+    cells_a, cells_b = _cells(runs_a), _cells(runs_b)
+    pairs = [(key, key, "settings") for key in cells_a if key in cells_b]
+    alone_a = [k for k in cells_a if k not in cells_b]
+    alone_b = [k for k in cells_b if k not in cells_a]
+    by_label_a = _by_label(cells_a, alone_a)
+    by_label_b = _by_label(cells_b, alone_b)
+    for label, keys in by_label_a.items():
+        if len(keys) == 1 and len(by_label_b.get(label, ())) == 1:
+            pairs.append((keys[0], by_label_b[label][0], "method and conditions"))
+            alone_a.remove(keys[0])
+            alone_b.remove(by_label_b[label][0])
+    rows = [_compare_row(cells_a[a], cells_b[b], found) for a, b, found in pairs]
+    rows += [_compare_row(cells_a[a], [], "only in A") for a in alone_a]
+    rows += [_compare_row([], cells_b[b], "only in B") for b in alone_b]
+    return rows
+
+
+def _by_label(cells: dict, keys: list) -> dict:
+    out: dict = {}
+    for key in keys:
+        first = cells[key][0]
+        out.setdefault((first["command"], first["method"], conditions_text(first)), []).append(key)
+    return out
+
+
+def _compare_row(a: list[dict], b: list[dict], found: str) -> dict:
+    from .benchmark import summarise
+
+    first = (a or b)[0]
+    row = {"method": first["method"], "conditions": conditions_text(first), "found": found,
+           "runs_a": len(a), "runs_b": len(b)}
+    summary_a = summarise([r["record"] for r in a]) if a else {}
+    summary_b = summarise([r["record"] for r in b]) if b else {}
+    for name in INDICATORS:
+        value_a = _finite(summary_a.get(f"{name}_median"))
+        value_b = _finite(summary_b.get(f"{name}_median"))
+        row[f"{name}_a"], row[f"{name}_b"] = value_a, value_b
+        row[f"{name}_ratio"] = value_b / value_a if value_a and value_b is not None else None
+    row["cell_a"] = cell_key(a[0]["spec"]) if a else None
+    row["cell_b"] = cell_key(b[0]["spec"]) if b else None
+    row["run_ids_a"] = [r["id"] for r in a]
+    row["run_ids_b"] = [r["id"] for r in b]
+    return row
+
+
+def _finite(value):
+    """JSON-safe: NaN and infinities become None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
