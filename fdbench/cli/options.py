@@ -3,7 +3,6 @@ options, execution, and the conditions (motion, noise, model) added by ``_with_c
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -206,7 +205,7 @@ def _key_values(option: str, items) -> list:
 
 def _model_file(path: Path) -> list:
     """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
-    from ..files import BadFile, read_input_text
+    from ..files import BadFile, parse_json, read_input_text
 
     try:
         text = read_input_text(path, "--model-file", 2**20)
@@ -214,7 +213,7 @@ def _model_file(path: Path) -> list:
         raise BadInput(str(exc)) from None
     try:
         if path.suffix.lower() == ".json":
-            data = json.loads(text)
+            data = parse_json(text)
         else:
             import tomllib
 
@@ -227,7 +226,15 @@ def _model_file(path: Path) -> list:
     if not isinstance(data, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                              for v in data.values()):
         raise BadInput(f"--model-file: {path} must hold KEY = number pairs (the constants of the model, e.g. I1 = 0.045)")
-    return [(str(k), float(v)) for k, v in data.items()]
+    return [(str(k), v if isinstance(v, float) else _float(k, v)) for k, v in data.items()]
+
+
+def _float(key, value: int) -> float:
+    """An integer of a model file as a float; one too large for a float is infinite (refused as such)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return float("inf") if value > 0 else float("-inf")
 
 
 def _spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
