@@ -266,6 +266,9 @@ def noisy(motion: Motion, sigma_deg: float, seed: int, capture_hz: float = DEFAU
     if isinstance(motion, SampledMotion):
         t = np.array(motion._t)
     else:
+        from .memory import VALUES_PER_CAPTURED_SAMPLE, check_grid
+
+        check_grid(motion.duration, 1 / capture_hz, "--capture-hz", values=VALUES_PER_CAPTURED_SAMPLE)
         t = np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1)
     theta, _, _ = motion(t)
     rng = np.random.default_rng(seed)
@@ -372,6 +375,9 @@ def sample_grid(duration: float, sample_dt: float) -> np.ndarray:
     a step outside [MIN_SAMPLE_DT, duration]."""
     if not (math.isfinite(sample_dt) and MIN_SAMPLE_DT <= sample_dt <= duration):
         raise ValueError(f"--sample-dt must be in [{MIN_SAMPLE_DT:g}, {duration:g}] s, got {sample_dt}")
+    from .memory import check_grid
+
+    check_grid(duration, sample_dt, "--sample-dt")
     grid = np.arange(0.0, duration, sample_dt)
     if duration - grid[-1] > 1e-9 * sample_dt:
         grid = np.append(grid, duration)

@@ -82,10 +82,13 @@ def read_params(path, model: str, motion_name: str, named_motions, option: str =
 
 
 def make_saved_torque(saved: dict, option: str = "--params"):
-    """The torque parameterisation a saved file names, checked against its parameter count."""
-    from .torques import make_torque
+    """The torque parameterisation a saved file names with its options (one the torque does not
+    take is refused, as a misspelling would be)."""
+    from .experiment import check_method_options
+    from .torques import TORQUES, make_torque
 
     try:
+        check_method_options(TORQUES, saved["torque"], saved["options"], "torque")
         torque = make_torque(saved["torque"], **saved["options"])
     except (TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {saved['path']}: {exc}") from None

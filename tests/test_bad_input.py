@@ -12,6 +12,7 @@ import threading
 import pytest
 from typer.testing import CliRunner
 
+import fdbench
 from fdbench import files
 from fdbench.cli import app
 
@@ -160,3 +161,99 @@ def test_the_arm_s_singular_configurations_are_refused_before_any_work(tmp_path,
     """shoulder -95 + 10 sin(3t) deg passes -90 deg; shoulder + elbow = 90 deg at t = 0."""
     path = arm_csv(tmp_path, shoulder, elbow)
     assert_one_line_error(invoke(["simulate", "--model", "arm2", "--motion", path, "-q"]), "--motion", *words)
+
+
+# ---- options that do not apply are errors, not ignored -----------------------------------------
+
+
+def saved_params(tmp_path, options):
+    path = tmp_path / "params.json"
+    path.write_text(json.dumps({"torque": "cs", "torque_options": options, "feedforward": False,
+                                "kinematics": "paper", "params": [0.0] * 11}))
+    return path
+
+
+@pytest.mark.parametrize("options, key", [({"knots": 11, "wings": 3}, "'wings'"), ({"knots": 11, "terms": -5}, "'terms'")])
+def test_a_parameter_file_s_unknown_torque_option_is_refused(tmp_path, options, key):
+    assert_one_line_error(invoke(["simulate", "--params", saved_params(tmp_path, options), "-q"]),
+                          "--params", key, "knots")
+
+
+@pytest.mark.parametrize("make, words", [
+    (lambda: fdbench.control_spec(controller="lqr", controller_options={"q_angl": 1}), ("'q_angl'", "q_angle")),
+    (lambda: fdbench.control_spec(controller_options={"q_angle": 1}), ("'q_angle'", "kp, kd")),
+    (lambda: fdbench.optimize_spec("cs", "bfgs", torque_options={"knot": 5}), ("'knot'", "knots")),
+    (lambda: fdbench.optimize_spec("cs", "bfgs", optimizer_options={"popsize": 5}), ("'popsize'", "bfgs")),
+    (lambda: fdbench.run(fdbench.RunSpec(command="optimize", torque="pf", optimizer="bfgs", seed=0, budget=2,
+                                         torque_options=(("term", 3),))), ("'term'", "terms")),
+])
+def test_a_misspelt_option_from_python_is_a_value_error_naming_it(make, words):
+    with pytest.raises(ValueError) as error:
+        make()
+    for word in words:
+        assert word in str(error.value)
+
+
+def test_a_sweep_s_shared_options_go_to_the_methods_that_take_them():
+    shared = fdbench.optimize_spec("pf", "bfgs", torque_options={"knots": 11, "hidden": 4, "terms": 3},
+                                   optimizer_options={"popsize": 8}, shared_options=True)
+    assert shared == fdbench.optimize_spec("pf", "bfgs", torque_options={"terms": 3})
+
+
+@pytest.mark.parametrize("args, words", [
+    (["control", "--controller", "lqr", "--kp", "50"], ("--kp", "--controller lqr", "--q-angle")),
+    (["control", "--controller", "pd", "--bandwidth", "5"], ("--bandwidth", "--controller pd")),
+    (["optimize", "--torque", "ann", "--knots", "5"], ("--knots", "--torque ann", "--hidden")),
+    (["optimize", "--opt", "bfgs", "--popsize", "5"], ("--popsize", "--opt bfgs")),
+])
+def test_an_option_given_for_another_method_is_refused(args, words):
+    assert_one_line_error(invoke([*args, "-q"]), *words)
+
+
+def test_defaults_of_other_methods_do_not_count_as_given():
+    result = invoke(["control", "--controller", "lqr", "-f", "json", "-q"])
+    assert result.exit_code == 0, result.stderr
+    assert json.loads(result.stdout)["controller_options"] == "q_angle=10000.0 q_rate=1.0 r_torque=1.0"
+
+
+# ---- memory: the work is bounded before it starts ----------------------------------------------
+
+
+@pytest.fixture
+def four_gib(monkeypatch):
+    """The budget of a machine with 16 GiB, whatever this one has."""
+    from fdbench import memory
+
+    monkeypatch.setattr(memory, "budget_bytes", lambda: 4 * 2**30)
+
+
+def long_motion(tmp_path):
+    """10 rows spanning 900,000 s."""
+    path = tmp_path / "long.csv"
+    path.write_text("t,theta\n" + "".join(f"{i * 100_000},{10 + i}\n" for i in range(10)))
+    return path
+
+
+@pytest.mark.parametrize("extra, option", [([], "--dt"), (["--dt", "0.1", "--sample-dt", "1e-4"], "--sample-dt"),
+                                           (["--integrator", "rk45", "--sample-dt", "1e-4"], "--sample-dt")])
+def test_a_long_motion_is_refused_before_any_allocation(tmp_path, four_gib, extra, option):
+    args = ["simulate", "--motion", long_motion(tmp_path), "--cutoff", "1e-6", *extra, "-q"]
+    assert_one_line_error(invoke(args), "memory", option)
+
+
+def test_a_tiny_step_on_a_long_motion_is_refused(tmp_path, four_gib):
+    rows = [(t / 100, 30 * math.sin(t / 100)) for t in range(10_001)]  # 100 s at 100 Hz
+    args = ["control", "--motion", motion_csv(tmp_path, rows=rows), "--dt", "1e-6", "-q"]
+    assert_one_line_error(invoke(args), "memory", "--dt")
+
+
+def test_a_capture_too_dense_for_memory_is_refused(tmp_path, four_gib):
+    args = ["inverse", "--motion", long_motion(tmp_path), "--cutoff", "1e-6", "--sample-dt", "1000",
+            "--noise-deg", "1", "--capture-hz", "1000", "-q"]
+    assert_one_line_error(invoke(args), "memory", "--capture-hz")
+
+
+def test_a_population_within_every_option_s_bounds_but_too_large_together(four_gib):
+    args = ["optimize", "--model", "arm2", "--popsize", "10000", "--budget", "10000", "--torque", "ann", "--hidden",
+            "50", "--opt", "cmaes", "-q"]
+    assert_one_line_error(invoke(args), "memory", "--popsize", "--hidden")

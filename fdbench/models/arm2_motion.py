@@ -130,6 +130,10 @@ def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: f
     from ..motion import SampledMotion
 
     recorded = isinstance(motion, PerJoint) and all(isinstance(p, SampledMotion) for p in motion.parts)
+    if not recorded:
+        from ..memory import VALUES_PER_CAPTURED_SAMPLE, check_grid
+
+        check_grid(motion.duration, 1 / capture_hz, "--capture-hz", len(motion.joints), VALUES_PER_CAPTURED_SAMPLE)
     t = (np.array(motion.parts[0]._t) if recorded
          else np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1))
     angles, _, _ = motion(t)
