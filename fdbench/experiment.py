@@ -459,14 +459,30 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
     ``on_start(budget)`` is called once compilation and imports are done."""
     spec.validate()
     if spec._runs() is not None:
-        return spec._runs().run(spec, on_evaluation, on_start)
+        return _explained(spec._runs().run(spec, on_evaluation, on_start), spec)
     if spec.command == "control":
-        return _run_control(spec)
+        return _explained(_run_control(spec), spec)
     if spec.command == "optimize":
-        return _run_optimize(spec, on_evaluation, on_start)
+        return _explained(_run_optimize(spec, on_evaluation, on_start), spec)
     if spec.command == "collocate":
-        return _run_collocate(spec)
+        return _explained(_run_collocate(spec), spec)
     raise ValueError("simulate runs are carried out by run_simulation")
+
+
+ALPHA_HINT = "; try a larger --alpha (or a smaller --dt with rk4)"
+
+
+def _explained(outcome: RunOutcome, spec: RunSpec) -> RunOutcome:
+    """A failed run's message names the likely cause when a constant of the model or the plant
+    is implausible (centimetres typed for metres), instead of the generic hint on --alpha."""
+    from .model import implausible
+
+    causes = implausible(spec.model + spec.plant)
+    record = outcome.record
+    if causes and record.get("status") not in (None, "success"):
+        message = str(record.get("message") or "").replace(ALPHA_HINT, "")
+        record["message"] = f"{message}; likely cause: {'; '.join(causes)}"
+    return outcome
 
 
 def _run_control(spec: RunSpec) -> RunOutcome:
@@ -595,7 +611,7 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     from .inverse import Feedforward
 
     if spec._runs() is not None:
-        return spec._runs().run_simulation(spec, torque_file, params_file)
+        return _explained(spec._runs().run_simulation(spec, torque_file, params_file), spec)
     settings = spec.settings()
     if torque_file is not None:
         from .files import read_torque_csv
@@ -618,7 +634,7 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     runtime = time.perf_counter() - start
     record = fill_result(base_record(spec), result, inverse)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
-    return RunOutcome(record, result, inverse)
+    return _explained(RunOutcome(record, result, inverse), spec)
 
 
 def replay(spec: RunSpec, params) -> SimulationResult:

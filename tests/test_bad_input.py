@@ -257,3 +257,28 @@ def test_a_population_within_every_option_s_bounds_but_too_large_together(four_g
     args = ["optimize", "--model", "arm2", "--popsize", "10000", "--budget", "10000", "--torque", "ann", "--hidden",
             "50", "--opt", "cmaes", "-q"]
     assert_one_line_error(invoke(args), "memory", "--popsize", "--hidden")
+
+
+# ---- implausible constants: a warning, and the likely cause of a failure -----------------------
+
+
+def test_centimetres_typed_for_metres_are_warned_about_and_named_as_the_cause():
+    result = invoke(["simulate", "--plant", "L12=30", "-f", "json"])
+    assert result.exit_code == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if line.startswith("fdbench: warning: --plant")]
+    assert len(warnings) == 1 and "L12 = 30 m" in warnings[0], result.stderr
+    record = json.loads(result.stdout)
+    assert record["status"] != "success"
+    assert "likely cause: L12 = 30 m" in record["message"] and "--alpha" not in record["message"]
+
+
+@pytest.mark.parametrize("change, words", [("m=1000", "m = 1000 kg"), ("I1=40", "I1 = 40 kg m^2")])
+def test_implausible_masses_and_inertias_are_warned_about(change, words):
+    result = invoke(["inverse", "--plant", change, "-f", "json"])
+    assert result.exit_code == 0, result.stderr
+    assert words in result.stderr
+
+
+def test_plausible_constants_and_quiet_runs_have_no_warning():
+    assert "warning" not in invoke(["inverse", "--plant", "L12=0.3", "-f", "json"]).stderr
+    assert invoke(["inverse", "--plant", "L12=30", "-f", "json", "-q"]).stderr == ""

@@ -152,6 +152,7 @@ def _with_conditions(command):
     def wrapper(**kwargs):
         values = {name: kwargs.pop(name) for name in CONDITIONS}
         conditions = _conditions(**values)
+        _warn_implausible(conditions, kwargs.get("quiet", False))
         if kwargs.get("kinematics") is None:
             from ..models import default_motion
 
@@ -161,6 +162,17 @@ def _with_conditions(command):
     wrapper.__signature__ = signature.replace(parameters=kept + added)
     wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
     return wrapper
+
+
+def _warn_implausible(conditions: dict, quiet: bool) -> None:
+    """A warning on stderr for each constant a human arm cannot have (the run goes on)."""
+    from ..model import implausible
+
+    import sys
+
+    for option, pairs in (("--model", conditions["model"]), ("--plant", conditions["plant"])):
+        for text in [] if quiet else implausible(pairs):
+            sys.stderr.write(f"fdbench: warning: {option}: {text}\n")
 
 
 def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
