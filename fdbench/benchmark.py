@@ -95,7 +95,7 @@ def make_plan(cells, seeds=5, budget=200, control=True, kp=80.0, kd=0.3, torque_
     specs = {
         cell: tuple(
             optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
-                          optimizer_options, penalty_weight=penalty_weight,
+                          optimizer_options, penalty_weight=penalty_weight, shared_options=True,
                           gradient=gradient_for(cell.optimizer, gradient), **common)
             for seed in range(seeds)
         )

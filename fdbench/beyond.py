@@ -59,7 +59,8 @@ def exact_gradient_methods(cells, budget, torque_options, optimizer_options, pen
             continue
         ff = " + ff" if cell.feedforward else ""
         spec = optimize_spec(cell.torque, cell.optimizer, cell.feedforward, 0, budget, torque_options,
-                             optimizer_options, gradient="exact", penalty_weight=penalty_weight, **common)
+                             optimizer_options, gradient="exact", penalty_weight=penalty_weight,
+                             shared_options=True, **common)
         methods.append(Method(f"{cell.torque.upper()} + {cell.optimizer}{ff}, exact gradient", EXACT_GRADIENT_SUMMARY,
                               spec))
     return methods

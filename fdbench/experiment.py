@@ -137,8 +137,9 @@ class RunSpec:
         else:
             self.settings()
         if self.command == "control" and self.controller not in (None, "pd"):
-            from .controllers import make_controller
+            from .controllers import CONTROLLERS, make_controller
 
+            check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
             make_controller(self.controller, **dict(self.method_options))
         elif self.command == "control":
             from .control import check_gain
@@ -159,7 +160,12 @@ class RunSpec:
                 raise ValueError(f"--budget must be an integer in [1, {MAX_BUDGET}], got {self.budget}")
             if not (math.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
                 raise ValueError(f"--penalty-weight must be a non-negative finite number, got {self.penalty_weight}")
+            from .optimizers import OPTIMIZERS
+            from .torques import TORQUES
+
             options = dict(self.torque_options)
+            check_method_options(TORQUES, self.torque, options, "torque")
+            check_method_options(OPTIMIZERS, self.optimizer, dict(self.optimizer_options), "optimizer")
             if options.get("hidden") == "auto":
                 options.pop("hidden")
             torque = make_torque(self.torque, **options)
@@ -167,7 +173,26 @@ class RunSpec:
             check_gradient(self.gradient, optimizer, torque, self.integrator)
         elif self.gradient != "fd":
             raise ValueError("--gradient applies to optimisations only")
+        self._check_memory()
         return self
+
+    def _check_memory(self) -> None:
+        """ValueError (one line naming the option to change) if the run's arrays would not fit in
+        the memory fdbench allows a run (see ``fdbench.memory``)."""
+        from .memory import check_run
+        from .models import model_class
+
+        truth = self.motions()[1]
+        population, hidden = 1, 0
+        if self.command == "optimize" and self.integrator == "rk4" and self.optimizer == "cmaes":
+            population = dict(self.optimizer_options).get("popsize") or 16  # cma's default is smaller
+            if self.torque == "ann":
+                from .torques.ann import AUTO_MAX_HIDDEN
+
+                hidden = dict(self.torque_options).get("hidden", 4)
+                hidden = AUTO_MAX_HIDDEN if hidden == "auto" else hidden
+        check_run(truth.duration, len(truth.samples), getattr(model_class(self.model_name), "n_joints", 1),
+                  self.dt if self.integrator == "rk4" else None, population, hidden)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -291,14 +316,15 @@ OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "r
 
 
 def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
-    """A control spec: the paper's PD (kp, kd) or another registered controller with the options
-    its class accepts (``controller_options``; others are dropped, so a run has one hash)."""
-    if controller in (None, "pd"):
-        return RunSpec(command="control", kp=kp, kd=kd, feedforward=True, **common)
+    """A control spec: the paper's PD (kp, kd) or another registered controller with its options
+    (``controller_options``: names its class takes; another name is a ValueError)."""
     from .controllers import CONTROLLERS
 
-    return RunSpec(command="control", controller=controller, feedforward=True,
-                   method_options=_accepted(CONTROLLERS, controller, controller_options), **common)
+    options = _accepted(CONTROLLERS, controller or "pd", controller_options, "controller")
+    if controller in (None, "pd"):
+        return RunSpec(command="control", kp=dict(options).get("kp", kp), kd=dict(options).get("kd", kd),
+                       feedforward=True, **common)
+    return RunSpec(command="control", controller=controller, feedforward=True, method_options=options, **common)
 
 
 def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max_iter=None, max_time=None,
@@ -314,19 +340,25 @@ def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max
 
 
 def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
-                  torque_options=None, optimizer_options=None, gradient="fd", **common) -> RunSpec:
-    """An optimisation spec keeping only the options its torque and optimiser accept, so that
-    the same run has the same hash whichever command asks for it. ``gradient`` "exact" serves
-    gradient-based optimisers only (see ``gradient_for``)."""
+                  torque_options=None, optimizer_options=None, gradient="fd", *, shared_options=False,
+                  **common) -> RunSpec:
+    """An optimisation spec. ``torque_options`` and ``optimizer_options`` name options the torque's
+    and the optimiser's classes take (another name is a ValueError), or, with ``shared_options``
+    (a sweep handing one set to several methods), each keeps those it takes; so the same run has
+    the same hash whichever command asks for it. ``gradient`` "exact" serves gradient-based
+    optimisers only (see ``gradient_for``)."""
     from .optimizers import OPTIMIZERS
     from .torques import TORQUES
 
+    if shared_options:
+        torque_options = options_for(TORQUES, torque, torque_options)
+        optimizer_options = options_for(OPTIMIZERS, optimizer, optimizer_options)
     options = {k: v for k, v in (optimizer_options or {}).items() if v is not None}
     if torque in TORQUES:  # the parameterisation's defaults for this optimiser, where not given
         options = {**getattr(TORQUES[torque], "optimizer_defaults", {}).get(optimizer, {}), **options}
     return RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
-                   seed=seed, budget=budget, torque_options=_accepted(TORQUES, torque, torque_options),
-                   optimizer_options=_accepted(OPTIMIZERS, optimizer, options),
+                   seed=seed, budget=budget, torque_options=_accepted(TORQUES, torque, torque_options, "torque"),
+                   optimizer_options=_accepted(OPTIMIZERS, optimizer, options, "optimizer"),
                    gradient=gradient, **common)
 
 
@@ -339,14 +371,38 @@ def gradient_for(optimizer: str, gradient: str) -> str:
     return gradient if uses else "fd"
 
 
-def _accepted(registry, name, options) -> tuple:
+def _accepted(registry, name, options, kind: str) -> tuple:
+    """The options given (not None) as sorted (name, value) pairs, checked by ``check_method_options``."""
+    options = {k: v for k, v in (options or {}).items() if v is not None}
+    check_method_options(registry, name, options, kind)
+    return tuple(sorted(options.items()))
+
+
+def taken_options(registry, name) -> list:
+    """The option names the class registered as ``name`` takes (none for an unknown name)."""
     import inspect
 
-    options = {k: v for k, v in (options or {}).items() if v is not None}
-    if name in registry:
-        accepted = inspect.signature(registry[name]).parameters
-        options = {k: v for k, v in options.items() if k in accepted}
-    return tuple(sorted(options.items()))
+    return list(inspect.signature(registry[name]).parameters) if name in registry else []
+
+
+def check_method_options(registry, name, options, kind: str) -> None:
+    """ValueError naming an option the class registered as ``name`` does not take, and those it
+    takes (a misspelt ``knot`` is not silently dropped). An unknown ``name`` is left to
+    ``RunSpec.validate``."""
+    if name not in registry:
+        return
+    taken = taken_options(registry, name)
+    unknown = [key for key in options if key not in taken]
+    if unknown:
+        raise ValueError(f"{kind} {name!r} takes no option {unknown[0]!r}; it takes "
+                         f"{', '.join(taken) if taken else 'none'}")
+
+
+def options_for(registry, name, options) -> dict:
+    """Of one set of options shared by several methods (a sweep's), those the class registered
+    as ``name`` takes."""
+    taken = taken_options(registry, name)
+    return {k: v for k, v in (options or {}).items() if k in taken}
 
 
 @dataclass
@@ -414,14 +470,30 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
     ``on_start(budget)`` is called once compilation and imports are done."""
     spec.validate()
     if spec._runs() is not None:
-        return spec._runs().run(spec, on_evaluation, on_start)
+        return _explained(spec._runs().run(spec, on_evaluation, on_start), spec)
     if spec.command == "control":
-        return _run_control(spec)
+        return _explained(_run_control(spec), spec)
     if spec.command == "optimize":
-        return _run_optimize(spec, on_evaluation, on_start)
+        return _explained(_run_optimize(spec, on_evaluation, on_start), spec)
     if spec.command == "collocate":
-        return _run_collocate(spec)
+        return _explained(_run_collocate(spec), spec)
     raise ValueError("simulate runs are carried out by run_simulation")
+
+
+ALPHA_HINT = "; try a larger --alpha (or a smaller --dt with rk4)"
+
+
+def _explained(outcome: RunOutcome, spec: RunSpec) -> RunOutcome:
+    """A failed run's message names the likely cause when a constant of the model or the plant
+    is implausible (centimetres typed for metres), instead of the generic hint on --alpha."""
+    from .model import implausible
+
+    causes = implausible(spec.model + spec.plant)
+    record = outcome.record
+    if causes and record.get("status") not in (None, "success"):
+        message = str(record.get("message") or "").replace(ALPHA_HINT, "")
+        record["message"] = f"{message}; likely cause: {'; '.join(causes)}"
+    return outcome
 
 
 def _run_control(spec: RunSpec) -> RunOutcome:
@@ -550,7 +622,7 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     from .inverse import Feedforward
 
     if spec._runs() is not None:
-        return spec._runs().run_simulation(spec, torque_file, params_file)
+        return _explained(spec._runs().run_simulation(spec, torque_file, params_file), spec)
     settings = spec.settings()
     if torque_file is not None:
         from .files import read_torque_csv
@@ -573,7 +645,7 @@ def run_simulation(spec: RunSpec, torque_file=None, params_file=None) -> RunOutc
     runtime = time.perf_counter() - start
     record = fill_result(base_record(spec), result, inverse)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
-    return RunOutcome(record, result, inverse)
+    return _explained(RunOutcome(record, result, inverse), spec)
 
 
 def replay(spec: RunSpec, params) -> SimulationResult:

@@ -247,31 +247,108 @@ def check_distinct(outputs: dict, inputs: dict | None = None, database=None) -> 
                 raise BadFile(f"{option} and {other} name the same file {path}; give each its own")
 
 
-def read_input_text(path: str | os.PathLike, option: str, limit: int = MAX_INPUT_BYTES) -> str:
-    """The text of an input file (UTF-8, a byte-order mark allowed), refusing one larger than
-    ``limit`` bytes (``/dev/zero`` included) and one that is a directory."""
+INPUT_TIMEOUT_S = 10.0  # s: a pipe or FIFO that sends nothing for this long is refused (no writer?)
+_READ_CACHE: dict = {}  # what each input held when first read, by identity (a pipe can be read only once)
+_READ_CACHE_SIZE = 8
+
+
+def read_input_bytes(path: str | os.PathLike, option: str, limit: int = MAX_INPUT_BYTES) -> bytes:
+    """The bytes of an input file, read once per process: a later call for the same file (the same
+    inode, unchanged) returns them again, so that a pipe (``--motion <(cat f.csv)``,
+    ``/dev/stdin``) serves a digest and a parse. A pipe, FIFO or device is read without blocking:
+    if it sends nothing for INPUT_TIMEOUT_S s (a FIFO with no writer) it is refused. Refuses a
+    directory and more than ``limit`` bytes (``/dev/zero`` included)."""
     path = Path(path)
-    if path.is_dir():
-        raise BadFile(f"{option}: {path} is a directory")
     try:
-        with open(path, "rb") as handle:
-            raw = handle.read(limit + 1)
+        st = os.stat(path)
     except FileNotFoundError:
         raise BadFile(f"{option}: {path} does not exist") from None
     except OSError as exc:
         raise BadFile(f"{option}: cannot read {path}: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise BadFile(f"{option}: {path} is a directory")
+    if _identity(st) in _READ_CACHE:
+        return _READ_CACHE[_identity(st)]
+    try:
+        raw = _read_regular(path, limit) if stat.S_ISREG(st.st_mode) else _read_stream(path, option, limit)
+        st = os.stat(path)  # a pipe's times change while it is written: it is known by its final ones
+    except OSError as exc:
+        raise BadFile(f"{option}: cannot read {path}: {exc.strerror or exc}") from None
     if len(raw) > limit:
         raise BadFile(f"{option}: {path} is larger than {limit // 2**20} MiB; this is not a file fdbench reads")
+    while len(_READ_CACHE) >= _READ_CACHE_SIZE:
+        _READ_CACHE.pop(next(iter(_READ_CACHE)))
+    _READ_CACHE[_identity(st)] = raw
+    return raw
+
+
+def _identity(st: os.stat_result) -> tuple:
+    """What tells one content of a file from another: its inode, size and change times (a new
+    pipe that reuses an inode number has other times)."""
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns
+
+
+def _read_regular(path: Path, limit: int) -> bytes:
+    with open(path, "rb") as handle:
+        return handle.read(limit + 1)
+
+
+def _read_stream(path: Path, option: str, limit: int) -> bytes:
+    """At most limit + 1 bytes of a pipe, FIFO or device, waiting at most INPUT_TIMEOUT_S s for
+    each piece."""
+    import select
+
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)  # a FIFO with no writer would block open()
+    try:
+        poller = select.poll()
+        poller.register(fd, select.POLLIN)
+        chunks, size = [], 0
+        while size <= limit:
+            if not poller.poll(INPUT_TIMEOUT_S * 1000):
+                raise BadFile(f"{option}: {path} sent nothing for {INPUT_TIMEOUT_S:g} s (a FIFO with no writer?); "
+                              "give a regular file or a pipe that is being written")
+            try:
+                chunk = os.read(fd, min(2**16, limit + 1 - size))
+            except BlockingIOError:
+                continue
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+        return b"".join(chunks)
+    finally:
+        os.close(fd)
+
+
+def read_input_text(path: str | os.PathLike, option: str, limit: int = MAX_INPUT_BYTES) -> str:
+    """The text of an input file (UTF-8, a byte-order mark allowed), read once as
+    ``read_input_bytes`` does, refusing one larger than ``limit`` bytes and a directory."""
+    raw = read_input_bytes(path, option, limit)
     try:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise BadFile(f"{option}: {path} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
 
 
+def parse_json(text: str):
+    """JSON text as Python objects, integers too large for a float read as floats (an infinity,
+    which the caller's finiteness checks refuse) rather than failing later. ValueError (one line)
+    for text that is not JSON or is nested too deeply."""
+    import json
+
+    def integer(digits: str):
+        value = float(digits)
+        return int(digits) if abs(value) < 2**63 else value
+
+    try:
+        return json.loads(text, parse_int=integer)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+
+
 def file_digest(path: str | os.PathLike) -> str:
     """SHA-256 of a file's content (hex): inputs enter a run's identity by what they hold."""
-    with open(path, "rb") as handle:
-        return hashlib.sha256(handle.read(MAX_INPUT_BYTES + 1)).hexdigest()
+    return hashlib.sha256(read_input_bytes(path, str(path))).hexdigest()
 
 
 def csv_text(header: list[str], rows) -> str:
@@ -284,11 +361,11 @@ def csv_text(header: list[str], rows) -> str:
 
 def read_columns(path: str | os.PathLike, option: str, required: tuple, optional: tuple = ()) -> dict:
     """Named columns of numbers from a CSV file with a header (names case-insensitive, any order,
-    other columns ignored): {name: array of shape (n,)}; optional columns absent from the header
-    are absent from the result. Raises BadFile with a one-line message."""
+    other columns ignored; line endings LF, CRLF or CR): {name: array of shape (n,)}; optional
+    columns absent from the header are absent from the result. Raises BadFile with a one-line
+    message."""
     path = Path(path)
-    text = read_input_text(path, option)
-    rows = [row for row in csv.reader(io.StringIO(text)) if row and any(cell.strip() for cell in row)]
+    rows = _csv_rows(path, option, read_input_text(path, option))
     expected = ",".join(required)
     if not rows:
         raise BadFile(f"{option}: {path} is empty; expected a header '{expected}' and rows of numbers")
@@ -297,6 +374,9 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
     if missing:
         raise BadFile(f"{option}: {path} needs columns {', '.join(repr(n) for n in required)} in its header, "
                       f"found {', '.join(header)}")
+    twice = [name for name in required + tuple(optional) if header.count(name) > 1]
+    if twice:
+        raise BadFile(f"{option}: {path}: the header names column {twice[0]!r} more than once")
     index = {name: header.index(name) for name in required + tuple(optional) if name in header}
     values = {name: [] for name in index}
     for number, row in enumerate(rows[1:], start=2):
@@ -306,6 +386,15 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
         except (ValueError, IndexError):
             raise BadFile(f"{option}: {path} line {number}: expected numbers in columns {', '.join(index)}") from None
     return {name: np.array(column) for name, column in values.items()}
+
+
+def _csv_rows(path: Path, option: str, text: str) -> list:
+    """The non-blank rows of a CSV text; old Mac line endings (CR only) are read as line ends."""
+    reader = csv.reader(io.StringIO(text.replace("\r\n", "\n").replace("\r", "\n")))
+    try:
+        return [row for row in reader if row and any(cell.strip() for cell in row)]
+    except csv.Error as exc:
+        raise BadFile(f"{option}: {path} line {reader.line_num}: not a CSV file of numbers ({exc})") from None
 
 
 def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple, preferred: tuple = ()

@@ -122,13 +122,16 @@ class SampledMotion(Motion):
     theta_acc: rad/s and rad/s^2 (None: estimated). ``cutoff_hz``: the -3 dB frequency of the whole
     zero-lag Butterworth filter; ``smoothing``: 'butterworth' or 'spline' (a smoothing spline whose
     factor ``spline_lambda`` is chosen by generalised cross-validation when None). ``samples``:
-    the reporting grid (default: t)."""
+    the reporting grid (default: t). ``absolute``: theta is measured from the horizontal, so
+    +-90 deg is singular (the forearm's theta); False for a relative angle (the arm's elbow)."""
 
     def __init__(self, t, theta, theta_vel=None, theta_acc=None, *, name: str = "sampled",
                  cutoff_hz: float = DEFAULT_CUTOFF_HZ, smoothing: str = "butterworth", spline_lambda=None,
-                 samples=None):
+                 samples=None, absolute: bool = True):
         t, theta = np.asarray(t, dtype=float), np.asarray(theta, dtype=float)
         check_samples(t, theta)
+        if absolute:
+            check_clear_of_singular(theta)
         self.name = name
         self._t = _read_only(t - t[0])
         self.recorded = _read_only(theta.copy())  # the raw angles (rad) at times self._t, for figures
@@ -241,10 +244,19 @@ def check_samples(t: np.ndarray, theta: np.ndarray) -> None:
         raise ValueError("times and angles must be finite numbers (no NaN or empty cells)")
     if np.any(np.diff(t) <= 0):
         raise ValueError("times must be strictly increasing")
-    if np.any(np.abs(np.cos(theta)) < 1e-2):
+
+
+SINGULAR_COS = 1e-2  # |cos| below this (within 0.57 deg of +-90 deg): a singular mixed coordinate
+
+
+def check_clear_of_singular(theta: np.ndarray, what: str = "the angle",
+                            needs: str = "the forearm model needs angles clear of it") -> None:
+    """ValueError unless every absolute angle (rad, from the horizontal) stays clear of +-90 deg,
+    where the mixed coordinates are singular."""
+    if np.any(np.abs(np.cos(theta)) < SINGULAR_COS):
         worst = float(np.degrees(theta[np.argmin(np.abs(np.cos(theta)))]))
-        raise ValueError(f"the angle reaches {worst:.4g} deg, where the mixed coordinates are singular "
-                         "(theta = +-90 deg); the forearm model needs angles clear of it")
+        raise ValueError(f"{what} reaches {worst:.4g} deg, where the mixed coordinates are singular "
+                         f"(+-90 deg); {needs}")
 
 
 def noisy(motion: Motion, sigma_deg: float, seed: int, capture_hz: float = DEFAULT_CAPTURE_HZ,
@@ -255,6 +267,9 @@ def noisy(motion: Motion, sigma_deg: float, seed: int, capture_hz: float = DEFAU
     if isinstance(motion, SampledMotion):
         t = np.array(motion._t)
     else:
+        from .memory import VALUES_PER_CAPTURED_SAMPLE, check_grid
+
+        check_grid(motion.duration, 1 / capture_hz, "--capture-hz", values=VALUES_PER_CAPTURED_SAMPLE)
         t = np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1)
     theta, _, _ = motion(t)
     rng = np.random.default_rng(seed)
@@ -384,6 +399,9 @@ def sample_grid(duration: float, sample_dt: float) -> np.ndarray:
     a step outside [MIN_SAMPLE_DT, duration]."""
     if not (math.isfinite(sample_dt) and MIN_SAMPLE_DT <= sample_dt <= duration):
         raise ValueError(f"--sample-dt must be in [{MIN_SAMPLE_DT:g}, {duration:g}] s, got {sample_dt}")
+    from .memory import check_grid
+
+    check_grid(duration, sample_dt, "--sample-dt")
     grid = np.arange(0.0, duration, sample_dt)
     if duration - grid[-1] > 1e-9 * sample_dt:
         grid = np.append(grid, duration)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .files import BadFile, read_input_text
+from .files import BadFile, parse_json, read_input_text
 from .motion import KINEMATICS
 
 MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand numbers
@@ -48,10 +48,9 @@ def read_params(path, model: str, motion_name: str, named_motions, option: str =
     Raises BadFile with a one-line message."""
     path = Path(path)
     try:
-        data = json.loads(read_input_text(path, option, MAX_PARAMS_BYTES))
-    except (json.JSONDecodeError, RecursionError) as exc:
-        reason = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
-        raise BadFile(f"{option}: cannot read {path} as JSON: {reason}") from None
+        data = parse_json(read_input_text(path, option, MAX_PARAMS_BYTES))
+    except ValueError as exc:
+        raise BadFile(f"{option}: cannot read {path} as JSON: {exc}") from None
     try:
         if not isinstance(data, dict):
             raise TypeError("content: a JSON object")
@@ -83,10 +82,13 @@ def read_params(path, model: str, motion_name: str, named_motions, option: str =
 
 
 def make_saved_torque(saved: dict, option: str = "--params"):
-    """The torque parameterisation a saved file names, checked against its parameter count."""
-    from .torques import make_torque
+    """The torque parameterisation a saved file names with its options (one the torque does not
+    take is refused, as a misspelling would be)."""
+    from .experiment import check_method_options
+    from .torques import TORQUES, make_torque
 
     try:
+        check_method_options(TORQUES, saved["torque"], saved["options"], "torque")
         torque = make_torque(saved["torque"], **saved["options"])
     except (TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {saved['path']}: {exc}") from None

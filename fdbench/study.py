@@ -93,7 +93,7 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
             label = method_label(cell) + (", exact gradient" if gradient_for(cell.optimizer, gradient) == "exact" else "")
             specs[(label, level)] = tuple(
                 optimize_spec(cell.torque, cell.optimizer, cell.feedforward, seed, budget, torque_options,
-                              optimizer_options, penalty_weight=penalty_weight,
+                              optimizer_options, penalty_weight=penalty_weight, shared_options=True,
                               gradient=gradient_for(cell.optimizer, gradient), **base)
                 for seed in range(seeds))
             methods.append(label)

@@ -3,7 +3,6 @@ options, execution, and the conditions (motion, noise, model) added by ``_with_c
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -153,6 +152,7 @@ def _with_conditions(command):
     def wrapper(**kwargs):
         values = {name: kwargs.pop(name) for name in CONDITIONS}
         conditions = _conditions(**values)
+        _warn_implausible(conditions, kwargs.get("quiet", False))
         if kwargs.get("kinematics") is None:
             from ..models import default_motion
 
@@ -162,6 +162,24 @@ def _with_conditions(command):
     wrapper.__signature__ = signature.replace(parameters=kept + added)
     wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
     return wrapper
+
+
+def _warn_implausible(conditions: dict, quiet: bool) -> None:
+    """A warning on stderr for each constant a human arm cannot have (the run goes on); constants
+    that are refused outright (a negative mass) are left to the error that follows."""
+    from ..model import implausible
+    from ..models import with_changes
+
+    try:
+        with_changes(conditions["model_name"], conditions["model"] + conditions["plant"])
+    except ValueError:
+        return
+
+    import sys
+
+    for option, pairs in (("--model", conditions["model"]), ("--plant", conditions["plant"])):
+        for text in [] if quiet else implausible(pairs):
+            sys.stderr.write(f"fdbench: warning: {option}: {text}\n")
 
 
 def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
@@ -206,7 +224,7 @@ def _key_values(option: str, items) -> list:
 
 def _model_file(path: Path) -> list:
     """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
-    from ..files import BadFile, read_input_text
+    from ..files import BadFile, parse_json, read_input_text
 
     try:
         text = read_input_text(path, "--model-file", 2**20)
@@ -214,7 +232,7 @@ def _model_file(path: Path) -> list:
         raise BadInput(str(exc)) from None
     try:
         if path.suffix.lower() == ".json":
-            data = json.loads(text)
+            data = parse_json(text)
         else:
             import tomllib
 
@@ -227,7 +245,15 @@ def _model_file(path: Path) -> list:
     if not isinstance(data, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
                                              for v in data.values()):
         raise BadInput(f"--model-file: {path} must hold KEY = number pairs (the constants of the model, e.g. I1 = 0.045)")
-    return [(str(k), float(v)) for k, v in data.items()]
+    return [(str(k), v if isinstance(v, float) else _float(k, v)) for k, v in data.items()]
+
+
+def _float(key, value: int) -> float:
+    """An integer of a model file as a float; one too large for a float is infinite (refused as such)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return float("inf") if value > 0 else float("-inf")
 
 
 def _spec_inputs(conditions: dict, kinematics: str, **others) -> dict:

@@ -88,6 +88,7 @@ def simulate(
 @app.command()
 @_with_conditions
 def control(
+    ctx: typer.Context,
     controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods').")] = "pd",
     kp: Annotated[float, typer.Option("--kp", help="pd: proportional gain, N m/rad (paper: 80).")] = 80.0,
     kd: Annotated[float, typer.Option("--kd", help="pd: derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
@@ -118,6 +119,9 @@ def control(
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
     _check_controller(controller, options)
+    from ..controllers import CONTROLLERS
+
+    options = _applicable(ctx, options, CONTROLLERS, controller, "--controller")
     spec = _validated(control_spec(kp, kd, controller, options, **_noise_seed(conditions, seed),
                                    **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     _check_store(db)
@@ -125,6 +129,21 @@ def control(
     _store(outcome, spec, db, quiet)  # the run is stored before any output is written
     _save_history(outcome, save_history)
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _applicable(ctx: typer.Context, options: dict, registry, name: str, choice: str) -> dict:
+    """Of a command's method options (parameter name: value), those the method ``name`` takes.
+    One the user gave (on the command line or from the environment, not a default) that it does
+    not take is bad input: ``--kp`` does not apply to ``--controller lqr``."""
+    from ..experiment import taken_options
+
+    taken = taken_options(registry, name)
+    for key in options:
+        source = ctx.get_parameter_source(key)
+        if key not in taken and getattr(source, "name", None) in ("COMMANDLINE", "ENVIRONMENT"):
+            allowed = ", ".join("--" + k.replace("_", "-") for k in taken if k in options) or "no options"
+            raise BadInput(f"--{key.replace('_', '-')} does not apply to {choice} {name} (it takes {allowed})")
+    return {k: v for k, v in options.items() if k in taken}
 
 
 def _check_controller(name: str, options: dict) -> None:
@@ -223,6 +242,7 @@ def methods():
 @app.command()
 @_with_conditions
 def optimize(
+    ctx: typer.Context,
     torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods').")] = "cs",
     opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods').")] = "bfgs",
     feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
@@ -266,6 +286,11 @@ def optimize(
     torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
     optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
+    from ..optimizers import OPTIMIZERS
+    from ..torques import TORQUES
+
+    torque_options = _applicable(ctx, torque_options, TORQUES, torque, "--torque")
+    optimizer_options = _applicable(ctx, optimizer_options, OPTIMIZERS, opt, "--opt")
     _check_gradient(gradient)
     if threads is not None and not 1 <= threads <= MAX_THREADS:
         raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")

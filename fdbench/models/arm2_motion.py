@@ -130,16 +130,32 @@ def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: f
     from ..motion import SampledMotion
 
     recorded = isinstance(motion, PerJoint) and all(isinstance(p, SampledMotion) for p in motion.parts)
+    if not recorded:
+        from ..memory import VALUES_PER_CAPTURED_SAMPLE, check_grid
+
+        check_grid(motion.duration, 1 / capture_hz, "--capture-hz", len(motion.joints), VALUES_PER_CAPTURED_SAMPLE)
     t = (np.array(motion.parts[0]._t) if recorded
          else np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1))
     angles, _, _ = motion(t)
     measured = angles + np.radians(sigma_deg) * np.random.default_rng(seed).standard_normal(angles.shape)
-    parts = [SampledMotion(t, measured[:, j], name=joint, samples=motion.samples, **estimate)
+    check_arm_angles(measured)
+    parts = [SampledMotion(t, measured[:, j], name=joint, samples=motion.samples, absolute=False, **estimate)
              for j, joint in enumerate(motion.joints)]
     out = PerJoint(parts, motion.joints)
     where = "" if recorded else f" at {capture_hz:g} Hz"
     out.name = f"{motion.name}+noise {sigma_deg:g} deg{where} (seed {seed})"
     return out
+
+
+def check_arm_angles(angles: np.ndarray) -> None:
+    """ValueError unless the shoulder and the forearm's absolute angle (shoulder + elbow) stay
+    clear of +-90 deg, where the arm's mixed coordinates are singular; angles (rad), shape (n, 2)
+    [shoulder, elbow]. The elbow alone, a relative angle, may take any value."""
+    from ..motion import check_clear_of_singular
+
+    needs = "the arm needs the shoulder and shoulder + elbow clear of it (the elbow alone may take any angle)"
+    check_clear_of_singular(angles[:, 0], "the shoulder", needs)
+    check_clear_of_singular(angles[:, 0] + angles[:, 1], "shoulder + elbow (the forearm's angle)", needs)
 
 
 class Resampled(JointMotion):

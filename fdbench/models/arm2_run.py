@@ -32,7 +32,8 @@ from .. import __version__
 from ..files import BadFile, read_columns, read_history_csv
 from ..model import Penalty
 from .arm2 import JOINTS, Arm2, arm2_with
-from .arm2_motion import MOTIONS, JointMotion, PerJoint, Resampled, as_joint_motion, noisy_joints
+from .arm2_motion import (MOTIONS, JointMotion, PerJoint, Resampled, as_joint_motion, check_arm_angles,
+                          noisy_joints)
 from . import arm2_sim as sim
 
 
@@ -49,9 +50,13 @@ def read_arm_motion_csv(path, option: str = "--motion", radians: bool = False, *
         vel, acc = given_rates(columns, joint, path, option, radians)
         try:
             parts.append(SampledMotion(columns["t"], columns[joint] * unit, None if vel is None else vel * unit,
-                                       None if acc is None else acc * unit, name=joint, **estimate))
+                                       None if acc is None else acc * unit, name=joint, absolute=False, **estimate))
         except ValueError as exc:
             raise BadFile(f"{option}: {path}: {joint}: {exc}") from None
+    try:
+        check_arm_angles(np.column_stack([columns[joint] * unit for joint in JOINTS]))
+    except ValueError as exc:
+        raise BadFile(f"{option}: {path}: {exc}") from None
     motion = PerJoint(parts, JOINTS)
     motion.name = f"file:{path.name}"
     return motion
