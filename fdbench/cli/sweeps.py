@@ -90,7 +90,6 @@ def report(
         _validated(spec)
     from ..store import open_store
 
-    jobs = jobs or os.cpu_count() or 1
     methods = None
     if beyond:
         from ..beyond import beyond_methods
@@ -120,7 +119,7 @@ def report(
 
         extra_rows = beyond_rows(methods, runs)
     _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
-                       _parallelism(backend, jobs, scheduler), figures, output, quiet), output)
+                       executor.describe(), figures, output, quiet), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 
@@ -206,7 +205,6 @@ def study(
         raise BadInput(_with_option(str(exc))) from None
     for key in sweep.specs:
         _validated(sweep.specs[key][0])
-    jobs = jobs or os.cpu_count() or 1
     runs = _run_specs(sweep.all_specs(), db_path, db is None, executor, rerun, quiet)
     rows = studies.summary(sweep, runs)
     if fmt == "csv":
@@ -220,13 +218,13 @@ def study(
             base = output.parent if output is not None else Path(".")
             links = {title: os.path.relpath(path, base) for title, path in written.items()}
             _say(quiet, f"wrote {len(written)} figures to {figures}")
-        settings = _study_settings(sweep, seeds, budget, _parallelism(backend, jobs, scheduler), kinematics, integrator, dt)
+        settings = _study_settings(sweep, seeds, budget, executor.describe(), kinematics, integrator, dt)
         _emit(studies.markdown(sweep, rows, settings, links), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
 
 
-def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> dict:
+def _study_settings(sweep, seeds, budget, carried_out: str, kinematics, integrator, dt) -> dict:
     from ..store import machine
 
     spec = sweep.all_specs()[0]
@@ -241,7 +239,7 @@ def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> d
         "seeds": f"{seeds} per method and level (PD: one run where the runs would be identical)",
         "budget": f"{budget} evaluations per optimisation",
         "runs": str(len(sweep.all_specs())),
-        "parallel jobs": str(jobs),
+        "parallel jobs": carried_out,
         "fdbench": __version__,
         "machine": machine(),
     }
@@ -278,18 +276,23 @@ def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qu
 
     existed = db_path.exists()
     try:
-        with sigterm_as_interrupt(), open_store(db_path) as store:
-            store.check_usable()
-            if not existed:
-                _say_creating(db_path, default_db, quiet)
-            with _progress(quiet, "runs") as progress:
+        with sigterm_as_interrupt():
+            executor.connect()  # an unreachable scheduler is refused before the database is made
+            try:
+                with open_store(db_path) as store:
+                    store.check_usable()
+                    if not existed:
+                        _say_creating(db_path, default_db, quiet)
+                    with _progress(quiet, "runs") as progress:
 
-                def on_done(done, total):
-                    if progress.bar is None:
-                        progress.start(total, show_best=False)
-                    progress.update(done)
+                        def on_done(done, total):
+                            if progress.bar is None:
+                                progress.start(total, show_best=False)
+                            progress.update(done)
 
-                return execute_specs(specs, store, executor, rerun, on_done)
+                        return execute_specs(specs, store, executor, rerun, on_done)
+            finally:
+                executor.stop()
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
     except BackendError as exc:
@@ -358,13 +361,6 @@ def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, names=
         check_distinct({"--output": output, **paths}, database=db)
     except BadFile as exc:
         raise BadInput(str(exc)) from None
-
-
-def _parallelism(name: str, jobs: int, scheduler: Optional[str]):
-    """How the runs were carried out, for the report's settings."""
-    if name != "dask":
-        return jobs
-    return f"Dask scheduler {scheduler}" if scheduler is not None else f"{jobs} (local Dask cluster)"
 
 
 def _backend(name: str, jobs: Optional[int], scheduler: Optional[str]):
