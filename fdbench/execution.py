@@ -361,7 +361,7 @@ class DaskBackend(Backend):
             self.address = scheduler_address(self.scheduler)
 
     @property
-    def _where(self) -> str:
+    def _label(self) -> str:
         return f"--scheduler {_shown(self.scheduler)}" if self.scheduler is not None else "local Dask cluster"
 
     def where(self) -> str:
@@ -370,40 +370,35 @@ class DaskBackend(Backend):
         return f"{self.workers} Dask worker threads of the scheduler {self.address}"
 
     def connect(self) -> None:
+        """Connect to the scheduler given, if any (its workers are awaited by ``start``, only
+        when runs are missing)."""
         if self.scheduler is None or self.client is not None:
             return
         if self.address is None:
             self.check()
         distributed = _import_distributed()
         _quiet_dask_logs()
+        _probe_scheduler(self.address, self.connect_timeout_s, self._label)
         try:
-            _probe_scheduler(self.address, self.connect_timeout_s, self._where)
-            try:
-                self.client = _quiet_client_class(distributed)(self.address, timeout=f"{self.connect_timeout_s}s",
-                                                               set_as_default=False)
-            except Exception as exc:  # noqa: BLE001 - a scheduler that went away since it answered
-                raise BackendError(f"{self._where}: cannot connect to the Dask scheduler: {_reason(exc)}") from None
-            self._join_workers()
-        except BaseException:
-            self.stop()
-            raise
+            self.client = _quiet_client_class(distributed)(self.address, timeout=f"{self.connect_timeout_s}s",
+                                                           set_as_default=False)
+        except Exception as exc:  # noqa: BLE001 - a scheduler that went away since it answered
+            raise BackendError(f"{self._label}: cannot connect to the Dask scheduler: {_reason(exc)}") from None
 
     def start(self, n_runs: int) -> None:
-        if self.client is not None:
-            return
-        if self.scheduler is not None:
-            self.connect()
-            return
-        import logging
-
-        distributed = _import_distributed()
-        _quiet_dask_logs()
         try:
-            self.cluster = distributed.LocalCluster(
-                n_workers=max(1, min(self.jobs, n_runs)), threads_per_worker=1, processes=True,
-                host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL,
-            )
-            self.client = _quiet_client_class(distributed)(self.cluster, set_as_default=False)
+            if self.scheduler is not None:
+                self.connect()
+            elif self.client is None:
+                import logging
+
+                distributed = _import_distributed()
+                _quiet_dask_logs()
+                self.cluster = distributed.LocalCluster(
+                    n_workers=max(1, min(self.jobs, n_runs)), threads_per_worker=1, processes=True,
+                    host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL,
+                )
+                self.client = _quiet_client_class(distributed)(self.cluster, set_as_default=False)
             self._join_workers()
         except BaseException:
             self.stop()
@@ -418,11 +413,11 @@ class DaskBackend(Backend):
         except Exception as exc:  # noqa: BLE001 - a timeout, or the scheduler gone meanwhile
             if isinstance(exc, (TimeoutError, asyncio.TimeoutError)):
                 hint = f"start workers with 'dask worker {self.address}'" if self.address else "see 'dask worker'"
-                raise BackendError(f"{self._where}: no worker joined within {self.workers_timeout_s:g} s; "
+                raise BackendError(f"{self._label}: no worker joined within {self.workers_timeout_s:g} s; "
                                    f"{hint}") from None
-            raise BackendError(f"{self._where}: lost the Dask scheduler while waiting for workers: "
+            raise BackendError(f"{self._label}: lost the Dask scheduler while waiting for workers: "
                                f"{_reason(exc)}") from None
-        self._check_versions(self._where)
+        self._check_versions(self._label)
         self.workers = max(1, sum(self.client.nthreads().values()))
 
     def _check_versions(self, where: str) -> None:
@@ -451,14 +446,14 @@ class DaskBackend(Backend):
                 futures.append((future, indices))
             index_of = {future.key: indices for future, indices in futures}
             for future in as_completed([f for f, _ in futures], loop=self.client.loop):
-                outcomes = _task_result(future, self._where)
+                outcomes = _task_result(future, self._label)
                 for index, outcome in zip(index_of[future.key], outcomes):
                     yield index, outcome
                 future.release()
         except (ExecutionError, BackendError):
             raise
         except Exception as exc:  # noqa: BLE001 - the connection failed while submitting or waiting
-            raise ExecutionError(_lost(self._where, _reason(exc))) from None
+            raise ExecutionError(_lost(self._label, _reason(exc))) from None
         finally:
             unfinished = [f for f, _ in futures if not f.done()]
             if unfinished and self.client is not None and self.client.status == "running":

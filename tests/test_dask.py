@@ -88,8 +88,9 @@ def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
                 args += ["--preload", str(preload)]
             worker_procs.append(_start(args, tmp_path / f"w{i}.log", tmp_path))
         procs.extend(worker_procs)
-        with Client(address, timeout="30s", set_as_default=False) as client:
-            client.wait_for_workers(workers, timeout=60)
+        if workers:
+            with Client(address, timeout="30s", set_as_default=False) as client:
+                client.wait_for_workers(workers, timeout=60)
         yield address, worker_procs, scheduler
     finally:
         for proc in reversed(procs):
@@ -389,6 +390,17 @@ def test_a_scheduler_lost_mid_report_exits_1_with_one_line_and_keeps_the_stored_
     assert len(lines) == 1 and "lost the connection to the Dask scheduler" in lines[0] and address in lines[0]
     assert "run the command again to resume" in lines[0]
     assert 1 <= stored_at_kill <= _count(db) < 8
+
+
+def test_a_fully_stored_report_needs_no_dask_worker_and_says_nothing_ran(tmp_path):
+    db = tmp_path / "stored.sqlite"
+    tiny = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond", "--seeds", "1",
+            "--budget", "5", "--db", str(db), "-f", "json", "-q"]
+    assert CliRunner().invoke(app, [*tiny, "--jobs", "1"]).exit_code == 0
+    with dask_cluster(tmp_path, workers=0) as (address, _, _):
+        done = CliRunner().invoke(app, [*tiny, "--backend", "dask", "--scheduler", address])
+    assert done.exit_code == 0, done.stderr
+    assert json.loads(done.stdout)["settings"]["parallel jobs"] == "none: every run was stored"
 
 
 def test_an_unreachable_scheduler_exits_2_naming_it(tmp_path):
