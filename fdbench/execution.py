@@ -509,7 +509,7 @@ def scheduler_address(text) -> str:
             raise BackendError(f"{where}: {_shown(host)} is not an IPv6 address; {example}") from None
     elif not re.fullmatch(r"[A-Za-z0-9_]([A-Za-z0-9_-]*[A-Za-z0-9_])?(\.[A-Za-z0-9_]([A-Za-z0-9_-]*[A-Za-z0-9_])?)*", host):
         raise BackendError(f"{where}: {_shown(host)} is not a host name or an IP address; {example}")
-    if not (port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
+    if not (port.isascii() and port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
         raise BackendError(f"{where}: the port must be an integer in [1, 65535], got {_shown(port)}; {example}")
     return f"tcp://{host}:{int(port)}"
 
