@@ -202,8 +202,8 @@ def _flush_stdout(code: int) -> int:
         sys.stdout.flush()
     except (BrokenPipeError, ValueError):  # ValueError: stdout closed by the command itself
         return _closed_stdout()
-    except OSError:
-        return code
+    except OSError as exc:  # a full disk under '> file': the results are not all there
+        return _error(f"cannot write the results to standard output: {exc.strerror or exc}", 1)
     return code
 
 
