@@ -63,15 +63,50 @@ class Outcome:
 
 
 def run_spec(spec) -> Outcome:
-    """Carry out one run; an exception becomes a failed run's outcome, never a lost run."""
+    """Carry out one run, once this process is warm for its method (:func:`warm_up_for`); an
+    exception becomes a failed run's outcome, never a lost run."""
     from .experiment import run
 
+    warm_up_for(spec)
     try:
         outcome = run(spec)
     except Exception as exc:  # noqa: BLE001 - a benchmark run never dies: it is recorded as failed
         return Outcome(failed_record(spec, exc), [], None)
     params = None if outcome.params is None else [float(v) for v in outcome.params]
     return Outcome(outcome.record, [float(v) for v in outcome.history], params)
+
+
+WARM_UP_BUDGET = 2  # evaluations of the miniature optimisation that warms a process for a run
+_WARM: set = set()  # what this process is warm for (see warm_up_for)
+
+
+def warm_up_for(spec) -> None:
+    """Before a timed run, make this process warm for it by a miniature run, neither stored nor
+    timed: every kernel and import the run uses (RK4, population and torque kernels, scipy, cma)
+    is then loaded or compiled, and what a method computes once per settings and keeps (the
+    ANN's pretraining) is there, so a worker's first run costs what its later runs cost, on
+    every backend. An optimisation is warmed per settings (seed 0, ``WARM_UP_BUDGET``
+    evaluations), control once per controller, model and integrator. Collocation is left to its
+    own run, which imports CasADi before its clock starts."""
+    from dataclasses import replace
+
+    if spec.command == "optimize":
+        miniature = replace(spec, budget=WARM_UP_BUDGET, seed=0)
+        key = miniature.hash()
+    elif spec.command == "control":
+        miniature = spec
+        key = ("control", spec.controller, spec.model_name, spec.integrator)
+    else:
+        return
+    if key in _WARM:
+        return
+    _WARM.add(key)
+    from .experiment import run
+
+    try:
+        run(miniature)
+    except Exception:  # noqa: BLE001 - the run itself records what is wrong with its spec
+        pass
 
 
 def run_batch(specs, client_version: str | None = None) -> list[Outcome]:
@@ -113,17 +148,23 @@ def warm_up_worker() -> None:
 
 
 class Backend(ABC):
-    """Executes runs. ``start(n)`` acquires the workers for n runs (raising BackendError if they
-    cannot be had), ``outcomes(specs)`` yields ``(index into specs, Outcome)`` as runs end,
-    ``stop()`` releases everything (also after an interruption). ``workers`` is the number of
-    runs carried out at once, stored with every run as ``jobs``."""
+    """Executes runs. ``connect()`` reaches remote workers before the store is opened,
+    ``start(n)`` acquires the workers for n runs (raising BackendError if they cannot be had),
+    ``outcomes(specs)`` yields ``(index into specs, Outcome)`` as runs end, ``stop()`` releases
+    everything (also after an interruption). ``workers`` is the number of runs carried out at
+    once, stored with every run as ``jobs``; ``carried_out`` counts the runs this backend made."""
 
     name = ""
     workers = 1
+    carried_out = 0
 
     def check(self) -> None:
-        """Checks that need no worker (an installed library, option combinations): run before
-        any work, also when every run is already stored."""
+        """Checks that need no worker (an installed library, option combinations, an address):
+        run before any work, also when every run is already stored."""
+
+    def connect(self) -> None:
+        """Reach the workers that exist independently of this command (a Dask scheduler), so
+        that an unreachable one is refused before anything is written; nothing by default."""
 
     def start(self, n_runs: int) -> None:
         """Acquire workers for ``n_runs`` runs."""
@@ -134,6 +175,17 @@ class Backend(ABC):
 
     def stop(self) -> None:
         """Release the workers; safe to call more than once."""
+
+    def describe(self) -> str:
+        """What was carried out where, for a report's settings: 'none: every run was stored',
+        or the number of runs and the workers that made them."""
+        if not self.carried_out:
+            return "none: every run was stored"
+        runs = f"{self.carried_out} run{'s' if self.carried_out != 1 else ''}"
+        return f"{runs} on {self.where()}"
+
+    def where(self) -> str:
+        return f"{self.workers} {self.name} worker{'s' if self.workers != 1 else ''}"
 
 
 BACKENDS: Registry[type] = Registry("backend")
@@ -169,6 +221,11 @@ class LocalBackend(Backend):
 
     def start(self, n_runs: int) -> None:
         self.workers = max(1, min(self.jobs, n_runs))
+
+    def where(self) -> str:
+        if self.workers == 1:
+            return "this machine, one at a time"
+        return f"this machine, {self.workers} worker processes at a time"
 
     def outcomes(self, specs):
         _prepare_parent(specs)
@@ -277,7 +334,11 @@ class DaskBackend(Backend):
     user with ``dask scheduler``, workers with ``dask worker ADDRESS``), or a local cluster of
     ``jobs`` single-threaded worker processes. Runs travel in batches of ``batch`` specs per task
     (default: chosen from the number of runs and workers); a task whose worker dies is run again
-    elsewhere by the scheduler, and a task that raises is retried ``retries`` times."""
+    elsewhere by the scheduler, and a task that raises is retried ``retries`` times.
+
+    Whatever goes wrong says so in one line: the address is checked before anything else
+    (:func:`scheduler_address`), the server there must answer as a Dask scheduler within
+    ``connect_timeout_s`` seconds, and Dask's own logging is silenced (fdbench reports)."""
 
     name = "dask"
 
@@ -289,50 +350,81 @@ class DaskBackend(Backend):
             raise BackendError(f"batch must be an integer >= 1, got {batch}")
         self.jobs = jobs or os.cpu_count() or 1
         self.scheduler = scheduler
+        self.address = None  # the scheduler's checked address, tcp://HOST:PORT
         self.batch, self.retries = batch, retries
         self.connect_timeout_s, self.workers_timeout_s = connect_timeout_s, workers_timeout_s
         self.client = self.cluster = None
 
     def check(self) -> None:
         _import_distributed()
-        if self.scheduler is not None and not str(self.scheduler).strip():
-            raise BackendError("--scheduler: give the scheduler's address, e.g. tcp://10.0.0.5:8786")
+        if self.scheduler is not None:
+            self.address = scheduler_address(self.scheduler)
+
+    @property
+    def _label(self) -> str:
+        return f"--scheduler {_shown(self.scheduler)}" if self.scheduler is not None else "local Dask cluster"
+
+    def where(self) -> str:
+        if self.scheduler is None:
+            return f"a local Dask cluster of {self.workers} worker processes"
+        return f"{self.workers} Dask worker threads of the scheduler {self.address}"
+
+    def connect(self) -> None:
+        """Connect to the scheduler given, if any (its workers are awaited by ``start``, only
+        when runs are missing)."""
+        if self.scheduler is None or self.client is not None:
+            return
+        if self.address is None:
+            self.check()
+        distributed = _import_distributed()
+        _quiet_dask_logs()
+        _probe_scheduler(self.address, self.connect_timeout_s, self._label)
+        try:
+            self.client = _quiet_client_class(distributed)(self.address, timeout=f"{self.connect_timeout_s}s",
+                                                           set_as_default=False)
+        except Exception as exc:  # noqa: BLE001 - a scheduler that went away since it answered
+            raise BackendError(f"{self._label}: cannot connect to the Dask scheduler: {_reason(exc)}") from None
 
     def start(self, n_runs: int) -> None:
-        distributed = _import_distributed()
-        where = f"--scheduler {self.scheduler}"
         try:
             if self.scheduler is not None:
-                try:
-                    self.client = distributed.Client(self.scheduler, timeout=f"{self.connect_timeout_s}s",
-                                                     set_as_default=False)
-                except (OSError, TimeoutError, ValueError, TypeError) as exc:
-                    raise BackendError(f"{where}: cannot connect to the Dask scheduler: {exc}") from None
-            else:
+                self.connect()
+            elif self.client is None:
                 import logging
 
-                where = "local Dask cluster"
+                distributed = _import_distributed()
+                _quiet_dask_logs()
                 self.cluster = distributed.LocalCluster(
                     n_workers=max(1, min(self.jobs, n_runs)), threads_per_worker=1, processes=True,
                     host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL,
                 )
-                self.client = distributed.Client(self.cluster, set_as_default=False)
-            try:
-                self.client.wait_for_workers(1, timeout=self.workers_timeout_s)
-            except (TimeoutError, OSError):
-                raise BackendError(f"{where}: no worker joined within {self.workers_timeout_s:g} s; start "
-                                   f"workers with 'dask worker {self.scheduler}'") from None
-            self._check_versions(where)
-            self.workers = max(1, sum(self.client.nthreads().values()))
+                self.client = _quiet_client_class(distributed)(self.cluster, set_as_default=False)
+            self._join_workers()
         except BaseException:
             self.stop()
             raise
+
+    def _join_workers(self) -> None:
+        """Wait for a worker, check every worker's fdbench version, count the worker threads."""
+        import asyncio
+
+        try:
+            self.client.wait_for_workers(1, timeout=self.workers_timeout_s)
+        except Exception as exc:  # noqa: BLE001 - a timeout, or the scheduler gone meanwhile
+            if isinstance(exc, (TimeoutError, asyncio.TimeoutError)):
+                hint = f"start workers with 'dask worker {self.address}'" if self.address else "see 'dask worker'"
+                raise BackendError(f"{self._label}: no worker joined within {self.workers_timeout_s:g} s; "
+                                   f"{hint}") from None
+            raise BackendError(f"{self._label}: lost the Dask scheduler while waiting for workers: "
+                               f"{_reason(exc)}") from None
+        self._check_versions(self._label)
+        self.workers = max(1, sum(self.client.nthreads().values()))
 
     def _check_versions(self, where: str) -> None:
         try:
             versions = self.client.run(worker_version)
         except Exception as exc:  # noqa: BLE001 - a worker that cannot even import fdbench
-            raise BackendError(f"{where}: the workers cannot run fdbench ({type(exc).__name__}: {exc}); "
+            raise BackendError(f"{where}: the workers cannot run fdbench ({_reason(exc)}); "
                                f"install fdbench {__version__} on every worker") from None
         wrong = {address: version for address, version in versions.items() if version != __version__}
         if wrong:
@@ -354,13 +446,17 @@ class DaskBackend(Backend):
                 futures.append((future, indices))
             index_of = {future.key: indices for future, indices in futures}
             for future in as_completed([f for f, _ in futures], loop=self.client.loop):
-                outcomes = _task_result(future)
+                outcomes = _task_result(future, self._label)
                 for index, outcome in zip(index_of[future.key], outcomes):
                     yield index, outcome
                 future.release()
+        except (ExecutionError, BackendError):
+            raise
+        except Exception as exc:  # noqa: BLE001 - the connection failed while submitting or waiting
+            raise ExecutionError(_lost(self._label, _reason(exc))) from None
         finally:
             unfinished = [f for f, _ in futures if not f.done()]
-            if unfinished:
+            if unfinished and self.client is not None and self.client.status == "running":
                 try:
                     self.client.cancel(unfinished)
                 except Exception:  # noqa: BLE001 - the connection may already be gone
@@ -370,22 +466,155 @@ class DaskBackend(Backend):
         client, cluster = self.client, self.cluster
         self.client = self.cluster = None
         if client is not None or cluster is not None:
-            _quiet_shutdown()
+            _quiet_dask_logs()
         for thing in (client, cluster):
             if thing is not None:
                 try:
-                    thing.close()
+                    if thing is client:
+                        thing.close(timeout=self.connect_timeout_s)
+                    else:
+                        thing.close()
                 except Exception:  # noqa: BLE001 - closing after a failure must not hide it
                     pass
 
 
-def _quiet_shutdown() -> None:
-    """Closing a cluster with tasks in flight (Ctrl-C, SIGTERM) makes Dask and asyncio log the
-    broken connections with tracebacks: what stopped the command is said once, by fdbench."""
+def scheduler_address(text) -> str:
+    """The Dask scheduler's address as ``tcp://HOST:PORT`` (``HOST:PORT`` means the same), or
+    BackendError saying what is wrong, before any connection is tried: fdbench reaches a
+    scheduler over plain TCP (it passes no TLS certificates and runs no UCX or in-process
+    scheduler), HOST is a host name or an IP address ([...] for IPv6), PORT is in [1, 65535]."""
+    import ipaddress
+    import re
+
+    example = "e.g. tcp://10.0.0.5:8786"
+    address = str(text).strip()
+    where = f"--scheduler {_shown(text)}"
+    if not address:
+        raise BackendError(f"--scheduler: give the scheduler's address, {example}")
+    if not address.isprintable() or any(c.isspace() for c in address):
+        raise BackendError(f"{where}: an address has no spaces or control characters; {example}")
+    scheme, separator, rest = address.partition("://")
+    if not separator:
+        scheme, rest = "tcp", address
+    if scheme.lower() != "tcp":
+        raise BackendError(f"{where}: fdbench reaches a Dask scheduler over tcp:// only, not {_shown(scheme)}://; "
+                           f"{example}")
+    host, colon, port = rest.rpartition(":")
+    if not colon or not host:
+        raise BackendError(f"{where}: give the host and the port, {example}")
+    if host.startswith("[") and host.endswith("]"):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            raise BackendError(f"{where}: {_shown(host)} is not an IPv6 address; {example}") from None
+    elif not re.fullmatch(r"[A-Za-z0-9_]([A-Za-z0-9_-]*[A-Za-z0-9_])?(\.[A-Za-z0-9_]([A-Za-z0-9_-]*[A-Za-z0-9_])?)*", host):
+        raise BackendError(f"{where}: {_shown(host)} is not a host name or an IP address; {example}")
+    if not (port.isascii() and port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
+        raise BackendError(f"{where}: the port must be an integer in [1, 65535], got {_shown(port)}; {example}")
+    return f"tcp://{host}:{int(port)}"
+
+
+def _shown(text, limit: int = 60) -> str:
+    """``text`` as a message can show it on one line: quoted if it has control characters,
+    cut after ``limit`` characters."""
+    text = str(text)
+    cut = text[:limit] + ("..." if len(text) > limit else "")
+    return cut if cut.isprintable() else repr(cut)
+
+
+def _reason(exc: BaseException) -> str:
+    return " ".join(f"{type(exc).__name__}: {exc}".split())
+
+
+def _probe_scheduler(address: str, timeout_s: float, where: str) -> None:
+    """Ask the server at ``address`` who it is, within ``timeout_s`` seconds in all, before a
+    Dask client is made: BackendError (one line) for a port where nothing listens, a server
+    that never answers, or one that answers in another protocol."""
+    import asyncio
+    import socket
+    import time
+
+    from distributed.comm import connect
+
+    started = time.monotonic()
+    host, _, port = address[len("tcp://"):].rpartition(":")
+    silent = f"{where}: no answer from a Dask scheduler within {timeout_s:g} s"
+    try:  # a refused port or an unknown host is said at once, not after the timeout
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except socket.timeout:
+        raise BackendError(silent) from None
+    except OSError as exc:
+        raise BackendError(f"{where}: cannot connect to a Dask scheduler: {_reason(exc)}") from None
+    left_s = max(0.1, timeout_s - (time.monotonic() - started))
+
+    async def identity():
+        comm = await connect(address, timeout=left_s + 5)  # the deadline below comes first
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def ask():
+        return asyncio.run(asyncio.wait_for(identity(), left_s))
+
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(1, thread_name_prefix="fdbench-probe") as pool:  # its own event loop, always
+        try:
+            reply = pool.submit(ask).result()
+        except (TimeoutError, asyncio.TimeoutError):
+            raise BackendError(silent) from None
+        except OSError:
+            raise BackendError(f"{where}: the server there closed the connection without answering as a Dask "
+                               "scheduler") from None
+        except Exception:  # noqa: BLE001 - e.g. a length of exabytes read from another protocol's bytes
+            raise BackendError(f"{where}: the server there is not a Dask scheduler (it answers in another "
+                               "protocol)") from None
+    if not isinstance(reply, dict) or reply.get("type") != "Scheduler":
+        raise BackendError(f"{where}: the server there is not a Dask scheduler")
+
+
+_QUIET_CLIENT = None
+
+
+def _quiet_client_class(distributed):
+    """distributed.Client whose collection never blocks nor prints: a client that failed to
+    start would otherwise wait 20 s at exit, then print a traceback from ``__del__``. fdbench
+    closes its clients itself (``DaskBackend.stop``)."""
+    global _QUIET_CLIENT
+    if _QUIET_CLIENT is None:
+
+        class QuietClient(distributed.Client):
+            def __del__(self):
+                try:
+                    if getattr(self, "status", "closed") not in ("closed", "newly-created"):
+                        self.close(timeout=1)
+                except Exception:  # noqa: BLE001 - nothing can be reported from a finaliser
+                    pass
+
+        _QUIET_CLIENT = QuietClient
+    return _QUIET_CLIENT
+
+
+def _lost(where: str, reason: str) -> str:
+    return (f"{where}: lost the connection to the Dask scheduler during the sweep ({reason}); the runs "
+            "stored so far are kept: run the command again to resume")
+
+
+def _quiet_dask_logs() -> None:
+    """Dask and asyncio log broken connections with tracebacks (a lost scheduler, Ctrl-C with
+    tasks in flight): what stopped the command is said once, by fdbench."""
     import logging
 
-    for name in ("distributed", "asyncio", "tornado"):
-        logging.getLogger(name).setLevel(logging.CRITICAL)
+    silent = logging.CRITICAL + 1
+    roots = ("distributed", "asyncio", "tornado")
+    names = [name for name in list(logging.root.manager.loggerDict) if name.split(".")[0] in roots]
+    for name in set(names) | set(roots):  # Dask's configuration gives some of them levels of their own
+        logger = logging.getLogger(name)
+        logger.setLevel(silent)
+        for handler in logger.handlers:
+            handler.setLevel(silent)
 
 
 def auto_batch(n_runs: int, workers: int) -> int:
@@ -395,8 +624,9 @@ def auto_batch(n_runs: int, workers: int) -> int:
     return max(1, min(8, n_runs // (4 * max(1, workers))))
 
 
-def _task_result(future) -> list:
+def _task_result(future, where: str = "Dask") -> list:
     from distributed import KilledWorker
+    from distributed.client import FutureCancelledError
 
     try:
         return future.result()
@@ -407,6 +637,10 @@ def _task_result(future) -> list:
                              "are kept: run the command again to resume") from None
     except (KeyboardInterrupt, ExecutionError, BackendError):
         raise
+    except FutureCancelledError as exc:  # the scheduler went away: its tasks are cancelled
+        raise ExecutionError(_lost(where, getattr(exc, "reason", None) or "its tasks were cancelled")) from None
+    except OSError as exc:
+        raise ExecutionError(_lost(where, _reason(exc))) from None
     except Exception as exc:  # noqa: BLE001 - e.g. a worker that cannot unpickle the task
         raise ExecutionError(f"a Dask task failed: {type(exc).__name__}: {exc}") from None
 
@@ -423,14 +657,18 @@ def _import_distributed():
 
 
 def execute_specs(specs, store, backend: Backend, rerun: bool = False, on_done=None) -> dict:
-    """Make sure every spec is in the store; return {spec hash: stored run}.
+    """Make sure every spec is in the store; return {spec hash: stored run} (each run with its
+    row ``id``).
 
     Runs already stored are reused unless ``rerun``; the missing ones (each settings hash once)
     are handed to the backend and each is stored as soon as its outcome arrives.
-    ``on_done(finished, total)`` reports progress (total = distinct specs)."""
+    ``on_done(finished, total)`` reports progress (total = distinct specs). The runs returned
+    are the rows this call found or wrote, read by id: another process replacing them meanwhile
+    (``--rerun`` on the same database) changes neither the numbers nor the ids returned, and a
+    replaced row stays in the store (``Store.put``)."""
     distinct = {spec.hash(): spec for spec in specs}
-    stored = set() if rerun else store.hashes()
-    missing = [spec for key, spec in distinct.items() if key not in stored]
+    ids = {} if rerun else store.ids(distinct)
+    missing = [spec for key, spec in distinct.items() if key not in ids]
     done = len(distinct) - len(missing)
     if on_done:
         on_done(done, len(distinct))
@@ -439,14 +677,18 @@ def execute_specs(specs, store, backend: Backend, rerun: bool = False, on_done=N
         try:
             with closing(backend.outcomes(missing)) as outcomes:
                 for index, outcome in outcomes:
-                    store.add_record(missing[index], outcome.record, outcome.history, outcome.params,
-                                     jobs=backend.workers, replace=rerun)
+                    spec = missing[index]
+                    row = store.put(spec, outcome.record, outcome.history, outcome.params, jobs=backend.workers,
+                                    replace=rerun)
+                    ids[spec.hash()] = row if row is not None else store.ids([spec.hash()])[spec.hash()]
+                    backend.carried_out += 1
                     done += 1
                     if on_done:
                         on_done(done, len(distinct))
         finally:
             backend.stop()
-    return {key: store.get(key) for key in distinct}
+    stored = store.runs_by_id(ids.values())
+    return {key: stored.get(ids[key]) for key in distinct}
 
 
 @contextmanager

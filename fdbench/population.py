@@ -135,5 +135,7 @@ def warm_up() -> None:
     n = 10
     tau = np.zeros((2, 2 * n + 1))
     ref = np.zeros(2 * n + 1)
-    Population(rk4_candidates, n)(2, (initial_state(settings.kinematics, settings.model), 0.1, n, tau, ref, ref,
+    half = ref.copy()
+    half.flags.writeable = False  # as integrate.half_step_reference gives them: numba types read-only apart
+    Population(rk4_candidates, n)(2, (initial_state(settings.kinematics, settings.model), 0.1, n, tau, half, half,
                                      constants(settings), 1, ref, 1.0))

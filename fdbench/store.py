@@ -6,6 +6,8 @@ any, the machine and a timestamp. Every write is one transaction, so a process k
 moment leaves every stored run intact; WAL journaling and a busy timeout let several processes
 write to one database. Only an empty file or a new name becomes a database: any other file
 without fdbench's metadata (another program's SQLite database included) is refused and never written.
+A run replaced by ``--rerun`` is kept, with its id, in ``superseded_runs``: an id cited by a
+report always names a stored run.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 DEFAULT_DB = "fdbench-results.sqlite"
 SCHEMA_NAME = "fdbench-results"
 SCHEMA_VERSION = "1"
+SUPERSEDED = "superseded_runs"  # runs replaced by a rerun, kept with their ids
 OPEN_PATIENCE_S = 10.0  # how long opening waits for a lock held by another program
 
 _SCHEMA = """
@@ -218,17 +221,47 @@ class Store:
     def records(self) -> list[dict]:
         return [json.loads(row[0]) for row in self._query("SELECT record_json FROM runs ORDER BY id")]
 
-    def provenance(self, hashes) -> dict:
-        """{spec hash: {id, created_at, machine, jobs, git_commit, fdbench_version}} of the
-        stored runs among ``hashes``: when, where and by what each run was made."""
+    def ids(self, hashes) -> dict[str, int]:
+        """{spec hash: row id} of the runs stored now under ``hashes``."""
         wanted = set(hashes)
-        out = {}
-        for row in self.db.execute("SELECT spec_hash, id, created_at, machine, jobs, git_commit, fdbench_version "
-                                   "FROM runs ORDER BY id"):
-            if row[0] in wanted:
-                out[row[0]] = dict(zip(("id", "created_at", "machine", "jobs", "git_commit", "fdbench_version"),
-                                       row[1:]))
-        return out
+        return {row[0]: row[1] for row in self._query("SELECT spec_hash, id FROM runs") if row[0] in wanted}
+
+    def runs_by_id(self, ids) -> dict[int, dict]:
+        """{row id: {id, record, history, params}} of these rows, whether current or replaced
+        since by a rerun (see :meth:`put`): an id once read stays readable."""
+        return {row[0]: {"id": row[0], "record": json.loads(row[1]), "history": json.loads(row[2]),
+                         "params": json.loads(row[3]) if row[3] else None}
+                for row in self._rows_by_id("id, record_json, history_json, params_json", ids)}
+
+    def provenance(self, runs) -> dict:
+        """{spec hash: {id, created_at, machine, jobs, git_commit, fdbench_version}}: when, where
+        and by what each run was made. ``runs`` is {spec hash: stored run} as
+        ``execution.execute_specs`` returns it (each run's own row, even if replaced since), or
+        an iterable of spec hashes (the rows stored now under them)."""
+        fields = ("id", "created_at", "machine", "jobs", "git_commit", "fdbench_version")
+        if isinstance(runs, dict) and all(isinstance(run, dict) and "id" in run for run in runs.values()):
+            hash_of = {run["id"]: key for key, run in runs.items()}
+            rows = self._rows_by_id(", ".join(fields), hash_of)
+            return {hash_of[row[0]]: dict(zip(fields, row)) for row in rows}
+        wanted = set(runs)
+        return {row[0]: dict(zip(fields, row[1:])) for row in self._query(f"SELECT spec_hash, {', '.join(fields)} "
+                                                                           "FROM runs ORDER BY id")
+                if row[0] in wanted}
+
+    def _rows_by_id(self, columns: str, ids) -> list:
+        """Rows (``columns``, id first) of the current and replaced runs with these ids."""
+        ids = sorted(set(ids))
+        tables = ["runs"] + ([SUPERSEDED] if self._has_table(SUPERSEDED) else [])
+        rows = []
+        for start in range(0, len(ids), 500):  # SQLite bounds the number of parameters of a statement
+            chunk = ids[start:start + 500]
+            marks = ", ".join("?" * len(chunk))
+            for table in tables:
+                rows += self._query(f"SELECT {columns} FROM {table} WHERE id IN ({marks})", chunk)
+        return rows
+
+    def _has_table(self, name: str) -> bool:
+        return bool(self._query("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)))
 
     # ---- writing -----------------------------------------------------------------------------
 
@@ -238,6 +271,17 @@ class Store:
         return self.add_record(spec, outcome.record, outcome.history, outcome.params, jobs, replace)
 
     def add_record(self, spec, record: dict, history, params=None, jobs: int = 1, replace: bool = False) -> bool:
+        """Store one run; True if written (see :meth:`put`)."""
+        return self.put(spec, record, history, params, jobs, replace) is not None
+
+    def put(self, spec, record: dict, history, params=None, jobs: int = 1, replace: bool = False) -> int | None:
+        """Store one run; its row id, or None when a run with the same settings hash is stored
+        and kept (not ``replace``).
+
+        Replacing never deletes: the replaced row moves, with its id, to the table
+        ``superseded_runs`` in the same transaction, so a report that cited it (another report
+        running ``--rerun`` on the same database at the same time) still cites a stored run.
+        Row ids are never reused (AUTOINCREMENT), so an id names one run for good."""
         record = dict(record, jobs=jobs)
         record.pop("command_time_s", None)
         values = (
@@ -249,15 +293,31 @@ class Store:
             json.dumps(dependency_versions()), git_commit(), machine(),
             datetime.now(timezone.utc).isoformat(timespec="seconds"),
         )
-        verb = "INSERT OR REPLACE" if replace else "INSERT OR IGNORE"
+        insert = ("INSERT OR IGNORE INTO runs (spec_hash, command, seed, spec_json, record_json, history_json, "
+                  "params_json, rmse_rot_deg, rmse_torque_nm, runtime_s, t_end, status, jobs, fdbench_version, "
+                  "versions_json, git_commit, machine, created_at) "
+                  "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)")
         try:
-            cursor = self.db.execute(f"{verb} INTO runs (spec_hash, command, seed, spec_json, record_json, "
-                                     "history_json, params_json, rmse_rot_deg, rmse_torque_nm, runtime_s, t_end, "
-                                     "status, jobs, fdbench_version, versions_json, git_commit, machine, created_at) "
-                                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)", values)
+            if not replace:
+                cursor = self.db.execute(insert, values)
+            else:
+                self.db.execute("BEGIN IMMEDIATE")
+                try:
+                    self._supersede(values[0])
+                    cursor = self.db.execute(insert, values)
+                    self.db.execute("COMMIT")
+                except BaseException:
+                    self.db.execute("ROLLBACK")
+                    raise
         except sqlite3.Error as exc:
             raise StoreError(f"cannot write to the results database {self.path}: {exc}") from None
-        return cursor.rowcount == 1
+        return cursor.lastrowid if cursor.rowcount == 1 else None
+
+    def _supersede(self, spec_hash: str) -> None:
+        """Move the current run of this hash, if any, to ``superseded_runs`` (within a transaction)."""
+        self.db.execute(f"CREATE TABLE IF NOT EXISTS {SUPERSEDED} AS SELECT * FROM runs WHERE 0")
+        self.db.execute(f"INSERT INTO {SUPERSEDED} SELECT * FROM runs WHERE spec_hash = ?", (spec_hash,))
+        self.db.execute("DELETE FROM runs WHERE spec_hash = ?", (spec_hash,))
 
 
 def _contents(objects: list) -> str:

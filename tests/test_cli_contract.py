@@ -18,6 +18,8 @@ import math
 import os
 import re
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -681,3 +683,62 @@ def test_run_that_stops_early_exits_zero_with_status(tmp_path):
     assert quiet.exit_code == 0 and quiet.stderr == ""
     frame = pd.read_csv(io.StringIO(quiet.stdout))
     assert frame.loc[0, "status"] == record["status"] and frame.loc[0, "t_end"] < 1
+
+
+# ---- the pipe contract: a reader that goes away ---------------------------------------------
+
+FDBENCH = [sys.executable, "-m", "fdbench.cli"]
+LONG_CSV = ["inverse", "-f", "csv", "--sample-dt", "1e-4"]  # 10 001 rows, ~585 kB: more than a pipe holds
+
+
+def _environment(unbuffered: bool) -> dict:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    if unbuffered:
+        env["PYTHONUNBUFFERED"] = "1"  # as in many containers: Python's text layer writes straight to the pipe
+    return env
+
+
+@pytest.mark.parametrize("unbuffered", [True, False], ids=["unbuffered", "buffered"])
+def test_a_reader_that_stops_after_one_line_gets_exit_141_and_no_message(tmp_path, unbuffered):
+    """``fdbench inverse -f csv | head -1`` on an output longer than the pipe's buffer: the
+    command learns the reader went away while writing, and exits 141 without a word, instead of
+    exit 0 with its output cut."""
+    proc = subprocess.Popen(FDBENCH + LONG_CSV, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path,
+                            env=_environment(unbuffered))
+    try:
+        assert proc.stdout.readline().startswith(b"t,")
+        proc.stdout.close()
+        err = proc.stderr.read()
+        assert proc.wait(timeout=120) == 141
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert err == b""
+
+
+@pytest.fixture(scope="module")
+def small_db(tmp_path_factory):
+    db = tmp_path_factory.mktemp("pipe") / "small.sqlite"
+    made = CliRunner().invoke(app, ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control",
+                                    "--no-beyond", "--seeds", "1", "--budget", "5", "--db", str(db), "-q"])
+    assert made.exit_code == 0, made.stderr
+    return db
+
+
+@pytest.mark.parametrize("unbuffered", [True, False], ids=["unbuffered", "buffered"])
+@pytest.mark.parametrize("command", ["inverse", "optimize", "report"])
+def test_every_command_exits_141_when_its_reader_is_gone(tmp_path, small_db, command, unbuffered):
+    """stdout is a pipe whose reader has already gone when the result is written."""
+    args = {"inverse": LONG_CSV,
+            "optimize": ["optimize", "--torque", "cs", "--opt", "bfgs", "--budget", "5", "-f", "json", "-q"],
+            "report": ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond",
+                       "--seeds", "1", "--budget", "5", "--db", str(small_db), "-f", "csv", "-q"]}[command]
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        done = subprocess.run(FDBENCH + args, stdout=write_end, stderr=subprocess.PIPE, cwd=tmp_path,
+                              env=_environment(unbuffered), timeout=120)
+    finally:
+        os.close(write_end)
+    assert done.returncode == 141 and done.stderr == b""

@@ -66,7 +66,8 @@ def _scheduler_address(proc: subprocess.Popen, log: Path, timeout_s: float = 30)
 @contextmanager
 def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
     """A scheduler on 127.0.0.1 (a free port chosen by the system) and ``workers`` single-threaded
-    workers, each a subprocess in its own session; yields (address, worker processes)."""
+    workers, each a subprocess in its own session; yields (address, worker processes, scheduler
+    process)."""
     _needs_dask()
     from distributed import Client
 
@@ -87,9 +88,10 @@ def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
                 args += ["--preload", str(preload)]
             worker_procs.append(_start(args, tmp_path / f"w{i}.log", tmp_path))
         procs.extend(worker_procs)
-        with Client(address, timeout="30s", set_as_default=False) as client:
-            client.wait_for_workers(workers, timeout=60)
-        yield address, worker_procs
+        if workers:
+            with Client(address, timeout="30s", set_as_default=False) as client:
+                client.wait_for_workers(workers, timeout=60)
+        yield address, worker_procs, scheduler
     finally:
         for proc in reversed(procs):
             _stop(proc)
@@ -124,7 +126,7 @@ def _numbers(csv_text: str) -> list[list[str]]:
 
 
 def test_report_on_a_dask_cluster_equals_the_local_backend(tmp_path):
-    with dask_cluster(tmp_path) as (address, _):
+    with dask_cluster(tmp_path) as (address, _, _):
         remote = _fdbench(*SMALL, "--backend", "dask", "--scheduler", address, "--db", tmp_path / "dask.sqlite",
                           "--format", "csv", "-q", cwd=tmp_path)
     assert remote.returncode == 0, remote.stderr
@@ -144,7 +146,7 @@ def test_a_worker_killed_during_a_sweep_loses_and_duplicates_nothing(tmp_path):
     sweep_args = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", seeds,
                   "--budget", 150]
     args = sweep_args + ["--db", db, "--format", "csv", "-q"]
-    with dask_cluster(tmp_path) as (address, workers):
+    with dask_cluster(tmp_path) as (address, workers, _):
         sweep = subprocess.Popen(FDBENCH + [str(a) for a in args] + ["--backend", "dask", "--scheduler", address],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
         try:
@@ -201,7 +203,7 @@ def test_a_worker_with_another_fdbench_version_is_refused(tmp_path):
     preload.write_text("import fdbench, fdbench.execution\n"
                        "fdbench.__version__ = fdbench.execution.__version__ = '0.0.0-other'\n")
     db = tmp_path / "refused.sqlite"
-    with dask_cluster(tmp_path, workers=1, preload=preload) as (address, _):
+    with dask_cluster(tmp_path, workers=1, preload=preload) as (address, _, _):
         done = _fdbench(*SMALL, "--backend", "dask", "--scheduler", address, "--db", db, "-q", cwd=tmp_path)
     assert done.returncode == 2
     assert done.stdout == ""
@@ -262,6 +264,145 @@ def test_bad_backend_options_exit_2_before_any_work(tmp_path, args, option):
     assert not db.exists()
 
 
+BAD_ADDRESSES = ["http://x:1", "tls://x:1", "ucx://x:1", "inproc://x", "not an address", "tcp://x:1\nx",
+                 "tcp://127.0.0.1:" + "9" * 5000, "tcp://127.0.0.1:0", "127.0.0.1", "tcp://:8786", "tcp://a b:1", "tcp://x:\u00b2"]
+
+
+@pytest.mark.parametrize("address", BAD_ADDRESSES, ids=lambda a: a[:20].replace("\n", "NL"))
+def test_an_invalid_scheduler_address_exits_2_with_one_line_before_anything_is_written(tmp_path, address):
+    _needs_dask()
+    db = tmp_path / "never.sqlite"
+    result = CliRunner().invoke(app, [*SMALL, "--backend", "dask", "--scheduler", address, "--db", str(db), "-q"])
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error: --scheduler ") and len(lines[0]) < 300
+    assert "tcp://" in lines[0]  # says what an address looks like
+    assert not db.exists()
+
+
+def test_an_invalid_scheduler_address_leaves_no_traceback_at_exit(tmp_path):
+    _needs_dask()
+    done = _fdbench(*SMALL, "--backend", "dask", "--scheduler", "http://x:1", "--db", tmp_path / "t.sqlite", "-q",
+                    cwd=tmp_path, timeout=60)
+    assert done.returncode == 2 and done.stdout == ""
+    assert len(done.stderr.splitlines()) == 1 and "Traceback" not in done.stderr
+    assert not (tmp_path / "t.sqlite").exists()
+
+
+@contextmanager
+def loopback_server(answer: bytes | None):
+    """A TCP server on 127.0.0.1 that accepts every connection and sends ``answer`` (None: says
+    nothing); yields its port, and stops (closing every connection) on leaving."""
+    import socket
+    import threading
+
+    listener = socket.socket()
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(8)
+    listener.settimeout(0.2)
+    accepted, stopping = [], threading.Event()
+
+    def serve():
+        while not stopping.is_set():
+            try:
+                conn, _ = listener.accept()
+            except OSError:
+                continue
+            accepted.append(conn)
+            if answer is not None:
+                try:
+                    conn.sendall(answer)
+                except OSError:
+                    pass
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    try:
+        yield listener.getsockname()[1]
+    finally:
+        stopping.set()
+        thread.join(timeout=5)
+        for conn in accepted:
+            conn.close()
+        listener.close()
+
+
+def test_a_server_that_is_not_a_dask_scheduler_exits_2_with_one_line(tmp_path):
+    _needs_dask()
+    db = tmp_path / "never.sqlite"
+    with loopback_server(b"HTTP/1.1 400 Bad Request\r\n\r\n") as port:
+        done = _fdbench(*SMALL, "--backend", "dask", "--scheduler", f"tcp://127.0.0.1:{port}", "--db", db, "-q",
+                        cwd=tmp_path, timeout=60)
+    assert done.returncode == 2 and done.stdout == ""
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and f"127.0.0.1:{port}" in lines[0] and "not a Dask scheduler" in lines[0]
+    assert not db.exists()
+
+
+def test_a_silent_server_is_refused_within_the_connect_timeout():
+    """A server that accepts and never answers: the backend gives up after its timeout (10 s
+    from the command line, 1 s here) with one line, instead of waiting for ever."""
+    _needs_dask()
+    import threading
+
+    from fdbench.execution import BackendError, DaskBackend
+
+    failures = []
+    with loopback_server(None) as port:
+        backend = DaskBackend(scheduler=f"tcp://127.0.0.1:{port}", connect_timeout_s=1)
+        backend.check()
+
+        def start():
+            try:
+                backend.start(1)
+            except BackendError as exc:
+                failures.append(str(exc))
+
+        attempt = threading.Thread(target=start, daemon=True)
+        attempt.start()
+        attempt.join(timeout=60)
+    assert not attempt.is_alive(), "the backend still waits for a server that never answers"
+    assert len(failures) == 1 and "no answer from a Dask scheduler within 1 s" in failures[0]
+    assert backend.client is None
+
+
+def test_a_scheduler_lost_mid_report_exits_1_with_one_line_and_keeps_the_stored_runs(tmp_path):
+    db = tmp_path / "lost.sqlite"
+    args = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond",
+            "--seeds", 8, "--budget", 150, "--db", db, "--format", "csv", "-q"]
+    with dask_cluster(tmp_path, workers=1) as (address, _, scheduler):
+        sweep = subprocess.Popen(FDBENCH + [str(a) for a in args] + ["--backend", "dask", "--scheduler", address],
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+        try:
+            deadline = time.monotonic() + 60
+            while sweep.poll() is None and time.monotonic() < deadline and _count(db) < 1:
+                time.sleep(0.01)
+            assert sweep.poll() is None, "the sweep ended before its scheduler could be killed: give it more work"
+            os.killpg(scheduler.pid, signal.SIGKILL)
+            stored_at_kill = _count(db)
+            out, err = sweep.communicate(timeout=60)
+        finally:
+            if sweep.poll() is None:
+                sweep.kill()
+                sweep.wait()
+    assert sweep.returncode == 1 and out == ""
+    lines = err.splitlines()
+    assert len(lines) == 1 and "lost the connection to the Dask scheduler" in lines[0] and address in lines[0]
+    assert "run the command again to resume" in lines[0]
+    assert 1 <= stored_at_kill <= _count(db) < 8
+
+
+def test_a_fully_stored_report_needs_no_dask_worker_and_says_nothing_ran(tmp_path):
+    db = tmp_path / "stored.sqlite"
+    tiny = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond", "--seeds", "1",
+            "--budget", "5", "--db", str(db), "-f", "json", "-q"]
+    assert CliRunner().invoke(app, [*tiny, "--jobs", "1"]).exit_code == 0
+    with dask_cluster(tmp_path, workers=0) as (address, _, _):
+        done = CliRunner().invoke(app, [*tiny, "--backend", "dask", "--scheduler", address])
+    assert done.exit_code == 0, done.stderr
+    assert json.loads(done.stdout)["settings"]["parallel jobs"] == "none: every run was stored"
+
+
 def test_an_unreachable_scheduler_exits_2_naming_it(tmp_path):
     _needs_dask()
     import socket
@@ -273,6 +414,7 @@ def test_an_unreachable_scheduler_exits_2_naming_it(tmp_path):
     from fdbench.execution import BackendError, DaskBackend
 
     backend = DaskBackend(scheduler=address, connect_timeout_s=1)
+    backend.check()
     with pytest.raises(BackendError, match=f"--scheduler {address}: cannot connect"):
         backend.start(1)
     assert backend.client is None

@@ -294,3 +294,63 @@ def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_
     assert {k: after[k] for k in kept} == kept  # nothing stored before the kill was redone or lost
     assert after == uninterrupted  # the numbers of an uninterrupted report
     assert _optimizations(after) == 10
+
+
+# ----------------------------------------------------------------------------- warm workers
+
+WARM_PROBE = textwrap.dedent("""
+    import gc, json, sys
+    from numba.core.registry import CPUDispatcher
+    import fdbench.experiment as experiment
+    import fdbench.torques.ann as ann
+    from fdbench.execution import LocalBackend, execute_specs
+    from fdbench.experiment import optimize_spec
+    from fdbench.store import open_store
+
+    def signatures():
+        return sum(len(d.signatures) for d in gc.get_objects() if isinstance(d, CPUDispatcher))
+
+    pretrained, calls, run = [], [], experiment.run
+    pretrain = ann.pretrain
+    ann.pretrain = lambda *a, **k: pretrained.append(1) or pretrain(*a, **k)
+
+    def watched(spec, *args, **kwargs):  # compiled signatures and ANN pretrainings during each run
+        before, fits = signatures(), len(pretrained)
+        outcome = run(spec, *args, **kwargs)
+        calls.append({"budget": spec.budget, "compiled": signatures() - before, "pretrained": len(pretrained) - fits})
+        return outcome
+
+    experiment.run = watched
+    specs = [optimize_spec("ann", "cmaes", seed=s, budget=12) for s in (0, 1)]
+    specs += [optimize_spec("cs", "bfgs", seed=0, budget=6)]
+    with open_store(sys.argv[1]) as store:
+        execute_specs(specs, store, LocalBackend(jobs=1))
+    print(json.dumps(calls))
+""")
+
+
+def test_a_process_is_warm_before_its_first_timed_run(tmp_path):
+    """In a fresh process (a worker), the first run of a method neither compiles a kernel nor
+    pretrains the ANN inside its clock: the runner warms the process for it first, so the first
+    run's runtime is comparable with the others'."""
+    done = subprocess.run([sys.executable, "-c", WARM_PROBE, str(tmp_path / "warm.sqlite")], capture_output=True,
+                          text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    calls = json.loads(done.stdout.strip().splitlines()[-1])
+    timed = [c for c in calls if c["budget"] in (12, 6)]
+    assert len(timed) == 3
+    assert all(c["compiled"] == 0 and c["pretrained"] == 0 for c in timed), calls
+
+
+def test_report_settings_say_what_was_carried_out_and_where(tmp_path):
+    from typer.testing import CliRunner
+
+    from fdbench.cli import app
+
+    args = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond",
+            "--seeds", "2", "--budget", "5", "--jobs", "1", "--db", str(tmp_path / "s.sqlite"), "-f", "json", "-q"]
+    first = CliRunner().invoke(app, args)
+    again = CliRunner().invoke(app, args)
+    assert first.exit_code == again.exit_code == 0, first.stderr + again.stderr
+    assert json.loads(first.stdout)["settings"]["parallel jobs"] == "2 runs on this machine, one at a time"
+    assert json.loads(again.stdout)["settings"]["parallel jobs"] == "none: every run was stored"

@@ -213,6 +213,81 @@ def test_same_spec_twice_keeps_one_row_unless_replace(tmp_path):
         assert store.hashes() == {spec.hash(), other.hash()}
 
 
+def test_a_replaced_run_keeps_its_id_and_numbers(tmp_path):
+    """--rerun replaces a run without deleting it: the old row, id and record, stays readable."""
+    spec = spec_for(4)
+    with open_store(tmp_path / "d.sqlite") as store:
+        first = store.put(spec, fake_record(spec, 1.0), [1.0], [0.5])
+        second = store.put(spec, fake_record(spec, 2.0), [2.0], [0.7], replace=True)
+        assert first is not None and second is not None and second != first
+        assert store.count() == 1 and store.get(spec.hash())["record"]["rmse_rot_deg"] == 2.0
+        kept = store.runs_by_id([first, second])
+    assert kept[first]["record"]["rmse_rot_deg"] == 1.0 and kept[first]["params"] == [0.5]
+    assert kept[second]["record"]["rmse_rot_deg"] == 2.0
+
+
+SMALL_REPORT = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--no-beyond",
+                "--seeds", "2", "--budget", "5", "--format", "json", "-q"]
+
+
+def _stored_runtimes(db: Path) -> dict:
+    """{row id: runtime_s} of every run the file holds, current or replaced by a rerun."""
+    con = sqlite3.connect(db)
+    try:
+        tables = {row[0] for row in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        rows = []
+        for table in {"runs", "superseded_runs"} & tables:
+            rows += con.execute(f"SELECT id, runtime_s FROM {table}").fetchall()
+    finally:
+        con.close()
+    return dict(rows)
+
+
+def _cited(report: dict) -> list:
+    """(run id, the cell's median runtime) of every run the report cites."""
+    return [(run_id, cell["runtime_s_median"]) for cell in report["cells"] for run_id in cell["run_ids"]]
+
+
+def test_ids_a_report_cites_stay_in_the_store_after_another_rerun(tmp_path):
+    db = tmp_path / "cited.sqlite"
+    first = CliRunner().invoke(app, [*SMALL_REPORT, "--db", str(db)])
+    assert first.exit_code == 0, first.stderr
+    second = CliRunner().invoke(app, [*SMALL_REPORT, "--db", str(db), "--rerun"])
+    assert second.exit_code == 0, second.stderr
+    cited = [i for text in (first.stdout, second.stdout) for i, _ in _cited(json.loads(text))]
+    assert len(cited) == 4 and len(set(cited)) == 4  # the rerun made new rows
+    assert set(cited) <= set(_stored_runtimes(db))
+
+
+def test_a_report_cites_the_rows_it_ran_while_another_rerun_replaces_them(tmp_path, monkeypatch):
+    """Another ``report --rerun`` on the same database replaces every run between this report's
+    runs and its reading of their provenance (made deterministic by running it at that moment):
+    the report still cites the rows whose numbers it shows, and they are still stored."""
+    from fdbench import execution
+
+    db = tmp_path / "raced.sqlite"
+    execute = execution.execute_specs
+
+    def with_a_rerun_meanwhile(specs, store, backend, rerun=False, on_done=None):
+        runs = execute(specs, store, backend, rerun, on_done)
+        with open_store(db) as other:
+            execute(specs, other, execution.LocalBackend(jobs=1), rerun=True)
+        return runs
+
+    monkeypatch.setattr(execution, "execute_specs", with_a_rerun_meanwhile)
+    done = CliRunner().invoke(app, [*SMALL_REPORT, "--seeds", "1", "--db", str(db)])
+    assert done.exit_code == 0, done.stderr
+    cited = _cited(json.loads(done.stdout))
+    stored = _stored_runtimes(db)
+    con = sqlite3.connect(db)
+    current = {row[0] for row in con.execute("SELECT id FROM runs")}
+    con.close()
+    assert len(cited) == 1
+    for run_id, runtime in cited:
+        assert run_id not in current  # replaced by the other rerun...
+        assert stored[run_id] == runtime  # ...and still stored, with the numbers the report shows
+
+
 # ----------------------------------------------------------------------------- concurrent writers
 
 

@@ -87,7 +87,7 @@ class FdbenchGroup(TyperGroup):
                 raise
             else:
                 code = _error(f"{type(exc).__name__}: {exc}", 1)
-        sys.exit(code)
+        sys.exit(_flush_stdout(code))
 
 
     def get_command(self, ctx, cmd_name):
@@ -167,6 +167,46 @@ class _StdoutClosed(Exception):
 
 
 SIGPIPE_EXIT = 141  # 128 + SIGPIPE: what a shell tool exits with when its reader went away
+
+
+def write_stdout(text: str) -> None:
+    """Write ``text`` to standard output in full and flush it, or raise BrokenPipeError (the
+    reader went away) or _StdoutClosed. The bytes go to the binary layer in a loop: with
+    unbuffered output (``PYTHONUNBUFFERED``, ``python -u``) the text layer would drop whatever a
+    partial write to a pipe left over, and exit 0 with the output cut."""
+    stream = sys.stdout
+    if stream is None:
+        raise _StdoutClosed
+    binary = getattr(stream, "buffer", None)
+    if binary is None:  # a plain text stream (an embedding application's)
+        stream.write(text)
+        stream.flush()
+        return
+    stream.flush()
+    data = memoryview(text.encode(stream.encoding or "utf-8", stream.errors or "strict"))
+    while data:
+        written = binary.write(data)
+        if written is None:  # a non-blocking stdout that is full: wait until it can take more
+            import select
+
+            select.select([], [binary.fileno()], [])
+            continue
+        data = data[written:]
+    binary.flush()
+
+
+def _flush_stdout(code: int) -> int:
+    """The exit code once standard output is flushed: 141 if the reader went away, which the
+    interpreter's own flush at exit would report as a traceback and exit code 120."""
+    if code == SIGPIPE_EXIT or sys.stdout is None:
+        return code
+    try:
+        sys.stdout.flush()
+    except (BrokenPipeError, ValueError):  # ValueError: stdout closed by the command itself
+        return _closed_stdout()
+    except OSError as exc:  # a full disk under '> file': the results are not all there
+        return _error(f"cannot write the results to standard output: {exc.strerror or exc}", 1)
+    return code
 
 
 def _closed_stdout() -> int:

@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Optional
 
 
-from .app import BadInput, FORMATS, _STARTED, _StdoutClosed
+from .app import BadInput, FORMATS, _STARTED, write_stdout
 
 
 def _check_choice(option: str, value: str, valid) -> str:
@@ -109,10 +109,7 @@ def _format_value(value) -> str:
 
 def _emit(text: str, output: Optional[Path]) -> None:
     if output is None or str(output) == "-":
-        if sys.stdout is None:
-            raise _StdoutClosed
-        sys.stdout.write(text)
-        sys.stdout.flush()
+        write_stdout(text)
     else:
         from ..files import write_atomic
 

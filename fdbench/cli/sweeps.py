@@ -91,7 +91,6 @@ def report(
         _validated(spec)
     from ..store import open_store
 
-    jobs = jobs or os.cpu_count() or 1
     methods = None
     if beyond:
         from ..beyond import beyond_methods
@@ -121,7 +120,7 @@ def report(
 
         extra_rows = beyond_rows(methods, runs)
     _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
-                       _parallelism(backend, jobs, scheduler), figures, output, quiet), output)
+                       executor.describe(), figures, output, quiet), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
 
@@ -208,7 +207,6 @@ def study(
         raise BadInput(_with_option(str(exc))) from None
     for key in sweep.specs:
         _validated(sweep.specs[key][0])
-    jobs = jobs or os.cpu_count() or 1
     runs = _run_specs(sweep.all_specs(), db_path, db is None, executor, rerun, quiet)
     rows = studies.summary(sweep, runs)
     if fmt == "csv":
@@ -216,7 +214,7 @@ def study(
 
         _emit(csv_text(list(studies.CSV_COLUMNS), studies.csv_rows(sweep, rows)), output)
     elif fmt == "json":
-        settings = _study_settings(sweep, seeds, budget, _parallelism(backend, jobs, scheduler), kinematics, integrator, dt)
+        settings = _study_settings(sweep, seeds, budget, executor.describe(), kinematics, integrator, dt)
         _emit(_study_json(sweep, rows, settings), output)
     else:
         links = None
@@ -225,7 +223,7 @@ def study(
             base = output.parent if output is not None else Path(".")
             links = {title: os.path.relpath(path, base) for title, path in written.items()}
             _say(quiet, f"wrote {len(written)} figures to {figures}")
-        settings = _study_settings(sweep, seeds, budget, _parallelism(backend, jobs, scheduler), kinematics, integrator, dt)
+        settings = _study_settings(sweep, seeds, budget, executor.describe(), kinematics, integrator, dt)
         _emit(studies.markdown(sweep, rows, settings, links), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
@@ -242,7 +240,7 @@ def _study_json(sweep, rows, settings: dict) -> str:
     return json.dumps({"settings": settings, "rows": table}, indent=2) + "\n"
 
 
-def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> dict:
+def _study_settings(sweep, seeds, budget, carried_out: str, kinematics, integrator, dt) -> dict:
     """The study's settings table: what was swept, the conditions every run shares (model, its
     changes, the plant's, the motion and its digest, the estimate, the noise), the run settings."""
     from ..report import condition_settings
@@ -273,7 +271,7 @@ def _study_settings(sweep, seeds, budget, jobs, kinematics, integrator, dt) -> d
         "seeds": f"{seeds} per method and level (PD: one run where the runs would be identical)",
         "budget": f"{budget} evaluations per optimisation",
         "runs": str(len(sweep.all_specs())),
-        "parallel jobs": str(jobs),
+        "parallel jobs": carried_out,
         "fdbench": __version__,
         "machine": machine(),
     }
@@ -313,6 +311,7 @@ def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qu
     existed = db_path.exists()
     try:
         with sigterm_as_interrupt():
+            executor.connect()  # an unreachable scheduler is refused before the database is made
             if not existed:
                 check_path(db_path)
                 executor = _StartedBackend(executor, len({spec.hash() for spec in specs}))
@@ -423,13 +422,6 @@ def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, inputs
         check_distinct({"--output": output, **paths}, inputs, db)
     except BadFile as exc:
         raise BadInput(str(exc)) from None
-
-
-def _parallelism(name: str, jobs: int, scheduler: Optional[str]):
-    """How the runs were carried out, for the report's settings."""
-    if name != "dask":
-        return jobs
-    return f"Dask scheduler {scheduler}" if scheduler is not None else f"{jobs} (local Dask cluster)"
 
 
 def _backend(name: str, jobs: Optional[int], scheduler: Optional[str]):
