@@ -95,17 +95,25 @@ def _check_fdbench(db: sqlite3.Connection, path: Path) -> None:
 # ---- reading --------------------------------------------------------------------------------
 
 
-def read_runs(path) -> list[dict]:
+def read_runs(path, superseded: bool = False) -> list[dict]:
     """Every stored run of the database at ``path``, oldest first: its id, settings hash,
-    command, seed, settings (``spec``), record, when, where and by what it was made."""
+    command, seed, settings (``spec``), record, when, where and by what it was made. With
+    ``superseded``, the runs replaced by a ``--rerun`` follow (``run["superseded"]`` True)."""
+    from .store import SUPERSEDED
+
     db = open_read_only(path)
     try:
-        rows = db.execute(f"SELECT {', '.join(_COLUMNS)} FROM runs ORDER BY id").fetchall()
+        tables = ["runs"]
+        if superseded and db.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?",
+                                     (SUPERSEDED,)).fetchone():
+            tables.append(SUPERSEDED)
+        rows = [(table, row) for table in tables
+                for row in db.execute(f"SELECT {', '.join(_COLUMNS)} FROM {table} ORDER BY id").fetchall()]
     except sqlite3.DatabaseError as exc:
         raise StoreError(f"cannot read the results database {path}: {exc}") from None
     finally:
         db.close()
-    return [_run(dict(zip(_COLUMNS, row))) for row in rows]
+    return [dict(_run(dict(zip(_COLUMNS, row))), superseded=table != "runs") for table, row in rows]
 
 
 def _run(row: dict) -> dict:
@@ -119,12 +127,15 @@ def _run(row: dict) -> dict:
     return run
 
 
-def read_run_data(path, run_id: int) -> tuple[list, list | None]:
+def read_run_data(path, run_id: int, superseded: bool = False) -> tuple[list, list | None]:
     """The convergence history (best objective per evaluation, deg) and the best parameters of
-    stored run ``run_id`` (None for a run without parameters)."""
+    stored run ``run_id`` (None for a run without parameters), from the superseded runs if asked."""
+    from .store import SUPERSEDED
+
     db = open_read_only(path)
     try:
-        row = db.execute("SELECT history_json, params_json FROM runs WHERE id = ?", (run_id,)).fetchone()
+        table = SUPERSEDED if superseded else "runs"
+        row = db.execute(f"SELECT history_json, params_json FROM {table} WHERE id = ?", (run_id,)).fetchone()
     except sqlite3.DatabaseError as exc:
         raise StoreError(f"cannot read the results database {path}: {exc}") from None
     finally:
@@ -200,6 +211,7 @@ def show(run: dict, history: list, params) -> dict:
     history and best parameters."""
     return {
         "id": run["id"], "spec_hash": run["spec_hash"], "method": run["method"],
+        "superseded": run.get("superseded", False),
         "record": {k: _finite(v) for k, v in run["record"].items()},
         "settings": run["spec"],
         "provenance": {"created_at": run["created_at"], "machine": run["machine"], "git_commit": run["git_commit"],

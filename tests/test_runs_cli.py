@@ -417,3 +417,19 @@ def test_a_run_that_failed_with_nan_gives_valid_json_everywhere(databases, tmp_p
     assert [row["id"] for row in listed] == [3] and listed[0]["rmse_torque_nm"] is None
     strict_json(invoke("runs", "export", "--db", path, "-f", "json").stdout)
     strict_json(invoke("runs", "compare", databases[0], path, "-f", "json").stdout)
+
+
+def test_show_finds_a_run_a_rerun_replaced(tmp_path):
+    """A report cites the ids it used; a later --rerun keeps the replaced run, and show finds it."""
+    db = tmp_path / "r.sqlite"
+    invoke("control", "--db", db, "-q", "-f", "json")
+    con = sqlite3.connect(db)
+    (old_id, old_rmse), = con.execute("SELECT id, rmse_rot_deg FROM runs").fetchall()
+    con.close()
+    invoke("report", "--rerun", "--no-beyond", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--seeds", "1",
+           "--budget", "3", "--db", db, "-q", "-f", "json")
+    shown = json.loads(invoke("runs", "show", old_id, "--db", db, "-f", "json").stdout)
+    assert shown["id"] == old_id and shown["superseded"] is True
+    assert shown["record"]["rmse_rot_deg"] == old_rmse
+    listed = json.loads(invoke("runs", "list", "--db", db, "-f", "json").stdout)
+    assert old_id not in [row["id"] for row in listed]  # list shows the current runs only

@@ -61,12 +61,12 @@ def _database(db: Optional[Path]) -> tuple[Path, str]:
     return (db, "--db") if db is not None else (default_path(), "--db (default)")
 
 
-def _read(path: Path, label: str) -> list[dict]:
+def _read(path: Path, label: str, superseded: bool = False) -> list[dict]:
     from ..store import StoreError
     from ..store_queries import read_runs
 
     try:
-        return read_runs(path)
+        return read_runs(path, superseded)
     except StoreError as exc:
         hint = "; name one with --db or $FDBENCH_DB" if label == "--db (default)" and not path.exists() else ""
         raise BadInput(f"{label}: {exc}{hint}") from None
@@ -170,10 +170,10 @@ def show_run(
 
     path, label = _database(db)
     _check_outputs(fmt, SHOW_FORMATS, db=path, output=output)
-    runs = _read(path, label)
+    runs = _read(path, label, superseded=True)  # an id a report cites may have been replaced since
     try:
         found = find_run(runs, run.strip())
-        history, params = read_run_data(path, found["id"])
+        history, params = read_run_data(path, found["id"], found["superseded"])
     except BadQuery as exc:
         raise BadInput(f"ID: {exc}") from None
     except StoreError as exc:
@@ -195,7 +195,7 @@ def _show_text(shown: dict) -> str:
         provenance["convergence"] = (f"{len(history)} evaluations stored, best objective {history[0]:.6g} "
                                      f"-> {history[-1]:.6g} deg")
     settings = {k: (json.dumps(v) if isinstance(v, (list, dict)) else v) for k, v in shown["settings"].items()}
-    title = f"run {shown['id']}: {shown['method']}"
+    title = f"run {shown['id']}: {shown['method']}" + (" (replaced by a later --rerun)" if shown["superseded"] else "")
     return (_render(shown["record"], "table", f"{title}, record") + _render(settings, "table", "settings")
             + _render(provenance, "table", "provenance"))
 
