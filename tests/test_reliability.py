@@ -346,7 +346,7 @@ def test_fifo_is_written_in_place(tmp_path):
     reader = threading.Thread(target=lambda: received.append(fifo.read_text()))
     reader.start()
     files.write_atomic(fifo, "through the pipe")
-    reader.join(timeout=10)
+    reader.join(timeout=120)
     assert received == ["through the pipe"]
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
 

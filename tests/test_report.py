@@ -764,7 +764,7 @@ def test_figures_keep_one_style_per_method_and_pd_as_reference(tmp_path, monkeyp
 
 def test_method_styles_are_stable_across_processes_for_plugin_names():
     code = "from fdbench.figures import method_style as m; print(m('my-torque', 'my-opt'), m('cs', 'bfgs'))"
-    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
+    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120).stdout
             for _ in range(2)}
     assert len(outs) == 1 and "tab:green" in outs.pop()
 
