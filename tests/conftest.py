@@ -23,7 +23,10 @@ def pytest_configure(config):
     """Every fdbench of the session, in this process and in the commands the tests start, keeps
     its compiled kernels in one folder beside pytest's temporary folders (private to the user,
     kept across sessions): kernels compile once, not once per command, and the user's own cache
-    is neither used nor written. A FDBENCH_CACHE_DIR set by the caller is kept."""
+    is neither used nor written. A FDBENCH_CACHE_DIR set by the caller is kept; its database,
+    plugins and debug mode are not: the tests start from fdbench's defaults."""
+    for name in ("FDBENCH_DB", "FDBENCH_PLUGINS", "FDBENCH_DEBUG"):  # the caller's choices are not the tests'
+        os.environ.pop(name, None)
     if not os.environ.get("FDBENCH_CACHE_DIR"):
         root = config._tmp_path_factory.getbasetemp().parent  # /tmp/pytest-of-USER, mode 0700
         os.environ["FDBENCH_CACHE_DIR"] = str(root / "fdbench-kernels")
