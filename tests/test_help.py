@@ -19,6 +19,8 @@ from fdbench.motion import KINEMATICS
 from fdbench.optimizers import OPTIMIZERS
 from fdbench.torques import TORQUES
 
+from processes import python_path
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 COMMANDS = ("inverse", "simulate", "control", "optimize", "report", "methods")
 
@@ -53,7 +55,8 @@ def test_no_help_shows_a_bare_type_for_flags_or_names(command):
 
 
 def test_plugin_names_appear_among_the_choices():
-    env = dict(os.environ, PYTHONPATH=str(EXAMPLES), FDBENCH_PLUGINS="my_methods", COLUMNS="200")
+    env = dict(os.environ, PYTHONPATH=python_path(EXAMPLES), FDBENCH_PLUGINS="my_methods",
+               COLUMNS="200")
     exe = Path(sys.executable).with_name("fdbench")
     out = subprocess.run([str(exe), "optimize", "--help"], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr

@@ -25,7 +25,7 @@ import fdbench.execution
 from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
 from fdbench.cli import app
 from fdbench.report import CSV_COLUMNS
-from gated import GATED_OPTIMIZER, Gate, children, wait_until
+from processes import GATED_OPTIMIZER, Gate, children, wait_until
 
 # The paper's published figures, typed in from its text (section 5, Tables 2 and 3):
 # (RMSE_rot deg, RMSE_torque N m, runtime s).
@@ -377,7 +377,7 @@ def _count_or_zero(db: Path) -> int:
 
 
 def _gated_sweep(db: Path, seeds: int, jobs: int) -> list[str]:
-    """A report of one cell whose runs from seed 2 on wait for the test's gate (see gated.py)."""
+    """A report of one cell whose runs from seed 2 on wait for the test's gate (see processes.py)."""
     return [sys.executable, "-m", "fdbench.cli", "report", "--no-beyond", "--db", str(db), "--torque", "cs",
             "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control", "--seeds", str(seeds), "--budget", "60",
             "--jobs", str(jobs), "--format", "csv"]

@@ -1,4 +1,5 @@
-"""Stopping a sweep in a known state, without timing anything.
+"""Helpers for tests that start fdbench commands: their Python path, and stopping a sweep in a
+known state without timing anything.
 
 A test that interrupts or kills a running sweep needs it mid-way: some runs stored, workers busy,
 more runs to come. Waiting a while and hoping fails on a loaded machine (the sweep ends first, or
@@ -17,15 +18,21 @@ HERE = Path(__file__).resolve().parent
 GATED_OPTIMIZER = "gated-bfgs"
 
 
+def python_path(*folders) -> str:
+    """A PYTHONPATH of ``folders`` followed by this process's own, so that commands started
+    with it import the same fdbench as the tests (a working copy's, not another install)."""
+    inherited = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    return os.pathsep.join([str(f) for f in folders] + inherited)
+
+
 class Gate:
     """``env``: the environment of a command that loads the plugin; its runs of ``gated-bfgs``
     with seed >= ``from_seed`` wait until :meth:`open` is called (the file ``path`` exists)."""
 
     def __init__(self, folder: Path, from_seed: int = 2):
         self.path = Path(folder) / "gate-open"
-        python_path = [str(HERE)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
         self.env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_GATE=str(self.path),
-                        FDBENCH_GATE_FROM=str(from_seed), PYTHONPATH=os.pathsep.join(python_path))
+                        FDBENCH_GATE_FROM=str(from_seed), PYTHONPATH=python_path(HERE))
 
     def open(self) -> None:
         self.path.touch()
