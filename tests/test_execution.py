@@ -161,12 +161,12 @@ def test_a_worker_dies_with_its_parent(tmp_path, mechanism):
         from fdbench.execution import die_with_parent
         die_with_parent(os.getppid(), poll_s=0.05)
         print(os.getpid(), flush=True)
-        time.sleep(120)
+        time.sleep(600)  # until killed with its parent
     """)
     middle = textwrap.dedent(f"""
         import subprocess, sys, time
         child = subprocess.Popen([sys.executable, "-c", {child!r}], stdout=sys.stdout)
-        time.sleep(120)
+        time.sleep(600)  # until killed
     """)
     proc = subprocess.Popen([sys.executable, "-c", middle], stdout=subprocess.PIPE, text=True, start_new_session=True)
     try:
