@@ -88,8 +88,8 @@ def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
                 args += ["--preload", str(preload)]
             worker_procs.append(_start(args, tmp_path / f"w{i}.log", tmp_path))
         procs.extend(worker_procs)
-        with Client(address, timeout="120s", set_as_default=False) as client:
-            client.wait_for_workers(workers, timeout=120)
+        with Client(address, timeout="30s", set_as_default=False) as client:
+            client.wait_for_workers(workers, timeout=60)
         yield address, worker_procs
     finally:
         for proc in reversed(procs):

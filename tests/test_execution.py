@@ -239,7 +239,7 @@ def _count(db: Path) -> int:
         return 0
 
 
-SWEEP = ["report", "--torque", "cs", "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control", "--seeds", "6",
+SWEEP = ["report", "--torque", "cs", "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control", "--seeds", "10",
          "--budget", "150", "--format", "csv", "-q"]
 
 
@@ -291,4 +291,4 @@ def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_
     after = _records(db)
     assert {k: after[k] for k in kept} == kept  # nothing stored before the kill was redone or lost
     assert after == uninterrupted  # the numbers of an uninterrupted report
-    assert _optimizations(after) == 6
+    assert _optimizations(after) == 10
