@@ -21,6 +21,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
+from processes import GATED_OPTIMIZER, Gate, wait_until
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 SMALL = ["report", "--torque", "cs", "--opt", "bfgs", "--seeds", "2", "--budget", "20"]
@@ -51,7 +52,7 @@ def _stop(proc: subprocess.Popen) -> None:
         proc.kill()
 
 
-def _scheduler_address(proc: subprocess.Popen, log: Path, timeout_s: float = 30) -> str:
+def _scheduler_address(proc: subprocess.Popen, log: Path, timeout_s: float = 120) -> str:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         for line in log.read_text(errors="replace").splitlines():
@@ -140,29 +141,29 @@ def test_report_on_a_dask_cluster_equals_the_local_backend(tmp_path):
     assert _numbers(remote.stdout) == _numbers(local.stdout)
 
 
-def test_a_worker_killed_during_a_sweep_loses_and_duplicates_nothing(tmp_path):
-    db = tmp_path / "killed.sqlite"
+def test_a_worker_killed_during_a_sweep_loses_and_duplicates_nothing(tmp_path, monkeypatch):
+    db, gate = tmp_path / "killed.sqlite", Gate(tmp_path, from_seed=2)
+    for name in ("FDBENCH_PLUGINS", "FDBENCH_GATE", "FDBENCH_GATE_FROM", "PYTHONPATH"):
+        monkeypatch.setenv(name, gate.env[name])  # for the workers as for the client
     seeds = 8
-    sweep_args = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", seeds,
-                  "--budget", 150]
+    sweep_args = ["report", "--torque", "cs", "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control",
+                  "--seeds", seeds, "--budget", 150]
     args = sweep_args + ["--db", db, "--format", "csv", "-q"]
     with dask_cluster(tmp_path) as (address, workers, _):
         sweep = subprocess.Popen(FDBENCH + [str(a) for a in args] + ["--backend", "dask", "--scheduler", address],
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-        try:
-            deadline = time.monotonic() + 60
-            while sweep.poll() is None and time.monotonic() < deadline and _count(db) < 1:
-                time.sleep(0.01)
-            assert sweep.poll() is None, "the sweep ended before a worker could be killed: give it more work"
+        try:  # seeds 0 and 1 stored, both workers inside runs of later seeds: kill one, open the gate
+            wait_until(lambda: _count(db) == 2, "seeds 0 and 1 were stored", sweep)
             os.killpg(workers[0].pid, signal.SIGKILL)  # the worker and its nanny, mid-run
             stored_at_kill = _count(db)
-            out, err = sweep.communicate(timeout=120)
+            gate.open()
+            out, err = sweep.communicate(timeout=300)
         finally:
             if sweep.poll() is None:
                 sweep.kill()
                 sweep.wait()
     assert sweep.returncode == 0, err
-    assert 1 <= stored_at_kill < seeds  # killed mid-sweep, with runs in flight
+    assert stored_at_kill == 2  # killed mid-sweep, with runs in flight
     runs = stored(db)
     con = sqlite3.connect(db)
     try:
@@ -441,24 +442,18 @@ def test_a_terminated_client_of_a_local_dask_cluster_leaves_nothing_and_resumes(
     are kept and the same command completes the rest."""
     _needs_dask()
     signum = signal.SIGTERM
-    db = tmp_path / "client.sqlite"
-    seeds = 10
-    cmd = FDBENCH + ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds",
-                     str(seeds), "--budget", "150", "--backend", "dask", "--jobs", "2", "--db", str(db), "-q"]
+    db, gate = tmp_path / "client.sqlite", Gate(tmp_path, from_seed=2)
+    seeds = 6
+    cmd = FDBENCH + ["report", "--torque", "cs", "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control",
+                     "--seeds", str(seeds), "--budget", "150", "--backend", "dask", "--jobs", "2", "--db", str(db), "-q"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
-                            start_new_session=True)
-    try:
-        deadline = time.monotonic() + 60
-        while proc.poll() is None and time.monotonic() < deadline and _count(db) < 1:
-            time.sleep(0.01)
-        assert proc.poll() is None, "the report ended before it could be killed: give it more work"
-        assert len(_session(proc.pid)) >= 3  # the client and its cluster's worker processes
+                            start_new_session=True, env=gate.env)
+    try:  # seeds 0 and 1 stored, the cluster's workers inside runs of later seeds
+        wait_until(lambda: _count(db) == 2 and len(_session(proc.pid)) >= 3,
+                   "seeds 0 and 1 were stored with the cluster's workers running", proc)
         proc.send_signal(signum)
-        out, err = proc.communicate(timeout=60)
-        deadline = time.monotonic() + 10
-        while _session(proc.pid) and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert _session(proc.pid) == []
+        out, err = proc.communicate(timeout=120)
+        wait_until(lambda: _session(proc.pid) == [], "every process of the client's session ended")
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -468,8 +463,9 @@ def test_a_terminated_client_of_a_local_dask_cluster_leaves_nothing_and_resumes(
     assert proc.returncode == 143 and out == ""
     assert err.strip().splitlines()[-1] == "fdbench: error: terminated" and "Traceback" not in err
     kept = stored(db)
-    assert 1 <= _optimizations(kept) < seeds
-    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert sorted(r["seed"] for r in kept.values()) == [0, 1]
+    gate.open()
+    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path, env=gate.env)
     assert resumed.returncode == 0, resumed.stderr
     after = stored(db)
     assert _optimizations(after) == seeds and {k: after[k] for k in kept} == kept

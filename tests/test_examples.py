@@ -17,6 +17,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from processes import python_path
+
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SCIPY_INTEGRATORS = ("rk45", "dop853", "lsoda", "radau", "bdf")
 
@@ -120,7 +122,7 @@ def test_custom_torque(tmp_path):
 
 def test_plugin_module_methods_reach_the_report(tmp_path):
     """examples/my_methods.py, named in FDBENCH_PLUGINS, gives report cells outside the paper."""
-    env = dict(example_env(), PYTHONPATH=str(EXAMPLES), FDBENCH_PLUGINS="my_methods")
+    env = dict(example_env(), PYTHONPATH=python_path(EXAMPLES), FDBENCH_PLUGINS="my_methods")
     args = ["fdbench", "report", "--db", tmp_path / "plugin.sqlite", "--torque", "linear", "--opt", "random",
             "--no-control", "--seeds", "2", "--budget", "10", "--jobs", "1", "-q"]
     out = subprocess.run([str(a) for a in args], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)

@@ -21,6 +21,7 @@ import pytest
 from fdbench.execution import Backend, LocalBackend, Outcome, execute_specs, failed_record, run_spec
 from fdbench.experiment import control_spec
 from fdbench.store import open_store
+from processes import GATED_OPTIMIZER, Gate, wait_until
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 needs_proc = pytest.mark.skipif(not (sys.platform.startswith("linux") and Path("/proc/self/stat").exists()),
@@ -160,20 +161,20 @@ def test_a_worker_dies_with_its_parent(tmp_path, mechanism):
         from fdbench.execution import die_with_parent
         die_with_parent(os.getppid(), poll_s=0.05)
         print(os.getpid(), flush=True)
-        time.sleep(120)
+        time.sleep(600)  # until killed with its parent
     """)
     middle = textwrap.dedent(f"""
         import subprocess, sys, time
         child = subprocess.Popen([sys.executable, "-c", {child!r}], stdout=sys.stdout)
-        time.sleep(120)
+        time.sleep(600)  # until killed
     """)
     proc = subprocess.Popen([sys.executable, "-c", middle], stdout=subprocess.PIPE, text=True, start_new_session=True)
     try:
         child_pid = int(proc.stdout.readline())
         assert _alive(child_pid)
         proc.kill()
-        proc.wait(timeout=10)
-        assert _wait_gone([child_pid], 5) == []
+        proc.wait(timeout=60)
+        assert _wait_gone([child_pid], 60) == []
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -238,16 +239,18 @@ def _count(db: Path) -> int:
         return 0
 
 
-SWEEP = ["report", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--no-control", "--seeds", "10",
-         "--budget", "250", "--format", "csv", "-q"]
+SWEEP = ["report", "--torque", "cs", "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control", "--seeds", "10",
+         "--budget", "150", "--format", "csv", "-q"]
 
 
 @pytest.fixture(scope="module")
 def uninterrupted(tmp_path_factory) -> dict:
     """The stored records of the sweep run to its end without interruption."""
     db = tmp_path_factory.mktemp("whole") / "whole.sqlite"
+    gate = Gate(db.parent)
+    gate.open()
     done = subprocess.run(FDBENCH + SWEEP + ["--jobs", "2", "--db", str(db)], capture_output=True, text=True,
-                          timeout=120, cwd=db.parent)
+                          timeout=300, cwd=db.parent, env=gate.env)
     assert done.returncode == 0, done.stderr
     return _records(db)
 
@@ -256,23 +259,17 @@ def uninterrupted(tmp_path_factory) -> dict:
 @needs_signals
 @pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
 def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_path, signum, uninterrupted):
-    db = tmp_path / "killed.sqlite"
+    db, gate = tmp_path / "killed.sqlite", Gate(tmp_path, from_seed=2)
     cmd = FDBENCH + SWEEP + ["--jobs", "2", "--db", str(db)]
-    start = time.monotonic()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
-                            start_new_session=True)
-    try:
-        # at least 1 s after the start, with the workers running and a run stored
-        deadline = start + 60
-        while proc.poll() is None and time.monotonic() < deadline and (
-                time.monotonic() - start < 1 or len(_session(proc.pid)) < 3 or not db.exists() or _count(db) < 1):
-            time.sleep(0.01)
-        assert proc.poll() is None, "the report ended before it could be killed: give it more work"
+                            start_new_session=True, env=gate.env)
+    try:  # seeds 0 and 1 stored, both workers inside a run of a later seed
+        wait_until(lambda: _count(db) == 2 and len(_session(proc.pid)) >= 3,
+                   "seeds 0 and 1 were stored with the workers running", proc)
         members = _session(proc.pid)
-        assert len(members) >= 3  # the report and its two workers
         proc.send_signal(signum)
-        out, err = proc.communicate(timeout=30)  # also waits for every holder of its pipes
-        assert _wait_gone(members, 5) == [] and _session(proc.pid) == []
+        out, err = proc.communicate(timeout=120)  # also waits for every holder of its pipes
+        assert _wait_gone(members, 60) == [] and _session(proc.pid) == []
     finally:
         try:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -286,9 +283,10 @@ def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_
         assert out == "" and "Traceback" not in err
         assert err.strip().splitlines() == ["fdbench: error: terminated"]
     kept = _records(db)
-    assert 1 <= _optimizations(kept) < 10
+    assert sorted(r["seed"] for r in kept.values()) == [0, 1]
 
-    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    gate.open()
+    resumed = subprocess.run(cmd, capture_output=True, text=True, timeout=300, cwd=tmp_path, env=gate.env)
     assert resumed.returncode == 0, resumed.stderr
     after = _records(db)
     assert {k: after[k] for k in kept} == kept  # nothing stored before the kill was redone or lost

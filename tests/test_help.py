@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import re
+import select
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +19,8 @@ from fdbench.integrate import INTEGRATORS
 from fdbench.motion import KINEMATICS
 from fdbench.optimizers import OPTIMIZERS
 from fdbench.torques import TORQUES
+
+from processes import GATED_OPTIMIZER, Gate, python_path, wait_until
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 COMMANDS = ("inverse", "simulate", "control", "optimize", "report", "methods")
@@ -53,7 +56,8 @@ def test_no_help_shows_a_bare_type_for_flags_or_names(command):
 
 
 def test_plugin_names_appear_among_the_choices():
-    env = dict(os.environ, PYTHONPATH=str(EXAMPLES), FDBENCH_PLUGINS="my_methods", COLUMNS="200")
+    env = dict(os.environ, PYTHONPATH=python_path(EXAMPLES), FDBENCH_PLUGINS="my_methods",
+               COLUMNS="200")
     exe = Path(sys.executable).with_name("fdbench")
     out = subprocess.run([str(exe), "optimize", "--help"], capture_output=True, text=True, env=env, timeout=120)
     assert out.returncode == 0, out.stderr
@@ -94,26 +98,45 @@ def test_import_fdbench_is_cheap_and_the_entry_points_load_on_use():
 
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
 def test_a_person_watching_sees_the_time_left_before_the_run_ends(tmp_path):
-    """On a terminal the progress bar estimates the time left from the first evaluations on."""
+    """On a terminal the progress bar estimates the time left from the first evaluations on. The
+    run holds after 3 of its 8 evaluations (tests/gate_plugin.py) until a frame shows an estimate."""
+    gate = Gate(tmp_path)
     master, slave = os.openpty()
     exe = Path(sys.executable).with_name("fdbench")
-    proc = subprocess.Popen([str(exe), "optimize", "--integrator", "rk45", "--budget", "8", "-f", "json",
-                             "-o", str(tmp_path / "run.json")], stderr=slave, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen([str(exe), "optimize", "--opt", GATED_OPTIMIZER, "--budget", "8", "-f", "json",
+                             "-o", str(tmp_path / "run.json")], stderr=slave, stdout=subprocess.DEVNULL,
+                            env=dict(gate.env, FDBENCH_GATE_AFTER="3"))
     os.close(slave)
-    chunks = []
-    while True:
+    screen = []
+
+    def read() -> bool:
+        """Add what the terminal received to ``screen``; False once the command closed it."""
+        if not select.select([master], [], [], 0.1)[0]:
+            return True
         try:
             chunk = os.read(master, 4096)
-        except OSError:
-            break
-        if not chunk:
-            break
-        chunks.append(chunk)
-    os.close(master)
-    assert proc.wait(timeout=120) == 0
-    text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", b"".join(chunks).decode(errors="replace"))
-    frames = re.findall(r"(\d+)/8 best \S+ \d+:\d\d:\d\d left (\d+:\d\d:\d\d)", text)
-    assert any(int(done) < 8 for done, _ in frames), text[-500:]  # an estimate while work remains
+        except OSError:  # the command ended and closed it
+            return False
+        screen.append(chunk)
+        return bool(chunk)
+
+    def estimate_while_work_remains() -> bool:
+        read()
+        text = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", b"".join(screen).decode(errors="replace"))
+        frames = re.findall(r"(\d+)/8 best \S+ \d+:\d\d:\d\d left \d+:\d\d:\d\d", text)
+        return any(int(done) < 8 for done in frames)
+
+    try:
+        wait_until(estimate_while_work_remains, "a frame showed the time left", proc)
+        gate.open()
+        while read():
+            pass
+        assert proc.wait(timeout=120) == 0
+    finally:
+        os.close(master)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
     assert (tmp_path / "run.json").is_file()
 
 

@@ -7,6 +7,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+from processes import python_path
+
 PLUGIN = textwrap.dedent('''
     import numpy as np
     from fdbench.optimizers import OPTIMIZERS, Optimizer
@@ -40,7 +42,7 @@ PLUGIN = textwrap.dedent('''
 
 
 def fdbench(args, tmp_path, plugins):
-    env = dict(os.environ, FDBENCH_PLUGINS=plugins, PYTHONPATH=str(tmp_path))
+    env = dict(os.environ, FDBENCH_PLUGINS=plugins, PYTHONPATH=python_path(tmp_path))
     exe = Path(sys.executable).with_name("fdbench")
     return subprocess.run([str(exe), *args], capture_output=True, text=True, env=env, cwd=tmp_path, timeout=120)
 

@@ -28,6 +28,8 @@ from fdbench.cli import app
 from fdbench.experiment import control_spec
 from fdbench.store import Store, StoreError, open_store
 
+from processes import python_path
+
 runner = CliRunner()
 PREFIX = "fdbench: error:"
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
@@ -373,7 +375,7 @@ def test_fifo_is_written_in_place(tmp_path):
     reader = threading.Thread(target=lambda: received.append(fifo.read_text()))
     reader.start()
     files.write_atomic(fifo, "through the pipe")
-    reader.join(timeout=10)
+    reader.join(timeout=120)
     assert received == ["through the pipe"]
     assert stat.S_ISFIFO(os.lstat(fifo).st_mode)
 
@@ -588,7 +590,7 @@ def test_dash_output_is_stdout(tmp_path, monkeypatch):
 
 def test_plugin_prints_do_not_reach_the_results(tmp_path):
     (tmp_path / "noisy.py").write_text("print('hello from a plugin')\n")
-    env = dict(os.environ, PYTHONPATH=str(tmp_path), FDBENCH_PLUGINS="noisy")
+    env = dict(os.environ, PYTHONPATH=python_path(tmp_path), FDBENCH_PLUGINS="noisy")
     out = subprocess.run(FDBENCH + ["methods"], capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr
     assert "hello" not in out.stdout and "hello from a plugin" in out.stderr

@@ -13,7 +13,6 @@ import sqlite3
 import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ import fdbench.execution
 from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
 from fdbench.cli import app
 from fdbench.report import CSV_COLUMNS
+from processes import GATED_OPTIMIZER, Gate, children, wait_until
 
 # The paper's published figures, typed in from its text (section 5, Tables 2 and 3):
 # (RMSE_rot deg, RMSE_torque N m, runtime s).
@@ -376,30 +376,34 @@ def _count_or_zero(db: Path) -> int:
         return 0
 
 
+def _gated_sweep(db: Path, seeds: int, jobs: int) -> list[str]:
+    """A report of one cell whose runs from seed 2 on wait for the test's gate (see processes.py)."""
+    return [sys.executable, "-m", "fdbench.cli", "report", "--no-beyond", "--db", str(db), "--torque", "cs",
+            "--opt", GATED_OPTIMIZER, "--no-feedforward", "--no-control", "--seeds", str(seeds), "--budget", "60",
+            "--jobs", str(jobs), "--format", "csv"]
+
+
 def test_sigkill_then_resume_stores_each_run_once(tmp_path):
-    db = tmp_path / "killed.sqlite"
-    seeds = 16
-    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--no-beyond", "--db", str(db), *CS_BFGS, "--no-feedforward",
-           "--no-control", "--seeds", str(seeds), "--budget", "400", "--jobs", "1", "--format", "csv", "-q"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp_path)
+    db, seeds, gate = tmp_path / "killed.sqlite", 6, Gate(tmp_path, from_seed=2)
+    cmd = _gated_sweep(db, seeds, jobs=1) + ["-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp_path, env=gate.env)
     try:
-        deadline = time.monotonic() + 60
-        while proc.poll() is None and time.monotonic() < deadline and _count_or_zero(db) < 2:
-            time.sleep(0.005)
-        assert proc.poll() is None, "the report finished before it could be killed: give it more work"
+        wait_until(lambda: _count_or_zero(db) == 2, "seeds 0 and 1 were stored", proc)
         proc.send_signal(signal.SIGKILL)
-        proc.wait(timeout=30)
+        proc.wait(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
     assert proc.returncode == -signal.SIGKILL
     before = db_rows(db)
-    assert 2 <= len(before) < seeds, "killed too late to test resuming"
+    assert sorted(r[2] for r in before) == [0, 1]  # killed while seed 2 was running
     max_id = max(r[0] for r in before)
 
+    gate.open()
     out = tmp_path / "report.csv"
-    done = subprocess.run(cmd + ["--output", str(out)], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    done = subprocess.run(cmd + ["--output", str(out)], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          env=gate.env)
     assert done.returncode == 0, done.stderr
     after = db_rows(db)
     con = sqlite3.connect(db)
@@ -415,18 +419,15 @@ def test_sigkill_then_resume_stores_each_run_once(tmp_path):
 
 
 def test_ctrl_c_stops_with_130_and_keeps_every_stored_run(tmp_path):
-    db = tmp_path / "interrupted.sqlite"
-    seeds = 24
-    cmd = [sys.executable, "-m", "fdbench.cli", "report", "--no-beyond", "--db", str(db), *CS_BFGS, "--no-feedforward",
-           "--no-control", "--seeds", str(seeds), "--budget", "400", "--jobs", "2", "--format", "csv"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    try:
-        deadline = time.monotonic() + 60
-        while proc.poll() is None and time.monotonic() < deadline and _count_or_zero(db) < 2:
-            time.sleep(0.005)
-        assert proc.poll() is None, "the report finished before it could be interrupted: give it more work"
+    db, seeds, gate = tmp_path / "interrupted.sqlite", 6, Gate(tmp_path, from_seed=2)
+    cmd = _gated_sweep(db, seeds, jobs=2)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path,
+                            env=gate.env)
+    try:  # Ctrl-C with seeds 0 and 1 stored and both workers inside a run of a later seed
+        wait_until(lambda: _count_or_zero(db) == 2 and len(children(proc.pid)) >= 2,
+                   "seeds 0 and 1 were stored with the workers running", proc)
         proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=60)
+        stdout, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()
@@ -435,8 +436,9 @@ def test_ctrl_c_stops_with_130_and_keeps_every_stored_run(tmp_path):
     assert stdout == "" and stderr.strip().splitlines()[-1] == "fdbench: error: interrupted"
     assert "Traceback" not in stderr
     kept = db_rows(db)
-    assert 2 <= len(kept) < seeds
-    done = subprocess.run(cmd + ["-q"], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert sorted(r[2] for r in kept) == [0, 1]
+    gate.open()
+    done = subprocess.run(cmd + ["-q"], capture_output=True, text=True, timeout=300, cwd=tmp_path, env=gate.env)
     assert done.returncode == 0, done.stderr
     after = db_rows(db)
     assert len(after) == len({r[1] for r in after}) == seeds
@@ -762,7 +764,7 @@ def test_figures_keep_one_style_per_method_and_pd_as_reference(tmp_path, monkeyp
 
 def test_method_styles_are_stable_across_processes_for_plugin_names():
     code = "from fdbench.figures import method_style as m; print(m('my-torque', 'my-opt'), m('cs', 'bfgs'))"
-    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
+    outs = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120).stdout
             for _ in range(2)}
     assert len(outs) == 1 and "tab:green" in outs.pop()
 

@@ -144,7 +144,7 @@ def test_hash_is_stable_within_and_across_processes():
     # a new interpreter, with another string-hash seed, computes the same digests
     env = dict(os.environ, PYTHONHASHSEED="12345")
     out = subprocess.run([sys.executable, "-c", HASH_SCRIPT], capture_output=True, text=True, env=env,
-                         timeout=60, check=True).stdout.split()
+                         timeout=120, check=True).stdout.split()
     assert out == [a.hash(), control_spec(80.0, 0.3).hash()]
 
 
@@ -311,7 +311,7 @@ WRITER = textwrap.dedent("""
         Spec = lambda seed: RunSpec(command="optimize", torque="cs", optimizer="bfgs", seed=seed, budget=10)
     specs = [Spec(worker * 100000 + i) for i in range(n)]
     (go.parent / f"{go.name}.ready{worker}").touch()
-    deadline = time.time() + 60
+    deadline = time.time() + 120  # a bound against a lost test process, not a timing
     while not go.exists() and time.time() < deadline:
         time.sleep(0.001)
     store = Store(path)  # every writer opens (and possibly creates) the file at the same moment
@@ -330,12 +330,12 @@ def _run_writers(path: Path, go: Path, n_proc: int, n_runs: int, offset: int = 0
                                "1" if light else "0"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
              for w in range(n_proc)]
-    deadline = time.time() + 60  # let every interpreter start and wait for the signal
+    deadline = time.time() + 120  # let every interpreter start and wait for the signal
     while time.time() < deadline and not all((go.parent / f"{go.name}.ready{offset + w}").exists()
                                               for w in range(n_proc)):
         time.sleep(0.01)
     go.touch()
-    outputs = [p.communicate(timeout=120) for p in procs]
+    outputs = [p.communicate(timeout=300) for p in procs]
     return [(p.returncode, out, err) for p, (out, err) in zip(procs, outputs)]
 
 
