@@ -167,7 +167,7 @@ class Backend(ABC):
         that an unreachable one is refused before anything is written; nothing by default."""
 
     def start(self, n_runs: int) -> None:
-        """Acquire workers for ``n_runs`` runs."""
+        """Acquire workers for ``n_runs`` runs; calling it again with the same count changes nothing."""
 
     @abstractmethod
     def outcomes(self, specs: list) -> Iterator[tuple[int, Outcome]]:

@@ -312,9 +312,9 @@ def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qu
     try:
         with sigterm_as_interrupt():
             executor.connect()  # an unreachable scheduler is refused before the database is made
-            if not existed:
+            if not existed:  # workers first: a backend that cannot start leaves no new database behind
                 check_path(db_path)
-                executor = _StartedBackend(executor, len({spec.hash() for spec in specs}))
+                executor.start(len({spec.hash() for spec in specs}))
             try:
                 with open_store(db_path) as store:
                     store.check_usable()
@@ -337,21 +337,6 @@ def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qu
     except Terminated:
         _error("terminated")
         raise typer.Exit(143) from None
-
-
-class _StartedBackend:
-    """A backend whose workers are acquired now, before the results database is created;
-    ``start`` then does nothing, everything else is the backend's."""
-
-    def __init__(self, backend, n_runs: int):
-        backend.start(n_runs)
-        self._backend = backend
-
-    def start(self, n_runs: int) -> None:
-        pass
-
-    def __getattr__(self, name):
-        return getattr(self._backend, name)
 
 
 def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
