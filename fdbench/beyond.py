@@ -66,16 +66,19 @@ def exact_gradient_methods(cells, budget, torque_options, optimizer_options, pen
     return methods
 
 
-def beyond_rows(methods: list[Method], runs: dict) -> list:
-    """The report rows (``report.Row``, table "beyond") of the methods from their stored runs."""
+def beyond_rows(methods: list[Method], runs: dict, provenance: dict | None = None) -> list:
+    """The report rows (``report.Row``, table "beyond") of the methods from their stored runs;
+    ``provenance`` ({hash: info}, from ``Store.provenance``) adds when and where each was made."""
     from .benchmark import summarise
     from .report import Row
 
+    provenance = provenance or {}
     rows = []
     for method in methods:
-        record = runs[method.spec.hash()]["record"]
+        key = method.spec.hash()
+        record = runs[key]["record"]
         rows.append(Row(method.name, "beyond", None, summarise([record]), None, [record],
-                        hashes=[method.spec.hash()], specs=[method.spec]))
+                        provenance=[provenance[key]] if key in provenance else [], hashes=[key], specs=[method.spec]))
     return rows
 
 

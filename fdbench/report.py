@@ -361,7 +361,7 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     differ = _differences(rows)
     if differ:
         out += ["## Where we differ from the paper, and why", ""] + differ + [""]
-    out += ["## When and where the runs were made", ""] + _provenance(rows, rerun_command) + [""]
+    out += ["## When and where the runs were made", ""] + _provenance(rows + list(extra_rows or []), rerun_command) + [""]
     if figures:
         out += ["## Figures", ""]
         out += [f"![{name}]({path})" for name, path in figures.items()] + [""]

@@ -118,7 +118,7 @@ def report(
     if methods:
         from ..beyond import beyond_rows
 
-        extra_rows = beyond_rows(methods, runs)
+        extra_rows = beyond_rows(methods, runs, made)
     _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
                        executor.describe(), figures, output, quiet), output)
     if output is not None and str(output) != "-":
