@@ -247,15 +247,15 @@ LOAD_KEYS = {"body": True, "at": True, "force": True}
 # what each key allows, said when it is missing or wrong
 ALLOWED = {
     "name": "a name: a letter then letters, digits or '_'", "description": "a text (one line)",
-    "gravity": "[x, y] in m/s^2", "bodies": "a list of tables ([[bodies]] in TOML)",
+    "gravity": "[x, y] (m/s^2, world axes)", "bodies": "a list of tables ([[bodies]] in TOML)",
     "joints": "a list of tables ([[joints]] in TOML)", "loads": "a list of tables ([[loads]] in TOML)",
-    "mass": "a positive number, kg", "com": "[x, y] in m, in the body's frame",
-    "inertia": "a positive number, kg m^2 about the centre of mass",
-    "end": "[x, y] in m, in the body's frame", "type": "pin", "parent": "a body's name or 'ground'",
-    "child": "a body's name", "at_parent": "[x, y] in m, in the parent's frame",
-    "at_child": "[x, y] in m, in the child's frame", "offset": "a number, rad",
-    "limits": "[lower, upper] in rad, lower < upper", "body": "a body's name", "at": "[x, y] in m, in the body's frame",
-    "force": "[x, y] in N, world axes",
+    "mass": "a positive number (kg)", "com": "[x, y] (m, in the body's frame)",
+    "inertia": "a positive number (kg m^2, about the centre of mass)",
+    "end": "[x, y] (m, in the body's frame)", "type": "pin", "parent": "a body's name or 'ground'",
+    "child": "a body's name", "at_parent": "[x, y] (m, in the parent's frame)",
+    "at_child": "[x, y] (m, in the child's frame)", "offset": "a number (rad)",
+    "limits": "[lower, upper] (rad, lower < upper)", "body": "a body's name", "at": "[x, y] (m, in the body's frame)",
+    "force": "[x, y] (N, world axes)",
 }
 
 
@@ -306,17 +306,17 @@ class _Checker:
             self.fail(key, f"must be {what}, got {_kind(value)}")
         value = float(value)
         if not math.isfinite(value):
-            self.fail(key, f"must be finite ({what}), got {value}")
+            self.fail(key, f"must be finite: {what}, got {value}")
         if abs(value) > MAX_MAGNITUDE:
-            self.fail(key, f"must be of magnitude at most 1e6 ({what}), got {value:g}")
+            self.fail(key, f"must be at most 1e6 in magnitude: {what}, got {value:g}")
         if positive and value <= 0:
-            self.fail(key, f"must be positive ({what}), got {value:g}")
+            self.fail(key, f"must be {what}, got {value:g}")
         return value
 
     def pair(self, value, key: str) -> tuple[float, float]:
         what = ALLOWED[key.rsplit(".", 1)[-1].split("[")[0]]
         if not isinstance(value, list) or len(value) != 2:
-            self.fail(key, f"must be {what} (two numbers), got {_kind(value)}")
+            self.fail(key, f"must be {what}, got {_kind(value)}")
         return tuple(self.number(v, f"{key}[{i}]", what="a number") for i, v in enumerate(value))
 
     def text(self, value, key: str, limit: int) -> str:
@@ -386,7 +386,7 @@ def _joint(check: _Checker, entry, key: str) -> Joint:
                                   f"{', <joint>'.join(RESERVED_SUFFIXES)}); choose another name")
     kind = entry.get("type", "pin")
     if kind not in JOINT_TYPES:
-        check.fail(f"{key}.type", f"{_kind(kind)} is not a joint type fdbench knows; valid: "
+        check.fail(f"{key}.type", f"{kind!r} is not a joint type fdbench knows; valid: "
                                   f"{', '.join(JOINT_TYPES)} (only pin joints in this version)")
     limits = check.pair(entry["limits"], f"{key}.limits") if "limits" in entry else None
     if limits is not None and not limits[0] < limits[1]:
@@ -490,7 +490,7 @@ def _check_ends(check: _Checker, model: Model, bodies: list, order: list) -> Non
         end, given_by = _end_of(model, body.name)
         if _distance(end, joint.at_child) >= MIN_SEGMENT:
             continue
-        here = f"{body.name!r}'s joint point {list(joint.at_child)} (joints[{order[model.joints.index(joint)]}].at_child)"
+        here = f"the joint point {list(joint.at_child)} of {body.name!r} (joints[{order[model.joints.index(joint)]}].at_child)"
         if given_by == "end":
             check.fail(f"bodies[{i}].end", f"is within 1 mm of {here}: a segment of zero length; the end point "
                                            "must be at least 1 mm away")
@@ -645,4 +645,4 @@ def find_model(name_or_path, option: str = "model file") -> Model:
         return load_model(text, option)
     from ..registry import unknown_name_message
 
-    raise ModelError(option, "", unknown_name_message("model", text, list(models)) + ", or a .toml or .json file")
+    raise ModelError(option, "", unknown_name_message("model", text, list(models)) + "; or give a model file (.toml or .json)")
