@@ -7,6 +7,8 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
+from pathlib import Path
 
 import pytest
 from hypothesis import given
@@ -384,3 +386,38 @@ def test_a_bad_change_names_the_pair(pair, words):
         with_changes(find_model("arm2"), [pair])
     for word in words:
         assert word in str(error.value)
+
+
+# ---- the README's "Your own model" ------------------------------------------------------------
+
+
+def readme_section() -> str:
+    text = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    start = text.index("\n## Your own model (file format)\n")
+    return text[start:text.index("\n## ", start + 1)]
+
+
+def test_the_readme_file_is_the_library_forearm(tmp_path):
+    (body,) = re.findall(r"```toml\n(.*?)```", readme_section(), flags=re.DOTALL)
+    (tmp_path / "forearm.toml").write_text(body)
+    assert load_model(tmp_path / "forearm.toml") == find_model("forearm")
+
+
+def test_the_readme_table_names_every_key():
+    from fdbench.multibody.description import BODY_KEYS, JOINT_KEYS, LOAD_KEYS, TOP_KEYS
+
+    documented = set(re.findall(r"^\| `([a-z_.]+)` \|", readme_section(), flags=re.MULTILINE))
+    keys = set(TOP_KEYS) | {f"{section}.{key}" for section, keys in
+                            (("bodies", BODY_KEYS), ("joints", JOINT_KEYS), ("loads", LOAD_KEYS)) for key in keys}
+    assert documented == keys
+
+
+def test_the_readme_example_message_is_what_fdbench_says(tmp_path, monkeypatch):
+    data = copy.deepcopy(BASE)
+    data["bodies"][1]["mass"] = -3.5
+    shown = re.search(r"\(`(leg\.toml: .*?)`\)", " ".join(readme_section().split())).group(1)
+    monkeypatch.chdir(tmp_path)
+    Path("leg.toml").write_text(toml_text(data))
+    result = invoke("models", "show", "leg.toml")
+    assert_one_line_error(result)
+    assert result.stderr.strip() == f"fdbench: error: {shown}"
