@@ -247,6 +247,9 @@ def test_a_bad_model_file_is_one_line_naming_the_file_and_the_key(tmp_path, suff
     ("twice.json", '{"bodies": [], "bodies": []}', ("'bodies' appears twice",)),
     ("list.json", "[1, 2]", ("a table of keys", "a list of 2")),
     ("deep.json", "[" * 100_000 + "]" * 100_000, ("nested too deeply",)),
+    ("deep.toml", "x = " + "[" * 5000 + "]" * 5000, ("nested too deeply",)),
+    ("long.toml", "bodies = [{mass = 1" + "0" * 5000 + "}]", ("a number too long",)),
+    ("huge.toml", toml_text(BASE).replace("mass = 7.5", "mass = 1" + "0" * 400), ("bodies[0].mass", "finite")),
 ])
 def test_a_file_that_is_not_a_description_is_one_line(tmp_path, name, text, words):
     path = tmp_path / name
@@ -379,6 +382,7 @@ def test_with_changes_sets_the_value_each_path_names():
     (("forearm.mass", "-1"), ("forearm.mass=-1", "positive")),
     (("forearm.mass", "heavy"), ("forearm.mass=heavy", "must be a number")),
     (("forearm.inertia", "nan"), ("forearm.inertia=nan", "finite")),
+    (("gravity.y", -10**400), ("gravity.y=-1000", "finite")),
     (("elbow.at_parent.x", "0"), ("elbow.at_parent.x=0", "joints[1].at_parent", "zero length")),
 ])
 def test_a_bad_change_names_the_pair(pair, words):

@@ -214,6 +214,8 @@ def _parse_toml(text: str, source: str):
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ModelError(source, "", f"not valid TOML: {exc}") from None
+    except ValueError:  # an integer of thousands of digits, beyond Python's limit for reading one
+        raise ModelError(source, "", "not valid TOML: a number too long to read") from None
     except RecursionError:
         raise ModelError(source, "", "not valid TOML: nested too deeply") from None
 
@@ -304,7 +306,10 @@ class _Checker:
         what = what or ALLOWED[key.rsplit(".", 1)[-1].split("[")[0]]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             self.fail(key, f"must be {what}, got {_kind(value)}")
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:  # an integer beyond the range of floats
+            value = math.inf if value > 0 else -math.inf
         if not math.isfinite(value):
             self.fail(key, f"must be finite: {what}, got {value}")
         if abs(value) > MAX_MAGNITUDE:
@@ -587,6 +592,8 @@ def _float(value, label: str) -> float:
         raise ModelError(label, "", "must be a number")
     try:
         return float(value)
+    except OverflowError:  # an integer beyond the range of floats: refused as not finite
+        return math.inf if value > 0 else -math.inf
     except (TypeError, ValueError):
         raise ModelError(label, "", f"must be a number, got {value!r}") from None
 
