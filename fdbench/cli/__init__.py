@@ -1,13 +1,13 @@
 """The ``fdbench`` command line, one module per job: ``app`` (the typer app and the contract's
 error handling), ``options`` (options declared once and shared), ``common`` (checks, rendering,
 writing, the store), ``runs`` (the commands of one run), ``sweeps`` (report and study) and ``store_commands`` (``fdbench
-runs``: looking at stored runs).
+runs``: looking at stored runs) and ``models_command`` (``fdbench models``: the model library).
 
 Rendering with rich happens here only; heavy imports are made inside the commands so that
 ``fdbench --help`` is instant.
 """
 
-from . import runs, store_commands, sweeps  # noqa: F401  (registration of the commands)
+from . import models_command, runs, store_commands, sweeps  # noqa: F401  (registration of the commands)
 from .app import BadInput, app, main
 
 __all__ = ["BadInput", "app", "main"]

@@ -1,0 +1,151 @@
+"""``fdbench models``: the library of model descriptions, and one model checked and shown (a library
+name or the user's own TOML or JSON file)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from typer.core import TyperGroup
+
+from .app import BadInput, _show_choices, app
+from .common import _check_outputs, _emit
+from .options import Output
+
+
+class _ModelsGroup(TyperGroup):
+    """The ``models`` commands' --help, shown as the other commands' (no type noise on flags)."""
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
+            _show_choices(command, ctx)
+        return command
+
+
+models_app = typer.Typer(
+    cls=_ModelsGroup,
+    help="The library of models (bodies, joints, loads as TOML files); 'fdbench models show NAME|FILE' checks and "
+    "shows one, your own file included.",
+    invoke_without_command=True,
+)
+app.add_typer(models_app, name="models")
+
+LIST_FORMATS = ("table", "json", "csv")
+SHOW_FORMATS = ("table", "json", "toml")
+
+
+def _format(choices, help_text: str):
+    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
+
+
+@models_app.callback()
+def list_models(
+    ctx: typer.Context,
+    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    output: Output = None,
+):
+    """One line per library model: its name, bodies, joints (its coordinates), total mass and what it is."""
+    if ctx.invoked_subcommand is not None:
+        return
+    from ..multibody.description import library
+
+    _check_outputs(fmt, LIST_FORMATS, output=output)
+    rows = [_summary(_checked(name)) for name in library()]
+    if fmt == "json":
+        text = json.dumps(rows, indent=2) + "\n"
+    elif fmt == "csv":
+        from ..files import csv_text
+
+        text = csv_text(list(rows[0]), [[" ".join(v) if isinstance(v, list) else v for v in row.values()] for row in rows])
+    else:
+        from .store_commands import _table
+
+        columns = ("name", "bodies", "coordinates", "mass_kg", "description")
+        shown = [{k: ", ".join(v) if isinstance(v, list) else v for k, v in row.items()} | {"mass_kg": f"{row['mass_kg']:.6g}"}
+                 for row in rows]
+        text = _table(f"{len(rows)} models in the library ('fdbench models show NAME' for one)", shown, columns,
+                      {"mass_kg": "mass (kg)", "coordinates": "joints (coordinates)"})
+    _emit(text, output)
+
+
+@models_app.command("show")
+def show_model(
+    model: Annotated[str, typer.Argument(metavar="NAME|FILE", help="A library model's name or a model file (.toml or .json).", show_default=False)],
+    fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
+    output: Output = None,
+):
+    """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads and the total mass. A file that cannot be used is refused in one line naming the key."""
+    from ..multibody.description import library
+
+    # a library model's file is an input too: an output may not write over it
+    _check_outputs(fmt, SHOW_FORMATS, inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
+    found = _checked(model)
+    if fmt == "toml":
+        from ..multibody.description import to_toml
+
+        _emit(to_toml(found, explicit_ends=True), output)
+    elif fmt == "json":
+        _emit(json.dumps(_shown(found, model), indent=2) + "\n", output)
+    else:
+        _emit(_show_text(found, model), output)
+
+
+def _checked(name_or_path: str):
+    from ..multibody.description import find_model
+
+    try:
+        return find_model(name_or_path, "NAME|FILE")
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _summary(model) -> dict:
+    return {"name": model.name, "bodies": [b.name for b in model.bodies], "coordinates": list(model.coordinates),
+            "mass_kg": model.total_mass, "description": model.description}
+
+
+def _shown(model, source: str) -> dict:
+    """The checked model (a model file's keys, end points explicit) and what follows from it."""
+    from ..multibody.description import to_dict
+
+    return {"source": source, "total_mass_kg": model.total_mass, "coordinates": list(model.coordinates),
+            "model": to_dict(model, explicit_ends=True)}
+
+
+def _point(point) -> str:
+    return f"({point[0]:.6g}, {point[1]:.6g})"
+
+
+def _show_text(model, source: str) -> str:
+    from ..multibody.description import _end_of
+    from .common import _render
+    from .store_commands import _table
+
+    header = {"name": model.name, "description": model.description, "source": source,
+              "gravity (m/s^2)": _point(model.gravity), "total mass (kg)": f"{model.total_mass:.6g}",
+              "coordinates": ", ".join(model.coordinates)}
+    bodies = []
+    for body in model.bodies:
+        end, given_by = _end_of(model, body.name)
+        bodies.append({"name": body.name, "mass": f"{body.mass:.6g}", "com": _point(body.com),
+                       "inertia": f"{body.inertia:.6g}", "joint": model.parent_joint(body.name).name,
+                       "end": _point(end) + ("" if given_by == "end" else f" ({_END_ORIGIN[given_by.split()[0]]})")})
+    joints = [{"#": str(k), "name": j.name, "type": j.type, "parent": j.parent, "child": j.child,
+               "at_parent": _point(j.at_parent), "at_child": _point(j.at_child), "offset": f"{j.offset:.6g}",
+               "limits": "" if j.limits is None else _point(j.limits)} for k, j in enumerate(model.joints)]
+    loads = [{"#": str(i), "body": load.body, "at": _point(load.at), "force": _point(load.force)}
+             for i, load in enumerate(model.loads)]
+    text = _render(header, "table", f"model {model.name}")
+    text += _table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)",
+                   bodies, list(bodies[0]))
+    text += _table("joints in order (m, rad)", joints, list(joints[0]))
+    if loads:
+        text += _table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
+    return text
+
+
+_END_ORIGIN = {"joint": "first child joint", "load": "farthest load", "com": "centre of mass",
+               "default": "1 m along x"}

@@ -1,0 +1,3 @@
+"""Planar multibody models as data: ``description`` reads and checks a model file (bodies, pin
+joints, constant loads) into a frozen ``Model``; the library of built-in models ships as TOML files
+in ``fdbench/models/library``."""

@@ -1,0 +1,655 @@
+"""A planar multibody model as data: bodies, pin joints and constant point loads, read from a TOML or
+JSON file (the same keys) and checked, in SI units with angles in radians.
+
+The model is a tree rooted at ``ground``: every body is the child of exactly one joint; a joint's
+parent is ground or a body. A joint's coordinate is the child frame's angle relative to its parent
+frame minus the joint's ``offset``, so a body's frame angle (from world +x, counter-clockwise) is
+the sum of (coordinate + offset) over the joints on its path from ground. The joint's torque acts
+on the child (+) and the parent (-): it is the generalised force of its coordinate. World axes: x
+forward, y up.
+
+Choices made here (documented in the README's "Your own model"):
+
+* Names of bodies and joints share one namespace, compared ignoring case (a joint's name is a
+  column of motion and torque files, whose headers are case-insensitive, and ``NAME.key`` paths of
+  ``with_changes`` must not be ambiguous). A name is a letter then letters, digits or ``_``;
+  ``ground`` is reserved, a joint may not be called ``t`` (the time column) nor end in a suffix
+  that trajectory files add to a joint's name (``_vel``, ``_acc``, ...).
+* Misspelt keys are errors, not ignored. Every problem is a ``ModelError``: one line naming the
+  file, the key path (``bodies[1].mass``) and what is allowed.
+* The joints are put in topological order (a file may list them in any order); the sort is
+  stable: among the joints whose parent is placed, the earliest in the file comes first, so
+  siblings keep their file order.
+* A body's ``end`` (its second point of natural coordinates, the first being its joint point) is
+  resolved by ``resolved_end``. The at_parent point of a body's first child joint, or an explicit
+  ``end``, closer than 1 mm to the body's joint point is an error (a segment of zero length: most
+  likely a mistyped joint position); a load or centre of mass that close is passed over for the
+  next default.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+GROUND = "ground"
+
+MAX_MAGNITUDE = 1e6  # any number of a model file, in its unit
+MAX_BODIES = 1000  # bodies, joints or loads of one model
+MAX_FILE_BYTES = 2**20  # a model file
+MIN_SEGMENT = 1e-3  # m: a body's end point is at least this far from its joint point
+JOINT_TYPES = ("pin",)
+RESERVED_SUFFIXES = ("_vel", "_acc", "_torque", "_desired", "_inverse")  # columns made from a joint's name
+NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
+LIBRARY = Path(__file__).resolve().parent.parent / "models" / "library"
+
+
+class ModelError(ValueError):
+    """A model description that cannot be used: ``source: key: problem``, one line."""
+
+    def __init__(self, source: str, key: str, problem: str):
+        self.source, self.key, self.problem = source, key, problem
+        super().__init__(f"{source}: {key}: {problem}" if key else f"{source}: {problem}")
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body: mass (kg), centre of mass in its frame (m), inertia about the centre of mass
+    (kg m^2) and optionally its second point of natural coordinates (m, in its frame)."""
+
+    name: str
+    mass: float
+    com: tuple[float, float]
+    inertia: float
+    end: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint whose coordinate is named ``name``: the point ``at_parent`` of the parent's frame
+    (world axes for ground) coincides with ``at_child`` of the child's frame (m); ``offset`` (rad)
+    is the child frame's angle relative to the parent's when the coordinate is 0; ``limits`` (rad)
+    are informative."""
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    at_parent: tuple[float, float]
+    at_child: tuple[float, float]
+    offset: float = 0.0
+    limits: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Load:
+    """A constant point force (N, world axes) at ``at`` (m) in the frame of ``body``."""
+
+    body: str
+    at: tuple[float, float]
+    force: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Model:
+    """A planar tree of bodies hanging from ground through pin joints (in topological order),
+    gravity (m/s^2, world axes) and constant loads."""
+
+    name: str
+    gravity: tuple[float, float]
+    bodies: tuple[Body, ...]
+    joints: tuple[Joint, ...]
+    loads: tuple[Load, ...] = ()
+    description: str = ""
+
+    @property
+    def coordinates(self) -> tuple[str, ...]:
+        """The joints' names in order: the model's coordinates."""
+        return tuple(joint.name for joint in self.joints)
+
+    @property
+    def n_joints(self) -> int:
+        return len(self.joints)
+
+    @property
+    def total_mass(self) -> float:
+        """kg."""
+        return math.fsum(body.mass for body in self.bodies)
+
+    def body(self, name: str) -> Body:
+        for body in self.bodies:
+            if body.name == name:
+                return body
+        raise KeyError(f"no body {name!r} in model {self.name!r}")
+
+    def parent_joint(self, body_name: str) -> Joint:
+        """The joint whose child is body ``body_name``."""
+        return self.joints[self._parent_index(body_name)]
+
+    def children(self, body_name: str) -> tuple[int, ...]:
+        """Indices of the joints whose parent is ``body_name`` (a body or GROUND), in order."""
+        return tuple(k for k, joint in enumerate(self.joints) if joint.parent == body_name)
+
+    def path(self, body_name: str) -> tuple[int, ...]:
+        """Indices of the joints from ground to body ``body_name``, ground's joint first."""
+        indices = []
+        while body_name != GROUND:
+            k = self._parent_index(body_name)
+            indices.append(k)
+            body_name = self.joints[k].parent
+            if len(indices) > len(self.joints):
+                raise ValueError(f"model {self.name!r}: the joints form a cycle")
+        return tuple(reversed(indices))
+
+    def _parent_index(self, body_name: str) -> int:
+        for k, joint in enumerate(self.joints):
+            if joint.child == body_name:
+                return k
+        raise KeyError(f"no joint has body {body_name!r} as its child in model {self.name!r}")
+
+
+# ---------------------------------------------------------------- the end point of natural coordinates
+
+
+def resolved_end(model: Model, body_name: str) -> tuple[float, float]:
+    """The body's second point of natural coordinates (m, in its frame): its ``end`` if given; else
+    the at_parent point of its first child joint; else its farthest load's point; else its centre of
+    mass; else its joint point + (1 m, 0). A load or centre of mass closer than 1 mm to the joint
+    point is passed over."""
+    return _end_of(model, body_name)[0]
+
+
+def _end_of(model: Model, body_name: str) -> tuple[tuple[float, float], str]:
+    """resolved_end and what gave it: 'end', 'joint <k>', 'load <i>', 'com' or 'default'."""
+    body = model.body(body_name)
+    if body.end is not None:
+        return body.end, "end"
+    children = model.children(body_name)
+    if children:
+        return model.joints[children[0]].at_parent, f"joint {children[0]}"
+    origin = model.parent_joint(body_name).at_child
+    loads = [(i, load) for i, load in enumerate(model.loads) if load.body == body_name]
+    if loads:
+        i, load = max(loads, key=lambda pair: _distance(pair[1].at, origin))
+        if _distance(load.at, origin) >= MIN_SEGMENT:
+            return load.at, f"load {i}"
+    if _distance(body.com, origin) >= MIN_SEGMENT:
+        return body.com, "com"
+    return (origin[0] + 1.0, origin[1]), "default"
+
+
+def _distance(a, b) -> float:
+    return math.hypot(a[0] - b[0], a[1] - b[1])
+
+
+# ---------------------------------------------------------------- reading files
+
+
+def load_model(path, option: str = "model file") -> Model:
+    """The checked model of a TOML or JSON file (by its suffix; otherwise JSON if it starts with
+    '{'). ModelError or BadFile (both ValueError, one line naming the file) if it cannot be used."""
+    from ..files import read_input_text
+
+    source = str(path)
+    text = read_input_text(path, option, MAX_FILE_BYTES)
+    suffix = Path(source).suffix.lower()
+    is_json = suffix == ".json" or (suffix != ".toml" and text.lstrip().startswith("{"))
+    data = _parse_json(text, source) if is_json else _parse_toml(text, source)
+    return model_from_dict(data, source, default_name=Path(source).stem)
+
+
+def _parse_toml(text: str, source: str):
+    try:
+        import tomllib
+    except ImportError:  # Python 3.10
+        try:
+            import tomli as tomllib
+        except ImportError:
+            raise ModelError(source, "", "reading TOML needs Python 3.11 or the tomli package; "
+                             "write the model as JSON (the same keys)") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ModelError(source, "", f"not valid TOML: {exc}") from None
+    except ValueError:  # an integer of thousands of digits, beyond Python's limit for reading one
+        raise ModelError(source, "", "not valid TOML: a number too long to read") from None
+    except RecursionError:
+        raise ModelError(source, "", "not valid TOML: nested too deeply") from None
+
+
+def _parse_json(text: str, source: str):
+    import json
+
+    def unique_keys(pairs):
+        keys = [key for key, _ in pairs]
+        for key in keys:
+            if keys.count(key) > 1:
+                raise ModelError(source, "", f"the key {key!r} appears twice in one object; give it once")
+        return dict(pairs)
+
+    try:
+        return json.loads(text, parse_int=float, object_pairs_hook=unique_keys)
+    except json.JSONDecodeError as exc:
+        raise ModelError(source, "", f"not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ModelError(source, "", "not valid JSON: nested too deeply") from None
+
+
+# ---------------------------------------------------------------- checking values
+
+TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": True, "joints": True, "loads": False}
+BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
+JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
+              "offset": False, "limits": False}
+LOAD_KEYS = {"body": True, "at": True, "force": True}
+
+# what each key allows, said when it is missing or wrong
+ALLOWED = {
+    "name": "a name: a letter then letters, digits or '_'", "description": "a text (one line)",
+    "gravity": "[x, y] (m/s^2, world axes)", "bodies": "a list of tables ([[bodies]] in TOML)",
+    "joints": "a list of tables ([[joints]] in TOML)", "loads": "a list of tables ([[loads]] in TOML)",
+    "mass": "a positive number (kg)", "com": "[x, y] (m, in the body's frame)",
+    "inertia": "a positive number (kg m^2, about the centre of mass)",
+    "end": "[x, y] (m, in the body's frame)", "type": "pin", "parent": "a body's name or 'ground'",
+    "child": "a body's name", "at_parent": "[x, y] (m, in the parent's frame)",
+    "at_child": "[x, y] (m, in the child's frame)", "offset": "a number (rad)",
+    "limits": "[lower, upper] (rad, lower < upper)", "body": "a body's name", "at": "[x, y] (m, in the body's frame)",
+    "force": "[x, y] (N, world axes)",
+}
+
+
+def _kind(value) -> str:
+    """How a value of the wrong type is named in a message."""
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, str):
+        return f"the text {value!r}" if len(value) <= 40 else "a text"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    if value is None:
+        return "null"
+    if isinstance(value, (int, float)):
+        return repr(value)
+    return f"a {type(value).__name__}"
+
+
+class _Checker:
+    """Reads the values of one description, raising ModelError naming ``source`` and the key."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, key: str, problem: str):
+        raise ModelError(self.source, key, problem)
+
+    def table(self, value, key: str, keys: dict) -> dict:
+        """``value`` as a table with every required key of ``keys`` and no other."""
+        if not isinstance(value, dict):
+            self.fail(key, f"must be a table of keys, got {_kind(value)}")
+        for name in value:
+            if name not in keys:
+                from ..registry import unknown_name_message
+
+                where = f"{key}." if key else ""
+                self.fail(f"{where}{name}", unknown_name_message("key", name, list(keys)))
+        for name, required in keys.items():
+            if required and name not in value:
+                self.fail(f"{key}.{name}" if key else name, f"missing; give {ALLOWED[name]}")
+        return value
+
+    def number(self, value, key: str, positive: bool = False, what: str = "") -> float:
+        what = what or ALLOWED[key.rsplit(".", 1)[-1].split("[")[0]]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(key, f"must be {what}, got {_kind(value)}")
+        try:
+            value = float(value)
+        except OverflowError:  # an integer beyond the range of floats
+            value = math.inf if value > 0 else -math.inf
+        if not math.isfinite(value):
+            self.fail(key, f"must be finite: {what}, got {value}")
+        if abs(value) > MAX_MAGNITUDE:
+            self.fail(key, f"must be at most 1e6 in magnitude: {what}, got {value:g}")
+        if positive and value <= 0:
+            self.fail(key, f"must be {what}, got {value:g}")
+        return value
+
+    def pair(self, value, key: str) -> tuple[float, float]:
+        what = ALLOWED[key.rsplit(".", 1)[-1].split("[")[0]]
+        if not isinstance(value, list) or len(value) != 2:
+            self.fail(key, f"must be {what}, got {_kind(value)}")
+        return tuple(self.number(v, f"{key}[{i}]", what="a number") for i, v in enumerate(value))
+
+    def text(self, value, key: str, limit: int) -> str:
+        if not isinstance(value, str):
+            self.fail(key, f"must be a text, got {_kind(value)}")
+        if len(value) > limit or any(ord(c) < 32 or ord(c) == 127 for c in value) or not value.strip():
+            self.fail(key, f"must be a non-empty line of at most {limit} characters")
+        return value
+
+    def name(self, value, key: str) -> str:
+        if not isinstance(value, str):
+            self.fail(key, f"must be {ALLOWED['name']}, got {_kind(value)}")
+        if not NAME_PATTERN.fullmatch(value):
+            self.fail(key, f"{value!r} is not a name fdbench accepts: a letter then letters, digits or '_', "
+                           "at most 64 characters")
+        if value.lower() == GROUND:
+            self.fail(key, "'ground' is reserved for the fixed world; choose another name")
+        return value
+
+    def entries(self, data: dict, key: str) -> list:
+        value = data.get(key, [])
+        if not isinstance(value, list):
+            self.fail(key, f"must be {ALLOWED[key]}, got {_kind(value)}")
+        if len(value) > MAX_BODIES:
+            self.fail(key, f"at most {MAX_BODIES} entries, got {len(value)}")
+        return value
+
+
+def model_from_dict(data, source: str, default_name: str | None = None) -> Model:
+    """The checked Model of a description's keys (as a TOML or JSON file gives them); ``source``
+    names it in errors, ``default_name`` (else the stem of ``source``) is its name if it has none.
+    ModelError for the first problem found."""
+    check = _Checker(source)
+    data = check.table(data, "", TOP_KEYS)
+    name = check.text(data["name"], "name", 100) if "name" in data else (default_name or Path(source).stem or "model")
+    description = check.text(data["description"], "description", 500) if "description" in data else ""
+    gravity = check.pair(data["gravity"], "gravity") if "gravity" in data else (0.0, -9.81)
+    bodies = [_body(check, entry, f"bodies[{i}]") for i, entry in enumerate(check.entries(data, "bodies"))]
+    joints = [_joint(check, entry, f"joints[{k}]") for k, entry in enumerate(check.entries(data, "joints"))]
+    loads = [_load(check, entry, f"loads[{i}]") for i, entry in enumerate(check.entries(data, "loads"))]
+    if not bodies:
+        check.fail("bodies", "a model needs at least one body ([[bodies]] with name, mass, com, inertia)")
+    _check_names(check, bodies, joints)
+    _check_references(check, bodies, joints, loads)
+    order = _topological_order(check, bodies, joints)
+    model = Model(name, gravity, tuple(bodies), tuple(joints[k] for k in order), tuple(loads), description)
+    _check_ends(check, model, bodies, order)
+    return model
+
+
+def _body(check: _Checker, entry, key: str) -> Body:
+    entry = check.table(entry, key, BODY_KEYS)
+    return Body(
+        name=check.name(entry["name"], f"{key}.name"),
+        mass=check.number(entry["mass"], f"{key}.mass", positive=True),
+        com=check.pair(entry["com"], f"{key}.com"),
+        inertia=check.number(entry["inertia"], f"{key}.inertia", positive=True),
+        end=check.pair(entry["end"], f"{key}.end") if "end" in entry else None,
+    )
+
+
+def _joint(check: _Checker, entry, key: str) -> Joint:
+    entry = check.table(entry, key, JOINT_KEYS)
+    name = check.name(entry["name"], f"{key}.name")
+    if name.lower() == "t" or name.lower().endswith(RESERVED_SUFFIXES):
+        check.fail(f"{key}.name", f"{name!r} would clash with the columns of motion and torque files (t, <joint>"
+                                  f"{', <joint>'.join(RESERVED_SUFFIXES)}); choose another name")
+    kind = entry.get("type", "pin")
+    if kind not in JOINT_TYPES:
+        check.fail(f"{key}.type", f"{kind!r} is not a joint type fdbench knows; valid: "
+                                  f"{', '.join(JOINT_TYPES)} (only pin joints in this version)")
+    limits = check.pair(entry["limits"], f"{key}.limits") if "limits" in entry else None
+    if limits is not None and not limits[0] < limits[1]:
+        check.fail(f"{key}.limits", f"must be [lower, upper] with lower < upper (rad), got {list(limits)}")
+    return Joint(
+        name=name, type=kind,
+        parent=_reference(check, entry["parent"], f"{key}.parent"),
+        child=_reference(check, entry["child"], f"{key}.child"),
+        at_parent=check.pair(entry["at_parent"], f"{key}.at_parent"),
+        at_child=check.pair(entry.get("at_child", [0.0, 0.0]), f"{key}.at_child"),
+        offset=check.number(entry.get("offset", 0.0), f"{key}.offset"),
+        limits=limits,
+    )
+
+
+def _load(check: _Checker, entry, key: str) -> Load:
+    entry = check.table(entry, key, LOAD_KEYS)
+    return Load(body=_reference(check, entry["body"], f"{key}.body"), at=check.pair(entry["at"], f"{key}.at"),
+                force=check.pair(entry["force"], f"{key}.force"))
+
+
+def _reference(check: _Checker, value, key: str) -> str:
+    if not isinstance(value, str):
+        check.fail(key, f"must be {ALLOWED[key.rsplit('.', 1)[-1]]}, got {_kind(value)}")
+    return value
+
+
+def _check_names(check: _Checker, bodies: list, joints: list) -> None:
+    """Names of bodies and joints are distinct, ignoring case."""
+    seen = {}
+    named = [(f"bodies[{i}]", b.name) for i, b in enumerate(bodies)] + [(f"joints[{k}]", j.name) for k, j in enumerate(joints)]
+    for key, name in named:
+        earlier = seen.setdefault(name.lower(), key)
+        if earlier != key:
+            check.fail(f"{key}.name", f"{name!r} is already the name of {earlier}; names of bodies and joints must "
+                                      "be distinct (ignoring case)")
+
+
+def _check_references(check: _Checker, bodies: list, joints: list, loads: list) -> None:
+    """Parents, children and loaded bodies exist; every body is the child of exactly one joint."""
+    from ..registry import unknown_name_message
+
+    names = [body.name for body in bodies]
+    parent_of = {}
+    for k, joint in enumerate(joints):
+        if joint.parent != GROUND and joint.parent not in names:
+            check.fail(f"joints[{k}].parent", unknown_name_message("body", joint.parent, [GROUND, *names]))
+        if joint.child not in names:
+            check.fail(f"joints[{k}].child", unknown_name_message("body", joint.child, names))
+        if joint.child == joint.parent:
+            check.fail(f"joints[{k}].child", f"{joint.child!r} is also the joint's parent; a body cannot hang from itself")
+        if joint.child in parent_of:
+            check.fail(f"joints[{k}].child", f"body {joint.child!r} is already the child of joints[{parent_of[joint.child]}]; "
+                                             "a body hangs from exactly one joint (the model is a tree)")
+        parent_of[joint.child] = k
+    for i, body in enumerate(bodies):
+        if body.name not in parent_of:
+            check.fail(f"bodies[{i}]", f"body {body.name!r} is the child of no joint; every body hangs from ground "
+                                       "through joints (add a [[joints]] with child = " + repr(body.name) + ")")
+    for i, load in enumerate(loads):
+        if load.body not in names:
+            check.fail(f"loads[{i}].body", unknown_name_message("body", load.body, names))
+
+
+def _topological_order(check: _Checker, bodies: list, joints: list) -> list[int]:
+    """Joint indices, each after the joint of its parent body; among those ready, file order.
+    ModelError naming a cycle when some bodies have no path to ground."""
+    by_parent = {}
+    for k, joint in enumerate(joints):
+        by_parent.setdefault(joint.parent, []).append(k)
+    ready = list(by_parent.get(GROUND, []))
+    heapq.heapify(ready)
+    order = []
+    while ready:
+        k = heapq.heappop(ready)
+        order.append(k)
+        for child in by_parent.get(joints[k].child, []):
+            heapq.heappush(ready, child)
+    if len(order) < len(joints):
+        _fail_cycle(check, joints, set(order))
+    return order
+
+
+def _fail_cycle(check: _Checker, joints: list, placed: set) -> None:
+    parent_joint = {joint.child: k for k, joint in enumerate(joints)}
+    start = min(k for k in range(len(joints)) if k not in placed)
+    chain, k = [], start
+    while k not in chain:
+        chain.append(k)
+        k = parent_joint[joints[k].parent]
+    cycle = chain[chain.index(k):]
+    bodies = " -> ".join([joints[j].child for j in cycle] + [joints[cycle[0]].child])
+    check.fail(f"joints[{min(cycle)}].parent", f"the joints form a cycle ({bodies}), so these bodies have no path "
+                                               "to ground; the model must be a tree hanging from ground")
+
+
+def _check_ends(check: _Checker, model: Model, bodies: list, order: list) -> None:
+    """Each body's end point is at least 1 mm from its joint point (a segment has a length)."""
+    for i, body in enumerate(bodies):
+        joint = model.parent_joint(body.name)
+        end, given_by = _end_of(model, body.name)
+        if _distance(end, joint.at_child) >= MIN_SEGMENT:
+            continue
+        here = f"the joint point {list(joint.at_child)} of {body.name!r} (joints[{order[model.joints.index(joint)]}].at_child)"
+        if given_by == "end":
+            check.fail(f"bodies[{i}].end", f"is within 1 mm of {here}: a segment of zero length; the end point "
+                                           "must be at least 1 mm away")
+        k = order[int(given_by.split()[1])]
+        check.fail(f"joints[{k}].at_parent", f"is within 1 mm of {here}: a segment of zero length; move the joint "
+                                             f"or give bodies[{i}].end, the body's second point")
+
+
+# ---------------------------------------------------------------- writing and changing
+
+
+def to_dict(model: Model, explicit_ends: bool = False) -> dict:
+    """The description's keys (as a file holds them); with ``explicit_ends`` every body's resolved end."""
+    def body(b: Body) -> dict:
+        entry = {"name": b.name, "mass": b.mass, "com": list(b.com), "inertia": b.inertia}
+        end = resolved_end(model, b.name) if explicit_ends else b.end
+        return entry | ({"end": list(end)} if end is not None else {})
+
+    def joint(j: Joint) -> dict:
+        entry = {"name": j.name, "type": j.type, "parent": j.parent, "child": j.child, "at_parent": list(j.at_parent),
+                 "at_child": list(j.at_child), "offset": j.offset}
+        return entry | ({"limits": list(j.limits)} if j.limits is not None else {})
+
+    data = {"name": model.name} | ({"description": model.description} if model.description else {})
+    data |= {"gravity": list(model.gravity), "bodies": [body(b) for b in model.bodies],
+             "joints": [joint(j) for j in model.joints]}
+    if model.loads:
+        data["loads"] = [{"body": load.body, "at": list(load.at), "force": list(load.force)} for load in model.loads]
+    return data
+
+
+def to_toml(model: Model, explicit_ends: bool = False) -> str:
+    """The model as a TOML file that load_model reads back to an equal Model."""
+    data = to_dict(model, explicit_ends)
+    lines = [f"{key} = {_toml_value(data[key])}" for key in ("name", "description", "gravity") if key in data]
+    for section in ("bodies", "joints", "loads"):
+        for entry in data.get(section, []):
+            lines += ["", f"[[{section}]]"] + [f"{key} = {_toml_value(value)}" for key, value in entry.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value) -> str:
+    import json
+
+    if isinstance(value, str):
+        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(float(value))
+
+
+def change_paths(model: Model) -> list[str]:
+    """Every path ``with_changes`` accepts for ``model``."""
+    paths = []
+    for body in model.bodies:
+        paths += [f"{body.name}.{key}" for key in ("mass", "inertia", "com.x", "com.y", "end.x", "end.y")]
+        if sum(load.body == body.name for load in model.loads) == 1:
+            paths += [f"{body.name}.force.x", f"{body.name}.force.y"]
+    for joint in model.joints:
+        paths += [f"{joint.name}.{key}" for key in ("offset", "at_parent.x", "at_parent.y", "at_child.x", "at_child.y")]
+    for i in range(len(model.loads)):
+        paths += [f"loads[{i}].{key}" for key in ("force.x", "force.y", "at.x", "at.y")]
+    return paths + ["gravity.x", "gravity.y"]
+
+
+def with_changes(model: Model, pairs) -> Model:
+    """``model`` with scalar values changed by (path, value) pairs, checked as a file is. Paths:
+
+    * ``<body>.mass``, ``<body>.inertia``, ``<body>.com.x|y``, ``<body>.end.x|y`` (an end not
+      given starts from its resolved default);
+    * ``<joint>.offset``, ``<joint>.at_parent.x|y``, ``<joint>.at_child.x|y``;
+    * ``loads[<i>].force.x|y``, ``loads[<i>].at.x|y`` (i from 0 in file order), and
+      ``<body>.force.x|y`` for the one load of a body that carries exactly one;
+    * ``gravity.x|y``.
+
+    Values are numbers or their text. ModelError naming ``path=value`` otherwise."""
+    data = to_dict(model)
+    for path, value in pairs:
+        label = f"{path}={value}"
+        if path not in change_paths(model):
+            from ..registry import unknown_name_message
+
+            raise ModelError(label, "", unknown_name_message(f"path into model {model.name!r}", path, change_paths(model)))
+        key = _set(data, model, path, _float(value, label))
+        try:
+            model = model_from_dict(data, label, default_name=model.name)
+        except ModelError as exc:
+            raise ModelError(label, "" if exc.key == key else exc.key, exc.problem) from None
+    return model
+
+
+def _float(value, label: str) -> float:
+    if isinstance(value, bool):
+        raise ModelError(label, "", "must be a number")
+    try:
+        return float(value)
+    except OverflowError:  # an integer beyond the range of floats: refused as not finite
+        return math.inf if value > 0 else -math.inf
+    except (TypeError, ValueError):
+        raise ModelError(label, "", f"must be a number, got {value!r}") from None
+
+
+def _set(data: dict, model: Model, path: str, value: float) -> str:
+    """Write ``value`` at ``path`` into the description ``data``; the key path of the file it changed."""
+    axis = {"x": 0, "y": 1}
+    if path.startswith("gravity."):
+        data["gravity"][axis[path[-1]]] = value
+        return f"gravity[{axis[path[-1]]}]"
+    match = re.fullmatch(r"loads\[(\d+)\]\.(.+)", path)
+    if match:
+        index, rest = int(match.group(1)), match.group(2)
+    else:
+        name, rest = path.split(".", 1)
+        names = [b.name for b in model.bodies]
+        if name in names and rest.startswith("force."):
+            index = next(i for i, load in enumerate(model.loads) if load.body == name)
+        elif name in names:
+            entry, key = data["bodies"][names.index(name)], f"bodies[{names.index(name)}]"
+            return key + _set_field(entry, rest, value, lambda: list(resolved_end(model, name)))
+        else:
+            k = model.coordinates.index(name)
+            return f"joints[{k}]" + _set_field(data["joints"][k], rest, value, None)
+    return f"loads[{index}]" + _set_field(data["loads"][index], rest, value, None)
+
+
+def _set_field(entry: dict, rest: str, value: float, default_end) -> str:
+    if "." not in rest:
+        entry[rest] = value
+        return f".{rest}"
+    field, component = rest.split(".")
+    if field == "end" and "end" not in entry:
+        entry["end"] = default_end()
+    i = {"x": 0, "y": 1}[component]
+    entry[field][i] = value
+    return f".{field}[{i}]"
+
+
+# ---------------------------------------------------------------- the library
+
+
+def library() -> dict[str, Path]:
+    """The built-in models: name -> its TOML file, sorted by name."""
+    return {path.stem: path for path in sorted(LIBRARY.glob("*.toml"))}
+
+
+def find_model(name_or_path, option: str = "model file") -> Model:
+    """A library model by name, or the model of a TOML/JSON file. ModelError (listing the library's
+    names) for a name that is neither."""
+    text = str(name_or_path)
+    models = library()
+    if text in models:
+        return load_model(models[text], option)
+    if Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".toml", ".json"):
+        return load_model(text, option)
+    from ..registry import unknown_name_message
+
+    raise ModelError(option, "", unknown_name_message("model", text, list(models)) + "; or give a model file (.toml or .json)")
