@@ -1,0 +1,1 @@
+"""Planar multibody models: the model description and the engine that simulates it."""
