@@ -166,7 +166,8 @@ def chains(draw):
         joints.append(Joint(f"q{k}", "pin", parent, f"b{k}", at_parent, (draw(small), draw(small)),
                             offset=draw(st.floats(-1.0, 1.0))))
         if draw(st.booleans()):
-            loads.append(Load(f"b{k}", (draw(length), draw(small)), (draw(st.floats(-20, 20)), draw(st.floats(-20, 20)))))
+            force = (draw(st.floats(-20, 20)), draw(st.floats(-20, 20)))
+            loads.append(Load(f"b{k}", (draw(length), draw(small)), force))
     return Model("chain", (0.0, -9.81), tuple(bodies), tuple(joints), tuple(loads))
 
 
@@ -277,7 +278,8 @@ def test_a_hanging_leg_swings_through_minus_90_degrees_open_loop():
 
 
 def test_the_sin_form_alone_would_be_singular_where_the_leg_hangs():
-    engine, z, zd, tau = Engine(leg3_model(), alpha=1e9), [-math.pi / 2, 0.0, math.pi / 2], [0.5, -0.2, 0.1], [1.0, 2.0, 3.0]
+    engine = Engine(leg3_model(), alpha=1e9)
+    z, zd, tau = [-math.pi / 2, 0.0, math.pi / 2], [0.5, -0.2, 0.1], [1.0, 2.0, 3.0]
     expected = np.linalg.solve(engine.mass_matrix(z), tau - engine.bias(z, zd))
     y = engine.state_from_joints(z, zd)
     assert relative_error(joint_accelerations(engine, engine.accelerations(y, tau)), expected) < 1e-5

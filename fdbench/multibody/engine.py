@@ -55,9 +55,9 @@ from ..dynamics import CONSTRAINT, NONFINITE, OK, SINGULAR, VIOLATION_TOL
 from ..jit import njit
 
 try:  # the one place the engine imports the model description from
-    from .description import GROUND, Model, resolved_end
+    from .description import Model, resolved_end
 except ImportError:  # pragma: no cover - until the description module lands
-    from ._stub_description import GROUND, Model, resolved_end
+    from ._stub_description import Model, resolved_end
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
@@ -291,7 +291,8 @@ class Engine:
                 phi[:, k], w[:, k], al[:, k] = z[:, k] + joint.offset, zd[:, k], zdd[:, k]
                 r, v, a = np.asarray(joint.at_parent, dtype=float), 0.0, 0.0
             else:
-                phi[:, k], w[:, k], al[:, k] = phi[:, p] + z[:, k] + joint.offset, w[:, p] + zd[:, k], al[:, p] + zdd[:, k]
+                phi[:, k] = phi[:, p] + z[:, k] + joint.offset
+                w[:, k], al[:, k] = w[:, p] + zd[:, k], al[:, p] + zdd[:, k]
                 r, v, a = self._body_point(p, joint.at_parent, phi, w, al, o, vo, ao)
             joint_at[:, k] = r
             arm = _rotate(phi[:, k], np.asarray(joint.at_child, dtype=float))
@@ -442,7 +443,7 @@ def _angle_form(c, switch):
     return 1 if abs(c) >= switch else 0
 
 
-@njit
+@njit(inline="always")
 def _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
                q_ext, params):
     """max |Phi_i| (m^2 and m) of the state y: distances, angles (the form in force), linear."""
@@ -466,7 +467,7 @@ def _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx
     return worst
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", inline="always")
 def _derivative(y, tau, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first,
                 base, q_ext, params, K, rhs, aux, q_phi, out):
     """y' = [q', q''] of eq. 12 into out for the state y and joint torques tau (N m). K, rhs, aux,
@@ -553,7 +554,7 @@ def _derivative(y, tau, pt_index, pt_fixed, body_pts, body_geom, joint_parent, l
     return OK
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", inline="always")
 def _solve_envelope(K, first, rhs):
     """Solve K x = rhs in place (x into rhs) for K symmetric positive definite, its lower triangle
     given inside the envelope first[r] <= c <= r, by L D L^T (L into K's strict lower triangle, D on
@@ -591,7 +592,7 @@ def _solve_envelope(K, first, rhs):
     return OK
 
 
-@njit(error_model="numpy")
+@njit(error_model="numpy", inline="always")
 def _pd_derivative(y, half, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts, body_geom,
                    joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, K, rhs, aux, q_phi, torque,
                    out):
@@ -619,14 +620,15 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_
     n = y0.shape[0]
     K, rhs, aux, q_phi = np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)), np.zeros(n_b)
     torque = np.zeros(n_b)
-    layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
-              params)
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    max_viol = _violation(y, *layout)
+    max_viol = _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
+                          first, base, q_ext, params)
     for i in range(n_steps + 1):
         j = 2 * i
-        code = _pd_derivative(y, j, tau_half, ref_half, refd_half, kp, kd, *layout, K, rhs, aux, q_phi, torque, k1)
+        code = _pd_derivative(y, j, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts, body_geom,
+                              joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, K, rhs, aux,
+                              q_phi, torque, k1)
         for m in range(n):
             states[i, m] = y[m]
         if code != OK:
@@ -635,18 +637,21 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_
             break
         for m in range(n):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _pd_derivative(tmp, j + 1, tau_half, ref_half, refd_half, kp, kd, *layout, K, rhs, aux, q_phi, torque,
-                              k2)
+        code = _pd_derivative(tmp, j + 1, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts,
+                              body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, K,
+                              rhs, aux, q_phi, torque, k2)
         if code == OK:
             for m in range(n):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _pd_derivative(tmp, j + 1, tau_half, ref_half, refd_half, kp, kd, *layout, K, rhs, aux, q_phi,
-                                  torque, k3)
+            code = _pd_derivative(tmp, j + 1, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts,
+                                  body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
+                                  K, rhs, aux, q_phi, torque, k3)
         if code == OK:
             for m in range(n):
                 tmp[m] = y[m] + dt * k3[m]
-            code = _pd_derivative(tmp, j + 2, tau_half, ref_half, refd_half, kp, kd, *layout, K, rhs, aux, q_phi,
-                                  torque, k4)
+            code = _pd_derivative(tmp, j + 2, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts,
+                                  body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
+                                  K, rhs, aux, q_phi, torque, k4)
         if code != OK:
             return code, i, max_viol
         finite = True
@@ -655,7 +660,8 @@ def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_
             finite = finite and math.isfinite(tmp[m])
         if not finite:
             return NONFINITE, i, max_viol
-        viol = _violation(tmp, *layout)
+        viol = _violation(tmp, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
+                          first, base, q_ext, params)
         if viol > params[VIOLATION]:
             return CONSTRAINT, i, max(max_viol, viol)
         max_viol = max(max_viol, viol)
