@@ -295,3 +295,39 @@ def test_simulate_pd_stops_on_a_constraint_violation():
     assert result.status == dynamics.CONSTRAINT
     assert result.steps_done < 1000
     assert np.isnan(result.z[-1, 0]) and np.isfinite(result.z[result.steps_done, 0])
+
+
+# ---------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("call, message", [
+    (lambda e: e.accelerations(np.zeros(12), [0.0]), r"tau must have shape \(2,\)"),
+    (lambda e: e.accelerations(np.zeros(11), [0.0, 0.0]), r"the state must have shape \(12,\)"),
+    (lambda e: e.constraint_violation(np.zeros(6)), r"the state must have shape \(12,\)"),
+    (lambda e: e.state_from_joints([0.0], [0.0]), r"z must have shape \(2,\)"),
+    (lambda e: e.joints_from_state(np.zeros(6)), r"states must have shape \(12,\)"),
+    (lambda e: e.inverse_dynamics([0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3), r"joint values must have shape \(2,\)"),
+    (lambda e: e.mass_matrix(np.zeros((3, 1))), r"joint values must have shape \(2,\)"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((20, 2)), np.zeros((21, 2)),
+                             np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0]), r"tau_half must have shape \(21, 2\)"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((21, 2)), np.zeros((21, 2)),
+                             np.zeros((21, 2)), [1.0], [0.0, 0.0]), r"kp must have shape \(2,\)"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], float("nan"), 10, np.zeros((21, 2)), np.zeros((21, 2)),
+                             np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0]), "dt must be a positive number"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], 1e-3, 0, np.zeros((1, 2)), np.zeros((1, 2)),
+                             np.zeros((1, 2)), [1.0, 1.0], [0.0, 0.0]), "n_steps must be a positive integer"),
+])
+def test_arrays_of_the_wrong_shape_are_refused_before_a_kernel_reads_them(call, message):
+    with pytest.raises(ValueError, match=message):
+        call(Engine(arm2_model()))
+
+
+@pytest.mark.parametrize("penalty, message", [({"alpha": 0.0}, "alpha must be in"), ({"omega": float("nan")}, "omega"),
+                                              ({"xi": -1.0}, "xi must be in")])
+def test_penalty_parameters_out_of_range_are_refused(penalty, message):
+    with pytest.raises(ValueError, match=message):
+        Engine(forearm_model(), **penalty)
+
+
+def test_a_non_finite_start_stops_as_non_finite():
+    result = Engine(arm2_model()).simulate_pd([float("nan"), 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((21, 2)),
+                                              np.zeros((21, 2)), np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0])
+    assert (result.status, result.steps_done) == (dynamics.NONFINITE, 0)

@@ -34,8 +34,10 @@ constraint, so they give that constraint's multiplier lambda_b = Q_phi_b / (dPhi
 point accelerations then solve the points' symmetric positive definite system (the mass matrix
 plus the penalty of the distance and linear constraints) by an L D L^T factorisation restricted to
 the matrix's envelope (a band for a chain: the cost grows linearly with the number of bodies), and
-the angle accelerations follow from the angle constraints' rows. A pivot that is not positive
-(rank lost) stops a simulation as SINGULAR.
+the angle accelerations follow from the angle constraints' rows. The points' matrix is positive definite for positive masses and
+inertias, and the angle rows' pivots are at least 0.2 d in magnitude, so the formulation has no
+singular configuration: a pivot that is not positive (rank lost) stops a simulation as SINGULAR
+only as a guard, a NaN pivot as NONFINITE, and fdbench.dynamics.COS_TOL has no role here.
 
 Mass matrix: each body's natural-coordinate mass matrix on its basic points (Garcia de Jalon and
 Bayo, ch. 3) from its mass, com and inertia; Q_ext: gravity at the com and the loads mapped to the
@@ -112,6 +114,12 @@ class Engine:
     damping ratio xi and the natural frequency omega (rad/s) of eq. 12."""
 
     def __init__(self, model: Model, alpha: float = 1e7, xi: float = 1.0, omega: float = 10.0):
+        from ..integrate import PENALTY_RANGES
+
+        for name, value in (("alpha", alpha), ("xi", xi), ("omega", omega)):
+            low, high = PENALTY_RANGES[name]
+            if not (math.isfinite(value) and low <= value <= high):
+                raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value}")
         self.model = model
         self.joints = tuple(joint.name for joint in model.joints)
         self.n_joints = len(self.joints)
@@ -162,6 +170,8 @@ class Engine:
             j = new_point(b, end)
             basic.append((i, j))
             u = end - np.asarray(joint.at_child, dtype=float)
+            if not math.hypot(u[0], u[1]) >= 1e-3:
+                raise ValueError(f"body {joint.child!r}: its end must be at least 1 mm from its joint point")
             geom.append((math.hypot(u[0], u[1]), math.atan2(u[1], u[0])))
         self.n_points = len(owners)
         self.pt_owner = np.array(owners, dtype=np.int64)
@@ -334,23 +344,36 @@ class Engine:
                 R[:, k:k + 2, joint] = _perp(p[:, k:k + 2] - joint_at[:, joint])
         return R
 
-    @staticmethod
-    def _samples(*arrays):
-        """Arrays of shape (J,) or (n, J) as (n, J), and whether the input was one sample."""
+    def _samples(self, *arrays):
+        """Arrays of shape (J,) or (n, J), all alike, as (n, J), and whether the input was one
+        sample. ValueError for another shape."""
         arrays = [np.asarray(a, dtype=float) for a in arrays]
-        single = arrays[0].ndim == 1
-        return [np.atleast_2d(a) for a in arrays], single
+        shape = arrays[0].shape
+        if not (shape[-1:] == (self.n_joints,) and len(shape) <= 2) or any(a.shape != shape for a in arrays):
+            raise ValueError(f"joint values must have shape ({self.n_joints},) or (n, {self.n_joints}), got "
+                             f"{', '.join(str(a.shape) for a in arrays)}")
+        return [np.atleast_2d(a) for a in arrays], len(shape) == 1
+
+    @staticmethod
+    def _vector(value, size: int, what: str) -> np.ndarray:
+        """value as a contiguous float array of shape (size,); ValueError for another shape."""
+        array = np.ascontiguousarray(value, dtype=float)
+        if array.shape != (size,):
+            raise ValueError(f"{what} must have shape ({size},), got {array.shape}")
+        return array
 
     # ------------------------------------------------------------------ API
     def state_from_joints(self, z, zd) -> np.ndarray:
         """y = [q, q'] on the constraint manifold for joint angles z (rad) and rates zd (rad/s), shape (J,)."""
-        (z, zd), _ = self._samples(z, zd)
-        p, pd, _, (phi, w, *_) = self._free_points(z, zd, np.zeros_like(z))
+        z, zd = self._vector(z, self.n_joints, "z"), self._vector(zd, self.n_joints, "zd")
+        p, pd, _, (phi, w, *_) = self._free_points(z[None], zd[None], np.zeros((1, self.n_joints)))
         return np.concatenate([p[0], phi[0], pd[0], w[0]])
 
     def joints_from_state(self, y) -> tuple[np.ndarray, np.ndarray]:
         """(z, zd) (rad, rad/s), shapes (J,), from the state y (n_state,) (or (n, n_state) -> (n, J))."""
         y = np.asarray(y, dtype=float)
+        if y.shape[-1:] != (self.n_state,):
+            raise ValueError(f"states must have shape ({self.n_state},) or (n, {self.n_state}), got {y.shape}")
         phi, w = y[..., self.n_p:self.n_q], y[..., self.n_q + self.n_p:]
         has_parent = self.joint_parent != FIXED
         parent = np.where(has_parent, self.joint_parent, 0)
@@ -361,17 +384,17 @@ class Engine:
     def accelerations(self, y, tau) -> np.ndarray:
         """y' = [q', q''] of eq. 12 for the state y (n_state,) and joint torques tau (J,) N m; NaN
         where the leading matrix is singular."""
-        y = np.ascontiguousarray(y, dtype=float)
+        y, tau = self._vector(y, self.n_state, "the state"), self._vector(tau, self.n_joints, "tau")
         out = np.empty(self.n_state)
         work = _workspace(self.n_p, self.n_joints)
-        code = _derivative(y, np.ascontiguousarray(tau, dtype=float), *self._kernel_layout, *work, out)
+        code = _derivative(y, tau, *self._kernel_layout, *work, out)
         if code != OK:
             out[self.n_q:] = np.nan
         return out
 
     def constraint_violation(self, y) -> float:
         """max |Phi_i| (m^2 and m) of the state y, the angle constraints in the form in force."""
-        return float(_violation(np.ascontiguousarray(y, dtype=float), *self._kernel_layout))
+        return float(_violation(self._vector(y, self.n_state, "the state"), *self._kernel_layout))
 
     def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
         """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
@@ -410,10 +433,16 @@ class Engine:
         tau = tau_half + kp (ref - z) + kd (refd - zd) per joint; tau_half (N m), ref_half (rad),
         refd_half (rad/s): shape (2 n_steps + 1, J) on the half-step grid t_k = k dt / 2; kp
         (N m/rad), kd (N m s/rad): shape (J,)."""
+        if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
+            raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt}")
         shape = (2 * n_steps + 1, self.n_joints)
-        tau_half, ref_half, refd_half = (np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=float), shape))
-                                         for a in (tau_half, ref_half, refd_half))
-        kp, kd = (np.ascontiguousarray(np.broadcast_to(np.asarray(g, dtype=float), (self.n_joints,))) for g in (kp, kd))
+        for name, array in (("tau_half", tau_half), ("ref_half", ref_half), ("refd_half", refd_half)):
+            if np.shape(array) != shape:
+                raise ValueError(f"{name} must have shape {shape} (the half-step grid), got {np.shape(array)}")
+        tau_half, ref_half, refd_half = (np.ascontiguousarray(a, dtype=float) for a in (tau_half, ref_half, refd_half))
+        kp, kd = self._vector(kp, self.n_joints, "kp"), self._vector(kd, self.n_joints, "kd")
         states = np.full((n_steps + 1, self.n_state), np.nan)
         ref_half = ref_half + self.joint_offset  # the kernel compares with phi_child - phi_parent
         code, done, max_viol = rk4_pd(self.state_from_joints(z0, zd0), float(dt), int(n_steps), tau_half, ref_half,
