@@ -209,18 +209,18 @@ def test_point_positions_name_every_body_s_joint_and_end():
 
 
 # ---------------------------------------------------------------------- the compiled RK4
-def test_simulate_pd_reproduces_the_forearm_rk4():
+@pytest.mark.parametrize("kinematics", ["paper", "exact"])
+def test_simulate_pd_reproduces_the_forearm_rk4(kinematics):
     from fdbench.integrate import half_step_reference, initial_state, steps
+    from fdbench.motion import eq5
 
     n = steps(1e-3)
     dt = 1.0 / n
-    half, ref, ref_w = half_step_reference(n, "paper")
-    from fdbench.motion import eq5
-
-    _, _, ref_a = eq5(half)
+    half, ref, ref_w = half_step_reference(n, kinematics)
+    _, _, ref_a = eq5(half, kinematics)
     tau = 0.04 * ref_a + np.cos(ref) * (15.0 * 0.33 + 9.81 * 0.11)
     states, qdd, applied = np.full((n + 1, 6), np.nan), np.full((n + 1, 3), np.nan), np.full(n + 1, np.nan)
-    y0 = initial_state("paper", Forearm())
+    y0 = initial_state(kinematics, Forearm())
     code, done, _ = dynamics.rk4(y0, dt, n, tau, ref, ref_w, 80.0, 0.3, dynamics.kernel_constants(Forearm(), Penalty()),
                                  states, qdd, applied)
     assert (code, done) == (dynamics.OK, n)
