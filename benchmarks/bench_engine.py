@@ -1,0 +1,96 @@
+"""Cost of one RK4 step of the multibody engine for chains of 1, 2, 3, 5, 8 and 12 bodies against
+the forearm's closed-form kernel (fdbench.dynamics), measured in the same run.
+
+Both: the compiled RK4 kernel alone (the same inputs every call), dt = 1 ms, 1 s of motion, PD
+feedback (kp 80, kd 0.3 per joint) plus the inverse-dynamics feedforward. The chain's bodies are
+0.3 m bars of 1 kg; its joints follow slow sines clear of the angle constraint's switch. Printed:
+the cost per step (us), its ratio to the forearm's, and the growth law fitted to the ratios
+(least squares of ratio = a + b N; the goal is at most 2N, a banded solve makes it linear).
+
+Run: python benchmarks/bench_engine.py
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import timeit
+
+import numpy as np
+
+import fdbench
+from fdbench import dynamics
+from fdbench.integrate import Settings, constants, half_step_reference, initial_state, steps
+from fdbench.inverse import elbow_torque
+from fdbench.multibody import engine as mb
+
+from fdbench.multibody.description import GROUND, Body, Joint, Model
+
+REPEAT, NUMBER = 5, 10
+SIZES = (1, 2, 3, 5, 8, 12)
+
+
+def best_per_call(fn) -> float:
+    return min(timeit.repeat(fn, repeat=REPEAT, number=NUMBER)) / NUMBER
+
+
+def chain(n_bodies: int) -> Model:
+    """n 0.3 m bars of 1 kg, pinned end to end from the origin."""
+    bodies = tuple(Body(f"b{k}", 1.0, (0.15, 0.0), 0.0075, end=(0.3, 0.0)) for k in range(n_bodies))
+    joints = tuple(Joint(f"q{k}", "pin", GROUND if k == 0 else f"b{k - 1}", f"b{k}",
+                         (0.0, 0.0) if k == 0 else (0.3, 0.0), (0.0, 0.0)) for k in range(n_bodies))
+    return Model(f"chain{n_bodies}", (0.0, -9.81), bodies, joints)
+
+
+def forearm_kernel():
+    settings = Settings(kinematics="paper")
+    n = steps(settings.dt)
+    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+    tau = np.array(elbow_torque(half, settings.model, settings.kinematics))
+    y0, consts = np.array(initial_state(settings.kinematics, settings.model)), constants(settings)
+    states, qdd, applied = np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1)
+    kp, kd = np.full(1, 80.0), np.full(1, 0.3)
+    return n, lambda: dynamics.rk4_feedback(y0, 1.0 / n, n, tau, ref_th, ref_w, kp, kd, 0.0, consts, states, qdd,
+                                            applied)
+
+
+def chain_kernel(n_bodies: int):
+    engine, n = mb.Engine(chain(n_bodies)), 1000
+    half = np.linspace(0.0, 1.0, 2 * n + 1)[:, None]
+    signs = np.where(np.arange(n_bodies) % 2 == 0, 1.0, -1.0)
+    centre = np.where(np.arange(n_bodies) == 0, 0.2, 0.1 * signs)  # absolute angles within [-0.1, 0.5] rad
+    z = centre + 0.1 * np.sin(2 * math.pi * half)
+    zd = 0.2 * math.pi * np.cos(2 * math.pi * half)
+    zdd = -0.4 * math.pi**2 * np.sin(2 * math.pi * half)
+    zd, zdd = np.broadcast_to(zd, z.shape).copy(), np.broadcast_to(zdd, z.shape).copy()
+    tau = engine.inverse_dynamics(z, zd, zdd)
+    kp, kd = np.full(n_bodies, 80.0), np.full(n_bodies, 0.3)
+    y0 = engine.state_from_joints(z[0], zd[0])
+    states = np.empty((n + 1, engine.n_state))
+    ref = np.ascontiguousarray(z + engine.joint_offset)
+    return n, lambda: mb.rk4_pd(y0, 1.0 / n, n, tau, ref, zd, kp, kd, *engine._kernel_layout, states)
+
+
+def main():
+    print(f"fdbench {fdbench.__version__}, {platform.python_implementation()} {platform.python_version()}, "
+          f"{platform.machine()}")
+    n, fn = forearm_kernel()
+    fn()
+    forearm = best_per_call(fn) / n
+    print(f"forearm (closed form): {forearm * 1e6:.3f} us per RK4 step")
+    ratios = []
+    for size in SIZES:
+        n, fn = chain_kernel(size)
+        code, done, _ = fn()
+        assert (code, done) == (dynamics.OK, n), f"chain of {size}: status {code} at step {done}"
+        per_step = best_per_call(fn) / n
+        ratios.append(per_step / forearm)
+        print(f"chain of {size:2d}: {per_step * 1e6:7.3f} us per step = {ratios[-1]:6.2f} x forearm "
+              f"({ratios[-1] / size:.2f} N)")
+    a, b = np.polyfit(np.array(SIZES, dtype=float), ratios, 1)[::-1]
+    slope = np.polyfit(np.log(SIZES), np.log(ratios), 1)[0]
+    print(f"growth: ratio = {a:.2f} + {b:.2f} N (least squares); log-log slope {slope:.2f}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,330 @@
+"""The multibody engine (fdbench.multibody.engine) against the forearm's and the arm's own kernels,
+its minimal equations against its penalty accelerations, and a hanging leg through -90 deg.
+
+Tolerances. Eq. 12's leading matrix has a condition number near alpha |Phi_q|^2 / m (about 1e7 for
+the forearm), so any float64 solve of it is accurate to about 1e-9 relative: the engine and the
+forearm's closed form are both 1.3e-9 and 1.4e-9 from an 80-bit solve of the same equations. The
+accelerations are compared to 1e-8 relative for that reason. The penalty formulation's solution is
+that of the constrained equations to O(m / (alpha d^2)) (d a body's length), hence, with alpha = 1e9,
+1e-6 for a tree and 1e-4 for random chains against M(z)^-1 (tau - h).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from fdbench import dynamics
+from fdbench.model import Forearm, Penalty
+from fdbench.multibody import engine as mb
+from fdbench.multibody.engine import Engine
+
+from fdbench.multibody.description import GROUND, Body, Joint, Load, Model
+
+
+def forearm_model() -> Model:
+    """Table 1's forearm, as the description contract writes it."""
+    return Model("forearm", (0.0, -9.81), (Body("forearm", 1.0, (0.11, 0.0), 0.04 - 1.0 * 0.11**2),),
+                 (Joint("theta", "pin", GROUND, "forearm", (0.0, 0.0), (0.0, 0.0)),),
+                 (Load("forearm", (0.33, 0.0), (0.0, -15.0)),))
+
+
+def arm2_model() -> Model:
+    """The two-segment arm (fdbench.models.arm2.Arm2's constants)."""
+    return Model("arm2", (0.0, -9.81),
+                 (Body("upper_arm", 2.0, (0.13, 0.0), 0.06 - 2.0 * 0.13**2),
+                  Body("forearm", 1.0, (0.11, 0.0), 0.04 - 1.0 * 0.11**2)),
+                 (Joint("shoulder", "pin", GROUND, "upper_arm", (0.0, 0.0), (0.0, 0.0)),
+                  Joint("elbow", "pin", "upper_arm", "forearm", (0.30, 0.0), (0.0, 0.0))),
+                 (Load("forearm", (0.33, 0.0), (0.0, -15.0)),))
+
+
+def leg3_model() -> Model:
+    """A three-segment leg hanging from the hip: thigh, shank, foot (the foot's end at the toes)."""
+    return Model("leg3", (0.0, -9.81),
+                 (Body("thigh", 7.5, (0.19, 0.0), 0.12), Body("shank", 3.5, (0.18, 0.0), 0.05),
+                  Body("foot", 1.0, (0.05, 0.0), 0.004, end=(0.15, 0.0))),
+                 (Joint("hip", "pin", GROUND, "thigh", (0.0, 0.0), (0.0, 0.0)),
+                  Joint("knee", "pin", "thigh", "shank", (0.43, 0.0), (0.0, 0.0)),
+                  Joint("ankle", "pin", "shank", "foot", (0.42, 0.0), (0.0, 0.0))))
+
+
+def tree_model() -> Model:
+    """A tree with an offset, a ground point away from the origin, a joint away from its parent's
+    basic points (an extra point), an end key and a load."""
+    return Model("tree", (0.0, -9.81),
+                 (Body("a", 2.0, (0.1, 0.02), 0.05), Body("b", 1.0, (0.15, -0.01), 0.02),
+                  Body("c", 0.5, (0.05, 0.0), 0.01), Body("d", 0.7, (0.0, 0.1), 0.01, end=(0.02, 0.2))),
+                 (Joint("j0", "pin", GROUND, "a", (0.1, 0.2), (0.0, 0.0), offset=-1.0),
+                  Joint("j1", "pin", "a", "b", (0.3, 0.0), (0.0, 0.0), offset=0.3),
+                  Joint("j2", "pin", "a", "c", (0.15, 0.05), (0.01, 0.0)),
+                  Joint("j3", "pin", "b", "d", (0.2, 0.01), (0.0, 0.0))),
+                 (Load("c", (0.1, 0.0), (1.0, -2.0)),))
+
+
+def joint_accelerations(engine: Engine, yd: np.ndarray) -> np.ndarray:
+    """z'' (rad/s^2) from a state derivative: differences of the absolute angles' accelerations."""
+    phidd = yd[engine.n_q + engine.n_p:]
+    parent = engine.joint_parent
+    return phidd - np.where(parent >= 0, phidd[np.maximum(parent, 0)], 0.0)
+
+
+def relative_error(found, expected) -> float:
+    return float(np.max(np.abs(np.asarray(found) - expected)) / np.max(np.abs(expected)))
+
+
+# ---------------------------------------------------------------------- the forearm and the arm
+def test_forearm_accelerations_match_the_closed_form():
+    engine, consts = Engine(forearm_model()), dynamics.kernel_constants(Forearm(), Penalty())
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        theta, w, tau = rng.uniform(-1.3, 1.3), rng.uniform(-5, 5), rng.uniform(-20, 20)
+        y = engine.state_from_joints([theta], [w]) + rng.normal(0.0, 1e-6, 6)  # near the manifold
+        expected = np.array(dynamics.accelerations(*y, tau, consts)[:3])
+        assert relative_error(engine.accelerations(y, [tau])[3:], expected) < 1e-8
+        assert engine.constraint_violation(y) == pytest.approx(dynamics.constraint_violation(*y[:3], 0.33), abs=1e-15)
+
+
+def test_the_forearm_state_is_eq_7s():
+    engine = Engine(forearm_model())
+    q, qd, _ = Forearm().coordinates(0.4, -1.5, 0.0)
+    np.testing.assert_allclose(engine.state_from_joints([0.4], [-1.5]), np.concatenate([q, qd]), rtol=0, atol=1e-15)
+
+
+def _arm_state(y: np.ndarray) -> np.ndarray:
+    """The arm kernels' state (relative elbow angle) from the engine's (absolute angles)."""
+    theirs = y.copy()
+    theirs[5], theirs[11] = y[5] - y[4], y[11] - y[10]
+    return theirs
+
+
+def test_arm_accelerations_match_the_arm_kernels():
+    from fdbench.models import arm2_kernels
+    from fdbench.models.arm2 import Arm2
+
+    engine, consts = Engine(arm2_model()), arm2_kernels.kernel_constants(Arm2(), Penalty())
+    rng = np.random.default_rng(2)
+    checked = 0
+    while checked < 200:
+        z, zd, tau = rng.uniform(-1.2, 1.2, 2), rng.uniform(-4, 4, 2), rng.uniform(-20, 20, 2)
+        if min(abs(math.cos(z[0])), abs(math.cos(z[0] + z[1]))) < 0.25:
+            continue  # the arm kernels use the sin form everywhere; the engine switches below 0.2
+        y = engine.state_from_joints(z, zd) + rng.normal(0.0, 1e-6, 12)
+        out = np.empty(12)
+        arm2_kernels.accelerations(_arm_state(y), tau[0], tau[1], consts, out)
+        yd = engine.accelerations(y, tau)
+        found = np.concatenate([yd[6:11], [yd[11] - yd[10]]])
+        assert relative_error(found, out[6:]) < 1e-8
+        checked += 1
+
+
+def test_forearm_inverse_dynamics_is_the_closed_form():
+    engine, rng = Engine(forearm_model()), np.random.default_rng(3)
+    theta, w, dw = rng.uniform(-2, 2, (3, 50, 1))
+    expected = 0.04 * dw + np.cos(theta) * (15.0 * 0.33 + 1.0 * 9.81 * 0.11)
+    np.testing.assert_allclose(engine.inverse_dynamics(theta, w, dw), expected, rtol=1e-12, atol=1e-12)
+    assert engine.inverse_dynamics([0.1], [0.2], [0.3]).shape == (1,)
+
+
+def test_arm_inverse_dynamics_matches_the_arm_kernels():
+    from fdbench.models import arm2_kernels
+    from fdbench.models.arm2 import Arm2
+
+    engine, consts = Engine(arm2_model()), arm2_kernels.kernel_constants(Arm2(), Penalty())
+    rng = np.random.default_rng(4)
+    z, zd, zdd = rng.uniform(-2, 2, (3, 40, 2))
+    found = engine.inverse_dynamics(z, zd, zdd)
+    for k in range(40):
+        out = np.empty(2)
+        arm2_kernels.inverse_torques(_arm_state(engine.state_from_joints(z[k], zd[k])), zdd[k, 0], zdd[k, 1],
+                                     consts, out)
+        np.testing.assert_allclose(found[k], out, rtol=1e-12, atol=1e-12)
+
+
+# ---------------------------------------------------------------------- random chains
+@st.composite
+def chains(draw):
+    """A chain of 1 to 6 bodies with random geometry, offsets, ends and loads."""
+    n = draw(st.integers(1, 6))
+    length = st.floats(0.1, 0.6)
+    small = st.floats(-0.05, 0.05)
+    bodies, joints, loads = [], [], []
+    for k in range(n):
+        L = draw(length)
+        end = (L, draw(small)) if draw(st.booleans()) else None
+        bodies.append(Body(f"b{k}", draw(st.floats(0.2, 8.0)), (draw(st.floats(0.1, 0.3)), draw(small)),
+                           draw(st.floats(0.002, 0.2)), end))
+        parent = GROUND if k == 0 else f"b{k - 1}"
+        at_parent = (draw(small), draw(small)) if k == 0 else (joints[-1].at_child[0] + draw(length), draw(small))
+        joints.append(Joint(f"q{k}", "pin", parent, f"b{k}", at_parent, (draw(small), draw(small)),
+                            offset=draw(st.floats(-1.0, 1.0))))
+        if draw(st.booleans()):
+            force = (draw(st.floats(-20, 20)), draw(st.floats(-20, 20)))
+            loads.append(Load(f"b{k}", (draw(length), draw(small)), force))
+    return Model("chain", (0.0, -9.81), tuple(bodies), tuple(joints), tuple(loads))
+
+
+@settings(max_examples=40, deadline=None)
+@given(chains(), st.integers(0, 2**32 - 1))
+def test_minimal_equations_agree_with_inverse_dynamics_and_the_penalty_accelerations(model, seed):
+    engine, rng = Engine(model), np.random.default_rng(seed)
+    J = engine.n_joints
+    z, zd, zdd, tau = rng.uniform(-1.5, 1.5, J), rng.uniform(-2, 2, J), rng.uniform(-5, 5, J), rng.uniform(-5, 5, J)
+    M, h = engine.mass_matrix(z), engine.bias(z, zd)
+    np.testing.assert_allclose(M, M.T, rtol=0, atol=1e-12)
+    assert np.all(np.linalg.eigvalsh(M) > 0)
+    tau_inv = engine.inverse_dynamics(z, zd, zdd)
+    np.testing.assert_allclose(M @ zdd + h, tau_inv, rtol=1e-10, atol=1e-10 * np.max(np.abs(tau_inv)))
+    y = engine.state_from_joints(z, zd)
+    assert engine.constraint_violation(y) < 1e-12
+    np.testing.assert_allclose(engine.joints_from_state(y), (z, zd), rtol=0, atol=1e-12)
+    stiff = Engine(model, alpha=1e9)  # the penalty's error, O(m / (alpha d^2)), below the tolerance
+    found = joint_accelerations(stiff, stiff.accelerations(stiff.state_from_joints(z, zd), tau))
+    assert relative_error(found, np.linalg.solve(M, tau - h)) < 1e-4
+
+
+def test_a_tree_with_a_joint_off_its_parents_points_agrees_with_its_minimal_equations():
+    engine, rng = Engine(tree_model(), alpha=1e9), np.random.default_rng(5)
+    assert len(engine.lin_const) == 2  # one extra point, two linear constraints
+    for _ in range(20):
+        z, zd, tau = rng.uniform(-1, 1, 4), rng.uniform(-2, 2, 4), rng.uniform(-5, 5, 4)
+        y = engine.state_from_joints(z, zd)
+        assert engine.constraint_violation(y) < 1e-12
+        expected = np.linalg.solve(engine.mass_matrix(z), tau - engine.bias(z, zd))
+        assert relative_error(joint_accelerations(engine, engine.accelerations(y, tau)), expected) < 1e-6
+
+
+def test_point_positions_name_every_body_s_joint_and_end():
+    points = Engine(arm2_model()).point_positions([0.0, math.pi / 2])
+    np.testing.assert_allclose(points["forearm.joint"], [0.30, 0.0], atol=1e-15)
+    np.testing.assert_allclose(points["forearm.end"], [0.30, 0.33], atol=1e-15)
+    np.testing.assert_allclose(points["upper_arm.end"], [0.30, 0.0], atol=1e-15)
+
+
+# ---------------------------------------------------------------------- the compiled RK4
+@pytest.mark.parametrize("kinematics", ["paper", "exact"])
+def test_simulate_pd_reproduces_the_forearm_rk4(kinematics):
+    from fdbench.integrate import half_step_reference, initial_state, steps
+    from fdbench.motion import eq5
+
+    n = steps(1e-3)
+    dt = 1.0 / n
+    half, ref, ref_w = half_step_reference(n, kinematics)
+    _, _, ref_a = eq5(half, kinematics)
+    tau = 0.04 * ref_a + np.cos(ref) * (15.0 * 0.33 + 9.81 * 0.11)
+    states, qdd, applied = np.full((n + 1, 6), np.nan), np.full((n + 1, 3), np.nan), np.full(n + 1, np.nan)
+    y0 = initial_state(kinematics, Forearm())
+    code, done, _ = dynamics.rk4(y0, dt, n, tau, ref, ref_w, 80.0, 0.3, dynamics.kernel_constants(Forearm(), Penalty()),
+                                 states, qdd, applied)
+    assert (code, done) == (dynamics.OK, n)
+    result = Engine(forearm_model()).simulate_pd([y0[2]], [y0[5]], dt, n, tau[:, None], ref[:, None],
+                                                 ref_w[:, None], [80.0], [0.3])
+    assert (result.status, result.steps_done) == (dynamics.OK, n)
+    assert np.max(np.abs(np.degrees(result.z[:, 0] - states[:, 2]))) < 1e-9
+    assert result.max_violation < 1e-6
+
+
+def test_simulate_pd_reproduces_the_arm_rk4_on_the_reach():
+    from fdbench.models import arm2_kernels
+    from fdbench.models.arm2 import Arm2
+    from fdbench.models.arm2_motion import Reach
+
+    motion, arm, n = Reach(), Arm2(), 1000
+    dt = motion.duration / n
+    half = np.linspace(0.0, motion.duration, 2 * n + 1)
+    ref, ref_w, ref_a = (np.ascontiguousarray(a) for a in motion(half))
+    tau = np.ascontiguousarray(arm.joint_torques(ref, ref_w, ref_a) * 0.9)  # a wrong model: the PD works
+    kp, kd = np.array([80.0, 40.0]), np.array([0.3, 0.2])
+    consts = arm2_kernels.kernel_constants(arm, Penalty())
+    states, qdd, applied = np.full((n + 1, 12), np.nan), np.full((n + 1, 6), np.nan), np.full((n + 1, 2), np.nan)
+    y0 = np.concatenate(arm.coordinates(ref[0], ref_w[0], ref_a[0])[:2])
+    code, done, _ = arm2_kernels.rk4_pd(y0, dt, n, tau, ref, ref_w, ref_a, kp, kd, 0, np.zeros((1, 2, 4)), consts,
+                                        consts, states, qdd, applied)
+    assert (code, done) == (dynamics.OK, n)
+    result = Engine(arm2_model()).simulate_pd(ref[0], ref_w[0], dt, n, tau, ref, ref_w, kp, kd)
+    assert (result.status, result.steps_done) == (dynamics.OK, n)
+    assert np.max(np.abs(np.degrees(result.z - states[:, 4:6]))) < 1e-9
+
+
+def _leg_motion(t):
+    """A slow swing of the leg: the thigh through -90 deg, knee and ankle bending (rad, rad/s, rad/s^2)."""
+    centre, amplitude, rate = np.array([-math.pi / 2, -0.3, 1.4]), np.array([0.3, 0.2, 0.15]), 2 * math.pi
+    t = np.asarray(t, dtype=float)[:, None]
+    return (centre + amplitude * np.sin(rate * t), amplitude * rate * np.cos(rate * t),
+            -amplitude * rate**2 * np.sin(rate * t))
+
+
+def test_a_hanging_leg_swings_through_minus_90_degrees_open_loop():
+    engine, n = Engine(leg3_model(), alpha=1e8), 1000  # 12 kg hanging: the violation is about 16 / alpha (m^2)
+    dt = 1.0 / n
+    half = np.linspace(0.0, 1.0, 2 * n + 1)
+    z, zd, zdd = _leg_motion(half)
+    tau = engine.inverse_dynamics(z, zd, zdd)
+    zero = np.zeros(3)
+    result = engine.simulate_pd(z[0], zd[0], dt, n, tau, z, zd, zero, zero)
+    assert (result.status, result.steps_done) == (dynamics.OK, n)
+    thigh = result.z[:, 0]
+    assert thigh.min() < -math.pi / 2 < thigh.max()  # it went through the sin form's singularity
+    rmse = math.sqrt(np.mean(np.degrees(result.z - z[::2]) ** 2))
+    assert rmse < 0.01
+    assert result.max_violation < 1e-6
+
+
+def test_the_sin_form_alone_would_be_singular_where_the_leg_hangs():
+    engine = Engine(leg3_model(), alpha=1e9)
+    z, zd, tau = [-math.pi / 2, 0.0, math.pi / 2], [0.5, -0.2, 0.1], [1.0, 2.0, 3.0]
+    expected = np.linalg.solve(engine.mass_matrix(z), tau - engine.bias(z, zd))
+    y = engine.state_from_joints(z, zd)
+    assert relative_error(joint_accelerations(engine, engine.accelerations(y, tau)), expected) < 1e-5
+    engine.params[mb.SWITCH_COS] = 0.0  # the paper's form for every body
+    with np.errstate(all="ignore"):
+        assert not relative_error(joint_accelerations(engine, engine.accelerations(y, tau)), expected) < 1.0
+
+
+def test_simulate_pd_stops_on_a_constraint_violation():
+    engine = Engine(forearm_model(), alpha=1.0)  # a penalty too weak to hold the constraint
+    result = engine.simulate_pd([0.0], [0.0], 1e-3, 1000, np.full((2001, 1), 200.0), np.zeros((2001, 1)),
+                                np.zeros((2001, 1)), [0.0], [0.0])
+    assert result.status == dynamics.CONSTRAINT
+    assert result.steps_done < 1000
+    assert np.isnan(result.z[-1, 0]) and np.isfinite(result.z[result.steps_done, 0])
+
+
+# ---------------------------------------------------------------------- bad input
+@pytest.mark.parametrize("call, message", [
+    (lambda e: e.accelerations(np.zeros(12), [0.0]), r"tau must have shape \(2,\)"),
+    (lambda e: e.accelerations(np.zeros(11), [0.0, 0.0]), r"the state must have shape \(12,\)"),
+    (lambda e: e.constraint_violation(np.zeros(6)), r"the state must have shape \(12,\)"),
+    (lambda e: e.state_from_joints([0.0], [0.0]), r"z must have shape \(2,\)"),
+    (lambda e: e.joints_from_state(np.zeros(6)), r"states must have shape \(12,\)"),
+    (lambda e: e.inverse_dynamics([0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3), r"joint values must have shape \(2,\)"),
+    (lambda e: e.mass_matrix(np.zeros((3, 1))), r"joint values must have shape \(2,\)"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((20, 2)), np.zeros((21, 2)),
+                             np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0]), r"tau_half must have shape \(21, 2\)"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((21, 2)), np.zeros((21, 2)),
+                             np.zeros((21, 2)), [1.0], [0.0, 0.0]), r"kp must have shape \(2,\)"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], float("nan"), 10, np.zeros((21, 2)), np.zeros((21, 2)),
+                             np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0]), "dt must be a positive number"),
+    (lambda e: e.simulate_pd([0.0, 0.0], [0.0, 0.0], 1e-3, 0, np.zeros((1, 2)), np.zeros((1, 2)),
+                             np.zeros((1, 2)), [1.0, 1.0], [0.0, 0.0]), "n_steps must be a positive integer"),
+])
+def test_arrays_of_the_wrong_shape_are_refused_before_a_kernel_reads_them(call, message):
+    with pytest.raises(ValueError, match=message):
+        call(Engine(arm2_model()))
+
+
+@pytest.mark.parametrize("penalty, message", [({"alpha": 0.0}, "alpha must be in"), ({"omega": float("nan")}, "omega"),
+                                              ({"xi": -1.0}, "xi must be in")])
+def test_penalty_parameters_out_of_range_are_refused(penalty, message):
+    with pytest.raises(ValueError, match=message):
+        Engine(forearm_model(), **penalty)
+
+
+def test_a_non_finite_start_stops_as_non_finite():
+    result = Engine(arm2_model()).simulate_pd([float("nan"), 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((21, 2)),
+                                              np.zeros((21, 2)), np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0])
+    assert (result.status, result.steps_done) == (dynamics.NONFINITE, 0)
