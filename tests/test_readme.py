@@ -105,9 +105,13 @@ def test_first_report_says_it_creates_its_database_and_prints_the_report(first_r
     assert (workdir / "fdbench-results.sqlite").is_file()
     again = sh("fdbench report", workdir)  # once stored: the same tables, and no creation line
     assert "creating results database" not in again.stderr
-    def stored(text):  # the report without what is measured anew: the date, the inverse-dynamics time
-        return re.sub(r"computed in [\d.]+ ms", "", re.sub(r"\| date \|.*\|", "", text))
+    def stored(text):  # the report without what is measured anew: the date, the inverse-dynamics time,
+        # and what was carried out (everything the first time, nothing the second)
+        text = re.sub(r"\| parallel jobs \|.*\|", "", re.sub(r"\| date \|.*\|", "", text))
+        return re.sub(r"computed in [\d.]+ ms", "", text)
 
+    assert "| parallel jobs | none: every run was stored |" in again.stdout
+    assert "| parallel jobs | none" not in first_report.stdout
     assert stored(again.stdout) == stored(first_report.stdout)
 
 
