@@ -80,8 +80,8 @@ class Model:
 
 def resolved_end(model: Model, body_name: str) -> tuple[float, float]:
     """The body's second point (m, body frame): its ``end``, else the at_parent of its first child
-    joint, else its farthest load point (from at_child), else its com if at least 1 mm from at_child,
-    else at_child + (1 m, 0)."""
+    joint, else its farthest load point (from at_child), else its com, else at_child + (1 m, 0); a
+    load or com closer than 1 mm to at_child is passed over."""
     body = model.body(body_name)
     if body.end is not None:
         return body.end
@@ -90,7 +90,7 @@ def resolved_end(model: Model, body_name: str) -> tuple[float, float]:
         return first.at_parent
     at_child = model.parent_joint(body_name).at_child
     loads = [load.at for load in model.loads if load.body == body_name]
-    if loads:
+    if loads and max(math.dist(at, at_child) for at in loads) >= 1e-3:
         return max(loads, key=lambda at: math.dist(at, at_child))
     if math.dist(body.com, at_child) >= 1e-3:
         return body.com

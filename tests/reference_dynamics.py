@@ -5,11 +5,13 @@ Why it is independent of the engine: the engine works in the paper's mixed coord
 coordinates of two points per body plus the angles, constraints, the penalty formulation of eq. 12).
 Here there are no points, constraints or penalties: body frames are placed by rotations along each
 body's path from ground, and the dynamics come from two separate constructions,
-- the recursive Newton-Euler algorithm (RNEA, Featherstone's, planar: a body's angular velocity is
-  the sum of its path's joint rates) for the inverse dynamics tau(z, z', z''), and
+- Newton-Euler for the inverse dynamics tau(z, z', z''): the recursive Newton-Euler algorithm
+  (Featherstone's RNEA, planar: a body's angular velocity is the sum of its path's joint rates),
+  its forward recursion written as sums along each body's path and its backward recursion as sums
+  over each joint's subtree (the same equations, vectorised over bodies and over a batch), and
 - the kinetic energy T = 1/2 z'^T M(z) z' written with each body's Jacobians for the mass matrix,
 so the self-checks can test them against each other, and the forward dynamics
-z'' = M^{-1} (tau - RNEA(z, z', 0)) integrated by scipy's DOP853 at rtol = atol = 1e-12.
+z'' = M^{-1} (tau - h(z, z')) integrated by scipy's DOP853 at rtol = atol = 1e-12.
 
 Conventions (the description's): body k is the child of joint k (joints in topological order); its
 frame angle is the parent's plus z_k + offset_k; joint k's point is parent origin + R(parent angle)
@@ -34,7 +36,9 @@ class Tree:
     parent: (J,) int, the joint whose child is joint k's parent body, -1 for ground; at_parent,
     at_child, com: (J, 2) m; offset: (J,) rad; mass: (J,) kg; inertia: (J,) kg m^2 about the com;
     gravity: (2,) m/s^2; load_joint: (L,) int, the body a load acts on; load_at: (L, 2) m, body
-    frame; load_force: (L, 2) N, world axes."""
+    frame; load_force: (L, 2) N, world axes; on_path: (J, J), 1 where joint k is on the path from
+    ground to body b (on_path[b, k]), else 0: a body's motion sums its path's joints' terms, a joint
+    carries its subtree."""
 
     parent: np.ndarray
     at_parent: np.ndarray
@@ -47,6 +51,7 @@ class Tree:
     load_joint: np.ndarray
     load_at: np.ndarray
     load_force: np.ndarray
+    on_path: np.ndarray
 
     @property
     def n_joints(self) -> int:
@@ -60,6 +65,11 @@ def tree(model) -> Tree:
     parent = [-1 if joint.parent == GROUND else of_child[joint.parent] for joint in model.joints]
     assert all(p < k for k, p in enumerate(parent)), "joints are not in topological order"
     children = [bodies[joint.child] for joint in model.joints]
+    on_path = np.zeros((len(parent), len(parent)))
+    for b in range(len(parent)):
+        k = b
+        while k >= 0:
+            on_path[b, k], k = 1.0, parent[k]
 
     def points(values):
         return np.array(values, dtype=float).reshape(-1, 2)
@@ -74,20 +84,20 @@ def tree(model) -> Tree:
                 gravity=np.array(model.gravity, dtype=float),
                 load_joint=np.array([of_child[load.body] for load in model.loads], dtype=int),
                 load_at=points([load.at for load in model.loads]),
-                load_force=points([load.force for load in model.loads]))
+                load_force=points([load.force for load in model.loads]), on_path=on_path)
 
 
 # ----------------------------------------------------------------------------- kinematics
 
 
 def _rotate(angle, v):
-    """R(angle) v for angles of shape (...) and a body-frame vector v (2,): shape (..., 2)."""
+    """R(angle_k) v_k for angles (..., J) and body-frame vectors v (J, 2): shape (..., J, 2)."""
     c, s = np.cos(angle), np.sin(angle)
-    return np.stack([c * v[0] - s * v[1], s * v[0] + c * v[1]], axis=-1)
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
 
 
 def _perp(v):
-    """The vector v (..., 2) turned by +90 degrees: e_z x v."""
+    """The vectors v (..., 2) turned by +90 degrees: e_z x v."""
     return np.stack([-v[..., 1], v[..., 0]], axis=-1)
 
 
@@ -96,97 +106,88 @@ def _cross(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
+def _sum_path(A, terms):
+    """sum over the joints k on each body's path of terms[..., k, :]: shape (..., J, 2)."""
+    return np.einsum("bk,...kx->...bx", A, terms)
+
+
 @dataclass
 class Frames:
-    """Every body frame's motion, lists indexed by joint: angle (rad), angular velocity (rad/s) and
-    acceleration (rad/s^2), each (...); origin, its velocity and acceleration, each (..., 2) m,
-    m/s, m/s^2; joint (..., 2): the joint's point (m)."""
+    """Every body's motion, indexed by its joint: angle (rad), angular velocity (rad/s) and
+    acceleration (rad/s^2), each (..., J); origin, its velocity and acceleration, and joint (the
+    joint's point), each (..., J, 2) in m, m/s, m/s^2."""
 
-    angle: list
-    rate: list
-    spin: list
-    origin: list
-    velocity: list
-    acceleration: list
-    joint: list
+    angle: np.ndarray
+    rate: np.ndarray
+    spin: np.ndarray
+    origin: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    joint: np.ndarray
 
-    def point(self, k, local):
-        """Position, velocity and acceleration (each (..., 2)) of the body point ``local`` (2,)
-        (m, body k's frame)."""
-        r = _rotate(self.angle[k], local)
-        w, dw = self.rate[k][..., None], self.spin[k][..., None]
-        return (self.origin[k] + r, self.velocity[k] + w * _perp(r),
-                self.acceleration[k] + dw * _perp(r) - w**2 * r)
+    def points(self, local):
+        """Position, velocity and acceleration (each (..., J, 2)) of one body-fixed point per body,
+        local (J, 2) (m, each in its body's frame)."""
+        r = _rotate(self.angle, local)
+        w, dw = self.rate[..., None], self.spin[..., None]
+        return self.origin + r, self.velocity + w * _perp(r), self.acceleration + dw * _perp(r) - w**2 * r
 
 
 def frames(t: Tree, z, zd, zdd) -> Frames:
-    """The body frames' motion for the joint angles z, rates z' and accelerations z'' (..., J),
-    joint by joint from ground (the forward pass of the RNEA)."""
+    """The bodies' motion for the joint angles z, rates z' and accelerations z'' (..., J).
+
+    A body's angle, rate and angular acceleration are sums over its path; its origin is the sum over
+    its path of each joint's step u_k = R(parent angle) at_parent_k - R(angle_k) at_child_k (from
+    the parent's origin to the child's), and so are the steps' derivatives."""
     z, zd, zdd = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (z, zd, zdd)))
-    zero, zero2 = np.zeros(z.shape[:-1]), np.zeros(z.shape[:-1] + (2,))
-    f = Frames([], [], [], [], [], [], [])
-    for k in range(t.n_joints):
-        p = t.parent[k]
-        if p < 0:
-            base = (zero, zero, zero, zero2, zero2, zero2)
-        else:
-            base = (f.angle[p], f.rate[p], f.spin[p], f.origin[p], f.velocity[p], f.acceleration[p])
-        angle, rate, spin = base[0] + z[..., k] + t.offset[k], base[1] + zd[..., k], base[2] + zdd[..., k]
-        if p < 0:
-            joint, joint_v, joint_a = zero2 + t.at_parent[k], zero2, zero2
-        else:
-            joint, joint_v, joint_a = f.point(p, t.at_parent[k])
-        arm = -_rotate(angle, t.at_child[k])  # from the joint to the child's origin
-        f.angle.append(angle)
-        f.rate.append(rate)
-        f.spin.append(spin)
-        f.joint.append(joint)
-        f.origin.append(joint + arm)
-        f.velocity.append(joint_v + rate[..., None] * _perp(arm))
-        f.acceleration.append(joint_a + spin[..., None] * _perp(arm) - rate[..., None] ** 2 * arm)
-    return f
+    A = t.on_path
+    angle, rate, spin = (z + t.offset) @ A.T, zd @ A.T, zdd @ A.T
+
+    def of_parent(x):  # the parent's value per joint, 0 for ground (index -1: the zero appended)
+        return np.concatenate([x, np.zeros(x.shape[:-1] + (1,))], axis=-1)[..., t.parent]
+
+    p_angle, p_rate, p_spin = of_parent(angle), of_parent(rate)[..., None], of_parent(spin)[..., None]
+    to_joint, to_origin = _rotate(p_angle, t.at_parent), -_rotate(angle, t.at_child)
+    w, dw = rate[..., None], spin[..., None]
+    step = to_joint + to_origin
+    step_v = p_rate * _perp(to_joint) + w * _perp(to_origin)
+    step_a = p_spin * _perp(to_joint) - p_rate**2 * to_joint + dw * _perp(to_origin) - w**2 * to_origin
+    origin = _sum_path(A, step)
+    return Frames(angle, rate, spin, origin, _sum_path(A, step_v), _sum_path(A, step_a), origin - to_origin)
 
 
 # ----------------------------------------------------------------------------- dynamics
 
 
-def inverse_dynamics(t: Tree, z, zd, zdd, external: bool = True) -> np.ndarray:
-    """The joint torques tau (..., J) (N m) of the motion z, z', z'' (..., J) by the planar RNEA:
-    the force and moment (about the joint's point) each joint passes to its child, from the leaves
-    to ground; tau_k is the moment of joint k. ``external`` False leaves out gravity and loads."""
-    f = frames(t, z, zd, zdd)
-    J = t.n_joints
-    force = [None] * J  # from the parent onto body k, N
-    moment = [None] * J  # from the parent onto body k about its joint's point, N m
-    for k in range(J):
-        com, _, com_a = f.point(k, t.com[k])
-        weight = t.mass[k] * t.gravity if external else np.zeros(2)
-        inertial = t.mass[k] * com_a - weight  # what the joint and the loads must supply
-        force[k] = inertial
-        moment[k] = t.inertia[k] * f.spin[k] + _cross(com - f.joint[k], inertial)
+def _torques(t: Tree, f: Frames, external: bool) -> np.ndarray:
+    """Newton-Euler: the torque of joint k is the moment about its point that the subtree it
+    carries needs, I alpha + G x m (a_G - g) summed over the subtree's bodies, minus the loads'
+    moments (the RNEA's backward recursion, f_k = own + sum of the children's, written as sums over
+    subtrees). ``external`` False leaves out gravity and loads. Shape (..., J), N m."""
+    com, _, com_a = f.points(t.com)
+    gravity = t.gravity if external else np.zeros(2)
+    force = t.mass[:, None] * (com_a - gravity)  # what the joint and the loads must supply, (..., J, 2)
+    moment = t.inertia * f.spin + _cross(com, force)  # about the world's origin, (..., J)
     if external:
         for j, at, load in zip(t.load_joint, t.load_at, t.load_force):
-            point, _, _ = f.point(j, at)
-            force[j] = force[j] - load
-            moment[j] = moment[j] - _cross(point - f.joint[j], np.broadcast_to(load, point.shape))
-    for k in reversed(range(J)):
-        p = t.parent[k]
-        if p >= 0:  # the child's joint pushes back on its parent
-            force[p] = force[p] + force[k]
-            moment[p] = moment[p] + moment[k] + _cross(f.joint[k] - f.joint[p], force[k])
-    return np.stack(moment, axis=-1)
+            point = f.origin[..., j, :] + _rotate(f.angle[..., j:j + 1], at[None])[..., 0, :]
+            force[..., j, :] -= load
+            moment[..., j] -= _cross(point, load)
+    A = t.on_path
+    subtree_force, subtree_moment = np.einsum("bk,...bx->...kx", A, force), moment @ A
+    return subtree_moment - _cross(f.joint, subtree_force)
 
 
-def _ancestry(t: Tree) -> np.ndarray:
-    """on_path[b, k]: joint k is on the path from ground to body b, shape (J, J) bool."""
-    J = t.n_joints
-    on_path = np.zeros((J, J), dtype=bool)
-    for b in range(J):
-        k = b
-        while k >= 0:
-            on_path[b, k] = True
-            k = t.parent[k]
-    return on_path
+def inverse_dynamics(t: Tree, z, zd, zdd, external: bool = True) -> np.ndarray:
+    """The joint torques tau (..., J) (N m) of the motion z, z', z'' (..., J)."""
+    return _torques(t, frames(t, z, zd, zdd), external)
+
+
+def _mass_matrix(t: Tree, f: Frames) -> np.ndarray:
+    A = t.on_path
+    com = f.points(t.com)[0]  # (..., B, 2)
+    lever = _perp(com[..., :, None, :] - f.joint[..., None, :, :]) * A[..., None]  # (..., B, J, 2)
+    return np.einsum("b,...bjx,...bkx->...jk", t.mass, lever, lever) + np.einsum("b,bj,bk->jk", t.inertia, A, A)
 
 
 def mass_matrix(t: Tree, z) -> np.ndarray:
@@ -194,14 +195,7 @@ def mass_matrix(t: Tree, z) -> np.ndarray:
     sum_b 1/2 (m_b |v_G|^2 + I_b w_b^2), with v_G = sum_k e_z x (G_b - P_k) z'_k and w_b = sum_k z'_k
     over the joints k on body b's path (P_k the joint's point, G_b the body's com)."""
     z = np.asarray(z, dtype=float)
-    f = frames(t, z, np.zeros_like(z), np.zeros_like(z))
-    on_path = _ancestry(t).astype(float)  # (B, J)
-    com = np.stack([f.point(b, t.com[b])[0] for b in range(t.n_joints)], axis=-2)  # (..., B, 2)
-    joint = np.stack(f.joint, axis=-2)  # (..., J, 2)
-    lever = _perp(com[..., :, None, :] - joint[..., None, :, :]) * on_path[..., None]  # (..., B, J, 2)
-    translation = np.einsum("b,...bjx,...bkx->...jk", t.mass, lever, lever)
-    rotation = np.einsum("b,bj,bk->jk", t.inertia, on_path, on_path)
-    return translation + rotation
+    return _mass_matrix(t, frames(t, z, np.zeros_like(z), np.zeros_like(z)))
 
 
 def bias(t: Tree, z, zd) -> np.ndarray:
@@ -211,54 +205,45 @@ def bias(t: Tree, z, zd) -> np.ndarray:
 
 def forward_dynamics(t: Tree, z, zd, tau) -> np.ndarray:
     """z'' (J,) (rad/s^2) = M^{-1} (tau - h) for one state z, z' (J,) under the torques tau (J,) N m."""
-    return np.linalg.solve(mass_matrix(t, z), np.asarray(tau, dtype=float) - bias(t, z, zd))
+    f = frames(t, z, zd, np.zeros_like(np.asarray(zd, dtype=float)))
+    return np.linalg.solve(_mass_matrix(t, f), np.asarray(tau, dtype=float) - _torques(t, f, True))
 
 
 def kinetic_energy(t: Tree, z, zd) -> np.ndarray:
     """T (...) (joules) from the bodies' com velocities and angular velocities."""
     f = frames(t, z, zd, np.zeros_like(np.asarray(zd, dtype=float)))
-    total = 0.0
-    for k in range(t.n_joints):
-        _, v, _ = f.point(k, t.com[k])
-        total = total + 0.5 * t.mass[k] * np.sum(v**2, axis=-1) + 0.5 * t.inertia[k] * f.rate[k] ** 2
-    return total
+    v = f.points(t.com)[1]
+    return 0.5 * (np.sum(v**2, axis=-1) @ t.mass + f.rate**2 @ t.inertia)
 
 
 def potential_energy(t: Tree, z) -> np.ndarray:
     """V (...) (joules) of gravity and the constant loads: -sum m g . G - sum F . (load point)."""
     z = np.asarray(z, dtype=float)
     f = frames(t, z, np.zeros_like(z), np.zeros_like(z))
-    total = 0.0
-    for k in range(t.n_joints):
-        total = total - t.mass[k] * f.point(k, t.com[k])[0] @ t.gravity
+    total = -(f.points(t.com)[0] @ t.gravity) @ t.mass
     for j, at, load in zip(t.load_joint, t.load_at, t.load_force):
-        total = total - f.point(j, at)[0] @ load
+        total = total - (f.origin[..., j, :] + _rotate(f.angle[..., j:j + 1], at[None])[..., 0, :]) @ load
     return total
 
 
 # ----------------------------------------------------------------------------- simulation
 
 
-def simulate(t: Tree, z0, zd0, t_end, torque, t_eval, extra=None):
+def simulate(t: Tree, z0, zd0, t_end, torque, t_eval):
     """DOP853 (rtol = atol = 1e-12) of the forward dynamics from z0, z'0 (J,) over [0, t_end] s
-    under torque(time, z, z') -> tau (J,) N m. Returns (z, z') at t_eval, each (len(t_eval), J).
-    ``extra(time, z, z', tau)``, if given, adds quantities to integrate along (returned third)."""
+    under torque(time, z, z') -> tau (J,) N m. Returns (z, z') at t_eval, each (len(t_eval), J)."""
     from scipy.integrate import solve_ivp
 
     J = t.n_joints
-    n_extra = 0 if extra is None else len(extra(0.0, z0, zd0, torque(0.0, z0, zd0)))
 
     def rhs(time, y):
-        z, zd = y[:J], y[J:2 * J]
-        tau = torque(time, z, zd)
-        parts = [zd, forward_dynamics(t, z, zd, tau)]
-        return np.concatenate(parts + ([np.atleast_1d(extra(time, z, zd, tau))] if n_extra else []))
+        z, zd = y[:J], y[J:]
+        return np.concatenate([zd, forward_dynamics(t, z, zd, torque(time, z, zd))])
 
-    y0 = np.concatenate([z0, zd0, np.zeros(n_extra)])
-    sol = solve_ivp(rhs, (0.0, t_end), y0, method="DOP853", rtol=1e-12, atol=1e-12, t_eval=t_eval)
+    sol = solve_ivp(rhs, (0.0, t_end), np.concatenate([z0, zd0]), method="DOP853", rtol=1e-12, atol=1e-12,
+                    t_eval=t_eval)
     assert sol.success, sol.message
-    out = sol.y.T
-    return (out[:, :J], out[:, J:2 * J]) + ((out[:, 2 * J:],) if n_extra else ())
+    return sol.y[:J].T, sol.y[J:].T
 
 
 def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval):
