@@ -343,7 +343,7 @@ class DaskBackend(Backend):
     name = "dask"
 
     def __init__(self, jobs: int | None = None, scheduler: str | None = None, batch: int | None = None,
-                 retries: int = 2, connect_timeout_s: float = 10.0, workers_timeout_s: float = 60.0):
+                 retries: int = 2, connect_timeout_s: float = 5.0, workers_timeout_s: float = 60.0):
         if jobs is not None and jobs < 1:
             raise BackendError(f"--jobs must be an integer >= 1, got {jobs}")
         if batch is not None and batch < 1:

@@ -341,7 +341,7 @@ def test_a_server_that_is_not_a_dask_scheduler_exits_2_with_one_line(tmp_path):
 
 
 def test_a_silent_server_is_refused_within_the_connect_timeout():
-    """A server that accepts and never answers: the backend gives up after its timeout (10 s
+    """A server that accepts and never answers: the backend gives up after its timeout (5 s
     from the command line, 1 s here) with one line, instead of waiting for ever."""
     _needs_dask()
     import threading

@@ -122,7 +122,7 @@ def report(
     _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
                        executor.describe(), figures, output, quiet), output)
     if output is not None and str(output) != "-":
-        _say(quiet, f"wrote {output} ({len(plan.all_specs())} runs, database {db_path})")
+        _say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
 
 
 @app.command()
