@@ -22,7 +22,7 @@ import math
 import numpy as np
 from hypothesis import strategies as st
 
-from _description_stub import model_types
+from fdbench.multibody import description as d
 
 ANGLE = st.floats(-math.pi, math.pi)
 
@@ -45,8 +45,7 @@ def _pair(low, high):
 
 
 def forearm_model():
-    """The forearm of the description contract (Table 1, F_ext 15 N at the hand)."""
-    d = model_types()
+    """The forearm as a model description (Table 1, F_ext 15 N at the hand)."""
     return d.Model(name="forearm", gravity=(0.0, -9.81),
                    bodies=(d.Body("forearm", mass=1.0, com=(0.11, 0.0), inertia=0.04 - 1.0 * 0.11**2),),
                    joints=(d.Joint("theta", "pin", d.GROUND, "forearm", (0.0, 0.0), (0.0, 0.0)),),
@@ -59,7 +58,6 @@ def arm2_model(arm=None):
     from fdbench.models.arm2 import Arm2
 
     arm = Arm2() if arm is None else arm
-    d = model_types()
     upper = d.Body("upper_arm", mass=arm.m0, com=(arm.L0G, 0.0), inertia=arm.I0 - arm.m0 * arm.L0G**2)
     fore = d.Body("forearm", mass=arm.m, com=(arm.L1G, 0.0), inertia=arm.I1 - arm.m * arm.L1G**2)
     return d.Model(name="arm2", gravity=(0.0, -arm.g), bodies=(upper, fore),
@@ -72,7 +70,6 @@ def arm2_model(arm=None):
 def models(draw, min_bodies: int = 1, max_bodies: int = 6, chain: bool = False):
     """A valid Model: a tree (each body the child of ground or of any earlier body), or a chain
     (each body the child of the previous one)."""
-    types = model_types()
     n = draw(st.integers(min_bodies, max_bodies))
     bodies, joints, segments = [], [], []
     for i in range(n):
@@ -84,7 +81,7 @@ def models(draw, min_bodies: int = 1, max_bodies: int = 6, chain: bool = False):
         com = _along(at_child, length, direction, draw(st.floats(-0.5, 1.5)), draw(st.floats(-0.5, 0.5)))
         tip = _along(at_child, length, direction, 1.0, 0.0)
         end = tip if draw(st.booleans()) else None
-        bodies.append(types.Body(name=f"b{i}", mass=draw(st.floats(0.1, 20.0)), com=com,
+        bodies.append(d.Body(name=f"b{i}", mass=draw(st.floats(0.1, 20.0)), com=com,
                                  inertia=draw(st.floats(1e-4, 2.0)), end=end))
         if parent < 0:
             at_parent = draw(_pair(-0.5, 0.5))
@@ -94,7 +91,7 @@ def models(draw, min_bodies: int = 1, max_bodies: int = 6, chain: bool = False):
                                MIN_END)
         else:
             at_parent = segments[parent][3]
-        joints.append(types.Joint(name=f"q{i}", type="pin", parent="ground" if parent < 0 else f"b{parent}",
+        joints.append(d.Joint(name=f"q{i}", type="pin", parent="ground" if parent < 0 else f"b{parent}",
                                   child=f"b{i}", at_parent=at_parent, at_child=at_child, offset=draw(ANGLE)))
         segments.append((at_child, length, direction, tip))
     loads = []
@@ -102,20 +99,20 @@ def models(draw, min_bodies: int = 1, max_bodies: int = 6, chain: bool = False):
         k = draw(st.integers(0, n - 1))
         at_child, length, direction, _ = segments[k]
         at = _along(at_child, length, direction, draw(st.floats(0.1, 1.2)), draw(st.floats(-0.3, 0.3)), MIN_END)
-        loads.append(types.Load(body=f"b{k}", at=at, force=draw(_pair(-50.0, 50.0))))
-    model = types.Model(name="random", gravity=(0.0, -9.81), bodies=tuple(bodies), joints=tuple(joints),
-                        loads=tuple(loads))
-    return _with_distinct_ends(types, model, [segment[3] for segment in segments])
+        loads.append(d.Load(body=f"b{k}", at=at, force=draw(_pair(-50.0, 50.0))))
+    model = d.Model(name="random", gravity=(0.0, -9.81), bodies=tuple(bodies), joints=tuple(joints),
+                    loads=tuple(loads))
+    return _with_distinct_ends(model, [segment[3] for segment in segments])
 
 
-def _with_distinct_ends(types, model, tips):
+def _with_distinct_ends(model, tips):
     """The model with end = tip for the bodies whose default end (their centre of mass, for a leaf
     without loads) would lie closer than MIN_END to their joint point."""
     import dataclasses
 
     bodies = list(model.bodies)
     for k, joint in enumerate(model.joints):
-        end = types.resolved_end(model, joint.child)
+        end = d.resolved_end(model, joint.child)
         if math.dist(end, joint.at_child) < MIN_END:
             bodies[k] = dataclasses.replace(bodies[k], end=tips[k])
     return dataclasses.replace(model, bodies=tuple(bodies))
