@@ -101,6 +101,17 @@ class FdbenchGroup(TyperGroup):
         return super().format_help(ctx, formatter)
 
 
+class SubcommandGroup(TyperGroup):
+    """A group of subcommands (``runs``, ``models``) whose --help shows choices as the other
+    commands' do (no type noise on flags)."""
+
+    def get_command(self, ctx, cmd_name):
+        command = super().get_command(ctx, cmd_name)
+        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
+            _show_choices(command, ctx)
+        return command
+
+
 def _choices(name: str, command: str):
     """The valid values of an option, from the registries (plugins included), for --help."""
     if name == "torque":

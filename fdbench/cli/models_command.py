@@ -8,25 +8,14 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from typer.core import TyperGroup
 
-from .app import BadInput, _show_choices, app
+from .app import BadInput, SubcommandGroup, app
 from .common import _check_outputs, _emit
 from .options import Output
 
 
-class _ModelsGroup(TyperGroup):
-    """The ``models`` commands' --help, shown as the other commands' (no type noise on flags)."""
-
-    def get_command(self, ctx, cmd_name):
-        command = super().get_command(ctx, cmd_name)
-        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
-            _show_choices(command, ctx)
-        return command
-
-
 models_app = typer.Typer(
-    cls=_ModelsGroup,
+    cls=SubcommandGroup,
     help="The library of models (bodies, joints, loads as TOML files); 'fdbench models show NAME|FILE' checks and "
     "shows one, your own file included.",
     invoke_without_command=True,

@@ -8,25 +8,14 @@ from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
-from typer.core import TyperGroup
 
-from .app import BadInput, _show_choices, app
+from .app import BadInput, SubcommandGroup, app
 from .common import _check_outputs, _console, _emit, _render
 from .options import Output
 
 
-class _RunsGroup(TyperGroup):
-    """The ``runs`` commands' --help, shown as the other commands' (no type noise on flags)."""
-
-    def get_command(self, ctx, cmd_name):
-        command = super().get_command(ctx, cmd_name)
-        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
-            _show_choices(command, ctx)
-        return command
-
-
 runs_app = typer.Typer(
-    cls=_RunsGroup,
+    cls=SubcommandGroup,
     help="Look at stored runs without changing the database: list, show, export, compare.",
     no_args_is_help=True,
 )
