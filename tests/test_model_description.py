@@ -425,3 +425,8 @@ def test_the_readme_example_message_is_what_fdbench_says(tmp_path, monkeypatch):
     result = invoke("models", "show", "leg.toml")
     assert_one_line_error(result)
     assert result.stderr.strip() == f"fdbench: error: {shown}"
+
+
+def test_an_empty_model_name_is_an_unknown_name_not_the_current_folder():
+    result = CliRunner().invoke(app, ["models", "show", ""])
+    assert result.exit_code == 2 and "unknown model ''" in result.stderr and "directory" not in result.stderr

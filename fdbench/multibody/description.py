@@ -648,7 +648,7 @@ def find_model(name_or_path, option: str = "model file") -> Model:
     models = library()
     if text in models:
         return load_model(models[text], option)
-    if Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".toml", ".json"):
+    if text and (Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".toml", ".json")):
         return load_model(text, option)
     from ..registry import unknown_name_message
 
