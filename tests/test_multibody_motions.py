@@ -158,6 +158,8 @@ def test_the_forearms_short_keys_set_table_1s_constants():
 def test_a_path_keeps_the_inertia_about_the_centre_of_mass():
     assert with_short_keys(ARM, [("upper_arm.mass", 2.5)]).body("upper_arm").inertia == 0.0262
     assert with_short_keys(ARM, [("L01", 0.35)]).body("upper_arm").inertia == 0.0262  # nothing moved: untouched
+    assert with_short_keys(ARM, [("upper_arm.mass", 2.5), ("F_ext", 10)]).body("upper_arm").inertia == 0.0262
+    assert with_short_keys(ARM, [("m0", 2.5), ("upper_arm.inertia", 0.03)]).body("upper_arm").inertia == 0.03
 
 
 def test_changed_models_keep_their_motions_and_short_keys():

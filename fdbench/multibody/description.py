@@ -25,6 +25,15 @@ Choices made here (documented in the README's "Your own model"):
   ``end``, closer than 1 mm to the body's joint point is an error (a segment of zero length: most
   likely a mistyped joint position); a load or centre of mass that close is passed over for the
   next default.
+* ``[[motions]]`` (optional) names motions of the model, the first its default: ``name``,
+  ``type`` ('minimum-jerk', the only type: z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t /
+  duration, from rest to rest), ``duration`` (s, positive), ``start`` and ``goal`` (tables
+  {joint = angle}, rad, naming every joint and no other).
+* ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
+  a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
+  ``<body>.inertia`` an ``@<joint>`` of the body for the inertia about the joint's point (inertia +
+  mass |com - point|^2), which stays when a short key changes the body's mass or centre of mass
+  (``with_short_keys``).
 """
 
 from __future__ import annotations
@@ -807,7 +816,7 @@ def with_short_keys(model: Model, pairs) -> Model:
     bad value."""
     short, paths = dict(model.keys), change_paths(model)
     about = {target: (_target_value(model, target), None) for target in short.values() if parse_target(target)[2]}
-    original, last_short, inertia_paths = model, None, set()
+    inertia_paths = set()  # set by a path: kept as given
     for name, value in pairs:
         label = f"{name}={value}"
         if name not in short and name not in paths:
@@ -816,20 +825,21 @@ def with_short_keys(model: Model, pairs) -> Model:
             listed = [f"{key} ({target})" for key, target in short.items()] + paths
             raise ModelError(label, "", unknown_name_message(f"key of model {model.name!r}", name, listed))
         negated, path, joint = parse_target(short[name]) if name in short else (False, name, None)
-        number = _float(value, label)
-        last_short = label if name in short else last_short
+        number = -_float(value, label) if negated else _float(value, label)
         if joint is not None:
-            about[short[name]] = (-number if negated else number, label)
-        elif path.endswith(".inertia"):
-            inertia_paths.add(path)
-        if joint is None:
-            model = _changed(model, path, -number if negated else number, label)
+            about[short[name]] = (number, label)
+            continue
+        before, model = model, _changed(model, path, number, label)
+        if name not in short:
+            inertia_paths |= {path} if path.endswith(".inertia") else set()
+            continue
+        for target, (held, held_label) in about.items():  # what this short key moved keeps its inertia
+            if held_label is None and _moved(before, model, *parse_target(target)[1:]):
+                about[target] = (held, label)
     for target, (value, label) in about.items():
         _, path, joint = parse_target(target)
-        body = path.rsplit(".", 1)[0]
-        kept = last_short is not None and _moved(original, model, body, joint)
-        if path not in inertia_paths and (label is not None or kept):
-            model = _inertia_about(model, body, joint, value, label or last_short)
+        if label is not None and path not in inertia_paths:
+            model = _inertia_about(model, path.rsplit(".", 1)[0], joint, value, label)
     return model
 
 
@@ -844,8 +854,10 @@ def _inertia_about(model: Model, body: str, joint: str, value: float, label: str
     return _changed(model, f"{body}.inertia", inertia, label)
 
 
-def _moved(before: Model, after: Model, body: str, joint: str) -> bool:
-    """The body's mass, centre of mass or the joint's point differ between the two models."""
+def _moved(before: Model, after: Model, path: str, joint: str) -> bool:
+    """The mass, centre of mass of the body of ``path`` ('<body>.inertia') or the joint's point
+    differ between the two models."""
+    body = path.rsplit(".", 1)[0]
     old, new = before.body(body), after.body(body)
     return ((old.mass, old.com) != (new.mass, new.com)
             or _joint_point(before, body, joint) != _joint_point(after, body, joint))
