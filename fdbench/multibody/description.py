@@ -517,7 +517,7 @@ def _target_problem(model: Model, target: str) -> str:
     """Why ``target`` cannot be a short key's target of ``model`` ('' if it can)."""
     from ..registry import unknown_name_message
 
-    negated, path, joint = parse_target(target)
+    _, path, joint = parse_target(target)
     paths = change_paths(model)
     if path not in paths:
         return (unknown_name_message("path", path, paths)
