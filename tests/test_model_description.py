@@ -227,6 +227,43 @@ BAD = [  # (id, change of BASE, words the message must hold: the key and what is
     ("limits upside down", setting("joints.1.limits", [0.5, -0.5]), ("joints[1].limits", "lower < upper")),
 ]
 
+SWING = {"name": "swing", "type": "minimum-jerk", "duration": 1.0, "start": {"hip": -0.3, "knee": -0.2, "ankle": 0.1},
+         "goal": {"hip": 0.6, "knee": -1.0, "ankle": -0.2}}
+
+
+def with_motion(path: str, new):
+    """BASE with the motion SWING, then ``path`` of it ('motions.0.start.knee') set to ``new`` (None: removed)."""
+    def change(data):
+        data["motions"] = [copy.deepcopy(SWING)]
+        setting(path, new)(data)
+    return change
+
+
+BAD += [  # named motions and short keys
+    ("a motion without a joint", with_motion("motions.0.start.knee", None),
+     ("motions[0].start.knee", "missing", "every joint: hip, knee, ankle")),
+    ("a motion naming an unknown joint", with_motion("motions.0.goal.kne", 0.1),
+     ("motions[0].goal.kne", "unknown joint 'kne'", "did you mean 'knee'")),
+    ("a motion of zero duration", with_motion("motions.0.duration", 0.0), ("motions[0].duration", "positive", "(s)")),
+    ("a motion of an unknown type", with_motion("motions.0.type", "cubic"), ("motions[0].type", "valid: minimum-jerk")),
+    ("a motion without a goal", with_motion("motions.0.goal", None), ("motions[0].goal", "missing", "every joint")),
+    ("a motion with a list for a start", with_motion("motions.0.start", [0.1, 0.2, 0.3]),
+     ("motions[0].start", "a table {joint = angle}")),
+    ("a motion with a text angle", with_motion("motions.0.start.hip", "10deg"), ("motions[0].start.hip", "an angle (rad)")),
+    ("a motion with an infinite angle", with_motion("motions.0.start.hip", math.inf), ("motions[0].start.hip", "finite")),
+    ("two motions of one name", lambda data: data.update(motions=[SWING, SWING | {"name": "Swing"}]),
+     ("motions[1].name", "already the name of motions[0]")),
+    ("a motion's unknown key", with_motion("motions.0.speed", 1.0), ("motions[0].speed", "unknown key")),
+    ("a short key to an unknown path", setting("keys", {"m1": "thigh.mas"}),
+     ("keys.m1", "unknown path 'thigh.mas'", "did you mean 'thigh.mass'")),
+    ("a short key to a number", setting("keys", {"m1": 7.5}), ("keys.m1", "a path of the model as a text")),
+    ("an @ after a mass", setting("keys", {"m1": "thigh.mass@hip"}), ("keys.m1", "goes after a body's inertia")),
+    ("an @ naming a far joint", setting("keys", {"I0": "thigh.inertia@ankle"}),
+     ("keys.I0", "unknown joint of body 'thigh' 'ankle'", "valid: hip, knee")),
+    ("a short key that is not a name", setting("keys", {"1m": "thigh.mass"}), ("keys.1m", "not a short key")),
+    ("keys as a list", setting("keys", ["thigh.mass"]), ("keys", "a table of short names")),
+]
+
 
 @pytest.mark.parametrize("suffix", (".toml", ".json"))
 @pytest.mark.parametrize("case, change, words", BAD, ids=[case[0] for case in BAD])
@@ -408,11 +445,12 @@ def test_the_readme_file_is_the_library_forearm(tmp_path):
 
 
 def test_the_readme_table_names_every_key():
-    from fdbench.multibody.description import BODY_KEYS, JOINT_KEYS, LOAD_KEYS, TOP_KEYS
+    from fdbench.multibody.description import BODY_KEYS, JOINT_KEYS, LOAD_KEYS, MOTION_KEYS, TOP_KEYS
 
     documented = set(re.findall(r"^\| `([a-z_.]+)` \|", readme_section(), flags=re.MULTILINE))
     keys = set(TOP_KEYS) | {f"{section}.{key}" for section, keys in
-                            (("bodies", BODY_KEYS), ("joints", JOINT_KEYS), ("loads", LOAD_KEYS)) for key in keys}
+                            (("bodies", BODY_KEYS), ("joints", JOINT_KEYS), ("loads", LOAD_KEYS),
+                             ("motions", MOTION_KEYS)) for key in keys}
     assert documented == keys
 
 
