@@ -103,7 +103,7 @@ def model_keys(name: str) -> tuple:
     from ..multibody.description import change_paths
 
     model = description(name)
-    return tuple(model.keys) + tuple(change_paths(model))
+    return tuple(name for name, _ in model.keys) + tuple(change_paths(model))
 
 
 def with_changes(name: str, pairs=()):
@@ -122,9 +122,10 @@ def value_of(name: str, model, key: str) -> float:
     """The value of constant ``key`` (a short key or a path) in ``model`` (from ``with_changes``)."""
     if name == PAPER:
         return float(getattr(model, key))
-    from ..multibody.description import short_key_value
+    from ..multibody.description import path_value, short_key_values
 
-    return short_key_value(model, key)
+    values = short_key_values(model)
+    return values[key] if key in values else path_value(model, key)
 
 
 def runs(name: str):

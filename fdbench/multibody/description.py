@@ -769,7 +769,7 @@ def _target_value(model: Model, target: str) -> float:
     if joint is not None:
         value = inertia_about(model, path.rsplit(".", 1)[0], joint)
     else:
-        value = _read(model, path)
+        value = path_value(model, path)
     return -value if negated else value
 
 
@@ -786,7 +786,7 @@ def _joint_point(model: Model, body_name: str, joint_name: str) -> tuple[float, 
     return joint.at_child if joint.child == body_name else joint.at_parent
 
 
-def _read(model: Model, path: str) -> float:
+def path_value(model: Model, path: str) -> float:
     """The value at one of ``change_paths(model)`` (an end not given reads its resolved default)."""
     head, _, component = path.rpartition(".")
     axis = {"x": 0, "y": 1}.get(component)
