@@ -107,16 +107,22 @@ def _functions(model: Model) -> dict:
 
 def _riccati_function(ca, J: int, inverse, linearisation):
     """P' = -(A^T P + P A - r_inv P B B^T P + diag(q)) (symmetrised) about the desired z, z', z''
-    (rad, rad/s, rad/s^2; A, B at the inverse dynamics' torques) for P (2J x 2J) flattened row-wise
-    (4 J^2,), q (2J,) and r_inv (N m)^2: one Function, so a Riccati evaluation is one call."""
-    z, zd, zdd = (ca.SX.sym(name, J) for name in ("z", "zd", "zdd"))
-    p, q, r_inv = ca.SX.sym("p", 4 * J * J), ca.SX.sym("q", 2 * J), ca.SX.sym("r_inv")
+    (rad, rad/s, rad/s^2; A, B at the inverse dynamics' torques) for P (2J x 2J) flattened row-wise,
+    q (2J,) and r_inv (N m)^2, all in ONE input vector [z, z', z'', P, q, r_inv] (a Function's call
+    from Python costs about 10 us per argument): a Riccati evaluation is one call."""
+    x = ca.SX.sym("x", riccati_input_size(J))
+    z, zd, zdd, p, q, r_inv = ca.vertsplit(x, list(np.cumsum([0, J, J, J, 4 * J * J, 2 * J, 1])))
     A, B = linearisation(z, zd, inverse(z, zd, zdd))
     P = ca.reshape(p, 2 * J, 2 * J).T  # row-wise
     PB = P @ B
     dP = A.T @ P + P @ A - r_inv * (PB @ PB.T) + ca.diag(q)
     rate = -0.5 * (dP + dP.T)
-    return ca.Function("riccati_rate", [z, zd, zdd, p, q, r_inv], [ca.reshape(rate.T, 4 * J * J, 1)])
+    return ca.Function("riccati_rate", [x], [ca.reshape(rate.T, 4 * J * J, 1)])
+
+
+def riccati_input_size(J: int) -> int:
+    """The length of the Riccati Function's input [z, z', z'', P, q, r_inv] for J joints."""
+    return 3 * J + 4 * J * J + 2 * J + 1
 
 
 def _is_symbolic(values) -> bool:
@@ -190,8 +196,10 @@ class MinimalDynamics:
         return self.functions["forward"].map(k)(z.T, zd.T, tau.T).T
 
     def riccati_rate(self, z, zd, zdd, p, q, r_inv: float) -> np.ndarray:
-        """The Riccati right-hand side (4 J^2,) about the desired state (see ``_riccati_function``)."""
-        return np.asarray(self.functions["riccati_rate"](z, zd, zdd, p, q, r_inv), dtype=float).ravel()
+        """The Riccati right-hand side P' flattened row-wise (4 J^2,) about the desired z, z', z''
+        (J,) each, for P flattened row-wise p (4 J^2,), q (2J,) the diagonal of Q and r_inv = R^-1."""
+        packed = np.concatenate([z, zd, zdd, p, q, [r_inv]])
+        return np.asarray(self.functions["riccati_rate"](packed), dtype=float).ravel()
 
     def _vector(self, value, like):
         """Numeric columns (J, 1) or (k, J, 1) as (J,) or (k, J); symbolic results unchanged."""
