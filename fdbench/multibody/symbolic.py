@@ -85,10 +85,10 @@ def _functions(model: Model) -> dict:
 
     J = model.n_joints
     z, zd, zdd, tau = (ca.SX.sym(name, J) for name in ("z", "zd", "zdd", "tau"))
-    inverse = _inverse_expression(ca, model, z, zd, zdd)
-    M = ca.jacobian(inverse, zdd)
-    h = ca.substitute(inverse, zdd, ca.SX.zeros(J))
-    forward = ca.solve(M, tau - h)
+    inverse = ca.cse(_inverse_expression(ca, model, z, zd, zdd))
+    M = ca.cse(ca.jacobian(inverse, zdd))
+    h = ca.cse(ca.substitute(inverse, zdd, ca.SX.zeros(J)))
+    forward = ca.cse(ca.solve(M, tau - h))
     # the implicit-function linearisation at z'' = forward (see the module docstring)
     id_rates = ca.Function("id_rates", [z, zd, zdd], [ca.jacobian(inverse, ca.vertcat(z, zd))])
     lower = -ca.solve(M, id_rates(z, zd, forward))
