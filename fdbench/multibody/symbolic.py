@@ -12,15 +12,18 @@ How they are built (one definition, from the description only):
 * Inverse dynamics by the principle of virtual work (Kane's equations): tau = sum_b J_b^T m_b (a_b - g)
   + I_b alpha_b (over the joints on b's path) - sum_loads J_L^T F_L, J = dr/dz by CasADi's
   ``jacobian``. Then M = d tau / d z'' (exact) and h = tau(z, z', 0).
-* Forward dynamics z'' = M^-1 (tau - h) by CasADi's ``solve`` (a symbolic QR: a linear solve, no
-  explicit inverse; M is positive definite for positive masses and inertias).
+* Forward dynamics z'' = M^-1 (tau - h) by a symbolic L D L^T solve (no explicit inverse; M is
+  symmetric positive definite for positive masses and inertias, so no pivoting is needed; CasADi's
+  own ``solve`` on SX forms the inverse by minors up to 3 x 3).
 * The linearisation of x = [z, z'], x' = [z', z''(z, z', tau)] by the implicit-function theorem on
   the inverse dynamics: ID(z, z', f(z, z', tau)) = tau gives df/d(z, z') = -M^-1 dID/d(z, z') at
   z'' = f, and df/dtau = M^-1; the derivatives of ID by CasADi's ``jacobian`` (exact, and cheaper
-  than differentiating through the solve).
+  than differentiating through the solve). About a desired motion (the LQR) z'' is the motion's and
+  the forward solve is not needed.
 
-The expressions are SX (scalar graphs, fast to evaluate for small J) and wrapped in CasADi
-Functions built once per model (``functools.lru_cache`` on the frozen ``Model``). Numeric calls
+The expressions are SX (scalar graphs, fast to evaluate for small J), their common subexpressions
+eliminated (``casadi.cse``), and wrapped in CasADi Functions built once per model
+(``functools.lru_cache`` on the frozen ``Model``). Numeric calls
 take numpy arrays of shape (J,) or (k, J) (one state or k of them, by ``Function.map``) and return
 numpy arrays of the matching shape. The collocation's transcription works on SX matrices of shape
 (k, J), one node per row: ``forward_rows`` maps the forward Function over the rows (the map of an
@@ -78,6 +81,24 @@ def _inverse_expression(ca, model: Model, z, zd, zdd):
     return tau
 
 
+def _solve_spd(ca, M, b):
+    """M^-1 b for a symmetric positive definite SX matrix M (J, J) and b (J, c), by L D L^T without
+    pivoting (M's pivots are positive) and forward and back substitution, written out symbolically."""
+    n = M.shape[0]
+    L, D = [[None] * n for _ in range(n)], [None] * n
+    for j in range(n):
+        D[j] = M[j, j] - sum((L[j][k] ** 2 * D[k] for k in range(j)), 0)
+        for i in range(j + 1, n):
+            L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), 0)) / D[j]
+    y = [None] * n
+    for i in range(n):
+        y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), 0)
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = y[i] / D[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), 0)
+    return ca.vertcat(*x)
+
+
 @functools.lru_cache(maxsize=64)
 def _functions(model: Model) -> dict:
     """The model's CasADi Functions (see the module docstring), built once per model."""
@@ -88,36 +109,36 @@ def _functions(model: Model) -> dict:
     inverse = ca.cse(_inverse_expression(ca, model, z, zd, zdd))
     M = ca.cse(ca.jacobian(inverse, zdd))
     h = ca.cse(ca.substitute(inverse, zdd, ca.SX.zeros(J)))
-    forward = ca.cse(ca.solve(M, tau - h))
-    # the implicit-function linearisation at z'' = forward (see the module docstring)
-    id_rates = ca.Function("id_rates", [z, zd, zdd], [ca.jacobian(inverse, ca.vertcat(z, zd))])
-    lower = -ca.solve(M, id_rates(z, zd, forward))
-    A = ca.vertcat(ca.horzcat(ca.SX.zeros(J, J), ca.SX.eye(J)), lower)
-    B = ca.vertcat(ca.SX.zeros(J, J), ca.solve(M, ca.SX.eye(J)))
+    forward = ca.cse(_solve_spd(ca, M, tau - h))
+    # the implicit-function linearisation at (z, z', z'') (see the module docstring)
+    lower = -_solve_spd(ca, M, ca.jacobian(inverse, ca.vertcat(z, zd)))
+    A = ca.cse(ca.vertcat(ca.horzcat(ca.SX.zeros(J, J), ca.SX.eye(J)), lower))
+    B = ca.cse(ca.vertcat(ca.SX.zeros(J, J), _solve_spd(ca, M, ca.SX.eye(J))))
+    about_motion = ca.Function("linearisation_about_motion", [z, zd, zdd], [A, B])
     functions = {
         "mass_matrix": ca.Function("mass_matrix", [z], [M]),
         "bias": ca.Function("bias", [z, zd], [h]),
         "inverse": ca.Function("inverse", [z, zd, zdd], [inverse]),
         "forward": ca.Function("forward", [z, zd, tau], [forward]),
-        "linearisation": ca.Function("linearisation", [z, zd, tau], [A, B]),
+        "linearisation": ca.Function("linearisation", [z, zd, tau], list(about_motion(z, zd, forward))),
     }
-    functions["riccati_rate"] = _riccati_function(ca, J, functions["inverse"], functions["linearisation"])
+    functions["riccati_rate"] = _riccati_function(ca, J, about_motion)
     return functions
 
 
-def _riccati_function(ca, J: int, inverse, linearisation):
+def _riccati_function(ca, J: int, about_motion):
     """P' = -(A^T P + P A - r_inv P B B^T P + diag(q)) (symmetrised) about the desired z, z', z''
     (rad, rad/s, rad/s^2; A, B at the inverse dynamics' torques) for P (2J x 2J) flattened row-wise,
     q (2J,) and r_inv (N m)^2, all in ONE input vector [z, z', z'', P, q, r_inv] (a Function's call
     from Python costs about 10 us per argument): a Riccati evaluation is one call."""
     x = ca.SX.sym("x", riccati_input_size(J))
     z, zd, zdd, p, q, r_inv = ca.vertsplit(x, list(np.cumsum([0, J, J, J, 4 * J * J, 2 * J, 1])))
-    A, B = linearisation(z, zd, inverse(z, zd, zdd))
+    A, B = about_motion(z, zd, zdd)
     P = ca.reshape(p, 2 * J, 2 * J).T  # row-wise
     PB = P @ B
     dP = A.T @ P + P @ A - r_inv * (PB @ PB.T) + ca.diag(q)
     rate = -0.5 * (dP + dP.T)
-    return ca.Function("riccati_rate", [x], [ca.reshape(rate.T, 4 * J * J, 1)])
+    return ca.Function("riccati_rate", [x], [ca.cse(ca.reshape(rate.T, 4 * J * J, 1))])
 
 
 def riccati_input_size(J: int) -> int:
