@@ -71,7 +71,7 @@ def random_states(n_joints, count, seed):
 
 @settings(max_examples=25, deadline=None)
 @given(case=models_and_states())
-def test_mass_matrix_bias_and_inverse_match_the_engine_and_the_reference(case):
+def test_mass_matrix_bias_inverse_and_forward_match_the_engine_and_the_reference(case):
     model, _ = case
     dynamics, engine, tree = MinimalDynamics(model), Engine(model), ref.tree(model)
     z, zd, zdd = random_states(model.n_joints, 4, seed=len(model.joints))
@@ -84,6 +84,8 @@ def test_mass_matrix_bias_and_inverse_match_the_engine_and_the_reference(case):
         assert_relative(actual, reference, 1e-9, f"{what} against the reference")
     assert_relative(dynamics.inverse(z[0], zd[0], zdd[0]), ref.inverse_dynamics(tree, z[0], zd[0], zdd[0]), 1e-9,
                     "inverse of one state (J,)")
+    tau = zdd[1]  # any torques (N m)
+    assert_relative(dynamics.forward(z[1], zd[1], tau), ref.forward_dynamics(tree, z[1], zd[1], tau), 1e-9, "forward")
 
 
 def test_forward_dynamics_inverts_the_inverse_dynamics_on_the_leg():
