@@ -186,8 +186,12 @@ def engine_linearisation(engine, z, tau, step=1e-6):
     return A, B
 
 
-@pytest.mark.parametrize("name, posture", [("arm2", [0.3, 0.8]), ("leg3", [0.5, -0.8, 0.2])])
-def test_lqr_gain_about_a_held_posture_is_the_algebraic_riccati_gain(name, posture):
+@pytest.mark.parametrize("name, posture, weights", [
+    ("arm2", [0.3, 0.8], {}),
+    ("leg3", [0.5, -0.8, 0.2], {}),
+    ("leg3", [0.5, -0.8, 0.2], {"q_angle": [1e4, 3e3, 1e3], "q_rate": 2.0, "r_torque": [0.5, 1.0, 4.0]}),  # per joint
+])
+def test_lqr_gain_about_a_held_posture_is_the_algebraic_riccati_gain(name, posture, weights):
     from scipy.linalg import solve_continuous_are
 
     from fdbench.multibody.lqr import lqr_gains, warm_up
@@ -195,11 +199,19 @@ def test_lqr_gain_about_a_held_posture_is_the_algebraic_riccati_gain(name, postu
     model = find_model(name)
     warm_up(model)
     engine, J, z = Engine(model), model.n_joints, np.array(posture)
-    q, r = np.repeat([1e4, 1.0], J), 1.0
+    q = np.concatenate([np.broadcast_to(weights.get("q_angle", 1e4), J), np.broadcast_to(weights.get("q_rate", 1.0), J)])
+    r = np.broadcast_to(weights.get("r_torque", 1.0), J)
     A, B = engine_linearisation(engine, z, engine.bias(z, np.zeros(J)))  # held by the gravity torques
-    P = solve_continuous_are(A, B, np.diag(q), r * np.eye(J))
-    expected = B.T @ P / r
-    gains = lqr_gains(model, Hold(z, duration=3.0))(np.array([0.0, 1.5, 3.0]))
+    P = solve_continuous_are(A, B, np.diag(q), np.diag(r))
+    expected = np.diag(1 / r) @ B.T @ P
+    gains = lqr_gains(model, Hold(z, duration=3.0), **weights)(np.array([0.0, 1.5, 3.0]))
     assert gains.shape == (3, J, 2 * J)
     for K in gains:
         assert_relative(K, expected, 1e-5, "K")
+
+
+def test_lqr_refuses_weights_of_another_number_of_joints():
+    from fdbench.multibody.lqr import lqr_gains
+
+    with pytest.raises(ValueError, match="q_angle must be one number or 3"):
+        lqr_gains(find_model("leg3"), Hold([0.0, 0.0, 0.0], duration=1.0), q_angle=[1.0, 2.0])

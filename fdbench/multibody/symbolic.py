@@ -127,23 +127,24 @@ def _functions(model: Model) -> dict:
 
 
 def _riccati_function(ca, J: int, about_motion):
-    """P' = -(A^T P + P A - r_inv P B B^T P + diag(q)) (symmetrised) about the desired z, z', z''
+    """P' = -(A^T P + P A - P B R^-1 B^T P + Q) (symmetrised) about the desired z, z', z''
     (rad, rad/s, rad/s^2; A, B at the inverse dynamics' torques) for P (2J x 2J) flattened row-wise,
-    q (2J,) and r_inv (N m)^2, all in ONE input vector [z, z', z'', P, q, r_inv] (a Function's call
-    from Python costs about 10 us per argument): a Riccati evaluation is one call."""
+    Q = diag(q), q (2J,), and R^-1 = diag(r_inv), r_inv (J,) (N m)^2, all in ONE input vector
+    [z, z', z'', P, q, r_inv] (a Function's call from Python costs about 10 us per argument): a
+    Riccati evaluation is one call."""
     x = ca.SX.sym("x", riccati_input_size(J))
-    z, zd, zdd, p, q, r_inv = ca.vertsplit(x, list(np.cumsum([0, J, J, J, 4 * J * J, 2 * J, 1])))
+    z, zd, zdd, p, q, r_inv = ca.vertsplit(x, list(np.cumsum([0, J, J, J, 4 * J * J, 2 * J, J])))
     A, B = about_motion(z, zd, zdd)
     P = ca.reshape(p, 2 * J, 2 * J).T  # row-wise
     PB = P @ B
-    dP = A.T @ P + P @ A - r_inv * (PB @ PB.T) + ca.diag(q)
+    dP = A.T @ P + P @ A - PB @ ca.diag(r_inv) @ PB.T + ca.diag(q)
     rate = -0.5 * (dP + dP.T)
     return ca.Function("riccati_rate", [x], [ca.cse(ca.reshape(rate.T, 4 * J * J, 1))])
 
 
 def riccati_input_size(J: int) -> int:
     """The length of the Riccati Function's input [z, z', z'', P, q, r_inv] for J joints."""
-    return 3 * J + 4 * J * J + 2 * J + 1
+    return 3 * J + 4 * J * J + 2 * J + J
 
 
 def _is_symbolic(values) -> bool:
@@ -216,10 +217,11 @@ class MinimalDynamics:
         k = z.shape[0]
         return self.functions["forward"].map(k)(z.T, zd.T, tau.T).T
 
-    def riccati_rate(self, z, zd, zdd, p, q, r_inv: float) -> np.ndarray:
+    def riccati_rate(self, z, zd, zdd, p, q, r_inv) -> np.ndarray:
         """The Riccati right-hand side P' flattened row-wise (4 J^2,) about the desired z, z', z''
-        (J,) each, for P flattened row-wise p (4 J^2,), q (2J,) the diagonal of Q and r_inv = R^-1."""
-        packed = np.concatenate([z, zd, zdd, p, q, [r_inv]])
+        (J,) each, for P flattened row-wise p (4 J^2,), q (2J,) the diagonal of Q and r_inv (J,)
+        that of R^-1 ((N m)^2)."""
+        packed = np.concatenate([z, zd, zdd, p, q, r_inv])
         return np.asarray(self.functions["riccati_rate"](packed), dtype=float).ravel()
 
     def _vector(self, value, like):
