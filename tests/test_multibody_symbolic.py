@@ -199,7 +199,8 @@ def test_lqr_gain_about_a_held_posture_is_the_algebraic_riccati_gain(name, postu
     model = find_model(name)
     warm_up(model)
     engine, J, z = Engine(model), model.n_joints, np.array(posture)
-    q = np.concatenate([np.broadcast_to(weights.get("q_angle", 1e4), J), np.broadcast_to(weights.get("q_rate", 1.0), J)])
+    q = np.concatenate([np.broadcast_to(weights.get("q_angle", 1e4), J),
+                        np.broadcast_to(weights.get("q_rate", 1.0), J)])
     r = np.broadcast_to(weights.get("r_torque", 1.0), J)
     A, B = engine_linearisation(engine, z, engine.bias(z, np.zeros(J)))  # held by the gravity torques
     P = solve_continuous_are(A, B, np.diag(q), np.diag(r))

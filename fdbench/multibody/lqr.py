@@ -11,10 +11,10 @@ linearise along the desired motion to x' = A(t) x + B(t) u, A and B exact (CasAD
 
 is integrated backwards by scipy's RK45 from P(T) = the algebraic Riccati solution of the final
 linearisation (an infinite-horizon tail), and tau = tau_ID(t) + K(t) [z_d - z, z'_d - z'] with
-K = R^-1 B^T P = R^-1 M(z_d)^-1 P[J:, :], shape (J, 2J). About a motion, A and B are taken at its own
-accelerations (``linearisation`` at the inverse dynamics' torques gives them back to rounding). The right-hand side, linearisation
-included, is one CasADi call on arrays it reads and writes in place (``Function.buffer``): scipy
-calls it about a thousand times on a 1 s motion.
+K = R^-1 B^T P = R^-1 M(z_d)^-1 P[J:, :], shape (J, 2J). A and B are taken at the motion's own
+accelerations (``linearisation`` at the inverse dynamics' torques gives them back to rounding).
+The right-hand side, linearisation included, is one CasADi call on arrays it reads and writes in
+place (``Function.buffer``): scipy calls it about a thousand times on a 1 s motion.
 """
 
 from __future__ import annotations
