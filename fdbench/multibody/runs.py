@@ -219,7 +219,7 @@ def run(spec, on_evaluation=None, on_start=None):
     if controller == "lqr":
         from .lqr import warm_up
 
-        warm_up()
+        warm_up(nominal(spec))
     began = time.perf_counter()
     inverse = reference(spec)
     law, label = _gains(spec, controller, dict(spec.method_options))
