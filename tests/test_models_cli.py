@@ -371,3 +371,44 @@ def test_a_bad_model_file_is_one_line_exit_2_naming_file_and_key(tmp_path, conte
     path.write_text(content)
     lines = invoke("control", "--model", path, code=2).stderr.splitlines()
     assert len(lines) == 1 and str(path) in lines[0] and all(w in lines[0] for w in words), lines
+
+
+# ---------------------------------------------------------------------- collocation on the arm
+def test_collocate_on_the_arm_saves_a_torque_that_simulate_replays(tmp_path):
+    path = tmp_path / "torque.csv"
+    record = json.loads(invoke("collocate", "--model", "arm2", "--nodes", 50, "-f", "json", "--save-torque", path,
+                               "--quiet").stdout)
+    assert record["model"] == "arm2" and record["command"] == "collocate" and record["nodes"] == 50
+    assert record["status"] == "success" and {"rmse_rot_deg_shoulder", "rmse_torque_nm_elbow"} <= set(record)
+    table = pd.read_csv(path)
+    assert list(table.columns) == ["t", "shoulder", "elbow"] and len(table) == 2001
+    replay = json.loads(invoke("simulate", "--model", "arm2", "--torque-file", path, "-f", "json").stdout)
+    for key in ("rmse_rot_deg", "rmse_torque_nm", "rmse_rot_deg_shoulder", "rmse_rot_deg_elbow"):
+        assert replay[key] == pytest.approx(record[key], rel=1e-9), key
+
+
+def test_an_iteration_limit_on_the_arm_is_a_status_with_a_message():
+    record = json.loads(invoke("collocate", "--model", "arm2", "--max-iter", 1, "-f", "json").stdout)
+    assert record["ipopt_status"] == "Maximum_Iterations_Exceeded" and record["status"] == "collocation_failed"
+    assert "--max-iter" in record["message"] and np.isfinite(record["rmse_rot_deg"])
+
+
+@pytest.mark.parametrize("args, word", [
+    (["--nodes", 1], "--nodes"), (["--scheme", "euler"], "--scheme"), (["--regularization", -1], "--regularization"),
+    (["--max-iter", 0], "--max-iter"), (["--max-time", 0], "--max-time"), (["--integrator", "dop853", "--atol", 2], "--atol"),
+    (["--motion", "paper"], "--motion"), (["--model", "m0=-1"], "m0"),
+])
+def test_bad_collocate_options_on_the_arm_are_one_line_exit_2(args, word, tmp_path):
+    out = tmp_path / "torque.csv"
+    result = invoke("collocate", "--model", "arm2", *args, "--save-torque", out, code=2)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and word in lines[0], result.stderr
+    assert result.stdout == "" and not out.exists()
+
+
+def test_the_arms_beyond_the_paper_table_has_direct_collocation():
+    from fdbench.beyond import beyond_methods
+
+    specs = [m.spec for m in beyond_methods(kinematics="reach", model_name="arm2")]
+    assert [s.command for s in specs] == ["control", "control", "collocate"]
+    assert all(s.model_name == "arm2" for s in specs)
