@@ -23,6 +23,7 @@ from fdbench import dynamics
 from fdbench.integrate import Settings, constants, half_step_reference, initial_state, steps
 from fdbench.inverse import elbow_torque
 from fdbench.multibody import engine as mb
+from fdbench.multibody import kernels
 
 from fdbench.multibody.description import GROUND, Body, Joint, Model
 
@@ -66,9 +67,11 @@ def chain_kernel(n_bodies: int):
     tau = engine.inverse_dynamics(z, zd, zdd)
     kp, kd = np.full(n_bodies, 80.0), np.full(n_bodies, 0.3)
     y0 = engine.state_from_joints(z[0], zd[0])
-    states = np.empty((n + 1, engine.n_state))
+    states, rates, applied = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)), np.empty((n + 1, n_bodies))
     ref = np.ascontiguousarray(z + engine.joint_offset)
-    return n, lambda: mb.rk4_pd(y0, 1.0 / n, n, tau, ref, zd, kp, kd, *engine._kernel_layout, states)
+    no_gains = np.zeros((1, n_bodies, 2 * n_bodies))
+    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, kernels.PD, no_gains,
+                                  *engine.simulation_layout(), states, rates, applied)
 
 
 def main():
