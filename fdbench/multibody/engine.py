@@ -42,8 +42,13 @@ only as a guard, a NaN pivot as NONFINITE, and fdbench.dynamics.COS_TOL has no r
 Mass matrix: each body's natural-coordinate mass matrix on its basic points (Garcia de Jalon and
 Bayo, ch. 3) from its mass, com and inertia; Q_ext: gravity at the com and the loads mapped to the
 basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels take arrays only (a data
-layout of indices and constants built once per Engine), so they are compiled once and cached for
-every model. Strict IEEE arithmetic.
+layout of indices and constants built once per Engine; they live in fdbench.multibody.kernels), so
+they are compiled once and cached for every model. Strict IEEE arithmetic.
+
+Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
+matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
+angles alone by recursive kinematics of the body points, so a nominal model other than the plant
+is just another layout of arrays.
 """
 
 from __future__ import annotations
