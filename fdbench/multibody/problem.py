@@ -61,6 +61,12 @@ class JointTrackingProblem(ShootingProblem):
                        if self.integrator == "rk4" else 0)  # the population kernel is RK4's
         self._population = None
         self._n_steps = n
+        if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
+            z0, zd0, _ = motion(np.zeros(1))
+            ref, refd, _ = (np.ascontiguousarray(r, dtype=float) for r in motion(self._half))
+            # the population kernel's arguments around the candidates' torques (see ``objectives``)
+            self._kernel_start = (engine.state_from_joints(z0[0], zd0[0]), self.duration / n, n)
+            self._kernel_rest = (ref, refd, self._every, np.ascontiguousarray(self.inverse.angles), penalty_weight)
 
     @property
     def n_params(self) -> int:
@@ -124,29 +130,12 @@ class JointTrackingProblem(ShootingProblem):
             return np.array([self.objective(p) for p in P])
         if self._population is None:
             from ..population import Population
+            from .kernels import rk4_candidates
 
-            kernel, widths = self.engine.population_kernel()
-            self._population = Population(kernel, self._n_steps, widths)
+            self._population = Population(rk4_candidates, self._n_steps, self.engine.population_widths)
         tau = self.torques_on_grid_batch(P)
-        y0 = sim.initial_state(self.engine, self.motion)
-        args = self.engine.population_args(y0, self.duration / self._n_steps, self._n_steps, tau, self._every,
-                                           self.inverse.angles, self.penalty_weight)
+        args = self.engine.population_args(*self._kernel_start, tau, *self._kernel_rest)
         return self._population(len(P), args)
-
-
-def warm_up() -> None:
-    """Load (or compile) the population kernel and start the threads, so that later timings
-    exclude both: a population of two candidates of two steps of a library model."""
-    from ..population import Population
-    from .description import find_model
-    from .engine import Engine
-
-    engine = Engine(find_model("arm2"))
-    n, joints = 2, engine.n_joints
-    kernel, widths = engine.population_kernel()
-    y0 = engine.state_from_joints(np.zeros(joints), np.zeros(joints))
-    args = engine.population_args(y0, 0.5, n, np.zeros((2, 2 * n + 1, joints)), 1, np.zeros((n + 1, joints)), 1.0)
-    Population(kernel, n, widths)(2, args)
 
 
 def _interp(grid, values, t):

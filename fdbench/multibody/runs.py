@@ -309,11 +309,9 @@ def _optimize(spec, on_evaluation, on_start):
     from ..experiment import _options_text, base_record
     from ..optimizers import make_optimizer
     from ..torques import TORQUES
-    from .problem import warm_up
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
-    _warm_up(spec)
-    warm_up()
+    _warm_up(spec)  # the population kernel and its threads too
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
     if on_start:
