@@ -275,7 +275,8 @@ def check_conditions(spec: "RunSpec") -> None:
     from .models import check_name, with_changes
 
     check_name(spec.model_name)
-    if spec.model_name != "forearm" and dict(spec.inputs).get("--model") not in (None, model_digest(spec.model_name)):
+    digest = dict(spec.inputs).get("--model")
+    if digest is not None and digest != model_digest(spec.model_name):
         from .files import BadFile
 
         raise BadFile(f"--model: {spec.model_name} has changed since this run was specified (or differs on this machine)")

@@ -202,11 +202,13 @@ def _model_name(names: list) -> str:
     if len(set(names)) > 1:
         raise BadInput(f"--model: name one model, got {', '.join(names)}")
     name = names[0] if names else "forearm"
+    from ..models import names
+
     try:
         return check_name(name)
     except ValueError as exc:
-        message = str(exc)
-        raise BadInput(message if message.startswith("--model") else f"--model: {message} (or KEY=VALUE)") from None
+        known = name in names() or not name or not any(c in name for c in "./")
+        raise BadInput(f"--model: {exc}" + (" (or KEY=VALUE)" if known else "")) from None
 
 
 def _model_input(name: str) -> dict:
