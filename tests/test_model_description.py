@@ -17,7 +17,6 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.model import Forearm
-from fdbench.models.arm2 import Arm2
 from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, find_model,
                                            library, load_model, resolved_end, to_dict, to_toml, with_changes)
 
@@ -75,12 +74,18 @@ def test_the_forearm_file_is_table_1():
 
 
 def test_the_arm2_file_is_the_two_segment_arm():
-    model, arm = find_model("arm2"), Arm2()
+    from arm2_closed_form import ARM2
+
+    model, c = find_model("arm2"), ARM2
     assert model.coordinates == ("shoulder", "elbow")
     assert [model.path(b) for b in ("upper_arm", "forearm")] == [(0,), (0, 1)]
     _, _, upper_jj = bar_point_masses(model, "upper_arm")  # its point i is the fixed shoulder
     fore_ii, fore_ij, fore_jj = bar_point_masses(model, "forearm")
-    m11, m12, m22 = arm.point_masses
+    # the points' mass matrix of two bars in natural coordinates (the elbow and the hand), by hand
+    a = c["L1G"] / c["L12"]
+    m22 = c["I1"] / c["L12"] ** 2
+    m12 = c["m"] * a - m22
+    m11 = c["I0"] / c["L01"] ** 2 + c["m"] * (1.0 - 2.0 * a) + m22
     assert upper_jj + fore_ii == pytest.approx(m11, rel=1e-15)
     assert fore_ij == pytest.approx(m12, rel=1e-15)
     assert fore_jj == pytest.approx(m22, rel=1e-15)
