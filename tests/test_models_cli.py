@@ -414,3 +414,18 @@ def test_the_arms_beyond_the_paper_table_has_direct_collocation():
     specs = [m.spec for m in beyond_methods(kinematics="reach", model_name="arm2")]
     assert [s.command for s in specs] == ["control", "control", "collocate"]
     assert all(s.model_name == "arm2" for s in specs)
+
+
+def test_a_missing_model_file_and_one_without_motions_are_one_line_exit_2(tmp_path):
+    missing = invoke("control", "--model", tmp_path / "none.toml", code=2).stderr.splitlines()
+    assert len(missing) == 1 and missing[0].count("--model") == 1 and "does not exist" in missing[0]
+    from fdbench.multibody.description import library
+
+    text = library()["leg3"].read_text()
+    path = tmp_path / "still.toml"
+    path.write_text(text[:text.index("[[motions]]")])
+    lines = invoke("control", "--model", path, code=2).stderr.splitlines()
+    assert len(lines) == 1 and "--motion" in lines[0] and "t,hip,knee,ankle" in lines[0]
+    motion = tmp_path / "m.csv"
+    motion.write_text(invoke("inverse", *LEG, "--format", "csv").stdout)
+    assert as_json("control", "--model", path, "--motion", motion)["status"] == "success"

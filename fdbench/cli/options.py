@@ -156,7 +156,10 @@ def _with_conditions(command):
         if kwargs.get("kinematics") is None:
             from ..models import default_motion
 
-            kwargs["kinematics"] = default_motion(conditions["model_name"])
+            try:
+                kwargs["kinematics"] = default_motion(conditions["model_name"])
+            except ValueError as exc:
+                raise BadInput(str(exc)) from None
         return command(conditions=conditions, **kwargs)
 
     wrapper.__signature__ = signature.replace(parameters=kept + added)
@@ -208,7 +211,8 @@ def _model_name(names: list) -> str:
         return check_name(name)
     except ValueError as exc:
         known = name in names() or not name or not any(c in name for c in "./")
-        raise BadInput(f"--model: {exc}" + (" (or KEY=VALUE)" if known else "")) from None
+        message = str(exc) if str(exc).startswith("--model") else f"--model: {exc}"
+        raise BadInput(message + (" (or KEY=VALUE)" if known else "")) from None
 
 
 def _model_input(name: str) -> dict:
