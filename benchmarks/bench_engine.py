@@ -7,6 +7,10 @@ feedback (kp 80, kd 0.3 per joint) plus the inverse-dynamics feedforward. The ch
 the cost per step (us), its ratio to the forearm's, and the growth law fitted to the ratios
 (least squares of ratio = a + b N; the goal is at most 2N, a banded solve makes it linear).
 
+Then the cost per step of leg3 (three bodies) under each feedback law of the one RK4 driver
+(fdbench.multibody.kernels.rk4): PD, computed torque (the inverse dynamics at every stage) and a
+gain matrix.
+
 Run: python benchmarks/bench_engine.py
 """
 
@@ -23,6 +27,7 @@ from fdbench import dynamics
 from fdbench.integrate import Settings, constants, half_step_reference, initial_state, steps
 from fdbench.inverse import elbow_torque
 from fdbench.multibody import engine as mb
+from fdbench.multibody import kernels
 
 from fdbench.multibody.description import GROUND, Body, Joint, Model
 
@@ -66,9 +71,37 @@ def chain_kernel(n_bodies: int):
     tau = engine.inverse_dynamics(z, zd, zdd)
     kp, kd = np.full(n_bodies, 80.0), np.full(n_bodies, 0.3)
     y0 = engine.state_from_joints(z[0], zd[0])
-    states = np.empty((n + 1, engine.n_state))
+    states, rates = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state))
+    applied = np.empty((n + 1, n_bodies))
     ref = np.ascontiguousarray(z + engine.joint_offset)
-    return n, lambda: mb.rk4_pd(y0, 1.0 / n, n, tau, ref, zd, kp, kd, *engine._kernel_layout, states)
+    no_gains = np.zeros((1, n_bodies, 2 * n_bodies))
+    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, kernels.PD, no_gains,
+                                  *engine.simulation_layout(), states, rates, applied)
+
+
+def leg_kernel(mode: int):
+    """The compiled RK4 of leg3 (fdbench/models/library/leg3.toml) under each feedback law: PD
+    (kp 300, kd 20 per joint), computed torque (kp 400 1/s^2, kd 40 1/s) and a constant gain matrix
+    [diag kp, diag kd], on a slow swing of the thigh through -90 deg with the inverse-dynamics
+    feedforward."""
+    from fdbench.multibody.description import find_model
+
+    engine, n = mb.Engine(find_model("leg3")), 1000
+    half = np.linspace(0.0, 1.0, 2 * n + 1)[:, None]
+    z = np.array([0.0, -0.4, 0.1]) + 0.3 * np.sin(2 * math.pi * half)
+    zd, zdd = 0.6 * math.pi * np.cos(2 * math.pi * half), -1.2 * math.pi**2 * np.sin(2 * math.pi * half)
+    zd, zdd = np.broadcast_to(zd, z.shape).copy(), np.broadcast_to(zdd, z.shape).copy()
+    tau = engine.inverse_dynamics(z, zd, zdd) if mode != kernels.COMPUTED else np.zeros_like(z)
+    computed = mode == kernels.COMPUTED
+    kp, kd = np.full(3, 400.0 if computed else 300.0), np.full(3, 40.0 if computed else 20.0)
+    gains = np.broadcast_to(np.hstack([np.diag(kp), np.diag(kd)]), (2 * n + 1, 3, 6)).copy()
+    if mode != kernels.GAINS:
+        gains = gains[:1]
+    y0 = engine.state_from_joints(z[0], zd[0])
+    states, rates, applied = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)), np.empty((n + 1, 3))
+    ref = np.ascontiguousarray(z + engine.joint_offset)
+    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, mode, gains, *engine.simulation_layout(),
+                                  states, rates, applied)
 
 
 def main():
@@ -90,6 +123,12 @@ def main():
     a, b = np.polyfit(np.array(SIZES, dtype=float), ratios, 1)[::-1]
     slope = np.polyfit(np.log(SIZES), np.log(ratios), 1)[0]
     print(f"growth: ratio = {a:.2f} + {b:.2f} N (least squares); log-log slope {slope:.2f}")
+    for name, mode in (("PD", kernels.PD), ("computed torque", kernels.COMPUTED), ("gain matrix", kernels.GAINS)):
+        n, fn = leg_kernel(mode)
+        code, done, _ = fn()
+        assert (code, done) == (dynamics.OK, n), f"leg3 {name}: status {code} at step {done}"
+        per_step = best_per_call(fn) / n
+        print(f"leg3, {name:15s}: {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ def simulate(torque=None, **settings):
     ``t_end``, ``status``...) and whose ``result`` holds the histories on the motion's samples.
 
     ``torque``: None for the inverse-dynamics torque, or a function of the times (s, shape
-    (n,)) returning the elbow torque (N m, shape (n,); for ``model_name="arm2"`` the joint
+    (n,)) returning the elbow torque (N m, shape (n,); for another model, e.g. ``model_name="arm2"``, the joint
     torques, shape (n, 2)). ``settings``: the fields of ``RunSpec`` (``kinematics``,
     ``integrator``, ``dt``, ``rtol``, ``atol``, ``alpha``, ``xi``, ``omega``, ``model_name``...);
     a bad value raises ValueError."""

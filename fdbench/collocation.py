@@ -18,7 +18,7 @@ state is free. ``casadi`` is imported here only (and in the models' collocation 
 
 ``transcribe`` is the transcription of any model with J joints whose accelerations are an
 explicit function of its angles, velocities and torques; ``collocate`` is the forearm's (J = 1),
-``fdbench.models.arm2_collocation.collocate`` the arm's (J = 2).
+``fdbench.multibody.collocation.collocate`` every other model's.
 """
 
 from __future__ import annotations

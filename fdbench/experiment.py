@@ -68,14 +68,16 @@ class RunSpec:
     plant: tuple = ()  # (key, value) pairs changing the simulated body only
     model: tuple = ()  # (key, value) pairs changing the nominal model and the simulated body
     gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
-    model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.MODELS``
+    model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
 
     def __post_init__(self):
         if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
-            from .models import MODELS, default_motion
+            from .models import default_motion
 
-            if self.model_name in MODELS:  # an unknown name is for ``validate`` to refuse
+            try:
                 object.__setattr__(self, "kinematics", default_motion(self.model_name))
+            except ValueError:  # an unknown model, or one without motions, is for ``validate`` to refuse
+                pass
 
     def _runs(self):
         """The module carrying out this spec's runs when its model is not the forearm, else None."""
@@ -180,7 +182,7 @@ class RunSpec:
         """ValueError (one line naming the option to change) if the run's arrays would not fit in
         the memory fdbench allows a run (see ``fdbench.memory``)."""
         from .memory import check_run
-        from .models import model_class
+        from .models import n_joints
 
         truth = self.motions()[1]
         population, hidden = 1, 0
@@ -191,7 +193,7 @@ class RunSpec:
 
                 hidden = dict(self.torque_options).get("hidden", 4)
                 hidden = AUTO_MAX_HIDDEN if hidden == "auto" else hidden
-        check_run(truth.duration, len(truth.samples), getattr(model_class(self.model_name), "n_joints", 1),
+        check_run(truth.duration, len(truth.samples), n_joints(self.model_name),
                   self.dt if self.integrator == "rk4" else None, population, hidden)
 
     def as_dict(self) -> dict:
@@ -214,6 +216,8 @@ class RunSpec:
                 data[name] = float(data[name]) + 0.0  # + 0.0 turns -0.0 into 0.0
         if dict(self.inputs).get("--motion"):  # a recorded motion counts by its content, not its file name
             data["kinematics"] = "file"
+        if dict(self.inputs).get("--model"):  # so does a model file
+            data["model_name"] = "file"
         if data.get("controller") == "pd":  # the paper's PD is the default controller
             data["controller"] = None
         for name, default in OMITTED_AT_DEFAULT.items():
@@ -268,9 +272,14 @@ def check_conditions(spec: "RunSpec") -> None:
         raise ValueError(f"--capture-hz must be in [1, {MAX_CAPTURE_HZ:g}] Hz, got {spec.capture_hz}")
     if spec.noise_deg and spec.seed is not None and not (isinstance(spec.seed, int) and 0 <= spec.seed < MAX_SEED):
         raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {spec.seed}")
-    from .models import MODELS, with_changes
+    from .models import check_name, with_changes
 
-    MODELS[spec.model_name]
+    check_name(spec.model_name)
+    digest = dict(spec.inputs).get("--model")
+    if digest is not None and digest != model_digest(spec.model_name):
+        from .files import BadFile
+
+        raise BadFile(f"--model: {spec.model_name} has changed since this run was specified (or differs on this machine)")
     with_changes(spec.model_name, spec.model)
     with_changes(spec.model_name, spec.model + spec.plant)
 
@@ -296,6 +305,25 @@ def motion_digest(path) -> str:
 
     check_source(str(path))
     return hashlib.sha256(read_input_text(path, "--motion").encode()).hexdigest()
+
+
+def model_digest(path) -> str:
+    """SHA-256 of a model file's content."""
+    from .files import read_input_bytes
+
+    return hashlib.sha256(read_input_bytes(path, "--model")).hexdigest()
+
+
+def with_model_file(spec: "RunSpec") -> "RunSpec":
+    """The spec with its model file's content digest among its inputs (none for a library model)."""
+    from dataclasses import replace
+
+    from .models import is_file
+
+    if not is_file(spec.model_name):
+        return spec
+    inputs = tuple(p for p in spec.inputs if p[0] != "--model") + (("--model", model_digest(spec.model_name)),)
+    return replace(spec, inputs=tuple(sorted(inputs)))
 
 
 def with_motion_file(spec: "RunSpec") -> "RunSpec":

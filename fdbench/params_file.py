@@ -34,9 +34,9 @@ def params_json(spec, outcome) -> str:
         "rmse_rot_deg": outcome.record["rmse_rot_deg"],
     }
     if data["torque_options"].get("hidden") == "auto":  # 3 n + 1 parameters per joint
-        from .models import model_class
+        from .models import n_joints
 
-        joints = getattr(model_class(spec.model_name), "n_joints", 1)
+        joints = n_joints(spec.model_name)
         data["torque_options"]["hidden"] = (len(outcome.params) // joints - 1) // 3
     return json.dumps(data, indent=2) + "\n"
 

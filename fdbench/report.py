@@ -705,9 +705,11 @@ def _flat(row: Row) -> dict:
 def _model_name(record: dict) -> str:
     """The record's model; runs stored before models had names kept their constant changes in
     ``model`` and are the forearm's."""
-    from .models import MODELS
+    from .models import names
 
-    return record.get("model") if record.get("model") in MODELS else "forearm"
+    model = record.get("model")
+    return model if model in names() or (isinstance(model, str) and model.lower().endswith((".toml", ".json"))) \
+        else "forearm"
 
 
 def _finite(value):
@@ -749,7 +751,7 @@ def condition_settings(spec, specs: list) -> dict:
     motion = f"{truth.name}: {truth.duration:g} s, {len(truth.samples)} samples"
     rows = {"motion": motion + (f", SHA-256 {digest[:16]}" if digest else "")}
     if digest:
-        rows["angle convention"] = ANGLE_CONVENTION[spec.model_name if spec.model_name in ANGLE_CONVENTION else "forearm"]
+        rows["angle convention"] = ANGLE_CONVENTION.get(spec.model_name, JOINT_ANGLES)
     if described.get("derivatives"):
         rows["derivative estimate"] = described["derivatives"]
     against = rmse_reference(spec, described.get("derivatives"))
@@ -766,6 +768,8 @@ def condition_settings(spec, specs: list) -> dict:
     return rows
 
 
+JOINT_ANGLES = ("each joint's angle (deg): its child body's frame angle relative to its parent's, minus the joint's "
+                "offset, counter-clockwise positive (y up); see 'fdbench models show' for the model's frames")
 ANGLE_CONVENTION = {
     "forearm": "theta (deg) is the forearm's angle from the horizontal +x axis, counter-clockwise positive (y up); "
                "with the upper arm hanging vertically, theta = elbow flexion - 90 deg",

@@ -67,7 +67,7 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
                gradient: str = "fd", **common) -> Sweep:
     """The specs of a study: for each level, PD control (one run per seed when the runs differ by
     their noise, else one) and each optimisation cell (seeds 0..seeds-1)."""
-    from .models import with_changes
+    from .models import value_of, with_changes
 
     if kind not in KINDS:
         from .registry import unknown_name_message
@@ -79,7 +79,7 @@ def make_sweep(kind: str, levels, seeds: int, cells, control: bool, kp: float, k
         if kind == "noise":
             condition = {"noise_deg": float(level)}
         else:
-            value = getattr(nominal, param) * (1 + level / 100)
+            value = value_of(common.get("model_name", "forearm"), nominal, param) * (1 + level / 100)
             condition = {"plant": tuple(common.get("plant", ())) + ((param, value),)}
         base = {**common, **condition}
         noisy = bool(base.get("noise_deg"))

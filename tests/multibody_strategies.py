@@ -52,12 +52,14 @@ def forearm_model():
                    loads=(d.Load("forearm", at=(0.33, 0.0), force=(0.0, -15.0)),))
 
 
-def arm2_model(arm=None):
-    """The description of fdbench's two-segment arm ``arm`` (an Arm2, whose inertias are about the
-    joints; the default arm when None)."""
-    from fdbench.models.arm2 import Arm2
+def arm2_model(**changes):
+    """The description of the two-segment arm of tests/arm2_closed_form.py with some of its
+    constants changed (its inertias I0, I1 are about the joints)."""
+    from types import SimpleNamespace
 
-    arm = Arm2() if arm is None else arm
+    from arm2_closed_form import ARM2
+
+    arm = SimpleNamespace(**{**ARM2, **changes})
     upper = d.Body("upper_arm", mass=arm.m0, com=(arm.L0G, 0.0), inertia=arm.I0 - arm.m0 * arm.L0G**2)
     fore = d.Body("forearm", mass=arm.m, com=(arm.L1G, 0.0), inertia=arm.I1 - arm.m * arm.L1G**2)
     return d.Model(name="arm2", gravity=(0.0, -arm.g), bodies=(upper, fore),

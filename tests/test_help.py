@@ -178,7 +178,7 @@ def test_study_writes_json_like_its_csv(tmp_path):
 
 def test_top_level_help_says_what_the_tool_does():
     text = " ".join(help_text().split())
-    for what in ("forearm", "two-segment arm", "--model arm2", "--format table|json|csv", "--format md|csv|json",
+    for what in ("forearm", "any planar tree of bodies", "--model arm2, leg3 or your own model file", "--format table|json|csv", "--format md|csv|json",
                  "collocation", "study"):
         assert what in text, what
 

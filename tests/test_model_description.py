@@ -17,7 +17,6 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.model import Forearm
-from fdbench.models.arm2 import Arm2
 from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, find_model,
                                            library, load_model, resolved_end, to_dict, to_toml, with_changes)
 
@@ -75,12 +74,18 @@ def test_the_forearm_file_is_table_1():
 
 
 def test_the_arm2_file_is_the_two_segment_arm():
-    model, arm = find_model("arm2"), Arm2()
+    from arm2_closed_form import ARM2
+
+    model, c = find_model("arm2"), ARM2
     assert model.coordinates == ("shoulder", "elbow")
     assert [model.path(b) for b in ("upper_arm", "forearm")] == [(0,), (0, 1)]
     _, _, upper_jj = bar_point_masses(model, "upper_arm")  # its point i is the fixed shoulder
     fore_ii, fore_ij, fore_jj = bar_point_masses(model, "forearm")
-    m11, m12, m22 = arm.point_masses
+    # the points' mass matrix of two bars in natural coordinates (the elbow and the hand), by hand
+    a = c["L1G"] / c["L12"]
+    m22 = c["I1"] / c["L12"] ** 2
+    m12 = c["m"] * a - m22
+    m11 = c["I0"] / c["L01"] ** 2 + c["m"] * (1.0 - 2.0 * a) + m22
     assert upper_jj + fore_ii == pytest.approx(m11, rel=1e-15)
     assert fore_ij == pytest.approx(m12, rel=1e-15)
     assert fore_jj == pytest.approx(m22, rel=1e-15)
@@ -225,6 +230,43 @@ BAD = [  # (id, change of BASE, words the message must hold: the key and what is
     ("no body", lambda data: data.update(bodies=[], joints=[], loads=[]), ("bodies", "at least one body")),
     ("a load on no body", setting("loads.0.body", "toe"), ("loads[0].body", "'toe'")),
     ("limits upside down", setting("joints.1.limits", [0.5, -0.5]), ("joints[1].limits", "lower < upper")),
+]
+
+SWING = {"name": "swing", "type": "minimum-jerk", "duration": 1.0, "start": {"hip": -0.3, "knee": -0.2, "ankle": 0.1},
+         "goal": {"hip": 0.6, "knee": -1.0, "ankle": -0.2}}
+
+
+def with_motion(path: str, new):
+    """BASE with the motion SWING, then ``path`` of it ('motions.0.start.knee') set to ``new`` (None: removed)."""
+    def change(data):
+        data["motions"] = [copy.deepcopy(SWING)]
+        setting(path, new)(data)
+    return change
+
+
+BAD += [  # named motions and short keys
+    ("a motion without a joint", with_motion("motions.0.start.knee", None),
+     ("motions[0].start.knee", "missing", "every joint: hip, knee, ankle")),
+    ("a motion naming an unknown joint", with_motion("motions.0.goal.kne", 0.1),
+     ("motions[0].goal.kne", "unknown joint 'kne'", "did you mean 'knee'")),
+    ("a motion of zero duration", with_motion("motions.0.duration", 0.0), ("motions[0].duration", "positive", "(s)")),
+    ("a motion of an unknown type", with_motion("motions.0.type", "cubic"), ("motions[0].type", "valid: minimum-jerk")),
+    ("a motion without a goal", with_motion("motions.0.goal", None), ("motions[0].goal", "missing", "every joint")),
+    ("a motion with a list for a start", with_motion("motions.0.start", [0.1, 0.2, 0.3]),
+     ("motions[0].start", "a table {joint = angle}")),
+    ("a motion with a text angle", with_motion("motions.0.start.hip", "10deg"), ("motions[0].start.hip", "an angle (rad)")),
+    ("a motion with an infinite angle", with_motion("motions.0.start.hip", math.inf), ("motions[0].start.hip", "finite")),
+    ("two motions of one name", lambda data: data.update(motions=[SWING, SWING | {"name": "Swing"}]),
+     ("motions[1].name", "already the name of motions[0]")),
+    ("a motion's unknown key", with_motion("motions.0.speed", 1.0), ("motions[0].speed", "unknown key")),
+    ("a short key to an unknown path", setting("keys", {"m1": "thigh.mas"}),
+     ("keys.m1", "unknown path 'thigh.mas'", "did you mean 'thigh.mass'")),
+    ("a short key to a number", setting("keys", {"m1": 7.5}), ("keys.m1", "a path of the model as a text")),
+    ("an @ after a mass", setting("keys", {"m1": "thigh.mass@hip"}), ("keys.m1", "goes after a body's inertia")),
+    ("an @ naming a far joint", setting("keys", {"I0": "thigh.inertia@ankle"}),
+     ("keys.I0", "unknown joint of body 'thigh' 'ankle'", "valid: hip, knee")),
+    ("a short key that is not a name", setting("keys", {"1m": "thigh.mass"}), ("keys.1m", "not a short key")),
+    ("keys as a list", setting("keys", ["thigh.mass"]), ("keys", "a table of short names")),
 ]
 
 
@@ -408,11 +450,12 @@ def test_the_readme_file_is_the_library_forearm(tmp_path):
 
 
 def test_the_readme_table_names_every_key():
-    from fdbench.multibody.description import BODY_KEYS, JOINT_KEYS, LOAD_KEYS, TOP_KEYS
+    from fdbench.multibody.description import BODY_KEYS, JOINT_KEYS, LOAD_KEYS, MOTION_KEYS, TOP_KEYS
 
     documented = set(re.findall(r"^\| `([a-z_.]+)` \|", readme_section(), flags=re.MULTILINE))
     keys = set(TOP_KEYS) | {f"{section}.{key}" for section, keys in
-                            (("bodies", BODY_KEYS), ("joints", JOINT_KEYS), ("loads", LOAD_KEYS)) for key in keys}
+                            (("bodies", BODY_KEYS), ("joints", JOINT_KEYS), ("loads", LOAD_KEYS),
+                             ("motions", MOTION_KEYS)) for key in keys}
     assert documented == keys
 
 

@@ -34,7 +34,7 @@ def forearm_model() -> Model:
 
 
 def arm2_model() -> Model:
-    """The two-segment arm (fdbench.models.arm2.Arm2's constants)."""
+    """The two-segment arm (the constants of tests/arm2_closed_form.py)."""
     return Model("arm2", (0.0, -9.81),
                  (Body("upper_arm", 2.0, (0.13, 0.0), 0.06 - 2.0 * 0.13**2),
                   Body("forearm", 1.0, (0.11, 0.0), 0.04 - 1.0 * 0.11**2)),
@@ -95,33 +95,6 @@ def test_the_forearm_state_is_eq_7s():
     np.testing.assert_allclose(engine.state_from_joints([0.4], [-1.5]), np.concatenate([q, qd]), rtol=0, atol=1e-15)
 
 
-def _arm_state(y: np.ndarray) -> np.ndarray:
-    """The arm kernels' state (relative elbow angle) from the engine's (absolute angles)."""
-    theirs = y.copy()
-    theirs[5], theirs[11] = y[5] - y[4], y[11] - y[10]
-    return theirs
-
-
-def test_arm_accelerations_match_the_arm_kernels():
-    from fdbench.models import arm2_kernels
-    from fdbench.models.arm2 import Arm2
-
-    engine, consts = Engine(arm2_model()), arm2_kernels.kernel_constants(Arm2(), Penalty())
-    rng = np.random.default_rng(2)
-    checked = 0
-    while checked < 200:
-        z, zd, tau = rng.uniform(-1.2, 1.2, 2), rng.uniform(-4, 4, 2), rng.uniform(-20, 20, 2)
-        if min(abs(math.cos(z[0])), abs(math.cos(z[0] + z[1]))) < 0.25:
-            continue  # the arm kernels use the sin form everywhere; the engine switches below 0.2
-        y = engine.state_from_joints(z, zd) + rng.normal(0.0, 1e-6, 12)
-        out = np.empty(12)
-        arm2_kernels.accelerations(_arm_state(y), tau[0], tau[1], consts, out)
-        yd = engine.accelerations(y, tau)
-        found = np.concatenate([yd[6:11], [yd[11] - yd[10]]])
-        assert relative_error(found, out[6:]) < 1e-8
-        checked += 1
-
-
 def test_forearm_inverse_dynamics_is_the_closed_form():
     engine, rng = Engine(forearm_model()), np.random.default_rng(3)
     theta, w, dw = rng.uniform(-2, 2, (3, 50, 1))
@@ -130,19 +103,12 @@ def test_forearm_inverse_dynamics_is_the_closed_form():
     assert engine.inverse_dynamics([0.1], [0.2], [0.3]).shape == (1,)
 
 
-def test_arm_inverse_dynamics_matches_the_arm_kernels():
-    from fdbench.models import arm2_kernels
-    from fdbench.models.arm2 import Arm2
+def test_arm_inverse_dynamics_is_the_closed_form():
+    from arm2_closed_form import joint_torques
 
-    engine, consts = Engine(arm2_model()), arm2_kernels.kernel_constants(Arm2(), Penalty())
-    rng = np.random.default_rng(4)
+    engine, rng = Engine(arm2_model()), np.random.default_rng(4)
     z, zd, zdd = rng.uniform(-2, 2, (3, 40, 2))
-    found = engine.inverse_dynamics(z, zd, zdd)
-    for k in range(40):
-        out = np.empty(2)
-        arm2_kernels.inverse_torques(_arm_state(engine.state_from_joints(z[k], zd[k])), zdd[k, 0], zdd[k, 1],
-                                     consts, out)
-        np.testing.assert_allclose(found[k], out, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(engine.inverse_dynamics(z, zd, zdd), joint_torques(z, zd, zdd), rtol=1e-12, atol=1e-12)
 
 
 # ---------------------------------------------------------------------- random chains
@@ -226,28 +192,6 @@ def test_simulate_pd_reproduces_the_forearm_rk4(kinematics):
     assert (result.status, result.steps_done) == (dynamics.OK, n)
     assert np.max(np.abs(np.degrees(result.z[:, 0] - states[:, 2]))) < 1e-9
     assert result.max_violation < 1e-6
-
-
-def test_simulate_pd_reproduces_the_arm_rk4_on_the_reach():
-    from fdbench.models import arm2_kernels
-    from fdbench.models.arm2 import Arm2
-    from fdbench.models.arm2_motion import Reach
-
-    motion, arm, n = Reach(), Arm2(), 1000
-    dt = motion.duration / n
-    half = np.linspace(0.0, motion.duration, 2 * n + 1)
-    ref, ref_w, ref_a = (np.ascontiguousarray(a) for a in motion(half))
-    tau = np.ascontiguousarray(arm.joint_torques(ref, ref_w, ref_a) * 0.9)  # a wrong model: the PD works
-    kp, kd = np.array([80.0, 40.0]), np.array([0.3, 0.2])
-    consts = arm2_kernels.kernel_constants(arm, Penalty())
-    states, qdd, applied = np.full((n + 1, 12), np.nan), np.full((n + 1, 6), np.nan), np.full((n + 1, 2), np.nan)
-    y0 = np.concatenate(arm.coordinates(ref[0], ref_w[0], ref_a[0])[:2])
-    code, done, _ = arm2_kernels.rk4_pd(y0, dt, n, tau, ref, ref_w, ref_a, kp, kd, 0, np.zeros((1, 2, 4)), consts,
-                                        consts, states, qdd, applied)
-    assert (code, done) == (dynamics.OK, n)
-    result = Engine(arm2_model()).simulate_pd(ref[0], ref_w[0], dt, n, tau, ref, ref_w, kp, kd)
-    assert (result.status, result.steps_done) == (dynamics.OK, n)
-    assert np.max(np.abs(np.degrees(result.z - states[:, 4:6]))) < 1e-9
 
 
 def _leg_motion(t):

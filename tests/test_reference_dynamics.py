@@ -1,8 +1,8 @@
 """Self-checks of the minimal-coordinate reference (tests/reference_dynamics.py), independent of the
 multibody engine, so that the engine's tests compare against something known to be right:
 
-- the forearm against its closed form and the two-segment arm against fdbench's own arm (the
-  existing, separately written models: Arm2's inverse dynamics and its compiled kernel);
+- the forearm and the two-segment arm against their closed forms (Lagrange's equations written by
+  hand: the elbow torque of the paper, tests/arm2_closed_form.py);
 - the two constructions of the reference against each other and against Lagrange's equations: the
   RNEA's torques equal M z'' + h with M from the kinetic energy, and d/dt dT/dz' - dT/dz + dV/dz
   (derivatives of the energies by central differences) on random trees;
@@ -21,15 +21,17 @@ from hypothesis import strategies as st
 
 import reference_dynamics as ref
 from fdbench.multibody import description as d
+from arm2_closed_form import joint_torques
 from multibody_strategies import arm2_model, forearm_model, models, models_and_states
 
 GRAVITY = 9.81  # m/s^2, the built-in models'
 
 
-def assert_relative(actual, expected, rel):
-    """max |actual - expected| <= rel * RMS(expected) (or rel when expected is all zero)."""
+def assert_relative(actual, expected, rel, scale=0.0):
+    """max |actual - expected| <= rel * max(RMS(expected), scale) (rel alone when both are zero):
+    ``scale`` is the size of the terms ``expected`` was summed from, when they may cancel."""
     expected = np.asarray(expected)
-    scale = max(float(np.sqrt(np.mean(expected**2))), 1.0 if not expected.any() else 0.0)
+    scale = max(float(np.sqrt(np.mean(expected**2))), scale, 1.0 if not expected.any() and not scale else 0.0)
     error = float(np.max(np.abs(np.asarray(actual) - expected)))
     assert error <= rel * scale, f"error {error:.3g} > {rel:g} x {scale:.3g}"
 
@@ -88,50 +90,29 @@ def test_pendulum_matches_its_closed_form(at_child, com, at, force, offset, thet
 @settings(max_examples=30)
 @given(offsets=st.tuples(st.floats(-math.pi, math.pi), st.floats(-math.pi, math.pi)), seed=st.integers(0, 2**16))
 def test_offsets_shift_the_coordinates(offsets, seed):
-    """The arm with joint offsets at z is fdbench's Arm2 at z + offsets."""
+    """The arm with joint offsets at z is the closed-form arm at z + offsets."""
     import dataclasses
 
-    from fdbench.models.arm2 import Arm2
-
-    arm = Arm2()
-    model = arm2_model(arm)
+    model = arm2_model()
     joints = tuple(dataclasses.replace(joint, offset=off) for joint, off in zip(model.joints, offsets))
     t = ref.tree(dataclasses.replace(model, joints=joints))
     z, w, dw = random_states(2, seed=seed)
-    assert_relative(ref.inverse_dynamics(t, z, w, dw), arm.joint_torques(z + np.array(offsets), w, dw), 1e-12)
+    assert_relative(ref.inverse_dynamics(t, z, w, dw), joint_torques(z + np.array(offsets), w, dw), 1e-12)
 
 
 @settings(max_examples=30)
 @given(m0=st.floats(0.1, 10), F_ext=st.floats(-50, 50), g=st.floats(0, 20), L01=st.floats(0.1, 0.6),
        seed=st.integers(0, 2**16))
-def test_arm_matches_fdbench_arm2(m0, F_ext, g, L01, seed):
-    """The RNEA's torques and M(z) equal those of fdbench's Arm2 (the inverse dynamics of its mixed
-    coordinates, R^T (M q'' - Q_ext)) at random states, batched, for changed constants."""
-    from fdbench.models.arm2 import Arm2
-
-    arm = Arm2(m0=m0, F_ext=F_ext, g=g, L01=L01)
-    t = ref.tree(arm2_model(arm))
+def test_arm_matches_the_closed_form_arm(m0, F_ext, g, L01, seed):
+    """The RNEA's torques and M(z) equal those of the arm's closed form (Lagrange's equations written
+    by hand, tests/arm2_closed_form.py) at random states, batched, for changed constants."""
+    changes = dict(m0=m0, F_ext=F_ext, g=g, L01=L01)
+    t = ref.tree(arm2_model(**changes))
     z, w, dw = random_states(2, seed=seed)
-    assert_relative(ref.inverse_dynamics(t, z, w, dw), arm.joint_torques(z, w, dw), 1e-12)
-    columns = [arm.joint_torques(z, 0 * w, unit + 0 * dw) - arm.joint_torques(z, 0 * w, 0 * dw) for unit in np.eye(2)]
+    assert_relative(ref.inverse_dynamics(t, z, w, dw), joint_torques(z, w, dw, **changes), 1e-12)
+    columns = [joint_torques(z, 0 * w, unit + 0 * dw, **changes) - joint_torques(z, 0 * w, 0 * dw, **changes)
+               for unit in np.eye(2)]
     assert_relative(ref.mass_matrix(t, z), np.stack(columns, axis=-1), 1e-12)
-
-
-def test_arm_matches_the_compiled_arm2_kernel():
-    """The RNEA's torques equal arm2_kernels.inverse_torques (the arm's compiled inverse dynamics)."""
-    from fdbench.model import Penalty
-    from fdbench.models.arm2 import Arm2
-    from fdbench.models.arm2_kernels import inverse_torques, kernel_constants
-
-    arm = Arm2()
-    consts = kernel_constants(arm, Penalty())
-    t = ref.tree(arm2_model(arm))
-    z, w, dw = random_states(2, count=100, seed=1)
-    q, qd, _ = arm.coordinates(z, w, dw)
-    expected = np.empty_like(z)
-    for i in range(len(z)):
-        inverse_torques(np.concatenate([q[i], qd[i]]), dw[i, 0], dw[i, 1], consts, expected[i])
-    assert_relative(ref.inverse_dynamics(t, z, w, dw), expected, 1e-12)
 
 
 # ----------------------------------------------------------------------------- the two constructions
@@ -171,7 +152,8 @@ def test_rnea_satisfies_lagrange_equations(case):
     kinetic_slope = np.array([0.5 * zd @ dMk @ zd for dMk in dM])
     potential_slope = _gradient(lambda x: ref.potential_energy(t, x), z, h)
     lagrange = momentum_rate - kinetic_slope + potential_slope
-    assert_relative(ref.inverse_dynamics(t, z, zd, zdd), lagrange, 1e-6)
+    terms = max(float(np.sqrt(np.mean(term**2))) for term in (momentum_rate, kinetic_slope, potential_slope))
+    assert_relative(ref.inverse_dynamics(t, z, zd, zdd), lagrange, 1e-6, scale=terms)
 
 
 # ----------------------------------------------------------------------------- physics

@@ -30,8 +30,9 @@ MAX_JOBS = 256  # worker processes
 KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper; the default), "
                    "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
                    "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
-                   "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With --model arm2: 'reach' (the default) or a CSV file t, shoulder, elbow "
-                   "(optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
+                   "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With another model (--model arm2, leg3 or a file): "
+                   "one of the motions its file declares ('reach' for arm2, 'swing' for leg3; the first is the default) or a "
+                   "CSV file t,<joint>... with one angle column per joint (optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
 
 
 INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
@@ -241,7 +242,7 @@ def _error(message: str, code: int = 1) -> int:
 app = typer.Typer(
     cls=FdbenchGroup,
     help="Benchmark of trajectory-tracking methods for the forward dynamic simulation of the paper's 1-DOF forearm "
-    "and a two-segment arm (--model arm2): feedback control (PD with computed feedforward, computed-torque, LQR), "
+    "and any planar tree of bodies (--model arm2, leg3 or your own model file): feedback control (PD with computed feedforward, computed-torque, LQR), "
     "optimised torque histories (ANN, cubic spline, parametric function by CMA-ES, BFGS and more) and direct "
     "collocation, on eq. 5's motion or your own recording. Results as a table, JSON or CSV "
     "(--format table|json|csv); 'fdbench report' runs the paper's whole comparison and 'fdbench study' sweeps "

@@ -235,9 +235,9 @@ def _methods_text() -> str:
 
     lines += ["controllers (control --controller):"]
     lines += [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
-    from ..models import MODELS, summary
+    from ..models import names, summary
 
-    lines += ["models (--model):"] + [f"  {name:<12} {summary(name)}" for name in MODELS]
+    lines += ["models (--model NAME, or a model file):"] + [f"  {name:<12} {summary(name)}" for name in names()]
     return "\n".join(lines) + "\n"
 
 

@@ -66,7 +66,7 @@ def show_model(
     fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
     output: Output = None,
 ):
-    """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads and the total mass. A file that cannot be used is refused in one line naming the key."""
+    """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads, named motions, short keys and the total mass. A file that cannot be used is refused in one line naming the key."""
     from ..multibody.description import library
 
     # a library model's file is an input too: an output may not write over it
@@ -98,10 +98,10 @@ def _summary(model) -> dict:
 
 def _shown(model, source: str) -> dict:
     """The checked model (a model file's keys, end points explicit) and what follows from it."""
-    from ..multibody.description import to_dict
+    from ..multibody.description import short_key_values, to_dict
 
     return {"source": source, "total_mass_kg": model.total_mass, "coordinates": list(model.coordinates),
-            "model": to_dict(model, explicit_ends=True)}
+            "short_key_values": short_key_values(model), "model": to_dict(model, explicit_ends=True)}
 
 
 def _point(point) -> str:
@@ -133,7 +133,29 @@ def _show_text(model, source: str) -> str:
     text += _table("joints in order (m, rad)", joints, list(joints[0]))
     if loads:
         text += _table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
-    return text
+    return text + _motions_text(model) + _keys_text(model)
+
+
+def _motions_text(model) -> str:
+    """The named motions (the first the default): each joint's start -> goal in degrees."""
+    import math
+
+    from .store_commands import _table
+
+    rows = [{"name": m.name + (" (default)" if i == 0 else ""), "type": m.type, "duration (s)": f"{m.duration:.6g}"}
+            | {f"{joint} (deg)": f"{math.degrees(a):.4g} -> {math.degrees(b):.4g}"
+               for (joint, a), (_, b) in zip(m.start, m.goal)} for i, m in enumerate(model.motions)]
+    return _table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
+
+
+def _keys_text(model) -> str:
+    """The short keys of --model KEY=VALUE: the path each sets and its value in this model."""
+    from ..multibody.description import short_key_values
+    from .store_commands import _table
+
+    values = short_key_values(model)
+    rows = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
+    return _table("short keys (--model KEY=VALUE)", rows, list(rows[0])) if rows else ""
 
 
 _END_ORIGIN = {"joint": "first child joint", "load": "farthest load", "com": "centre of mass",

@@ -41,7 +41,7 @@ Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for 
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
 
 
-SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (one row per sample of the motion, 1001 for eq. 5), as CSV to FILE in a motion file's units, so that --motion reads back the simulated angle and --torque-file the applied torque: t (s), theta, theta_desired (deg), theta_vel, theta_vel_desired (deg/s), theta_acc, theta_acc_desired (deg/s^2), torque, torque_inverse (N m), x2, y2 (m); arm2: per joint <joint>, <joint>_desired (deg), <joint>_torque, <joint>_torque_inverse (N m). --save-history is an older name.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (one row per sample of the motion, 1001 for eq. 5), as CSV to FILE in a motion file's units, so that --motion reads back the simulated angle and --torque-file the applied torque: t (s), theta, theta_desired (deg), theta_vel, theta_vel_desired (deg/s), theta_acc, theta_acc_desired (deg/s^2), torque, torque_inverse (N m), x2, y2 (m); another model: per joint <joint>, <joint>_desired (deg), <joint>_torque, <joint>_torque_inverse (N m). --save-history is an older name.")]
 
 
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
@@ -129,8 +129,8 @@ CONDITIONS = {
     "sample_dt": (Optional[float], None, typer.Option("--sample-dt", help="Report the histories and indicators every SAMPLE_DT s (default: the motion's own samples; eq. 5: 1 ms).", show_default=False)),
     "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angle before the derivative estimate; indicators stay measured against the noise-free motion.")),
     "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
-    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
-    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|KEY=VALUE", help="The model, forearm (Table 1, default) or arm2 (shoulder + elbow, motion 'reach' or a file t,shoulder,elbow; see 'fdbench methods'), and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's).", show_default=False)),
+    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; any model: a path such as thigh.mass; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
+    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|FILE|KEY=VALUE", help="The model: forearm (Table 1, default), a library model (arm2: shoulder + elbow; leg3: hip, knee, ankle; see 'fdbench models') or your own model file (.toml or .json, see 'fdbench models show FILE'), whose motions are its named ones or a CSV file t,<joint>...; and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's; any model: a path such as thigh.mass or knee.at_parent.x).", show_default=False)),
     "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
 }
 
@@ -156,7 +156,10 @@ def _with_conditions(command):
         if kwargs.get("kinematics") is None:
             from ..models import default_motion
 
-            kwargs["kinematics"] = default_motion(conditions["model_name"])
+            try:
+                kwargs["kinematics"] = default_motion(conditions["model_name"])
+            except ValueError as exc:
+                raise BadInput(str(exc)) from None
         return command(conditions=conditions, **kwargs)
 
     wrapper.__signature__ = signature.replace(parameters=kept + added)
@@ -188,24 +191,35 @@ def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_d
     names = [item.strip() for item in model or [] if "=" not in item]
     pairs = _model_file(model_file) if model_file is not None else []
     pairs += _key_values("--model", [item for item in model or [] if "=" in item])
+    name = _model_name(names)
     return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
                 sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
                 plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file}, model_name=_model_name(names))
+                _inputs={"--model-file": model_file, **_model_input(name)}, model_name=name)
 
 
 def _model_name(names: list) -> str:
-    """The one model named by --model (default: forearm)."""
-    from ..models import MODELS
+    """The one model named by --model (default: forearm): a library name or a model file."""
+    from ..models import check_name
 
     if len(set(names)) > 1:
         raise BadInput(f"--model: name one model, got {', '.join(names)}")
     name = names[0] if names else "forearm"
-    if name not in MODELS:
-        from ..registry import unknown_name_message
+    from ..models import names
 
-        raise BadInput(f"--model: {unknown_name_message('model', name, list(MODELS))} (or KEY=VALUE)")
-    return name
+    try:
+        return check_name(name)
+    except ValueError as exc:
+        known = name in names() or not name or not any(c in name for c in "./")
+        message = str(exc) if str(exc).startswith("--model") else f"--model: {exc}"
+        raise BadInput(message + (" (or KEY=VALUE)" if known else "")) from None
+
+
+def _model_input(name: str) -> dict:
+    """{'--model': path} for a model file (an input the outputs must not overwrite), else {}."""
+    from ..models import is_file
+
+    return {"--model": Path(name)} if is_file(name) else {}
 
 
 def _key_values(option: str, items) -> list:
@@ -213,8 +227,8 @@ def _key_values(option: str, items) -> list:
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key.strip():
-            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0), "
-                           f"got {item!r}")
+            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; "
+                           f"any model: a path such as thigh.mass, see 'fdbench models show'), got {item!r}")
         try:
             pairs.append((key.strip(), float(value)))
         except ValueError:
@@ -291,6 +305,16 @@ def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions
 
         try:
             fields["inputs"] = (("--motion", motion_digest(kinematics)),)
+        except BadFile as exc:
+            raise BadInput(str(exc)) from None
+    from ..models import is_file
+
+    if is_file(model):
+        from ..experiment import model_digest
+        from ..files import BadFile
+
+        try:
+            fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--model", model_digest(model)),)))
         except BadFile as exc:
             raise BadInput(str(exc)) from None
     return fields

@@ -32,7 +32,7 @@ def inverse(
 ):
     """Inverse dynamics (eq. 3): the joint torques that should produce the desired motion, with the nominal model.
 
-    The table and JSON give a summary; --format csv gives the whole history on the motion's samples (eq. 5: 1001 rows) as a motion file that --motion and --torque-file read back: t (s), theta (deg), theta_vel (deg/s), theta_acc (deg/s^2), torque (N m); arm2: t, then <joint>, <joint>_vel, <joint>_acc, <joint>_torque for the shoulder and the elbow."""
+    The table and JSON give a summary; --format csv gives the whole history on the motion's samples (eq. 5: 1001 rows) as a motion file that --motion and --torque-file read back: t (s), theta (deg), theta_vel (deg/s), theta_acc (deg/s^2), torque (N m); another model: t, then <joint>, <joint>_vel, <joint>_acc, <joint>_torque for each of its joints."""
     from ..experiment import RunSpec, inverse_run
 
     _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))
@@ -176,7 +176,7 @@ def collocate(
     regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
-    save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; --model arm2: t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
+    save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; another model: t and one column per joint, e.g. t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
     kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
@@ -224,12 +224,12 @@ def _collocation_torque_text(solution, spec) -> str:
 
     from ..files import csv_text
     from ..integrate import steps
-    from ..models import model_class
+    from ..models import joints
 
     duration = spec.motions()[0].duration
     half = np.linspace(0.0, duration, 2 * steps(spec.dt, duration) + 1)
     torque = solution.torque_samples(half).reshape(len(half), -1)
-    names = ["torque"] if solution.torque.ndim == 1 else list(model_class(spec.model_name).joints)
+    names = ["torque"] if solution.torque.ndim == 1 else list(joints(spec.model_name))
     return csv_text(["t", *names], ([f"{t:.17g}", *(f"{q:.17g}" for q in row)] for t, row in zip(half, torque)))
 
 

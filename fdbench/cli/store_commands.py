@@ -27,7 +27,7 @@ EXPORT_FORMATS = ("csv", "json", "parquet")
 
 ReadDb = Annotated[Optional[Path], typer.Option("--db", help="Results database, opened read-only (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)]
 Command = Annotated[Optional[str], typer.Option("--command", metavar="NAME", help="Only runs of this command: control, optimize, collocate, ...", show_default=False)]
-Model = Annotated[Optional[str], typer.Option("--model", metavar="NAME", help="Only runs of this model: forearm, arm2, ...", show_default=False)]
+Model = Annotated[Optional[str], typer.Option("--model", metavar="NAME", help="Only runs of this model: forearm, arm2, leg3 or a model file's path, as stored", show_default=False)]
 Torque = Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help="Only optimisations of this torque parameterisation: ann, cs, pf, ...", show_default=False)]
 Opt = Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
 Controller = Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]

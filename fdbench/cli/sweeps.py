@@ -130,7 +130,7 @@ def report(
 def study(
     kind: Annotated[str, typer.Argument(help="noise: the motion captured with white noise of each level (deg); mismatch: one constant of the simulated body changed by each level (percent) while the methods keep the nominal model.", metavar="noise|mismatch")],
     levels: Annotated[str, typer.Option("--levels", help="The levels, comma-separated: deg for noise (e.g. 0,0.25,0.5,1,2), percent for mismatch (e.g. -20,-10,0,10,20).")] = "",
-    param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g (arm2 also L01, L0G, m0, I0).")] = "I1",
+    param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g (arm2 also L01, L0G, m0, I0; any model: a path such as thigh.mass, see 'fdbench models show').")] = "I1",
     torque: TorqueSelection = None,
     opt: OptSelection = None,
     feedforward: FeedforwardSelection = None,

@@ -1,72 +1,138 @@
-"""The registry of simulated bodies: a name -> the frozen dataclass of its constants.
+"""The models fdbench simulates, by name or file.
 
-* ``forearm``: Table 1's 1-DOF forearm (``fdbench.model.Forearm``), the paper's model.
-* ``arm2``: the planar two-segment arm, shoulder + elbow (``fdbench.models.arm2.Arm2``).
-
-A new model is a new module here that registers its class (``@MODELS.register("leg")``) and gives
-it the class attributes ``motions`` (its named motions, the default first), ``keys`` (the
-constants ``--model KEY=VALUE`` may change), ``with_changes`` (a function of (key, value) pairs
-returning the checked model) and ``runs``: the name of the module carrying out its runs
-(``check``, ``motions``, ``reference``, ``describe``, ``run``, ``run_simulation``,
-``inverse_run`` and ``replay`` of a ``RunSpec``; see ``arm2_run``), None for the forearm, whose
-runs are ``fdbench.experiment``'s own.
+* ``forearm``: Table 1's 1-DOF forearm (``fdbench.model.Forearm``), the paper's model, carried out
+  by ``fdbench.experiment``'s own runs (eq. 5's motions, exact gradients, the paper's kernels).
+* Every other model of the library (``library/*.toml``: ``arm2``, ``leg3``) and any model file
+  (TOML or JSON, ``fdbench.multibody.description``): carried out by the multibody engine
+  (``fdbench.multibody.runs``), with the motions the file declares (or a CSV file) and its short
+  keys (``[keys]``) or paths into the description for ``--model``/``--plant KEY=VALUE``.
 """
 
 from __future__ import annotations
 
-import importlib
+import os
+from functools import lru_cache
 
-from ..model import MODEL_KEYS, Forearm, forearm_with
-from ..motion import KINEMATICS
-from ..registry import Registry
+PAPER = "forearm"
+SUFFIXES = (".toml", ".json")
 
-MODELS: Registry = Registry("model")
-MODELS.register("forearm")(Forearm)
-Forearm.motions = KINEMATICS  # eq. 5 as printed (the default) or differentiated exactly
-Forearm.keys = MODEL_KEYS
-Forearm.with_changes = staticmethod(forearm_with)
-Forearm.runs = None  # its runs are fdbench.experiment's own
 
-from . import arm2  # noqa: E402,F401 - registers "arm2"
+def names() -> list[str]:
+    """The models known by name: the paper's forearm, then the library's other models."""
+    from ..multibody.description import library
 
-SUMMARIES = {
-    "forearm": "the paper's 1-DOF forearm (Table 1): the elbow fixed at the origin",
-    "arm2": "planar two-segment arm, shoulder + elbow: Table 1's forearm on a 0.30 m, 2 kg upper arm",
-}
+    return [PAPER] + [name for name in library() if name != PAPER]
+
+
+def is_file(name: str) -> bool:
+    """True when ``name`` is not a library name but a model file's path."""
+    return name not in names()
+
+
+def check_name(name: str) -> str:
+    """``name`` if it is a known model or a readable model file; ValueError (one line) otherwise."""
+    if name in names():
+        return name
+    if name and (os.path.exists(name) or name.lower().endswith(SUFFIXES) or "/" in name):
+        description(name)  # a ModelError (a ValueError) names the file, the key and what is allowed
+        return name
+    from ..registry import unknown_name_message
+
+    raise ValueError(unknown_name_message("model", name, names()) + "; or give a model file (.toml or .json)")
+
+
+def description(name: str):
+    """The ``fdbench.multibody.description.Model`` of a library name or model file (a file is read
+    again when its content changed). The forearm's is the library's forearm.toml."""
+    from ..multibody.description import library
+
+    if name in library():
+        return _described(name, None)
+    from ..files import read_input_bytes
+
+    return _described(name, read_input_bytes(name, "--model"))
+
+
+@lru_cache(maxsize=32)
+def _described(name: str, content: bytes | None):
+    from ..multibody.description import find_model
+
+    return find_model(name, "--model")
 
 
 def summary(name: str) -> str:
-    """One line saying what the model ``name`` is (empty for a model registered without one)."""
-    return SUMMARIES.get(name, getattr(MODELS[name], "summary", ""))
+    """One line saying what the model ``name`` is."""
+    if name == PAPER:
+        return "the paper's 1-DOF forearm (Table 1): the elbow fixed at the origin"
+    return description(name).description or f"model file {name}"
 
 
-def model_class(name: str):
-    """The class of the model registered as ``name``; UnknownName (a ValueError) lists the valid ones."""
-    return MODELS[name]
+def joints(name: str) -> tuple[str, ...]:
+    """The joints (coordinates) of model ``name``, in the model's order: columns of its files."""
+    return ("theta",) if name == PAPER else tuple(description(name).coordinates)
+
+
+def n_joints(name: str) -> int:
+    return len(joints(name))
 
 
 def named_motions(name: str) -> tuple:
     """The motions model ``name`` knows by name, its default first (any other is a CSV file)."""
-    return tuple(model_class(name).motions)
+    if name == PAPER:
+        from ..motion import KINEMATICS
+
+        return tuple(KINEMATICS)
+    return tuple(motion.name for motion in description(name).motions)
 
 
 def default_motion(name: str) -> str:
     """The motion a command of model ``name`` follows when none is given."""
-    return model_class(name).motions[0]
+    motions = named_motions(name)
+    if not motions:
+        raise ValueError(f"--motion: model {name} declares no motion; give a CSV file t,"
+                         f"{','.join(joints(name))}")
+    return motions[0]
 
 
 def model_keys(name: str) -> tuple:
     """The constants of model ``name`` that --model and --plant KEY=VALUE may change."""
-    return tuple(model_class(name).keys)
+    if name == PAPER:
+        from ..model import MODEL_KEYS
+
+        return tuple(MODEL_KEYS)
+    from ..multibody.description import change_paths
+
+    model = description(name)
+    return tuple(name for name, _ in model.keys) + tuple(change_paths(model))
 
 
 def with_changes(name: str, pairs=()):
-    """Model ``name`` with some constants changed ((key, value) pairs); ValueError if out of range."""
-    return model_class(name).with_changes(pairs)
+    """Model ``name`` with some constants changed ((key, value) pairs); ValueError if out of range:
+    a ``Forearm`` for the paper's, a ``Model`` description for the others."""
+    if name == PAPER:
+        from ..model import forearm_with
+
+        return forearm_with(pairs)
+    from ..multibody.description import with_short_keys
+
+    return with_short_keys(description(name), tuple(pairs))
+
+
+def value_of(name: str, model, key: str) -> float:
+    """The value of constant ``key`` (a short key or a path) in ``model`` (from ``with_changes``)."""
+    if name == PAPER:
+        return float(getattr(model, key))
+    from ..multibody.description import path_value, short_key_values
+
+    values = short_key_values(model)
+    return values[key] if key in values else path_value(model, key)
 
 
 def runs(name: str):
-    """The module carrying out the runs of model ``name``, or None for the forearm (whose runs are
-    ``fdbench.experiment``'s own)."""
-    module = model_class(name).runs
-    return None if module is None else importlib.import_module(module)
+    """The module carrying out the runs of model ``name``: None for the paper's forearm (whose runs
+    are ``fdbench.experiment``'s own), else ``fdbench.multibody.runs``."""
+    if name == PAPER:
+        return None
+    from ..multibody import runs as multibody_runs
+
+    return multibody_runs

@@ -25,6 +25,15 @@ Choices made here (documented in the README's "Your own model"):
   ``end``, closer than 1 mm to the body's joint point is an error (a segment of zero length: most
   likely a mistyped joint position); a load or centre of mass that close is passed over for the
   next default.
+* ``[[motions]]`` (optional) names motions of the model, the first its default: ``name``,
+  ``type`` ('minimum-jerk', the only type: z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t /
+  duration, from rest to rest), ``duration`` (s, positive), ``start`` and ``goal`` (tables
+  {joint = angle}, rad, naming every joint and no other).
+* ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
+  a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
+  ``<body>.inertia`` an ``@<joint>`` of the body for the inertia about the joint's point (inertia +
+  mass |com - point|^2), which stays when a short key changes the body's mass or centre of mass
+  (``with_short_keys``).
 """
 
 from __future__ import annotations
@@ -32,7 +41,7 @@ from __future__ import annotations
 import heapq
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 GROUND = "ground"
@@ -94,9 +103,23 @@ class Load:
 
 
 @dataclass(frozen=True)
+class MotionSpec:
+    """A named motion of a model: every joint from ``start`` to ``goal`` (rad, (joint, angle) pairs
+    in the model's coordinate order) in ``duration`` s, from rest to rest, along ``type``
+    ('minimum-jerk': z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t / duration)."""
+
+    name: str
+    type: str
+    duration: float
+    start: tuple[tuple[str, float], ...]
+    goal: tuple[tuple[str, float], ...]
+
+
+@dataclass(frozen=True)
 class Model:
     """A planar tree of bodies hanging from ground through pin joints (in topological order),
-    gravity (m/s^2, world axes) and constant loads."""
+    gravity (m/s^2, world axes), constant loads, named motions (the first the default) and short
+    keys ((name, target) pairs: see ``with_short_keys``)."""
 
     name: str
     gravity: tuple[float, float]
@@ -104,6 +127,8 @@ class Model:
     joints: tuple[Joint, ...]
     loads: tuple[Load, ...] = ()
     description: str = ""
+    motions: tuple[MotionSpec, ...] = ()
+    keys: tuple[tuple[str, str], ...] = ()
 
     @property
     def coordinates(self) -> tuple[str, ...]:
@@ -240,11 +265,14 @@ def _parse_json(text: str, source: str):
 
 # ---------------------------------------------------------------- checking values
 
-TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": True, "joints": True, "loads": False}
+TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": True, "joints": True, "loads": False,
+            "motions": False, "keys": False}
 BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
 JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
               "offset": False, "limits": False}
 LOAD_KEYS = {"body": True, "at": True, "force": True}
+MOTION_KEYS = {"name": True, "type": False, "duration": True, "start": True, "goal": True}
+MOTION_TYPES = ("minimum-jerk",)
 
 # what each key allows, said when it is missing or wrong
 ALLOWED = {
@@ -257,7 +285,10 @@ ALLOWED = {
     "child": "a body's name", "at_parent": "[x, y] (m, in the parent's frame)",
     "at_child": "[x, y] (m, in the child's frame)", "offset": "a number (rad)",
     "limits": "[lower, upper] (rad, lower < upper)", "body": "a body's name", "at": "[x, y] (m, in the body's frame)",
-    "force": "[x, y] (N, world axes)",
+    "force": "[x, y] (N, world axes)", "motions": "a list of tables ([[motions]] in TOML)",
+    "keys": "a table of short names, each a path of with_changes ([keys] in TOML)",
+    "duration": "a positive number (s)", "start": "a table {joint = angle} (rad), every joint",
+    "goal": "a table {joint = angle} (rad), every joint",
 }
 
 
@@ -369,7 +400,10 @@ def model_from_dict(data, source: str, default_name: str | None = None) -> Model
     order = _topological_order(check, bodies, joints)
     model = Model(name, gravity, tuple(bodies), tuple(joints[k] for k in order), tuple(loads), description)
     _check_ends(check, model, bodies, order)
-    return model
+    motions = tuple(_motion(check, entry, f"motions[{i}]", model.coordinates)
+                    for i, entry in enumerate(check.entries(data, "motions")))
+    _check_motion_names(check, motions)
+    return replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model))
 
 
 def _body(check: _Checker, entry, key: str) -> Body:
@@ -417,6 +451,86 @@ def _reference(check: _Checker, value, key: str) -> str:
     if not isinstance(value, str):
         check.fail(key, f"must be {ALLOWED[key.rsplit('.', 1)[-1]]}, got {_kind(value)}")
     return value
+
+
+def _motion(check: _Checker, entry, key: str, joints: tuple) -> MotionSpec:
+    entry = check.table(entry, key, MOTION_KEYS)
+    kind = entry.get("type", MOTION_TYPES[0])
+    if kind not in MOTION_TYPES:
+        check.fail(f"{key}.type", f"{_kind(kind)} is not a motion type fdbench knows; valid: {', '.join(MOTION_TYPES)}")
+    return MotionSpec(name=check.name(entry["name"], f"{key}.name"), type=kind,
+                      duration=check.number(entry["duration"], f"{key}.duration", positive=True),
+                      start=_joint_angles(check, entry["start"], f"{key}.start", joints),
+                      goal=_joint_angles(check, entry["goal"], f"{key}.goal", joints))
+
+
+def _joint_angles(check: _Checker, value, key: str, joints: tuple) -> tuple[tuple[str, float], ...]:
+    """{joint = angle} (rad) naming every joint once: (joint, angle) pairs in the model's order."""
+    if not isinstance(value, dict):
+        check.fail(key, f"must be {ALLOWED[key.rsplit('.', 1)[-1]]}, got {_kind(value)}")
+    for name in value:
+        if name not in joints:
+            from ..registry import unknown_name_message
+
+            check.fail(f"{key}.{name}", unknown_name_message("joint", name, list(joints)))
+    for joint in joints:
+        if joint not in value:
+            check.fail(f"{key}.{joint}", f"missing; give the angle (rad) of every joint: {', '.join(joints)}")
+    return tuple((joint, check.number(value[joint], f"{key}.{joint}", what="an angle (rad)")) for joint in joints)
+
+
+def _check_motion_names(check: _Checker, motions: tuple) -> None:
+    seen = {}
+    for i, motion in enumerate(motions):
+        earlier = seen.setdefault(motion.name.lower(), i)
+        if earlier != i:
+            check.fail(f"motions[{i}].name", f"{motion.name!r} is already the name of motions[{earlier}]; "
+                                             "motions need distinct names (ignoring case)")
+
+
+def _short_keys(check: _Checker, value, model: Model) -> tuple[tuple[str, str], ...]:
+    """The [keys] table: short name -> '[-]path[@joint]', each path one of ``change_paths``."""
+    if not isinstance(value, dict):
+        check.fail("keys", f"must be {ALLOWED['keys']}, got {_kind(value)}")
+    if len(value) > MAX_BODIES:
+        check.fail("keys", f"at most {MAX_BODIES} entries, got {len(value)}")
+    for name, target in value.items():
+        key = f"keys.{name}"
+        if not NAME_PATTERN.fullmatch(name):
+            check.fail(key, f"{name!r} is not a short key fdbench accepts: a letter then letters, digits or '_'")
+        if not isinstance(target, str):
+            check.fail(key, f"must be a path of the model as a text ('[-]path[@joint]'), got {_kind(target)}")
+        problem = _target_problem(model, target)
+        if problem:
+            check.fail(key, problem)
+    return tuple(value.items())
+
+
+def parse_target(target: str) -> tuple[bool, str, str | None]:
+    """(negated, path, joint) of a short key's target '[-]path[@joint]'."""
+    negated = target.startswith("-")
+    path, _, joint = target[negated:].partition("@")
+    return negated, path, joint or None
+
+
+def _target_problem(model: Model, target: str) -> str:
+    """Why ``target`` cannot be a short key's target of ``model`` ('' if it can)."""
+    from ..registry import unknown_name_message
+
+    _, path, joint = parse_target(target)
+    paths = change_paths(model)
+    if path not in paths:
+        return (unknown_name_message("path", path, paths)
+                + " (with '-' before it for its negative, @<joint> after an inertia for the inertia about that joint)")
+    if joint is None:
+        return ""
+    body = path.rsplit(".", 1)[0]
+    if not path.endswith(".inertia") or body not in [b.name for b in model.bodies]:
+        return f"@{joint} goes after a body's inertia (<body>.inertia@<joint>), not after {path!r}"
+    near = [j.name for j in model.joints if body in (j.parent, j.child)]
+    if joint not in near:
+        return unknown_name_message(f"joint of body {body!r}", joint, near)
+    return ""
 
 
 def _check_names(check: _Checker, bodies: list, joints: list) -> None:
@@ -524,6 +638,11 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
              "joints": [joint(j) for j in model.joints]}
     if model.loads:
         data["loads"] = [{"body": load.body, "at": list(load.at), "force": list(load.force)} for load in model.loads]
+    if model.motions:
+        data["motions"] = [{"name": m.name, "type": m.type, "duration": m.duration, "start": dict(m.start),
+                            "goal": dict(m.goal)} for m in model.motions]
+    if model.keys:
+        data["keys"] = dict(model.keys)
     return data
 
 
@@ -531,9 +650,11 @@ def to_toml(model: Model, explicit_ends: bool = False) -> str:
     """The model as a TOML file that load_model reads back to an equal Model."""
     data = to_dict(model, explicit_ends)
     lines = [f"{key} = {_toml_value(data[key])}" for key in ("name", "description", "gravity") if key in data]
-    for section in ("bodies", "joints", "loads"):
+    for section in ("bodies", "joints", "loads", "motions"):
         for entry in data.get(section, []):
             lines += ["", f"[[{section}]]"] + [f"{key} = {_toml_value(value)}" for key, value in entry.items()]
+    if "keys" in data:
+        lines += ["", "[keys]"] + [f"{key} = {_toml_value(value)}" for key, value in data["keys"].items()]
     return "\n".join(lines) + "\n"
 
 
@@ -544,6 +665,8 @@ def _toml_value(value) -> str:
         return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
     if isinstance(value, list):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):  # names of joints: bare keys
+        return "{ " + ", ".join(f"{key} = {_toml_value(v)}" for key, v in value.items()) + " }"
     return repr(float(value))
 
 
@@ -631,6 +754,121 @@ def _set_field(entry: dict, rest: str, value: float, default_end) -> str:
     i = {"x": 0, "y": 1}[component]
     entry[field][i] = value
     return f".{field}[{i}]"
+
+
+# ---------------------------------------------------------------- short keys
+
+
+def short_key_values(model: Model) -> dict[str, float]:
+    """{short key: the value it reads in ``model``} (SI units; an @<joint> inertia about the joint)."""
+    return {name: _target_value(model, target) for name, target in model.keys}
+
+
+def _target_value(model: Model, target: str) -> float:
+    negated, path, joint = parse_target(target)
+    if joint is not None:
+        value = inertia_about(model, path.rsplit(".", 1)[0], joint)
+    else:
+        value = path_value(model, path)
+    return -value if negated else value
+
+
+def inertia_about(model: Model, body_name: str, joint_name: str) -> float:
+    """kg m^2: the body's inertia about the point of joint ``joint_name`` (one of the body's joints):
+    inertia + mass |com - point|^2."""
+    body = model.body(body_name)
+    return body.inertia + body.mass * _distance(body.com, _joint_point(model, body_name, joint_name)) ** 2
+
+
+def _joint_point(model: Model, body_name: str, joint_name: str) -> tuple[float, float]:
+    """The joint's point in the body's frame (m): at_child if the body is its child, else at_parent."""
+    joint = model.joints[model.coordinates.index(joint_name)]
+    return joint.at_child if joint.child == body_name else joint.at_parent
+
+
+def path_value(model: Model, path: str) -> float:
+    """The value at one of ``change_paths(model)`` (an end not given reads its resolved default)."""
+    head, _, component = path.rpartition(".")
+    axis = {"x": 0, "y": 1}.get(component)
+    if axis is None:  # <body>.mass, <body>.inertia, <joint>.offset
+        name, field = path.split(".")
+        return getattr(model.body(name) if field != "offset" else model.joints[model.coordinates.index(name)], field)
+    if head == "gravity":
+        return model.gravity[axis]
+    owner, _, field = head.rpartition(".")
+    if owner.startswith("loads["):
+        return getattr(model.loads[int(owner[6:-1])], field)[axis]
+    if field == "force":
+        return next(load for load in model.loads if load.body == owner).force[axis]
+    if owner in model.coordinates:
+        return getattr(model.joints[model.coordinates.index(owner)], field)[axis]
+    return (resolved_end(model, owner) if field == "end" else model.body(owner).com)[axis]
+
+
+def with_short_keys(model: Model, pairs) -> Model:
+    """``model`` with values changed by (name, value) pairs, each name a short key of the model's
+    [keys] table or a path of ``with_changes``. A short key's target '[-]path[@joint]' sets the
+    path to the value (negated with '-'); '<body>.inertia@<joint>' sets the body's inertia about
+    the joint's point (kg m^2). When short keys change a body's mass, centre of mass or joint
+    point, its inertia about the joint of its @ key is what stays (as the built-in arm's I0 and I1
+    do); paths keep the description's meaning (the inertia about the centre of mass stays).
+    ModelError naming ``name=value`` for an unknown name (listing the short keys and paths) or a
+    bad value."""
+    short, paths = dict(model.keys), change_paths(model)
+    about = {target: (_target_value(model, target), None) for target in short.values() if parse_target(target)[2]}
+    inertia_paths = set()  # set by a path: kept as given
+    for name, value in pairs:
+        label = f"{name}={value}"
+        if name not in short and name not in paths:
+            from ..registry import unknown_name_message
+
+            listed = [f"{key} ({target})" for key, target in short.items()] + paths
+            raise ModelError(label, "", unknown_name_message(f"key of model {model.name!r}", name, listed))
+        negated, path, joint = parse_target(short[name]) if name in short else (False, name, None)
+        number = -_float(value, label) if negated else _float(value, label)
+        if joint is not None:
+            about[short[name]] = (number, label)
+            continue
+        before, model = model, _changed(model, path, number, label)
+        if name not in short:
+            inertia_paths |= {path} if path.endswith(".inertia") else set()
+            continue
+        for target, (held, held_label) in about.items():  # what this short key moved keeps its inertia
+            if held_label is None and _moved(before, model, *parse_target(target)[1:]):
+                about[target] = (held, label)
+    for target, (value, label) in about.items():
+        _, path, joint = parse_target(target)
+        if label is not None and path not in inertia_paths:
+            model = _inertia_about(model, path.rsplit(".", 1)[0], joint, value, label)
+    return model
+
+
+def _inertia_about(model: Model, body: str, joint: str, value: float, label: str) -> Model:
+    """``model`` with the body's inertia (kg m^2) about the joint's point set to ``value``."""
+    inertia = value - (inertia_about(model, body, joint) - model.body(body).inertia)
+    if not inertia > 0:
+        raise ModelError(label, f"{body}.inertia@{joint}",
+                         f"the inertia about {joint}, {value:g} kg m^2, must be more than mass * distance^2 of the "
+                         f"centre of mass from the joint ({value - inertia:g} kg m^2): the inertia about the centre "
+                         "of mass must be positive")
+    return _changed(model, f"{body}.inertia", inertia, label)
+
+
+def _moved(before: Model, after: Model, path: str, joint: str) -> bool:
+    """The mass, centre of mass of the body of ``path`` ('<body>.inertia') or the joint's point
+    differ between the two models."""
+    body = path.rsplit(".", 1)[0]
+    old, new = before.body(body), after.body(body)
+    return ((old.mass, old.com) != (new.mass, new.com)
+            or _joint_point(before, body, joint) != _joint_point(after, body, joint))
+
+
+def _changed(model: Model, path: str, value: float, label: str) -> Model:
+    """with_changes of one path, its ModelError naming ``label`` and the path."""
+    try:
+        return with_changes(model, [(path, value)])
+    except ModelError as exc:
+        raise ModelError(label, exc.key or path, exc.problem) from None
 
 
 # ---------------------------------------------------------------- the library

@@ -42,8 +42,13 @@ only as a guard, a NaN pivot as NONFINITE, and fdbench.dynamics.COS_TOL has no r
 Mass matrix: each body's natural-coordinate mass matrix on its basic points (Garcia de Jalon and
 Bayo, ch. 3) from its mass, com and inertia; Q_ext: gravity at the com and the loads mapped to the
 basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels take arrays only (a data
-layout of indices and constants built once per Engine), so they are compiled once and cached for
-every model. Strict IEEE arithmetic.
+layout of indices and constants built once per Engine; they live in fdbench.multibody.kernels), so
+they are compiled once and cached for every model. Strict IEEE arithmetic.
+
+Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
+matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
+angles alone by recursive kinematics of the body points, so a nominal model other than the plant
+is just another layout of arrays.
 """
 
 from __future__ import annotations
@@ -53,27 +58,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import CONSTRAINT, NONFINITE, OK, SINGULAR, VIOLATION_TOL
-from ..jit import njit
+from ..dynamics import OK, VIOLATION_TOL
 
 from .description import Model, resolved_end
+from .kernels import (ALPHA, BETA, COMPUTED, FIXED, GAINS, LENGTH, N_AUX, N_PARAMS, OMEGA2, PD, SWITCH_COS,
+                      TWO_XI_OMEGA, VIOLATION, _derivative, _violation)
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
-
-# named indices into the kernels' arrays
-ALPHA, TWO_XI_OMEGA, OMEGA2, SWITCH_COS, VIOLATION, N_PARAMS = 0, 1, 2, 3, 4, 5  # params
-LENGTH, BETA = 0, 1  # body_geom columns: d (m), beta (rad)
-LAMBDA, PIVOT, VELOCITY_TERM, FORM, N_AUX = 0, 1, 2, 3, 4  # aux columns per body
-FIXED = -1  # pt_index of a point fixed to ground (and lin_idx padding)
+MODES = (PD, COMPUTED, GAINS)  # the feedback laws of ``Engine.simulate``
 
 
 @dataclass
 class SimResult:
-    """The outcome of ``Engine.simulate_pd``: status (fdbench.dynamics codes: 0 ok, 1 nonfinite,
+    """The outcome of ``Engine.simulate``: status (fdbench.dynamics codes: 0 ok, 1 nonfinite,
     2 singular, 3 constraint), the steps done, the joint angles z (rad) and velocities zd (rad/s)
-    at the steps, shape (n_steps + 1, J), NaN after ``steps_done``, the mixed-coordinate states
-    (n_steps + 1, n_state) and the largest constraint violation reached (m^2 or m)."""
+    at the steps, shape (n_steps + 1, J), the largest constraint violation reached (m^2 or m), the
+    mixed-coordinate states and their derivatives ``rates`` (n_steps + 1, n_state) and the total
+    applied joint torques ``applied`` (n_steps + 1, J) (N m); NaN after ``steps_done``."""
 
     status: int
     steps_done: int
@@ -81,6 +83,8 @@ class SimResult:
     zd: np.ndarray
     max_violation: float
     states: np.ndarray
+    rates: np.ndarray
+    applied: np.ndarray
 
 
 def _rotate(angle, local):
@@ -138,6 +142,8 @@ class Engine:
         basic, geom, extra = [], [], {}
         self.joint_parent = np.array([body_index.get(j.parent, FIXED) for j in model.joints], dtype=np.int64)
         self.joint_offset = np.array([j.offset for j in model.joints], dtype=float)
+        self.joint_at_parent = np.array([j.at_parent for j in model.joints], dtype=float).reshape(-1, 2)
+        self.joint_at_child = np.array([j.at_child for j in model.joints], dtype=float).reshape(-1, 2)
         self._local_end = []
         lin_rows = []  # (point, parent body) of the extra points
 
@@ -285,6 +291,21 @@ class Engine:
         return (self.pt_index, self.pt_fixed, self.body_pts, self.body_geom, self.joint_parent, self.lin_idx,
                 self.lin_coef, self.lin_const, self.first, self.base, self.q_ext, self.params)
 
+    @property
+    def inverse_torques_layout(self) -> tuple:
+        """The arrays ``kernels.inverse_torques`` takes after (z, zd, zdd), in order."""
+        return (self.joint_parent, self.joint_offset, self.joint_at_parent, self.joint_at_child, self.pt_owner,
+                self.pt_local, self.pt_index, self.mass, self.q_ext)
+
+    def simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
+        """The arrays ``kernels.rk4``, ``derivatives`` and ``rk4_candidates`` take after the feedback
+        law: the joint offsets, the penalty layout, then the inverse-dynamics layout of ``nominal``
+        (the model computed-torque control believes; None: this one)."""
+        believed = self if nominal is None else nominal
+        if believed.joints != self.joints:
+            raise ValueError(f"the nominal model's joints {believed.joints} are not the plant's {self.joints}")
+        return (self.joint_offset, *self._kernel_layout, *believed.inverse_torques_layout)
+
     # ------------------------------------------------------------------ kinematics (numpy)
     def _kinematics(self, z, zd, zdd):
         """Body angles phi, rates w, angular accelerations (shape (n, B)) and body origins' positions,
@@ -425,271 +446,119 @@ class Engine:
             points[f"{name}.end"] = self._body_point(b, self._local_end[b], phi, w, al, o, vo, ao)[0]
         return {key: value[0] if single else value for key, value in points.items()}
 
-    def simulate_pd(self, z0, zd0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd) -> SimResult:
-        """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the joint state (z0, zd0) under
-        tau = tau_half + kp (ref - z) + kd (refd - zd) per joint; tau_half (N m), ref_half (rad),
-        refd_half (rad/s): shape (2 n_steps + 1, J) on the half-step grid t_k = k dt / 2; kp
-        (N m/rad), kd (N m s/rad): shape (J,)."""
+    def inverse_torques(self, z, zd, zdd) -> np.ndarray:
+        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``): the joint torques (N m) of one
+        minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
+        from .kernels import inverse_torques
+
+        z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
+        out = np.empty(self.n_joints)
+        inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
+        return out
+
+    def simulate(self, y0, dt, n_steps, tau_half, ref_half, refd_half, refdd_half, kp, kd, mode=PD, gains=None,
+                 nominal: "Engine | None" = None) -> SimResult:
+        """Classical RK4 of eq. 12 (compiled, ``kernels.rk4``) over n_steps steps of dt (s) from the
+        state y0 (n_state,) under a feedback law: ``mode`` PD, tau + kp (ref - z) + kd (refd - z')
+        (kp N m/rad, kd N m s/rad); COMPUTED, the inverse dynamics of ``nominal`` (an Engine of the
+        same joints; None: this one) at (z, z') for the accelerations refdd + kp e + kd e' (kp 1/s^2,
+        kd 1/s), plus tau; GAINS, tau + K_k [ref - z, refd - z'] with ``gains`` K of shape
+        (2 n_steps + 1, J, 2J) (N m/rad, N m s/rad). tau_half (N m), ref_half (rad), refd_half
+        (rad/s), refdd_half (rad/s^2): shape (2 n_steps + 1, J) on the half-step grid t_k = k dt / 2;
+        kp, kd: shape (J,) or one number."""
+        from .kernels import rk4
+
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt}")
-        shape = (2 * n_steps + 1, self.n_joints)
-        for name, array in (("tau_half", tau_half), ("ref_half", ref_half), ("refd_half", refd_half)):
+        y0 = self._vector(y0, self.n_state, "the initial state")
+        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, tau_half=tau_half, ref_half=ref_half,
+                                                       refd_half=refd_half, refdd_half=refdd_half)
+        kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
+        layout = self.simulation_layout(nominal)
+        states, rates = np.full((n_steps + 1, self.n_state), np.nan), np.full((n_steps + 1, self.n_state), np.nan)
+        applied = np.full((n_steps + 1, self.n_joints), np.nan)
+        code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
+                                   gains, *layout, states, rates, applied)
+        z, zd = self.joints_from_state(states)
+        return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
+
+    def simulate_pd(self, z0, zd0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd) -> SimResult:
+        """``simulate`` under PD from the joint state (z0, zd0) (rad, rad/s), shapes (J,)."""
+        zero = np.zeros((2 * n_steps + 1, self.n_joints)) if isinstance(n_steps, (int, np.integer)) else None
+        return self.simulate(self.state_from_joints(z0, zd0), dt, n_steps, tau_half, ref_half, refd_half, zero, kp, kd)
+
+    def rates(self, states, tau, ref, refd, refdd, kp, kd, mode=PD, gains=None,
+              nominal: "Engine | None" = None) -> tuple[np.ndarray, np.ndarray]:
+        """The state derivatives (k, n_state) and applied joint torques (k, J) (N m) of k states
+        (k, n_state) under ``simulate``'s feedback law, row i with row i of tau, ref, refd, refdd
+        (each (k, J)) and of gains ((k, J, 2J)): the adaptive integrators' right-hand side. The
+        accelerations are NaN where the points' matrix is singular."""
+        from .kernels import derivatives
+
+        states = np.ascontiguousarray(states, dtype=float)
+        if states.ndim != 2 or states.shape[1] != self.n_state:
+            raise ValueError(f"states must have shape (k, {self.n_state}), got {states.shape}")
+        k = states.shape[0]
+        tau, ref, refd, refdd = self._half_step_arrays(k, tau=tau, ref=ref, refd=refd, refdd=refdd)
+        kp, kd, mode, gains = self._law(kp, kd, mode, gains, k)
+        out, applied = np.empty((k, self.n_state)), np.empty((k, self.n_joints))
+        derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
+                    *self.simulation_layout(nominal), out, applied)
+        return out, applied
+
+    def population_args(self, y0, dt, n_steps, tau, ref_half, refd_half, every, angles_ref, penalty_weight) -> tuple:
+        """The arguments of ``kernels.rk4_candidates`` before its work buffers, for
+        ``fdbench.population.Population(rk4_candidates, n_steps, engine.population_widths)(lam, args)``:
+        the start y0 (n_state,), the step dt (s), the candidates' torques tau (N m, shape (lam,
+        2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
+        J), eq. 18's samples every ``every``-th step with the desired joint angles angles_ref (rad,
+        shape (n_steps // every + 1, J)) and its penalty weight (deg)."""
+        if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
+            raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
+        if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):
+            raise ValueError(f"every must be an integer in [1, {n_steps}], got {every!r}")
+        rows = 2 * n_steps + 1
+        if np.ndim(tau) != 3 or np.shape(tau)[1:] != (rows, self.n_joints):
+            raise ValueError(f"tau must have shape (candidates, {rows}, {self.n_joints}), got {np.shape(tau)}")
+        ref, refd = self._half_step_arrays(rows, ref_half=ref_half, refd_half=refd_half)
+        samples = (n_steps // every + 1, self.n_joints)
+        if np.shape(angles_ref) != samples:
+            raise ValueError(f"angles_ref must have shape {samples}, got {np.shape(angles_ref)}")
+        return (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
+                np.ascontiguousarray(tau, dtype=float), ref + self.joint_offset, refd, int(every),
+                np.array(angles_ref, dtype=float), float(penalty_weight), *self.simulation_layout())
+
+    @property
+    def population_widths(self) -> tuple:
+        """The trailing shapes of ``rk4_candidates``' work buffers: states, rates, applied."""
+        return (self.n_state,), (self.n_state,), (self.n_joints,)
+
+    def _half_step_arrays(self, rows: int, **arrays) -> list[np.ndarray]:
+        """Each array as a contiguous float array of shape (rows, J); ValueError naming another shape."""
+        shape = (rows, self.n_joints)
+        for name, array in arrays.items():
             if np.shape(array) != shape:
                 raise ValueError(f"{name} must have shape {shape} (the half-step grid), got {np.shape(array)}")
-        tau_half, ref_half, refd_half = (np.ascontiguousarray(a, dtype=float) for a in (tau_half, ref_half, refd_half))
-        kp, kd = self._vector(kp, self.n_joints, "kp"), self._vector(kd, self.n_joints, "kd")
-        states = np.full((n_steps + 1, self.n_state), np.nan)
-        ref_half = ref_half + self.joint_offset  # the kernel compares with phi_child - phi_parent
-        code, done, max_viol = rk4_pd(self.state_from_joints(z0, zd0), float(dt), int(n_steps), tau_half, ref_half,
-                                      refd_half, kp, kd, *self._kernel_layout, states)
-        z, zd = self.joints_from_state(states)
-        return SimResult(int(code), int(done), z, zd, float(max_viol), states)
+        return [np.array(array, dtype=float) for array in arrays.values()]
+
+    def _law(self, kp, kd, mode, gains, rows: int):
+        """kp, kd (J,), the mode and the gain matrices as the kernels take them."""
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of PD={PD}, COMPUTED={COMPUTED}, GAINS={GAINS}, got {mode!r}")
+        kp, kd = (np.array(np.broadcast_to(np.asarray(g, dtype=float), (self.n_joints,))) if np.ndim(g) == 0
+                  else self._vector(g, self.n_joints, name) for g, name in ((kp, "kp"), (kd, "kd")))
+        shape = (rows, self.n_joints, 2 * self.n_joints)
+        if mode == GAINS:
+            if np.shape(gains) != shape:
+                raise ValueError(f"gains must have shape {shape}, got {np.shape(gains)}")
+            gains = np.array(gains, dtype=float)
+        else:
+            gains = np.zeros((1, *shape[1:]))
+        return kp, kd, int(mode), gains
 
 
 def _workspace(n_p, n_joints):
     """The kernels' scratch arrays: the points' matrix, right-hand side, per-body values, torques."""
     return np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_joints, N_AUX)), np.zeros(n_joints)
-
-
-# ---------------------------------------------------------------------- compiled kernels
-@njit(inline="always")
-def _point(y, n_q, pt, pt_index, pt_fixed):
-    """x, y, x', y' of a point (fixed points: their position and zero velocity)."""
-    k = pt_index[pt]
-    if k < 0:
-        return pt_fixed[pt, 0], pt_fixed[pt, 1], 0.0, 0.0
-    return y[k], y[k + 1], y[n_q + k], y[n_q + k + 1]
-
-
-@njit(inline="always")
-def _angle_form(c, switch):
-    """1 for the sin form of the angle constraint (|cos| >= switch), 0 for the cos form."""
-    return 1 if abs(c) >= switch else 0
-
-
-@njit(inline="always")
-def _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
-               q_ext, params):
-    """max |Phi_i| (m^2 and m) of the state y: distances, angles (the form in force), linear."""
-    n_b = body_pts.shape[0]
-    n_q = base.shape[0] + n_b
-    worst = 0.0
-    for b in range(n_b):
-        xi, yi, _, _ = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
-        xj, yj, _, _ = _point(y, n_q, body_pts[b, 1], pt_index, pt_fixed)
-        dx, dy, d = xj - xi, yj - yi, body_geom[b, LENGTH]
-        psi = y[base.shape[0] + b] + body_geom[b, BETA]
-        c = math.cos(psi)
-        angle = dy - d * math.sin(psi) if _angle_form(c, params[SWITCH_COS]) == 1 else dx - d * c
-        worst = max(worst, max(abs(dx * dx + dy * dy - d * d), abs(angle)))
-    for r in range(lin_const.shape[0]):
-        value = lin_const[r]
-        for e in range(lin_idx.shape[1]):
-            if lin_idx[r, e] >= 0:
-                value += lin_coef[r, e] * y[lin_idx[r, e]]
-        worst = max(worst, abs(value))
-    return worst
-
-
-@njit(error_model="numpy", inline="always")
-def _derivative(y, tau, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first,
-                base, q_ext, params, K, rhs, aux, q_phi, out):
-    """y' = [q', q''] of eq. 12 into out for the state y and joint torques tau (N m). K, rhs, aux,
-    q_phi: scratch (``_workspace``). Returns OK, or SINGULAR where a pivot of the points' matrix is
-    not positive (then out[n_q:] is left unfinished)."""
-    n_p, n_b = base.shape[0], body_pts.shape[0]
-    n_q = n_p + n_b
-    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
-    for k in range(n_q):
-        out[k] = y[n_q + k]
-    for k in range(n_b):  # joint torques -> generalised forces of the absolute angles
-        q_phi[k] = tau[k]
-    for k in range(n_b):
-        if joint_parent[k] >= 0:
-            q_phi[joint_parent[k]] -= tau[k]
-    for r in range(n_p):
-        rhs[r] = q_ext[r]
-        for c in range(first[r], r + 1):
-            K[r, c] = base[r, c]
-    for r in range(lin_const.shape[0]):  # linear constraints: their J^T J is in base
-        phi, rate = lin_const[r], 0.0
-        for e in range(lin_idx.shape[1]):
-            k = lin_idx[r, e]
-            if k >= 0:
-                phi += lin_coef[r, e] * y[k]
-                rate += lin_coef[r, e] * y[n_q + k]
-        cc = alpha * (txo * rate + om2 * phi)
-        for e in range(lin_idx.shape[1]):
-            k = lin_idx[r, e]
-            if k >= 0:
-                rhs[k] -= lin_coef[r, e] * cc
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        xi, yi, vxi, vyi = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
-        xj, yj, vxj, vyj = y[kj], y[kj + 1], y[n_q + kj], y[n_q + kj + 1]
-        dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
-        d = body_geom[b, LENGTH]
-        psi = y[n_p + b] + body_geom[b, BETA]
-        w = y[n_q + n_p + b]
-        s, c = math.sin(psi), math.cos(psi)
-        # distance: Phi = |dr|^2 - d^2, J = 2 dr on j, -2 dr on i
-        cd = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - d * d)
-        p4 = 4 * alpha
-        K[kj, kj] += p4 * dx * dx
-        K[kj + 1, kj] += p4 * dx * dy
-        K[kj + 1, kj + 1] += p4 * dy * dy
-        rhs[kj] -= 2 * alpha * dx * cd
-        rhs[kj + 1] -= 2 * alpha * dy * cd
-        if ki >= 0:
-            K[ki, ki] += p4 * dx * dx
-            K[ki + 1, ki] += p4 * dx * dy
-            K[ki + 1, ki + 1] += p4 * dy * dy
-            K[kj, ki] -= p4 * dx * dx
-            K[kj, ki + 1] -= p4 * dx * dy
-            K[kj + 1, ki] -= p4 * dx * dy
-            K[kj + 1, ki + 1] -= p4 * dy * dy
-            rhs[ki] += 2 * alpha * dx * cd
-            rhs[ki + 1] += 2 * alpha * dy * cd
-        # angle: its row gives the multiplier lambda = Q_phi / (dPhi/dphi)
-        form = _angle_form(c, params[SWITCH_COS])
-        if form == 1:  # (y_j - y_i) - d sin(psi)
-            pivot = -d * c
-            ca = d * s * w * w + txo * (dvy - d * c * w) + om2 * (dy - d * s)
-            axis = 1
-        else:  # (x_j - x_i) - d cos(psi)
-            pivot = d * s
-            ca = d * c * w * w + txo * (dvx + d * s * w) + om2 * (dx - d * c)
-            axis = 0
-        lam = q_phi[b] / pivot
-        rhs[kj + axis] -= lam
-        if ki >= 0:
-            rhs[ki + axis] += lam
-        aux[b, LAMBDA], aux[b, PIVOT], aux[b, VELOCITY_TERM], aux[b, FORM] = lam, pivot, ca, axis
-    code = _solve_envelope(K, first, rhs)
-    if code != OK:
-        return code
-    for r in range(n_p):
-        out[n_q + r] = rhs[r]
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        axis = int(aux[b, FORM])
-        rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
-        out[n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
-    return OK
-
-
-@njit(error_model="numpy", inline="always")
-def _solve_envelope(K, first, rhs):
-    """Solve K x = rhs in place (x into rhs) for K symmetric positive definite, its lower triangle
-    given inside the envelope first[r] <= c <= r, by L D L^T (L into K's strict lower triangle, D on
-    its diagonal). Returns OK, NONFINITE for a pivot that is NaN, or SINGULAR for one that is not
-    positive (rank lost; rhs is then unfinished)."""
-    n = rhs.shape[0]
-    for r in range(n):
-        fr = first[r]
-        for c in range(fr, r):
-            total = K[r, c]
-            for k in range(max(fr, first[c]), c):
-                total -= K[r, k] * K[c, k]  # K[r, k] holds L[r, k] D[k] until row r is done
-            K[r, c] = total
-        diag = K[r, r]
-        for c in range(fr, r):
-            lrc = K[r, c] / K[c, c]
-            diag -= lrc * K[r, c]
-            K[r, c] = lrc
-        if math.isnan(diag):
-            return NONFINITE
-        if not diag > 0.0:
-            return SINGULAR
-        K[r, r] = diag
-    for r in range(n):  # L z = rhs
-        total = rhs[r]
-        for k in range(first[r], r):
-            total -= K[r, k] * rhs[k]
-        rhs[r] = total
-    for r in range(n):
-        rhs[r] /= K[r, r]
-    for r in range(n - 1, -1, -1):  # L^T x = z, column by column
-        x = rhs[r]
-        for k in range(first[r], r):
-            rhs[k] -= K[r, k] * x
-    return OK
-
-
-@njit(error_model="numpy", inline="always")
-def _pd_derivative(y, half, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts, body_geom,
-                   joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, K, rhs, aux, q_phi, torque,
-                   out):
-    """The state derivative at grid index ``half`` under per-joint PD feedback plus feedforward."""
-    n_p, n_b = base.shape[0], body_pts.shape[0]
-    n_q = n_p + n_b
-    for k in range(n_b):
-        p = joint_parent[k]
-        z = y[n_p + k] - (y[n_p + p] if p >= 0 else 0.0)
-        zd = y[n_q + n_p + k] - (y[n_q + n_p + p] if p >= 0 else 0.0)
-        torque[k] = tau_half[half, k] + kp[k] * (ref_half[half, k] - z) + kd[k] * (refd_half[half, k] - zd)
-    return _derivative(y, torque, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
-                       first, base, q_ext, params, K, rhs, aux, q_phi, out)
-
-
-@njit(error_model="numpy")
-def rk4_pd(y0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts, body_geom,
-           joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, states):
-    """Classical RK4 of eq. 12 over n_steps steps of dt (s) under per-joint PD plus feedforward (see
-    ``Engine.simulate_pd``; ref_half holds the reference joint angles plus the joint offsets, as the
-    kernel's z is the difference of the body angles). Fills
-    states (n_steps + 1, n_state) up to the last step reached. Returns (status, steps_done, max
-    constraint violation)."""
-    n_p, n_b = base.shape[0], body_pts.shape[0]
-    n = y0.shape[0]
-    K, rhs, aux, q_phi = np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)), np.zeros(n_b)
-    torque = np.zeros(n_b)
-    y = y0.copy()
-    k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    max_viol = _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
-                          first, base, q_ext, params)
-    for i in range(n_steps + 1):
-        j = 2 * i
-        code = _pd_derivative(y, j, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts, body_geom,
-                              joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, K, rhs, aux,
-                              q_phi, torque, k1)
-        for m in range(n):
-            states[i, m] = y[m]
-        if code != OK:
-            return code, i, max_viol
-        if i == n_steps:
-            break
-        for m in range(n):
-            tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _pd_derivative(tmp, j + 1, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts,
-                              body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, K,
-                              rhs, aux, q_phi, torque, k2)
-        if code == OK:
-            for m in range(n):
-                tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _pd_derivative(tmp, j + 1, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts,
-                                  body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
-                                  K, rhs, aux, q_phi, torque, k3)
-        if code == OK:
-            for m in range(n):
-                tmp[m] = y[m] + dt * k3[m]
-            code = _pd_derivative(tmp, j + 2, tau_half, ref_half, refd_half, kp, kd, pt_index, pt_fixed, body_pts,
-                                  body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
-                                  K, rhs, aux, q_phi, torque, k4)
-        if code != OK:
-            return code, i, max_viol
-        finite = True
-        for m in range(n):
-            tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
-            finite = finite and math.isfinite(tmp[m])
-        if not finite:
-            return NONFINITE, i, max_viol
-        viol = _violation(tmp, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
-                          first, base, q_ext, params)
-        if viol > params[VIOLATION]:
-            return CONSTRAINT, i, max(max_viol, viol)
-        max_viol = max(max_viol, viol)
-        y[:] = tmp
-    return OK, n_steps, max_viol

@@ -1,5 +1,6 @@
-"""The two-segment arm through the command line: --model arm2 on inverse, simulate and control,
-arm motion and torque files, per-joint indicators, and bad input as one line with exit 2."""
+"""Models of the library through the command line, on the multibody engine: --model arm2 on every
+command against the arm's closed form (tests/arm2_closed_form.py), motion and torque files by joint
+name, per-joint indicators, and bad input as one line with exit 2."""
 
 from __future__ import annotations
 
@@ -13,11 +14,21 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.models import arm2_sim as sim
-from fdbench.models.arm2 import Arm2
-from fdbench.models.arm2_motion import Reach
+from fdbench.multibody import simulation as sim
+from fdbench.multibody.description import find_model, with_short_keys
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.motions import joint_motion
+
+from arm2_closed_form import joint_torques, reach
 
 runner = CliRunner()
+ARM = Engine(find_model("arm2"))
+REACH = joint_motion("reach", find_model("arm2"))
+SAMPLES = np.linspace(0.0, 1.0, 1001)
+
+
+def arm(**changes) -> Engine:
+    return Engine(with_short_keys(find_model("arm2"), tuple(changes.items())))
 
 
 def invoke(*args, code=0):
@@ -36,7 +47,7 @@ def test_inverse_history_is_the_models_joint_torques():
     z = np.radians(table[["shoulder", "elbow"]].to_numpy())  # degrees, like a motion file
     w = np.radians(table[["shoulder_vel", "elbow_vel"]].to_numpy())
     dw = np.radians(table[["shoulder_acc", "elbow_acc"]].to_numpy())
-    expected = Arm2(m0=2.5).joint_torques(z, w, dw)
+    expected = joint_torques(z, w, dw, m0=2.5)
     changed = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--model", "m0=2.5", "--format", "csv").stdout))
     np.testing.assert_allclose(changed[["shoulder_torque", "elbow_torque"]].to_numpy(), expected, rtol=1e-8)
     np.testing.assert_allclose(changed.elbow_torque, table.elbow_torque, rtol=1e-8)  # m0 acts on the shoulder only
@@ -68,8 +79,8 @@ def test_plant_mismatch_on_the_arm():
     ct = as_json("control", "--model", "arm2", "--plant", "m0=2.5", "--controller", "computed-torque")
     assert both["rmse_rot_deg"] < 1e-5 and both["model_options"] == "m0=2.5" and both["plant"] is None
     assert plant["plant"] == "m0=2.5" and plant["rmse_rot_deg"] > 0.1 and ct["rmse_rot_deg"] > 0.1
-    direct = sim.simulate(sim.feedforward(Arm2(), Reach()), Arm2(m0=2.5), Reach(), 80.0, 0.3)
-    rot, _ = sim.rmse_deg(direct, sim.inverse_dynamics(None, Arm2(), Reach()).angles)
+    direct = sim.simulate(sim.feedforward(ARM, REACH), arm(m0=2.5), REACH, 80.0, 0.3)
+    rot, _ = sim.rmse_deg(direct, reach(SAMPLES)[0])
     assert plant["rmse_rot_deg"] == pytest.approx(rot, rel=1e-12)
 
 
@@ -83,22 +94,20 @@ def test_lqr_on_the_arm():
 
 
 def test_simulate_reads_one_torque_column_per_joint(tmp_path):
-    motion = Reach()
     t = np.linspace(0.0, 1.0, 2001)
-    torque = sim.inverse_dynamics(t, Arm2(), motion).torque + np.array([0.05, -0.02])
+    torque = joint_torques(*reach(t)) + np.array([0.05, -0.02])
     path = tmp_path / "torque.csv"
     pd.DataFrame({"t": t, "shoulder": torque[:, 0], "elbow": torque[:, 1]}).to_csv(path, index=False)
     record = as_json("simulate", "--model", "arm2", "--torque-file", path)
-    expected = sim.simulate(lambda s: np.stack([np.interp(s, t, torque[:, j]) for j in range(2)], -1), Arm2(), motion)
-    rot, _ = sim.rmse_deg(expected, sim.inverse_dynamics(None, Arm2(), motion).angles)
+    expected = sim.simulate(lambda s: np.stack([np.interp(s, t, torque[:, j]) for j in range(2)], -1), ARM, REACH)
+    rot, _ = sim.rmse_deg(expected, reach(SAMPLES)[0])
     assert record["torque"] == f"file:{path}" and record["rmse_rot_deg"] == pytest.approx(rot, rel=1e-9)
     assert record["rmse_rot_deg"] > 0.1  # the offsets drive the arm off the reach
 
 
 def test_a_motion_file_in_degrees_gives_the_reach(tmp_path):
-    motion = Reach()
-    z, w, dw = motion(motion.samples)
-    frame = {"t": motion.samples}
+    z, w, dw = reach(SAMPLES)
+    frame = {"t": SAMPLES}
     for j, joint in enumerate(("shoulder", "elbow")):
         frame.update({joint: np.degrees(z[:, j]), f"{joint}_vel": np.degrees(w[:, j]), f"{joint}_acc": np.degrees(dw[:, j])})
     path = tmp_path / "reach.csv"
@@ -112,8 +121,7 @@ def test_a_motion_file_in_degrees_gives_the_reach(tmp_path):
 def test_arm_inverse_csv_and_trajectory_read_back_as_motions(tmp_path):
     """The arm's inverse --format csv is a motion file (degrees, <joint>_vel, <joint>_acc), and a
     saved trajectory's angles are read back in degrees."""
-    motion = Reach()
-    z, w, dw = motion(motion.samples)
+    z, w, dw = reach(SAMPLES)
     path = tmp_path / "m.csv"
     path.write_text(invoke("inverse", "--model", "arm2", "--format", "csv").stdout)
     again = pd.read_csv(io.StringIO(invoke("inverse", "--model", "arm2", "--motion", path, "--format", "csv").stdout))
@@ -138,10 +146,9 @@ def test_the_arm_inverse_history_is_a_torque_file(tmp_path):
 
 
 def test_an_arm_file_in_radians_from_an_older_fdbench_needs_radians(tmp_path):
-    motion = Reach()
-    z, w, dw = motion(motion.samples)
+    z, w, dw = reach(SAMPLES)
     old = tmp_path / "old.csv"
-    pd.DataFrame({"t": motion.samples, "shoulder": z[:, 0], "elbow": z[:, 1], "shoulder_dot": w[:, 0],
+    pd.DataFrame({"t": SAMPLES, "shoulder": z[:, 0], "elbow": z[:, 1], "shoulder_dot": w[:, 0],
                   "elbow_dot": w[:, 1], "shoulder_ddot": dw[:, 0], "elbow_ddot": dw[:, 1]}).to_csv(old, index=False)
     lines = invoke("control", "--model", "arm2", "--motion", old, code=2).stderr.splitlines()
     assert len(lines) == 1 and "shoulder_dot" in lines[0] and "older fdbench" in lines[0] and "--radians" in lines[0]
@@ -155,8 +162,8 @@ def test_the_forearm_is_the_default_model():
 
 
 @pytest.mark.parametrize("args, word", [
-    (["--model", "arm3"], "valid: forearm, arm2"), (["--model", "arm2", "--model", "forearm"], "one model"),
-    (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "arm2 constant"),
+    (["--model", "arm3"], "valid: forearm, arm2, leg3"), (["--model", "arm2", "--model", "forearm"], "one model"),
+    (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "unknown key of model 'arm2' 'mass'"),
     (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45", "--rtol", "0"], "--rtol"),
     (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
     (["--model", "arm2", "--controller", "computed-torque", "--bandwidth", "-1"], "--bandwidth"), (["--model", "arm2", "--sample-dt", "5"], "--sample-dt"),
@@ -198,7 +205,7 @@ def test_optimize_on_the_arm_refuses_what_it_lacks():
 
 def test_methods_lists_the_models():
     text = invoke("methods").stdout
-    assert "models (--model):" in text and "  arm2 " in text and "  forearm " in text
+    assert "models (--model" in text and "  arm2 " in text and "  forearm " in text and "  leg3 " in text
 
 
 def test_arm_runs_are_stored_and_found_again(tmp_path):
@@ -292,7 +299,7 @@ def test_hidden_auto_on_the_arm_is_the_smallest_count_fitting_every_joint():
     record = as_json("optimize", "--model", "arm2", "--torque", "ann", "--hidden", "auto", "--budget", "3")
     chosen = int(record["torque_options"].split("=")[1])
     assert record["n_params"] == 2 * (3 * chosen + 1)
-    inv = sim.inverse_dynamics(None, Arm2(), Reach())
+    inv = sim.inverse_dynamics(None, ARM, REACH)
 
     def fits(n):
         errors = []
@@ -303,3 +310,122 @@ def test_hidden_auto_on_the_arm_is_the_smallest_count_fitting_every_joint():
         return max(errors) <= AUTO_TOLERANCE
 
     assert fits(chosen) and (chosen == 1 or not fits(chosen - 1))
+
+
+# ---------------------------------------------------------------------- any model: the leg and files
+LEG = ["--model", "leg3"]
+
+
+def test_the_leg_swings_through_the_hanging_pose_under_every_controller():
+    """The thigh passes -90 deg, where the paper's angle constraint is singular: every controller
+    tracks the leg's default motion to the end."""
+    for args in ([], ["--controller", "computed-torque"], ["--controller", "lqr"]):
+        record = as_json("control", *LEG, *args)
+        duration = find_model("leg3").motions[0].duration
+        assert record["status"] == "success" and record["t_end"] == pytest.approx(duration)
+        assert record["rmse_rot_deg"] < 0.05, (args, record["rmse_rot_deg"])
+        assert {"rmse_rot_deg_hip", "rmse_rot_deg_knee", "rmse_rot_deg_ankle"} <= set(record)
+
+
+def test_the_legs_inverse_history_drives_its_simulation(tmp_path):
+    path = tmp_path / "leg.csv"
+    path.write_text(invoke("inverse", *LEG, "--format", "csv").stdout)
+    table = pd.read_csv(path)
+    assert {"t", "hip", "knee", "ankle", "hip_torque", "knee_torque", "ankle_torque"} <= set(table.columns)
+    record = as_json("simulate", *LEG, "--torque-file", path)
+    assert record["rmse_torque_nm"] < 1e-9 and record["status"] == "success"
+
+
+def test_optimize_and_collocate_on_the_leg():
+    optimised = as_json("optimize", *LEG, "--torque", "cs", "--feedforward", "--opt", "bfgs", "--budget", "10")
+    assert optimised["n_params"] == 3 * 11 and optimised["best_objective"] <= optimised["initial_objective"]
+    collocated = as_json("collocate", *LEG, "--nodes", "40")
+    assert collocated["status"] == "success" and collocated["rmse_rot_deg"] < 0.5
+
+
+def test_a_model_file_counts_by_its_content(tmp_path):
+    """The same file under two names is the same model (one spec hash); a changed mass is another;
+    the file is an input that no output may overwrite."""
+    from fdbench.multibody.description import library
+
+    text = library()["leg3"].read_text()
+    first, second = tmp_path / "a.toml", tmp_path / "b.toml"
+    first.write_text(text)
+    second.write_text(text)
+    a, b = as_json("control", "--model", first), as_json("control", "--model", second)
+    assert a["spec_hash"] == b["spec_hash"] and a["rmse_rot_deg"] == b["rmse_rot_deg"]
+    second.write_text(text.replace("mass = 7.5 ", "mass = 7.6 "))
+    assert as_json("control", "--model", second)["spec_hash"] != a["spec_hash"]
+    before = first.read_bytes()
+    result = invoke("control", "--model", first, "--save-trajectory", first, code=2)
+    assert len(result.stderr.splitlines()) == 1 and first.read_bytes() == before
+
+
+@pytest.mark.parametrize("content, words", [
+    ("[[bodies]]\nname = 'a'\nmass = -1\ncom = [0.1, 0]\ninertia = 0.1\n[[joints]]\nname = 'j'\nparent = 'ground'\n"
+     "child = 'a'\nat_parent = [0, 0]\n", ["bodies[0].mass"]),
+    ("[[bodies]]\nname = 'a'\nmass = 1\ncom = [0.1, 0]\ninertia = 0.1\n[[joints]]\nname = 'j'\ntype = 'pin'\n"
+     "parent = 'nowhere'\nchild = 'a'\nat_parent = [0, 0]\nat_child = [0, 0]\n", ["joints[0].parent", "nowhere"]),
+    ("this is not toml", ["not valid TOML"]),
+])
+def test_a_bad_model_file_is_one_line_exit_2_naming_file_and_key(tmp_path, content, words):
+    path = tmp_path / "bad.toml"
+    path.write_text(content)
+    lines = invoke("control", "--model", path, code=2).stderr.splitlines()
+    assert len(lines) == 1 and str(path) in lines[0] and all(w in lines[0] for w in words), lines
+
+
+# ---------------------------------------------------------------------- collocation on the arm
+def test_collocate_on_the_arm_saves_a_torque_that_simulate_replays(tmp_path):
+    path = tmp_path / "torque.csv"
+    record = json.loads(invoke("collocate", "--model", "arm2", "--nodes", 50, "-f", "json", "--save-torque", path,
+                               "--quiet").stdout)
+    assert record["model"] == "arm2" and record["command"] == "collocate" and record["nodes"] == 50
+    assert record["status"] == "success" and {"rmse_rot_deg_shoulder", "rmse_torque_nm_elbow"} <= set(record)
+    table = pd.read_csv(path)
+    assert list(table.columns) == ["t", "shoulder", "elbow"] and len(table) == 2001
+    replay = json.loads(invoke("simulate", "--model", "arm2", "--torque-file", path, "-f", "json").stdout)
+    for key in ("rmse_rot_deg", "rmse_torque_nm", "rmse_rot_deg_shoulder", "rmse_rot_deg_elbow"):
+        assert replay[key] == pytest.approx(record[key], rel=1e-9), key
+
+
+def test_an_iteration_limit_on_the_arm_is_a_status_with_a_message():
+    record = json.loads(invoke("collocate", "--model", "arm2", "--max-iter", 1, "-f", "json").stdout)
+    assert record["ipopt_status"] == "Maximum_Iterations_Exceeded" and record["status"] == "collocation_failed"
+    assert "--max-iter" in record["message"] and np.isfinite(record["rmse_rot_deg"])
+
+
+@pytest.mark.parametrize("args, word", [
+    (["--nodes", 1], "--nodes"), (["--scheme", "euler"], "--scheme"), (["--regularization", -1], "--regularization"),
+    (["--max-iter", 0], "--max-iter"), (["--max-time", 0], "--max-time"), (["--integrator", "dop853", "--atol", 2], "--atol"),
+    (["--motion", "paper"], "--motion"), (["--model", "m0=-1"], "m0"),
+])
+def test_bad_collocate_options_on_the_arm_are_one_line_exit_2(args, word, tmp_path):
+    out = tmp_path / "torque.csv"
+    result = invoke("collocate", "--model", "arm2", *args, "--save-torque", out, code=2)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and word in lines[0], result.stderr
+    assert result.stdout == "" and not out.exists()
+
+
+def test_the_arms_beyond_the_paper_table_has_direct_collocation():
+    from fdbench.beyond import beyond_methods
+
+    specs = [m.spec for m in beyond_methods(kinematics="reach", model_name="arm2")]
+    assert [s.command for s in specs] == ["control", "control", "collocate"]
+    assert all(s.model_name == "arm2" for s in specs)
+
+
+def test_a_missing_model_file_and_one_without_motions_are_one_line_exit_2(tmp_path):
+    missing = invoke("control", "--model", tmp_path / "none.toml", code=2).stderr.splitlines()
+    assert len(missing) == 1 and missing[0].count("--model") == 1 and "does not exist" in missing[0]
+    from fdbench.multibody.description import library
+
+    text = library()["leg3"].read_text()
+    path = tmp_path / "still.toml"
+    path.write_text(text[:text.index("[[motions]]")])
+    lines = invoke("control", "--model", path, code=2).stderr.splitlines()
+    assert len(lines) == 1 and "--motion" in lines[0] and "t,hip,knee,ankle" in lines[0]
+    motion = tmp_path / "m.csv"
+    motion.write_text(invoke("inverse", *LEG, "--format", "csv").stdout)
+    assert as_json("control", "--model", path, "--motion", motion)["status"] == "success"

@@ -1,0 +1,142 @@
+"""The tracking problem of section 4 on any model of the engine: one block of torque parameters per
+joint (each joint its own instance of the parameterisation, prepared on that joint's
+inverse-dynamics torque), the blocks concatenated into one parameter vector, and
+
+    f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end / T)
+
+with RMSE_rot_deg over every joint and all samples reached (eq. 18 for J joints). Optimisers see
+one objective of scaled parameters x = p / scale and work unchanged; budgets keep their meaning
+(one evaluation, one forward simulation).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..problem import ShootingProblem
+from . import simulation as sim
+
+
+class JointTrackingProblem(ShootingProblem):
+    """Optimise per-joint torque parameters so that the simulated body (``engine``) tracks ``motion``.
+
+    ``torque``: a registered parameterisation's name, made once per joint with ``options``.
+    With ``feedforward`` the parameterised torques are added to the inverse-dynamics torques
+    (eq. 19); without, they are the whole drive torques (eq. 15). ``nominal`` (an engine of the same
+    joints; default: ``engine``) gives the inverse dynamics that prepare the parameters, the
+    feedforward and the objective's reference. ``dt``, ``integrator``, ``rtol`` and ``atol`` say how
+    to simulate (``simulation.simulate``): with rk4 the torques are computed on its half-step grid at
+    once, with an adaptive integrator at the times it asks for."""
+
+    def __init__(self, torque: str, engine, motion, feedforward: bool = False, penalty_weight: float = 1.0,
+                 dt: float = 1e-3, nominal=None, integrator: str = "rk4", rtol: float = 1e-6, atol: float = 1e-9,
+                 **options):
+        from ..integrate import check_integrator, steps
+        from ..torques import make_torque
+
+        if not (math.isfinite(penalty_weight) and penalty_weight >= 0):
+            raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
+        self.engine, self.motion, self.dt = engine, motion, dt
+        self.integrator, self.rtol, self.atol = check_integrator(integrator), rtol, atol
+        self.feedforward, self.penalty_weight = feedforward, penalty_weight
+        self._nominal = engine if nominal is None else nominal
+        self.inverse = sim.inverse_dynamics(None, self._nominal, motion)
+        self.duration = motion.duration
+        n_joints = self.inverse.torque.shape[1]
+        self.parts = [make_torque(torque, **options) for _ in range(n_joints)]
+        p0 = [np.asarray(part.prepare(self.inverse.t, self.inverse.torque[:, j], feedforward), dtype=float)
+              for j, part in enumerate(self.parts)]
+        self.blocks = np.cumsum([0] + [len(p) for p in p0])
+        self.p0 = np.concatenate(p0)
+        self.scale = np.concatenate([np.asarray(part.scale(), dtype=float) for part in self.parts])
+        self.x0 = self.p0 / self.scale
+        n = steps(dt, self.duration)
+        self._half = np.linspace(0.0, self.duration, 2 * n + 1)
+        self._on_grid_batch = [part.on_grid_batch(self._half) for part in self.parts]
+        self._ff_half = (np.array(sim.inverse_dynamics(self._half, self._nominal, motion).torque) if feedforward
+                         else np.zeros((2 * n + 1, n_joints)))
+        self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), motion.samples)
+                       if self.integrator == "rk4" else 0)  # the population kernel is RK4's
+        self._population = None
+        self._n_steps = n
+        if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
+            z0, zd0, _ = motion(np.zeros(1))
+            ref, refd, _ = (np.ascontiguousarray(r, dtype=float) for r in motion(self._half))
+            # the population kernel's arguments around the candidates' torques (see ``objectives``)
+            self._kernel_start = (engine.state_from_joints(z0[0], zd0[0]), self.duration / n, n)
+            self._kernel_rest = (ref, refd, self._every, np.ascontiguousarray(self.inverse.angles), penalty_weight)
+
+    @property
+    def n_params(self) -> int:
+        return int(self.blocks[-1])
+
+    @property
+    def batched(self) -> bool:
+        """True when ``objectives`` runs a population in one compiled call (the motion's samples
+        on the integrator's grid); else it evaluates the candidates one by one."""
+        return bool(self._every)
+
+    def torques_on_grid_batch(self, P) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for every row of P, shape
+        (lam, n_params) -> (lam, 2 n + 1, J): each joint's population evaluator on its block, plus
+        the inverse-dynamics torques with feedforward. Row c depends on P[c] alone, to the last bit."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        with np.errstate(all="ignore"):
+            own = np.stack([f(P[:, a:b]) for f, a, b in zip(self._on_grid_batch, self.blocks[:-1], self.blocks[1:])],
+                           axis=-1)
+        return self._ff_half + own
+
+    def torques_on_grid(self, p) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for parameters p, shape (2 n + 1, J)."""
+        return self.torques_on_grid_batch(np.asarray(p, dtype=float)[None])[0]
+
+    def torque_function(self, p):
+        """The drive torques for parameters p as a function t (s), shape (k,) -> (k, J) N m (the
+        feedforward, if any, computed at t)."""
+        p = np.asarray(p, dtype=float)
+
+        def drive(t):
+            t = np.asarray(t, dtype=float)
+            own = np.stack([part.evaluate(p[a:b], t) for part, a, b in zip(self.parts, self.blocks[:-1], self.blocks[1:])],
+                           axis=-1)
+            return own + sim.inverse_dynamics(t, self._nominal, self.motion).torque if self.feedforward else own
+
+        return drive
+
+    def simulate(self, p) -> sim.Simulation:
+        """The forward simulation of parameters p: RK4 on the torques of ``torques_on_grid``, or
+        an adaptive integrator on ``torque_function``."""
+        how = dict(dt=self.dt, integrator=self.integrator, rtol=self.rtol, atol=self.atol)
+        if self.integrator != "rk4":
+            return sim.simulate(self.torque_function(p), self.engine, self.motion, **how)
+        tau = self.torques_on_grid(p)
+        half = self._half
+        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.engine, self.motion, **how)
+
+    def rmse_deg(self, result: sim.Simulation) -> float:
+        """RMSE of the joint angles (deg) over every joint and the samples reached."""
+        return sim.rmse_deg(result, self.inverse.angles)[0]
+
+    def objectives(self, P) -> np.ndarray:
+        """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
+        operations (``torques_on_grid_batch``), the simulations and their objectives in one
+        compiled call spread over threads (``population.Population``). ``objective`` is this with a
+        population of one, so the numbers equal those of the rows one by one, to the last bit,
+        whatever the number of threads."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        if not self.batched:
+            return np.array([self.objective(p) for p in P])
+        if self._population is None:
+            from ..population import Population
+            from .kernels import rk4_candidates
+
+            self._population = Population(rk4_candidates, self._n_steps, self.engine.population_widths)
+        tau = self.torques_on_grid_batch(P)
+        args = self.engine.population_args(*self._kernel_start, tau, *self._kernel_rest)
+        return self._population(len(P), args)
+
+
+def _interp(grid, values, t):
+    return np.stack([np.interp(t, grid, values[:, j]) for j in range(values.shape[1])], axis=-1)

@@ -1,0 +1,371 @@
+"""The runs of every model but the paper's forearm, from a ``RunSpec`` (``fdbench.experiment`` hands
+them over): inverse dynamics, open-loop simulation, control (PD per joint with computed
+feedforward, computed torque, LQR), optimisation and direct collocation, on the multibody engine
+(``fdbench.multibody``) built from the model's description (a library name or a model file), each
+giving a flat record (the forearm's keys plus per-joint indicators) and a trajectory table.
+
+Indicators for J joints: ``rmse_rot_deg`` is the root mean square over all joints and samples of
+the angle error (deg), ``rmse_torque_nm`` likewise of the torque (N m) against the inverse-dynamics
+torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint's.
+
+Files (CSV with a header, names case-insensitive, any order): a motion has ``t`` (s) and one angle
+column per joint (deg, or rad), with optional ``<joint>_vel`` and ``<joint>_acc``; a torque history
+has ``t`` (s) and one column per joint (N m), or ``<joint>_torque`` where the file has them (the
+history of ``inverse --format csv`` or ``--save-trajectory``, whose ``<joint>`` is an angle).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from functools import lru_cache
+
+import numpy as np
+
+from .. import __version__
+from ..files import BadFile, read_history_csv
+from . import simulation as sim
+
+CONTROLLERS = ("pd", "computed-torque", "lqr")
+
+
+# ---------------------------------------------------------------------- the model and its motion
+def nominal(spec):
+    """The model the methods believe: the spec's model with its ``--model`` changes."""
+    from ..models import with_changes
+
+    return with_changes(spec.model_name, spec.model)
+
+
+def plant(spec):
+    """The simulated body: the nominal model with the ``--plant`` changes too."""
+    from ..models import with_changes
+
+    return with_changes(spec.model_name, tuple(spec.model) + tuple(spec.plant))
+
+
+@lru_cache(maxsize=32)
+def _engine(model, alpha: float, xi: float, omega: float):
+    from .engine import Engine
+
+    return Engine(model, alpha, xi, omega)
+
+
+def engine(spec, model=None):
+    """The engine of ``model`` (default: the plant) with the spec's penalty parameters."""
+    return _engine(plant(spec) if model is None else model, spec.alpha, spec.xi, spec.omega)
+
+
+def joints(spec) -> tuple:
+    return nominal(spec).coordinates
+
+
+@lru_cache(maxsize=32)
+def _motions(model_name, source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, seed, capture_hz,
+             digest):
+    from ..experiment import motion_digest
+    from ..models import description
+    from .motions import Resampled, joint_motion, noisy_joints
+
+    estimate = dict(cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda)
+    truth = joint_motion(source, description(model_name), radians, **estimate)
+    if sample_dt is not None:
+        truth = Resampled(truth, sample_dt)
+    if digest is not None and digest != motion_digest(source):
+        raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
+    if not noise_deg:
+        return truth, truth
+    return noisy_joints(truth, noise_deg, seed, capture_hz, **estimate), truth
+
+
+def motions(spec):
+    """(desired, true) motions of a spec: the one given to every method (a noisy capture when
+    ``noise_deg`` > 0) and the one its indicators are measured against."""
+    return _motions(spec.model_name, spec.kinematics, spec.radians, spec.cutoff_hz, spec.smoothing, spec.spline_lambda,
+                    spec.sample_dt, spec.noise_deg, spec.seed or 0, spec.capture_hz, dict(spec.inputs).get("--motion"))
+
+
+def reference(spec) -> sim.JointInverse:
+    """The nominal model's inverse dynamics on the true motion, on its samples (the indicators' reference)."""
+    return sim.inverse_dynamics(None, engine(spec, nominal(spec)), motions(spec)[1])
+
+
+def describe(spec) -> dict:
+    """The record's fields that say which motion, noise, filter, model and plant a run used."""
+    from ..experiment import _options_text
+
+    desired, truth = motions(spec)
+    out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
+    parts = getattr(desired, "parts", [])
+    if parts and hasattr(parts[0], "describe"):
+        out["derivatives"] = parts[0].describe().get("derivatives")
+    out.update(noise_deg=spec.noise_deg, model=spec.model_name, model_options=_options_text(spec.model) or None,
+               plant=_options_text(spec.plant) or None)
+    return out
+
+
+def check(spec) -> None:
+    """ValueError (one line) for what the engine cannot run, or settings out of range; BadFile for a
+    motion file that cannot be used. No simulation is run."""
+    from ..integrate import Settings
+    from ..model import Penalty
+
+    if spec.gradient != "fd":
+        raise ValueError(f"--gradient exact: not available with --model {spec.model_name} yet (the forearm has it)")
+    if spec.command == "control" and (spec.controller or "pd") not in CONTROLLERS:
+        raise ValueError(f"--controller {spec.controller}: not available with --model {spec.model_name} yet "
+                         f"({', '.join(CONTROLLERS)})")
+    engine(spec, nominal(spec)), engine(spec)
+    # the integrator's checks of its dt or tolerances, and the penalty's
+    Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), integrator=spec.integrator, dt=spec.dt, rtol=spec.rtol,
+             atol=spec.atol)
+    motions(spec)
+
+
+def integration(spec) -> dict:
+    """The keyword arguments of ``simulation.simulate`` that say how a spec integrates."""
+    return dict(dt=spec.dt, integrator=spec.integrator, rtol=spec.rtol, atol=spec.atol)
+
+
+def _simulate(spec, drive, **law):
+    """The plant's forward simulation of the desired motion under ``drive`` and a feedback law."""
+    return sim.simulate(drive, engine(spec), motions(spec)[0], **law, **integration(spec))
+
+
+# ---------------------------------------------------------------------- records
+def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
+    """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows), the
+    columns of a motion file (t, <joint>, <joint>_vel, <joint>_acc in s, deg, deg/s, deg/s^2) and
+    <joint>_torque (N m)."""
+    desired, _ = motions(spec)
+    names = joints(spec)
+    body = engine(spec, nominal(spec))
+    began = time.perf_counter()
+    inv = sim.inverse_dynamics(None, body, desired)
+    runtime = time.perf_counter() - began
+    record = {"command": "inverse", "kinematics": spec.kinematics, **describe(spec),
+              **{f"{k}_{j}": float(v) for k, vals in (("torque_rms_nm", np.sqrt(np.mean(inv.torque**2, axis=0))),
+                                                      ("torque_max_nm", inv.torque.max(axis=0)),
+                                                      ("torque_min_nm", inv.torque.min(axis=0)))
+                 for j, v in zip(names, vals)},
+              "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
+              "fdbench_version": __version__}
+    header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
+    rows = np.column_stack([inv.t, *np.degrees([inv.angles, inv.velocities, inv.accelerations]), inv.torque])
+    return record, header, rows
+
+
+def _per_joint(prefix: str, names, values) -> dict:
+    return {f"{prefix}_{joint}": float(v) for joint, v in zip(names, values)}
+
+
+def _message(result) -> str:
+    text = result.status.value
+    if not result.success:
+        text += f" (stopped at t = {result.t_end:.4g} s)"
+    return text + (f": {result.detail}" if result.detail else "")
+
+
+def _outcome(spec, record: dict, result, inverse, **more):
+    """The RunOutcome of a finished simulation: indicators over every joint and per joint, the
+    trajectory table."""
+    from ..experiment import RunOutcome
+
+    names = joints(spec)
+    desired = inverse.angles
+    rot, rot_j = sim.rmse_deg(result, desired)
+    trq, trq_j = sim.rmse_torque_nm(result, inverse.torque)
+    record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
+                  message=_message(result), max_violation=result.max_violation,
+                  **_per_joint("rmse_rot_deg", names, rot_j), **_per_joint("rmse_torque_nm", names, trq_j))
+    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
+    rows = np.column_stack([result.t, np.degrees(result.angles), np.degrees(desired), result.torque, inverse.torque])
+    return RunOutcome(record, result, inverse, table=(header, rows), **more)
+
+
+def _warm_up(spec) -> None:
+    """Load (or compile) the engine's kernels (and scipy's integrators for an adaptive one), so that
+    runtimes exclude it."""
+    sim.warm_up(spec.integrator != "rk4")
+
+
+# ---------------------------------------------------------------------- control
+def _gains(spec, controller: str, options: dict):
+    """The law's keyword arguments of ``simulation.simulate`` and the feedforward label."""
+    if controller == "computed-torque":
+        bandwidth, damping = options.get("bandwidth", 20.0), options.get("damping", 1.0)
+        return dict(kp=bandwidth**2, kd=2 * damping * bandwidth, computed=True,
+                    nominal=engine(spec, nominal(spec))), "M(z)*z_ddot_d+h(z,z_dot)"
+    if controller == "lqr":
+        from .lqr import lqr_gains
+
+        return dict(gains=lqr_gains(nominal(spec), motions(spec)[0], **options)), "id"
+    return dict(kp=spec.kp or 0.0, kd=spec.kd or 0.0), "id"
+
+
+def run(spec, on_evaluation=None, on_start=None):
+    """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
+    from ..experiment import _options_text, base_record
+
+    if spec.command == "optimize":
+        return _optimize(spec, on_evaluation, on_start)
+    if spec.command == "collocate":
+        return _collocate(spec)
+    if spec.command != "control":
+        raise ValueError(f"{spec.command}: not available with --model {spec.model_name}")
+    _warm_up(spec)
+    controller = spec.controller or "pd"
+    if controller == "lqr":
+        from .lqr import warm_up
+
+        warm_up(nominal(spec))
+    began = time.perf_counter()
+    inverse = reference(spec)
+    law, label = _gains(spec, controller, dict(spec.method_options))
+    drive = None if controller == "computed-torque" else sim.feedforward(engine(spec, nominal(spec)), motions(spec)[0])
+    result = _simulate(spec, drive, **law)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=label, evaluations=1, runtime_s=runtime, controller=controller,
+                  **({"kp": spec.kp, "kd": spec.kd} if controller == "pd" else
+                     {"controller_options": _options_text(spec.method_options)}))
+    return _outcome(spec, record, result, inverse)
+
+
+# ---------------------------------------------------------------------- open loop
+def run_simulation(spec, torque_file=None, params_file=None, torque=None):
+    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
+    (``t,<joint>...``), saved parameters, or ``torque``, a function t (s), shape (k,) -> joint
+    torques (N m), shape (k, J); BadFile for a file that cannot be used."""
+    from dataclasses import replace
+
+    from ..experiment import base_record
+
+    names = joints(spec)
+    desired, _ = motions(spec)
+    label, drive = "id", sim.feedforward(engine(spec, nominal(spec)), desired)
+    if params_file is not None:
+        drive, label, digest, spec = _saved_torque(spec, params_file)
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
+    elif torque is not None:
+        drive, label = torque, getattr(torque, "__name__", "function")
+    elif torque_file is not None:
+        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, names,
+                                     preferred=tuple(f"{joint}_torque" for joint in names))
+        drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(names))], axis=-1)  # noqa: E731
+        label = f"file:{torque_file}"
+        digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
+    _warm_up(spec)
+    began = time.perf_counter()
+    inverse = reference(spec)
+    result = _simulate(spec, drive)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=label, evaluations=1, runtime_s=runtime)
+    return _outcome(spec, record, result, inverse)
+
+
+def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):
+    from .problem import JointTrackingProblem
+
+    return JointTrackingProblem(torque, engine(spec), motions(spec)[0], feedforward, penalty_weight,
+                                nominal=engine(spec, nominal(spec)), **integration(spec), **options)
+
+
+def _saved_torque(spec, path):
+    """(torque function, label, digest, spec) of a parameter file saved by ``optimize --save-params``;
+    the spec follows the file's named motion. BadFile if it cannot be used."""
+    from dataclasses import replace
+
+    from ..models import named_motions
+    from ..params_file import make_saved_torque, read_params
+
+    saved = read_params(path, spec.model_name, motions(spec)[1].name, named_motions(spec.model_name))
+    if saved["kinematics"] is not None and saved["kinematics"] != spec.kinematics:
+        spec = replace(spec, kinematics=saved["kinematics"], inputs=tuple(p for p in spec.inputs if p[0] != "--motion"))
+    expected = make_saved_torque(saved).n_params * len(joints(spec))
+    if saved["params"].shape != (expected,):
+        raise BadFile(f"--params: {path}: expected {expected} parameters for {saved['torque']} on "
+                      f"{len(joints(spec))} joints")
+    problem = _problem(spec, saved["torque"], saved["feedforward"], **saved["options"])
+    name = saved["torque"] + (" (feedforward)" if saved["feedforward"] else "")
+    return problem.torque_function(saved["params"]), f"{name} from {saved['path'].name}", saved["digest"], spec
+
+
+def replay(spec, params) -> sim.Simulation:
+    """The simulation of a stored optimisation run's best parameters (for figures)."""
+    options = dict(spec.torque_options)
+    if options.get("hidden") == "auto":  # 3 n + 1 parameters per joint
+        options["hidden"] = (len(params) // len(joints(spec)) - 1) // 3
+    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
+    return problem.simulate(np.asarray(params, dtype=float))
+
+
+# ---------------------------------------------------------------------- optimisation and collocation
+def _optimize(spec, on_evaluation, on_start):
+    """Shooting optimisation of per-joint torque parameters (``problem.JointTrackingProblem``)."""
+    from ..experiment import _options_text, base_record
+    from ..optimizers import make_optimizer
+    from ..torques import TORQUES
+
+    optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
+    _warm_up(spec)  # the population kernel and its threads too
+    optimizer.warm_up()
+    TORQUES[spec.torque].warm_up()
+    if on_start:
+        on_start(spec.budget)
+    desired, _ = motions(spec)
+    began = time.perf_counter()
+    options, extra = dict(spec.torque_options), {}
+    if options.get("hidden") == "auto":  # the count that fits every joint's inverse-dynamics torque
+        from ..torques.ann import select_hidden
+
+        inv = sim.inverse_dynamics(None, engine(spec, nominal(spec)), desired)
+        fits = [select_hidden(inv.t, inv.torque[:, j]) for j in range(inv.torque.shape[1])]
+        options["hidden"] = max(n for n, _ in fits)
+        extra["hidden_fits"] = [(n, max(dict(tried).get(n, math.inf) for _, tried in fits))
+                                for n in range(1, options["hidden"] + 1)]
+    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
+    batch = problem.objectives_scaled if problem.batched else None
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation,
+                               batch=batch)
+    params = np.asarray(found.x) * problem.scale
+    result = problem.simulate(params)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
+                  evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
+                  n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
+                  torque_options=_options_text(sorted(options.items())),
+                  optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
+                  initial_objective=problem.objective(problem.p0))
+    return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+
+
+def _collocate(spec):
+    """Direct collocation of the nominal model on the desired motion (``collocation``), then its
+    torque replayed by the plant's forward simulation: the indicators are the replay's; the
+    collocation's own RMSE over every joint at its nodes (against the true motion), IPOPT's status,
+    iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
+    arrays of shape (N + 1, J))."""
+    from ..collocation import record_fields
+    from ..experiment import base_record
+    from .collocation import collocate
+
+    options = dict(spec.method_options)
+    _warm_up(spec)
+    import casadi  # noqa: F401  (its import is not part of the runtime)
+
+    desired, truth = motions(spec)
+    began = time.perf_counter()
+    inverse = reference(spec)
+    solution = collocate(nominal(spec), desired, **options)
+    result = _simulate(spec, solution.torque_function())
+    runtime = time.perf_counter() - began
+    own = float(np.sqrt(np.mean(np.degrees(solution.angles - truth(solution.t)[0]) ** 2)))
+    record = base_record(spec)
+    outcome = _outcome(spec, record, result, inverse, extra={"collocation": solution})
+    record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
+    return outcome

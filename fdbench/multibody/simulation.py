@@ -1,0 +1,329 @@
+"""Inverse and forward dynamics of any model on a desired joint motion, through the multibody
+engine: compiled fixed-step RK4 (torques and references on the half-step grid) or scipy's adaptive
+methods (``fdbench.integrate.solve_adaptive``) on the same compiled feedback laws (per-joint PD
+plus feedforward, computed torque, a gain matrix).
+
+A motion is any object with ``samples`` (s, shape (n,)), ``duration`` (s), ``name``, ``joints``
+(the joint names, in the model's order) and ``motion(t) -> (z, zd, zdd)``, the angles (rad),
+velocities (rad/s) and accelerations (rad/s^2) of every joint, each of shape t.shape + (J,).
+A torque function maps times (s), shape (k,), to joint torques (N m), shape (k, J).
+
+A simulation never raises on a physical failure: it stops where it cannot go on and says why in
+``status`` (``fdbench.integrate.Status``); ``t_end`` is the time reached. The engine has no singular
+configuration, so a simulation stops on a non-finite state or torque, a constraint violation
+beyond its tolerance, or an adaptive solver's failure.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrator, check_tolerances,
+                         solve_adaptive, steps)
+from .engine import Engine
+from .kernels import COMPUTED, GAINS, PD, VIOLATION
+
+STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # fdbench.dynamics codes
+
+
+@dataclass(frozen=True)
+class JointInverse:
+    """Histories on the time grid ``t`` (s): angles (rad), velocities (rad/s), accelerations
+    (rad/s^2) and joint torques (N m), each of shape (n, J), the joints in ``joints``' order."""
+
+    t: np.ndarray
+    angles: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    torque: np.ndarray
+    motion: str
+    joints: tuple
+
+
+def inverse_dynamics(t, engine: Engine, motion) -> JointInverse:
+    """The joint torques of ``motion`` at times t (s) (None: the motion's samples), eq. 3."""
+    t = motion.samples if t is None else np.asarray(t, dtype=float)
+    z, zd, zdd = motion(t)
+    return JointInverse(t, z, zd, zdd, engine.inverse_dynamics(z, zd, zdd), motion.name, engine.joints)
+
+
+@dataclass
+class Simulation:
+    """A forward simulation on the motion's samples ``t`` (s): joint angles z (rad), rates zd
+    (rad/s) and total applied joint torques (N m), shape (n, J); mixed-coordinate states
+    (n, n_state); samples after ``t_end`` (s) are NaN."""
+
+    t: np.ndarray
+    z: np.ndarray
+    zd: np.ndarray
+    states: np.ndarray
+    torque: np.ndarray
+    t_end: float
+    status: Status
+    max_violation: float  # max |Phi_i| reached (at the RK4 steps, or at the samples), m^2 or m
+    runtime_s: float = 0.0
+    integrator: str = "rk4"
+    detail: str = ""  # what made an adaptive integrator fail
+    rhs_evaluations: int = 0  # adaptive integrators
+
+    @property
+    def angles(self) -> np.ndarray:
+        """Joint angles (rad), shape (n, J)."""
+        return self.z
+
+    @property
+    def reached(self) -> np.ndarray:
+        return np.isfinite(self.z[:, 0])
+
+    @property
+    def success(self) -> bool:
+        return self.status is Status.SUCCESS
+
+
+@dataclass(frozen=True)
+class FeedbackLaw:
+    """A feedback law as the engine's kernels apply it: per-joint gains kp, kd (J,), the mode (PD,
+    COMPUTED, GAINS), the gain matrices ``gains`` (a function of times (s), shape (k,) ->
+    (k, J, 2J), or None) and the believed model ``nominal`` (an Engine, or None: the plant)."""
+
+    kp: np.ndarray
+    kd: np.ndarray
+    mode: int
+    gains: object
+    nominal: Engine | None
+
+    def gain_matrices(self, t: np.ndarray, n_joints: int) -> np.ndarray | None:
+        """K at times t (s), shape (k, J, 2J), or None without a gain matrix."""
+        return None if self.gains is None else np.asarray(self.gains(t), dtype=float).reshape(len(t), n_joints,
+                                                                                               2 * n_joints)
+
+
+def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3, start=None,
+             computed: bool = False, nominal: Engine | None = None, gains=None, integrator: str = "rk4",
+             rtol: float = 1e-6, atol: float = 1e-9) -> Simulation:
+    """Forward dynamics of ``engine`` (the plant) over the motion's span, driven by the feedforward
+    ``torque`` (a torque function, or None for zero) plus feedback towards the motion, the results
+    on the motion's samples.
+
+    kp (N m/rad), kd (N m s/rad): one number for every joint or one per joint (zero: open loop).
+    ``computed``: computed-torque control instead of PD, the inverse dynamics of ``nominal`` (an
+    Engine of the same joints; None: the plant) at the current state for the accelerations
+    z''_d + kp e + kd e' (kp in 1/s^2, kd in 1/s), plus torque. ``gains``: instead of kp and kd (and
+    before ``computed``), a full gain matrix K(t) as a function of times (s), shape (k,) ->
+    (k, J, 2J), applied to [z_d - z, z'_d - z'] (N m/rad, N m s/rad), e.g. time-varying LQR.
+    ``start``: the initial state (n_state,) (default: on the motion at t = 0).
+    ``integrator``: 'rk4' (compiled, a fixed step of about ``dt`` s, torques and references on its
+    half-step grid) or one of scipy's adaptive methods (``fdbench.integrate.SCIPY_METHODS``) with
+    the relative and absolute tolerances ``rtol`` and ``atol``."""
+    check_integrator(integrator)
+    if integrator != "rk4":
+        check_tolerances(rtol, atol)
+    if tuple(motion.joints) != engine.joints:
+        raise ValueError(f"the motion's joints {tuple(motion.joints)} are not the model's {engine.joints}")
+    began = time.perf_counter()
+    if start is None:
+        z0, zd0, _ = motion(np.zeros(1))
+        y0 = engine.state_from_joints(z0[0], zd0[0])
+    else:
+        y0 = np.array(start, dtype=float)
+    if y0.shape != (engine.n_state,) or not np.all(np.isfinite(y0)):
+        raise ValueError(f"the initial state must be {engine.n_state} finite numbers [q, q'], got shape {y0.shape}")
+    law = _law(engine, kp, kd, computed, nominal, gains)
+    if integrator == "rk4":
+        result = _simulate_rk4(torque, engine, motion, law, y0, dt)
+    else:
+        result = _simulate_adaptive(torque, engine, motion, law, y0, integrator, rtol, atol)
+    result.runtime_s = time.perf_counter() - began
+    return result
+
+
+def _law(engine: Engine, kp, kd, computed: bool, nominal: Engine | None, gains) -> FeedbackLaw:
+    """The feedback law of ``simulate``'s arguments."""
+    kp, kd = (np.array(np.broadcast_to(np.asarray(g, dtype=float), (engine.n_joints,))) for g in (kp, kd))
+    if nominal is not None:
+        engine.simulation_layout(nominal)  # ValueError for other joints
+    return FeedbackLaw(kp, kd, GAINS if gains is not None else COMPUTED if computed else PD, gains, nominal)
+
+
+def _torques(torque, t: np.ndarray, n_joints: int) -> np.ndarray:
+    """The feedforward torques (N m) at times t (s), shape (k, J)."""
+    if torque is None:
+        return np.zeros((len(t), n_joints))
+    return np.array(torque(t), dtype=float).reshape(len(t), n_joints)
+
+
+def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, dt: float) -> Simulation:
+    """The compiled RK4 (``Engine.simulate``) with steps of about dt (s)."""
+    n = steps(dt, motion.duration)
+    half = np.linspace(0.0, motion.duration, 2 * n + 1)
+    ref, refd, refdd = motion(half)
+    result = engine.simulate(y0, motion.duration / n, n, _torques(torque, half, engine.n_joints), ref, refd, refdd,
+                             law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints), law.nominal)
+    grid = np.linspace(0.0, motion.duration, n + 1)
+    y, applied = _on_samples(grid, result.states, result.rates, result.applied, result.steps_done, motion.samples)
+    z, zd = engine.joints_from_state(y)
+    return Simulation(motion.samples, z, zd, y, applied, result.steps_done * motion.duration / n,
+                      STATUS_OF_CODE[result.status], result.max_violation)
+
+
+def _rates(torque, engine: Engine, motion, law: FeedbackLaw, t: np.ndarray, states: np.ndarray):
+    """State derivatives (k, n_state) and applied joint torques (N m, (k, J)) of the states
+    (k, n_state) at times t (s, shape (k,)) under the feedback law."""
+    ref, refd, refdd = (np.asarray(r, dtype=float).reshape(len(t), engine.n_joints) for r in motion(t))
+    return engine.rates(states, _torques(torque, t, engine.n_joints), ref, refd, refdd, law.kp, law.kd, law.mode,
+                        law.gain_matrices(t, engine.n_joints), law.nominal)
+
+
+def _simulate_adaptive(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, integrator: str,
+                       rtol: float, atol: float) -> Simulation:
+    """One of scipy's adaptive methods (``fdbench.integrate.solve_adaptive``): stops where the
+    state, its derivative or the applied torques become non-finite, the constraint violation
+    exceeds its tolerance, or the solver fails."""
+    tolerance = engine.params[VIOLATION]
+
+    def rhs(t, y):
+        out, applied = _rates(torque, engine, motion, law, np.array([t]), y[None])
+        if not (np.all(np.isfinite(applied)) and np.all(np.isfinite(out)) and np.all(np.isfinite(y))):
+            raise StopIntegration(Status.NONFINITE, "")
+        return out[0]
+
+    def failure(y_old, y):
+        """The status that a step from y_old to y ends the simulation with, or None."""
+        if not np.all(np.isfinite(y)):
+            return Status.NONFINITE
+        if engine.constraint_violation(y) > tolerance:
+            return Status.CONSTRAINT
+        return None
+
+    def clear_of_violation(y, y_old):
+        return tolerance - engine.constraint_violation(y)
+
+    system = AdaptiveSystem(rhs, failure, {Status.CONSTRAINT: clear_of_violation})
+    found = solve_adaptive(system, y0, motion.duration, integrator, rtol, atol, motion.samples)
+    ts, reached = motion.samples, found.reached
+    applied = np.full((len(ts), engine.n_joints), np.nan)
+    with np.errstate(all="ignore"):
+        applied[reached] = _rates(torque, engine, motion, law, ts[reached], found.states[reached])[1]
+    max_viol = max(engine.constraint_violation(y) for y in found.states[reached])
+    z, zd = engine.joints_from_state(found.states)
+    return Simulation(ts, z, zd, found.states, applied, found.t_end, found.status, float(max_viol),
+                      integrator=integrator, detail=found.detail, rhs_evaluations=found.evaluations)
+
+
+def samples_on_grid(grid, ts) -> int:
+    """The number of steps between samples when the samples ts (s) lie on the integrator grid
+    (s), one every so many steps from the first step to the last; 0 when they do not."""
+    every = (len(grid) - 1) // max(len(ts) - 1, 1)
+    on_grid = every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=1e-12)
+    return every if on_grid else 0
+
+
+def _on_samples(grid, states, rates, applied, done, ts):
+    """States (n, n_state) and applied torques (n, J) on the motion's samples ts (s): taken from
+    the grid where the samples lie on it, else interpolated (cubic Hermite for the states, linear
+    for the torques)."""
+    every = samples_on_grid(grid, ts)
+    if every:
+        y, tau = states[::every].copy(), applied[::every].copy()
+        beyond = np.arange(len(ts)) * every > done
+        y[beyond], tau[beyond] = np.nan, np.nan
+        return y, tau
+    tau = np.stack([np.interp(ts, grid[: done + 1], applied[: done + 1, j], right=np.nan)
+                    for j in range(applied.shape[1])], -1)
+    return _hermite(grid, states, rates, done, ts), tau
+
+
+def _hermite(grid, states, rates, done, ts) -> np.ndarray:
+    """States on the integrator grid (s) -> times ts (s) by cubic Hermite between steps (``rates``:
+    the states' derivatives), NaN beyond step ``done``; shape (len(ts), n_state)."""
+    out = np.full((len(ts), states.shape[1]), np.nan)
+    inside = ts <= grid[done] + 1e-12
+    if done == 0:
+        out[inside] = states[0]
+        return out
+    i = np.clip(np.searchsorted(grid, ts[inside], side="right") - 1, 0, done - 1)
+    h = grid[1] - grid[0]
+    s = ((ts[inside] - grid[i]) / h)[:, None]
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    out[inside] = h00 * states[i] + h10 * h * rates[i] + h01 * states[i + 1] + h11 * h * rates[i + 1]
+    return out
+
+
+class Feedforward:
+    """The inverse-dynamics joint torques of ``engine`` on ``motion`` as a torque function
+    t (s), shape (k,) -> (k, J) N m, remembering the last grid it was evaluated on."""
+
+    def __init__(self, engine: Engine, motion):
+        self.engine, self.motion = engine, motion
+        self._last: tuple = (b"", None)
+
+    def __call__(self, t) -> np.ndarray:
+        t = np.asarray(t, dtype=float)
+        key = t.tobytes()
+        if key != self._last[0]:
+            torque = inverse_dynamics(t, self.engine, self.motion).torque
+            torque.flags.writeable = False
+            self._last = (key, torque)
+        return self._last[1]
+
+
+def feedforward(engine: Engine, motion) -> Feedforward:
+    """The inverse-dynamics joint torques of ``engine`` on ``motion`` as a torque function."""
+    return Feedforward(engine, motion)
+
+
+def rmse_deg(result: Simulation, desired: np.ndarray) -> tuple[float, np.ndarray]:
+    """RMSE (deg) of the joint angles against ``desired`` (rad, shape (n, J)) over the samples
+    reached: over all joints and samples, and per joint (shape (J,))."""
+    reached = result.reached
+    if not reached.any():
+        return float("nan"), np.full(result.z.shape[1], np.nan)
+    error = np.degrees(result.angles[reached] - desired[reached])
+    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+
+
+def rmse_torque_nm(result: Simulation, torque: np.ndarray) -> tuple[float, np.ndarray]:
+    """RMSE (N m) of the applied joint torques against ``torque`` (shape (n, J)), overall and per joint."""
+    reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
+    if not reached.any():
+        return float("nan"), np.full(result.torque.shape[1], np.nan)
+    error = result.torque[reached] - torque[reached]
+    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+
+
+class _Still:
+    """The joints held at zero for 0.1 s, sampled every 0.05 s (for ``warm_up``)."""
+
+    name, duration = "still", 0.1
+
+    def __init__(self, joints: tuple):
+        self.joints, self.samples = joints, np.linspace(0.0, 0.1, 3)
+
+    def __call__(self, t):
+        zero = np.zeros(np.shape(t) + (len(self.joints),))
+        return zero, zero, zero
+
+
+def warm_up(adaptive: bool = False) -> None:
+    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population) on a small
+    library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
+    integrators, so that later timings exclude it."""
+    from ..population import Population
+    from .description import find_model
+    from .kernels import rk4_candidates
+
+    engine = Engine(find_model("forearm"))
+    motion = _Still(engine.joints)
+    simulate(None, engine, motion, dt=0.05)
+    engine.inverse_torques(np.zeros(1), np.zeros(1), np.zeros(1))
+    y0, rows = engine.state_from_joints(np.zeros(1), np.zeros(1)), np.zeros((5, 1))
+    Population(rk4_candidates, 2, engine.population_widths)(
+        2, engine.population_args(y0, 0.05, 2, np.zeros((2, 5, 1)), rows, rows, 1, np.zeros((3, 1)), 1.0))
+    if adaptive:
+        import scipy.integrate  # noqa: F401
+        import scipy.optimize  # noqa: F401
+
+        _rates(None, engine, motion, _law(engine, 0.0, 0.0, False, None, None), np.zeros(1), y0[None])
