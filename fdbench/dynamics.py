@@ -7,6 +7,12 @@ a^2 + 4 alpha a (x2^2 + y2^2) never vanishes, so the only singularity is cos(the
 The kernels keep strict IEEE arithmetic (no fastmath): a run gives the same numbers on every
 x86-64 machine, which stored results and seeds rely on. Constants travel as one float64 array ``consts`` (see ``kernel_constants``) so that a kernel
 compiles once for every model and penalty setting.
+
+Speed: the RK4 driver inlines its right-hand side (``inline="always"``; a call of a compiled
+function that takes arrays costs reference counting at every call) and computes sin and cos of
+theta once per state, together (one ``sincos``), carrying them from the end of a step to the
+start of the next. The operations on every number are those of the plain formulas, so the
+results do not move by a bit.
 """
 
 from __future__ import annotations
@@ -48,8 +54,13 @@ def accelerations(x, y, th, vx, vy, w, tau, consts):
     Returns (x2'', y2'', theta'', cos(theta)); the accelerations are zero where |cos(theta)| is
     below the tolerance consts[6] (the singular leading matrix).
     """
+    return _accelerations(x, y, math.sin(th), math.cos(th), vx, vy, w, tau, consts)
+
+
+@njit(inline="always")
+def _accelerations(x, y, s, c, vx, vy, w, tau, consts):
+    """``accelerations`` given s = sin(theta) and c = cos(theta)."""
     a, L, load_y, alpha, two_xi_omega, omega2 = consts[0], consts[1], consts[2], consts[3], consts[4], consts[5]
-    s, c = math.sin(th), math.cos(th)
     lc = L * c
     if abs(c) < consts[6]:
         return 0.0, 0.0, 0.0, c
@@ -69,18 +80,32 @@ def accelerations(x, y, th, vx, vy, w, tau, consts):
 @njit
 def constraint_violation(x, y, th, L):
     """max |Phi_i| of eq. 9 (m^2 and m)."""
-    return max(abs(x * x + y * y - L * L), abs(y - L * math.sin(th)))
+    return _violation(x, y, math.sin(th), L)
 
 
-@njit
+@njit(inline="always")
+def _violation(x, y, s, L):
+    """``constraint_violation`` given s = sin(theta)."""
+    return max(abs(x * x + y * y - L * L), abs(y - L * s))
+
+
+@njit(inline="always")
 def _derivative(state, tau, ref_th, ref_w, kp, kd, g_c, consts, c0, out):
-    """State derivative for state = [q, q'] with the feedback law added to tau (see ``rk4_feedback``).
-    Returns a status: NONFINITE for a non-finite theta, SINGULAR where |cos(theta)| is below
-    tolerance or of another sign than c0 (a step that jumped over cos(theta) = 0), else OK."""
+    """``_derivative_at`` of a state whose sin and cos of theta are still to compute."""
+    th = state[2]
+    return _derivative_at(state, math.sin(th), math.cos(th), tau, ref_th, ref_w, kp, kd, g_c, consts, c0, out)
+
+
+@njit(inline="always")
+def _derivative_at(state, s, c, tau, ref_th, ref_w, kp, kd, g_c, consts, c0, out):
+    """State derivative for state = [q, q'] (s, c: sin and cos of its theta) with the feedback law
+    added to tau (see ``rk4_feedback``). Returns a status: NONFINITE for a non-finite theta,
+    SINGULAR where |cos(theta)| is below tolerance or of another sign than c0 (a step that jumped
+    over cos(theta) = 0), else OK."""
     total = tau + kp * (ref_th - state[2]) + kd * (ref_w - state[5])
     if g_c != 0.0:
-        total += g_c * math.cos(state[2])
-    ax, ay, ath, c = accelerations(state[0], state[1], state[2], state[3], state[4], state[5], total, consts)
+        total += g_c * c
+    ax, ay, ath, c = _accelerations(state[0], state[1], s, c, state[3], state[4], state[5], total, consts)
     out[0], out[1], out[2] = state[3], state[4], state[5]
     out[3], out[4], out[5] = ax, ay, ath
     if not math.isfinite(c):
@@ -116,18 +141,19 @@ def rk4_feedback(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp_half, kd
     sd = 1 if kd_half.shape[0] > 1 else 0
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(6), np.empty(6), np.empty(6), np.empty(6), np.empty(6)
-    max_viol = constraint_violation(y[0], y[1], y[2], L)
+    s, c = math.sin(y[2]), math.cos(y[2])  # of the step's start state, carried over from the step before
+    max_viol = _violation(y[0], y[1], s, L)
     for i in range(n_steps + 1):
         j = 2 * i
-        c0 = math.cos(y[2])
+        c0 = c
         kp0, kd0 = kp_half[j * sp], kd_half[j * sd]
-        code = _derivative(y, tau_half[j], ref_th_half[j], ref_w_half[j], kp0, kd0, g_c, consts, c0, k1)
+        code = _derivative_at(y, s, c, tau_half[j], ref_th_half[j], ref_w_half[j], kp0, kd0, g_c, consts, c0, k1)
         for m in range(6):
             states[i, m] = y[m]
         qdd[i, 0], qdd[i, 1], qdd[i, 2] = k1[3], k1[4], k1[5]
         applied[i] = tau_half[j] + kp0 * (ref_th_half[j] - y[2]) + kd0 * (ref_w_half[j] - y[5])
         if g_c != 0.0:
-            applied[i] += g_c * math.cos(y[2])
+            applied[i] += g_c * c
         if code != OK:
             return code, i, max_viol
         if i == n_steps:
@@ -155,9 +181,10 @@ def rk4_feedback(y0, dt, n_steps, tau_half, ref_th_half, ref_w_half, kp_half, kd
             finite = finite and math.isfinite(tmp[m])
         if not finite:
             return NONFINITE, i, max_viol
-        if math.cos(tmp[2]) * c0 <= 0.0:  # the step itself jumped over cos(theta) = 0
+        s, c = math.sin(tmp[2]), math.cos(tmp[2])
+        if c * c0 <= 0.0:  # the step itself jumped over cos(theta) = 0
             return SINGULAR, i, max_viol
-        viol = constraint_violation(tmp[0], tmp[1], tmp[2], L)
+        viol = _violation(tmp[0], tmp[1], s, L)
         if viol > viol_tol:
             return CONSTRAINT, i, max(max_viol, viol)
         max_viol = max(max_viol, viol)

@@ -1,0 +1,256 @@
+"""The forearm against its speed limit: fdbench's costs beside the same algorithm in C, measured in
+one run.
+
+Baseline, measured in the same run: ../shared/bench/pd_forearm.c (or the file given by
+--c-source), compiled with ``cc -O2`` into a temporary folder and run: PD (kp 80, kd 0.3) plus the
+computed feedforward, the penalty formulation (eq. 12), RK4 with dt = 1 ms over the paper motion,
+feedforward and reference precomputed on the half-step grid; it prints the RMSE of rotation and
+the time of one simulation (mean of 2000 in one process). Its RMSE must equal that of
+``fdbench control --kp 80 --kd 0.3`` to the digits it prints (the same algorithm).
+
+fdbench, in this process, on one thread (``population.set_threads(1)``), each after a warm-up
+(kernels loaded, cma imported), best of several rounds:
+
+  (a) kernel      the compiled forearm kernel alone (``dynamics.rk4`` on integrate's prepared
+                  arrays: feedforward and reference on the half-step grid, buffers allocated once)
+  (b) one-shot    ``run(control_spec())``'s runtime_s: the reference, the inverse dynamics, the
+                  feedforward, the simulation and its resampling
+  (c) CMA-ES      runtime_s / evaluations of ``run(optimize_spec(torque, "cmaes", ...))``, budget
+                  BUDGET, for cs and ann without and pf with feedforward: the path ``fdbench
+                  optimize`` takes. Beside it, where the time goes, per evaluation: the
+                  population's simulations and eq. 18 (``TrackingProblem.objectives_scaled`` on
+                  one generation of the cell's size, torques excluded), its torques
+                  (``torques_on_grid``), cma's own work (ask, tell, set-up and the budget's
+                  records: the same optimiser and options on a trivial objective), and the rest
+                  (the problem's set-up, the final simulation of the best parameters)
+  (d) engine      the multibody engine's forearm (``Engine(find_model("forearm")).simulate_pd``,
+                  the same PD law and feedforward) per simulation
+
+Each is printed in ms and as a ratio to C; the goal is at most 1.5x for a CMA-ES evaluation.
+The C loop runs again before every CMA-ES run and its least disturbed time is the baseline (its
+median is printed beside it). C's figure is a mean over one block of 2000 simulations (about
+0.25 s), fdbench's are the best of short rounds: on a busy machine the C block is the more likely
+to be interrupted, which flatters the ratios; compare runs whose C minimum is the same. The
+machine's load average is printed.
+
+Run: python benchmarks/bench_speed_limit.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+GOAL = 1.5  # x C, for a CMA-ES evaluation
+BUDGET = 200
+RUNS = 7  # runs per figure (best of)
+ROUNDS, CALLS = 7, 50  # kernel timings: best of ROUNDS rounds of CALLS calls
+KP, KD = 80.0, 0.3
+CELLS = [("cs", False), ("pf", True), ("ann", False)]
+C_FILE = Path("shared", "bench", "pd_forearm.c")
+
+
+def default_c_source() -> Path:
+    """../shared/bench/pd_forearm.c from the checkout, or from the nearest folder above it that has one."""
+    root = Path(__file__).resolve().parents[1]
+    found = [folder / C_FILE for folder in root.parents if (folder / C_FILE).is_file()]
+    return found[0] if found else root.parent / C_FILE
+
+
+def compile_c(source: Path, folder: str) -> Path:
+    """The C loop compiled with cc -O2 into folder; exit 1 with cc's first line if it fails."""
+    binary = Path(folder) / "pd_forearm"
+    done = subprocess.run(["cc", "-O2", "-o", str(binary), str(source), "-lm"], capture_output=True, text=True)
+    if done.returncode != 0:
+        first = (done.stderr.strip().splitlines() or ["no message"])[0]
+        raise SystemExit(f"error: cc -O2 failed on {source}: {first}")
+    return binary
+
+
+def run_c(binary: Path) -> tuple[str, float]:
+    """One run of the C loop: (its RMSE of rotation as printed, deg; ms per simulation)."""
+    out = subprocess.run([str(binary)], check=True, capture_output=True, text=True).stdout
+    match = re.search(r"rmse_deg\s+(\S+)\s+per_sim_ms\s+(\S+)", out)
+    if match is None:
+        raise SystemExit(f"error: unexpected output of the C loop: {out.strip()!r}")
+    return match[1], float(match[2])
+
+
+def best_per_call(fn, rounds=ROUNDS, calls=CALLS) -> float:
+    """Seconds of one call of fn: the minimum over ``rounds`` rounds of ``calls`` calls."""
+    best = np.inf
+    for _ in range(rounds):
+        start = time.perf_counter()
+        for _ in range(calls):
+            fn()
+        best = min(best, (time.perf_counter() - start) / calls)
+    return best
+
+
+def paper_grid():
+    """The paper motion's half-step grid as integrate prepares it: n steps, the reference rotation
+    (rad) and rate (rad/s), and the inverse-dynamics feedforward (N m) on it."""
+    from fdbench.integrate import Settings, half_step_reference, steps
+    from fdbench.inverse import Feedforward
+
+    settings = Settings()
+    n = steps(settings.dt)
+    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
+    return settings, n, ref_th, ref_w, np.array(Feedforward(settings.nominal_model, settings.kinematics)(half))
+
+
+def rmse_deg(theta, ref_th) -> float:
+    """RMSE (deg) of theta at the steps (rad) against the reference on the half-step grid."""
+    return float(np.degrees(np.sqrt(np.mean((theta - ref_th[::2]) ** 2))))
+
+
+def kernel_call():
+    """(a): one call of the compiled kernel under PD plus feedforward, and the RMSE (deg) it gives."""
+    from fdbench import dynamics
+    from fdbench.integrate import constants, initial_state
+
+    settings, n, ref_th, ref_w, tau = paper_grid()
+    states, qdd, applied = np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1)
+    y0, consts = initial_state(settings.kinematics, settings.model), constants(settings)
+
+    def call():
+        return dynamics.rk4(y0, settings.dt, n, tau, ref_th, ref_w, KP, KD, consts, states, qdd, applied)
+
+    call()
+    return call, rmse_deg(states[:, 2], ref_th)
+
+
+def engine_call():
+    """(d): one ``Engine.simulate_pd`` of the library's forearm under the same law, and its RMSE (deg)."""
+    from fdbench.multibody.description import find_model
+    from fdbench.multibody.engine import Engine
+
+    settings, n, ref_th, ref_w, tau = paper_grid()
+    engine = Engine(find_model("forearm"))
+    ref, refd, tau = (np.ascontiguousarray(a[:, None]) for a in (ref_th, ref_w, tau))
+    kp, kd = np.full(1, KP), np.full(1, KD)
+
+    def call():
+        return engine.simulate_pd(ref_th[:1], ref_w[:1], settings.dt, n, tau, ref, refd, kp, kd)
+
+    return call, rmse_deg(call().z[:, 0], ref_th)
+
+
+def control_runtime(runs: int) -> tuple[float, float]:
+    """(b): the best runtime_s (s) of ``run(control_spec())`` over ``runs`` runs after a warm-up,
+    and its RMSE of rotation (deg)."""
+    import fdbench
+
+    spec = fdbench.control_spec(KP, KD)
+    records = [fdbench.run(spec).record for _ in range(runs + 1)][1:]
+    return min(r["runtime_s"] for r in records), records[0]["rmse_rot_deg"]
+
+
+def cell_timers(torque: str, feedforward: bool):
+    """(c) for one cell: a function that times one BUDGET-evaluation CMA-ES run (runtime_s /
+    evaluations, s) and one that times its parts per evaluation (s): the simulations with eq. 18
+    of one generation (torques excluded), its torques, cma's own work on a trivial objective."""
+    import fdbench
+    from fdbench.optimizers import make_optimizer
+    from fdbench.problem import TrackingProblem
+    from fdbench.torques import TORQUES, make_torque
+
+    spec = fdbench.optimize_spec(torque, "cmaes", feedforward, seed=0, budget=BUDGET)
+    options = TORQUES[torque].optimizer_defaults.get("cmaes", {})
+    problem = TrackingProblem(make_torque(torque), feedforward=feedforward)
+    size = options.get("popsize") or 4 + int(3 * np.log(problem.n_params))  # cma's default generation
+    X = problem.x0 + options.get("sigma0", 0.1) * np.random.default_rng(0).standard_normal((size, problem.n_params))
+    optimizer = make_optimizer("cmaes", **options)
+
+    def one_run():
+        record = fdbench.run(spec).record
+        return record["runtime_s"] / record["evaluations"]
+
+    def parts():
+        population = best_per_call(lambda: problem.objectives_scaled(X), 3, 10) / size
+        torques = best_per_call(lambda: problem.torques_on_grid(X * problem.scale), 3, 10) / size
+        cma = best_per_call(lambda: optimizer.minimize(lambda x: float(x @ x), problem.x0, BUDGET, seed=0,
+                                                       batch=lambda P: np.einsum("ij,ij->i", P, P)), 1, 1) / BUDGET
+        return np.array([population - torques, torques, cma])
+
+    one_run()  # warm-up
+    parts()
+    return one_run, parts
+
+
+def main(c_source: Path, runs: int) -> None:
+    if shutil.which("cc") is None:
+        print("error: no C compiler (cc) on PATH: the C baseline cannot be built", file=sys.stderr)
+        raise SystemExit(2)
+    if not c_source.is_file():
+        print(f"error: --c-source: no such file {c_source}", file=sys.stderr)
+        raise SystemExit(2)
+    import fdbench
+    from fdbench.population import set_threads
+
+    print(f"fdbench {fdbench.__version__}, {platform.python_implementation()} {platform.python_version()}, "
+          f"{platform.machine()}; load average {os.getloadavg()}, cores {len(os.sched_getaffinity(0))}")
+    set_threads(1)
+    with tempfile.TemporaryDirectory() as folder:
+        binary = compile_c(c_source, folder)
+        c_text, c_ms = run_c(binary)
+        one_shot, control_rmse = control_runtime(runs)
+        digits = len(c_text.split(".")[-1])
+        print(f"C loop ({c_source.name}, cc -O2): rmse_rot_deg {c_text}; fdbench control --kp {KP:g} --kd {KD:g}: "
+              f"{control_rmse:.{digits}f}")
+        if f"{control_rmse:.{digits}f}" != c_text:
+            raise SystemExit("error: the C loop and fdbench control disagree: not the same algorithm")
+        kernel, kernel_rmse = kernel_call()
+        engine, engine_rmse = engine_call()
+        rows = [("(a) forearm kernel, dynamics.rk4", best_per_call(kernel), f"rmse {kernel_rmse:.{digits}f}"),
+                ("(b) one-shot run(control_spec())", one_shot, "inverse dynamics, feedforward, resampling")]
+        parts = []
+        c_times = [c_ms]
+        for torque, ff in CELLS:  # runs, their parts and the C loop alternately: each sees the same load
+            one_run, cell_parts = cell_timers(torque, ff)
+            per, split = np.inf, np.full(3, np.inf)
+            for _ in range(runs):
+                c_times.append(run_c(binary)[1])
+                per, split = min(per, one_run()), np.minimum(split, cell_parts())
+            rows.append((f"(c) CMA-ES {torque}{' + ff' if ff else ''} per evaluation", per, ""))
+            parts.append((rows[-1][0], per, split))
+        rows.append(("(d) engine forearm, simulate_pd", best_per_call(engine), f"rmse {engine_rmse:.{digits}f}"))
+        c_ms = min(c_times)  # the least disturbed
+    c_s = c_ms / 1e3
+    print(f"{'single thread, best of ' + str(runs):<42}{'ms':>9}{'x C':>8}")
+    print(f"{'C loop, one PD simulation (the baseline)':<42}{c_ms:>9.4f}{1.0:>8.2f}  "
+          f"median of {len(c_times)} runs {np.median(c_times):.4f} ms")
+    for label, seconds, note in rows:
+        if label.startswith("(c)"):
+            note = "meets the goal" if seconds <= GOAL * c_s else "misses the goal"
+        print(f"{label:<42}{seconds * 1e3:>9.4f}{seconds / c_s:>8.2f}  {note}".rstrip())
+    print("where a CMA-ES evaluation's time goes (x C): simulations + eq. 18, torques, cma's own work, rest")
+    for label, per, (simulations, torques, cma) in parts:
+        rest = per - simulations - torques - cma
+        print(f"  {label[4:]:<38}{simulations / c_s:>6.2f}{torques / c_s:>8.2f}{cma / c_s:>8.2f}{rest / c_s:>8.2f}")
+    print(f"goal: a CMA-ES evaluation within {GOAL:g}x of the C loop, single thread")
+
+
+def positive(text: str) -> int:
+    """A positive integer, for --runs."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return int(text)
+
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--c-source", type=Path, default=None, help="the C loop (default: ../shared/bench/pd_forearm.c)")
+    parser.add_argument("--runs", type=positive, default=RUNS, help="runs per figure, best of (default: %(default)s)")
+    args = parser.parse_args()
+    main(args.c_source or default_c_source(), args.runs)
