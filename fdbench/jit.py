@@ -15,6 +15,7 @@ another user could have made (or redirected) is never used.
 
 from __future__ import annotations
 
+import functools
 import os
 import stat
 import sys
@@ -91,11 +92,26 @@ def _warn(message: str) -> None:
 CACHE_DIR = _choose_cache_dir()
 
 
+@functools.lru_cache(maxsize=None)
+def source_digest(package: Path | None = None) -> str:
+    """16 hex digits of SHA-256 over the Python sources of ``package`` (default: fdbench's). numba's
+    cache checks the modification time of the file of the function it loads, not of the files its
+    callees were inlined from (a changed fdbench.dynamics would leave population's kernel stale), so
+    each version of the sources gets its own kernel folder."""
+    import hashlib
+
+    package = Path(__file__).resolve().parent if package is None else Path(package)
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        digest.update(str(path.relative_to(package)).encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
 def _configure():
     import numba
 
     if CACHE_DIR is not None:
-        numba.config.CACHE_DIR = str(CACHE_DIR / "numba")
+        numba.config.CACHE_DIR = str(CACHE_DIR / "numba" / source_digest())
     return numba
 
 

@@ -362,3 +362,23 @@ def test_preferred_cache_folder_that_others_control_is_not_used(tmp_path, monkey
     monkeypatch.setattr(jit.tempfile, "gettempdir", lambda: str(tmp_path / "tmp"))
     assert jit._choose_cache_dir() == tmp_path / "tmp" / f"fdbench-cache-{os.getuid()}"
     assert problem in capsys.readouterr().err
+
+
+def test_the_kernel_cache_folder_follows_the_sources(tmp_path):
+    """numba would load a kernel whose inlined callee changed from its stale cache: each version of
+    fdbench's sources has its own kernel folder, and a changed source gives another."""
+    import shutil
+
+    import numba
+
+    from fdbench import jit
+
+    package = tmp_path / "fdbench"
+    shutil.copytree(Path(jit.__file__).parent, package, ignore=shutil.ignore_patterns("__pycache__"))
+    before = jit.source_digest(package)
+    assert jit.source_digest(package) == before and len(before) == 16
+    (package / "dynamics.py").write_text((package / "dynamics.py").read_text() + "\n# changed\n")
+    jit.source_digest.cache_clear()
+    assert jit.source_digest(package) != before
+    jit.njit(lambda x: x)
+    assert numba.config.CACHE_DIR.endswith(jit.source_digest())
