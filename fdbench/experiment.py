@@ -384,10 +384,31 @@ def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budg
     options = {k: v for k, v in (optimizer_options or {}).items() if v is not None}
     if torque in TORQUES:  # the parameterisation's defaults for this optimiser, where not given
         options = {**getattr(TORQUES[torque], "optimizer_defaults", {}).get(optimizer, {}), **options}
-    return RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
+    spec = RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
                    seed=seed, budget=budget, torque_options=_accepted(TORQUES, torque, torque_options, "torque"),
                    optimizer_options=_accepted(OPTIMIZERS, optimizer, options, "optimizer"),
                    gradient=gradient, **common)
+    return with_motion_knots(spec, written_out="knots" in (torque_options or {}))
+
+
+def with_motion_knots(spec: RunSpec, written_out: bool) -> RunSpec:
+    """A spline spec without --knots gets one knot every 0.1 s of its motion (``cs.knots_for``).
+    ``written_out`` (the command line's and the report's knots=None) puts the count among the
+    torque options whatever it is; else (the Python API's omitted knots) only where it differs from
+    the class default, so that every stored run keeps its hash."""
+    from dataclasses import replace
+
+    from .torques.cs import DEFAULT_KNOTS, knots_for
+
+    if spec.torque != "cs" or "knots" in dict(spec.torque_options):
+        return spec
+    try:
+        knots = knots_for(spec.motions()[1].duration)
+    except (OSError, ValueError):  # a motion that cannot be read: for ``validate`` to refuse
+        return spec
+    if not written_out and knots == DEFAULT_KNOTS:
+        return spec
+    return replace(spec, torque_options=tuple(sorted(spec.torque_options + (("knots", knots),))))
 
 
 def gradient_for(optimizer: str, gradient: str) -> str:

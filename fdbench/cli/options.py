@@ -59,7 +59,7 @@ Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (fo
 Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
 
 
-Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span (eq. 5: [0, 1] s).")]
+Knots = Annotated[Optional[int], typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span; default one every 0.1 s, as the paper's 11 over eq. 5's 1 s (26 for a 2.5 s recording).", show_default=False)]
 
 
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]

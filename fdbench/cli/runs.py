@@ -249,7 +249,7 @@ def optimize(
     budget: Budget = 200,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
     hidden: Hidden = "4",
-    knots: Knots = 11,
+    knots: Knots = None,
     terms: Terms = 4,
     sigma0: Sigma0 = None,
     popsize: Popsize = None,
