@@ -91,10 +91,10 @@ Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once,
 
 
 # Options of the commands that run many specs (report, study)
-TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")]
+TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf. NAME[KEY=VALUE,...] passes options, e.g. 'cs[knots=21]'.")]
 
 
-OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")]
+OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs. NAME[KEY=VALUE,...] passes options, e.g. 'cmaes[sigma0=0.1]'.")]
 
 
 FeedforwardSelection = Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with feedforward (Table 3) or without (Table 2); default both.", show_default=False)]
