@@ -93,15 +93,15 @@ def reference(spec) -> sim.JointInverse:
 
 def describe(spec) -> dict:
     """The record's fields that say which motion, noise, filter, model and plant a run used."""
-    from ..experiment import _options_text
+    from ..method_options import options_text
 
     desired, truth = motions(spec)
     out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
     parts = getattr(desired, "parts", [])
     if parts and hasattr(parts[0], "describe"):
         out["derivatives"] = parts[0].describe().get("derivatives")
-    out.update(noise_deg=spec.noise_deg, model=spec.model_name, model_options=_options_text(spec.model) or None,
-               plant=_options_text(spec.plant) or None)
+    out.update(noise_deg=spec.noise_deg, model=spec.model_name, model_options=options_text(spec.model) or None,
+               plant=options_text(spec.plant) or None)
     return out
 
 
@@ -206,7 +206,8 @@ def _gains(spec, controller: str, options: dict):
 
 def run(spec, on_evaluation=None, on_start=None):
     """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
-    from ..experiment import _options_text, base_record
+    from ..experiment import base_record
+    from ..method_options import options_text
 
     if spec.command == "optimize":
         return _optimize(spec, on_evaluation, on_start)
@@ -229,7 +230,7 @@ def run(spec, on_evaluation=None, on_start=None):
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime, controller=controller,
                   **({"kp": spec.kp, "kd": spec.kd} if controller == "pd" else
-                     {"controller_options": _options_text(spec.method_options)}))
+                     {"controller_options": options_text(spec.method_options)}))
     return _outcome(spec, record, result, inverse)
 
 
@@ -306,7 +307,8 @@ def replay(spec, params) -> sim.Simulation:
 # ---------------------------------------------------------------------- optimisation and collocation
 def _optimize(spec, on_evaluation, on_start):
     """Shooting optimisation of per-joint torque parameters (``problem.JointTrackingProblem``)."""
-    from ..experiment import _options_text, base_record
+    from ..experiment import base_record
+    from ..method_options import options_text
     from ..optimizers import make_optimizer
     from ..torques import TORQUES
 
@@ -338,8 +340,8 @@ def _optimize(spec, on_evaluation, on_start):
     record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
                   evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
                   n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
-                  torque_options=_options_text(sorted(options.items())),
-                  optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
+                  torque_options=options_text(sorted(options.items())),
+                  optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
     return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
 
