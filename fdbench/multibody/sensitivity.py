@@ -1,0 +1,258 @@
+"""Forward sensitivities of the engine's RK4 map (compiled), for exact gradients on any model.
+
+Every RK4 stage k_s = f(y_s, tau_s) is differentiated with the chain rule,
+K_s = f_y(y_s) dy_s/dp + f_tau(y_s) dtau_s/dp, and the step y+ = y + dt/6 (k1 + 2 k2 + 2 k3 + k4)
+gives S+ = S + dt/6 (K1 + 2 K2 + 2 K3 + K4), S = dy/dp of shape (n_state, P) (stored (P, n_state)).
+f_y S and f_tau are exact: ``_tangent`` is the forward-mode (tangent) derivative of
+``kernels._derivative`` written by hand, one parameter direction at a time. It differentiates the
+assembly of the points' matrix K and right-hand side r, and for the linear solve K x = r uses
+dx = K^-1 (dr - dK x) with the L D L^T factor the stage has already computed (no refactoring per
+direction); the angle rows follow as in ``_derivative``. The form of each angle constraint is that
+in force at the stage (the derivative of the branch taken).
+
+The states are those of the open-loop ``kernels.rk4`` to the last bit (the same stage code,
+``kernels._rate`` in PD mode with zero gains, is run), so the value and the gradient belong to one
+simulation. The kernels take the engine's layout arrays only, so numba compiles and caches them
+once for every model.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..dynamics import CONSTRAINT, NONFINITE, OK
+from ..jit import njit
+from .kernels import (ALPHA, BETA, FORM, LAMBDA, LENGTH, OMEGA2, PD, PIVOT, TWO_XI_OMEGA, VIOLATION, _point, _rate,
+                      _scratch, _violation)
+
+# columns of a stage's per-body values (``_stage_values``): the end minus the joint point (m) and
+# its rate (m/s), the distance constraint's velocity term, the solution's relative point
+# acceleration (m/s^2), sin and cos of the body's angle, its rate (rad/s), the angle acceleration
+# (rad/s^2)
+EX, EY, EVX, EVY, DIST_TERM, RX, RY, SIN, COS, RATE, ACC, N_STAGE = range(12)
+# columns of a direction's per-body tangents: the multiplier, the pivot, the velocity term
+D_LAMBDA, D_PIVOT, D_VELOCITY_TERM, N_DIRECTION = range(4)
+
+
+@njit(error_model="numpy", inline="always")
+def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, base, params, x, values):
+    """The per-body values that every direction's tangent at the state y needs, into values
+    (n_b, N_STAGE): x is the stage's solution of K x = r (the point accelerations) and k its state
+    derivative."""
+    n_p, n_b = base.shape[0], body_pts.shape[0]
+    n_q = n_p + n_b
+    txo, om2 = params[TWO_XI_OMEGA], params[OMEGA2]
+    for b in range(n_b):
+        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        xi, yi, vxi, vyi = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
+        ex, ey, evx, evy = y[kj] - xi, y[kj + 1] - yi, y[n_q + kj] - vxi, y[n_q + kj + 1] - vyi
+        d = body_geom[b, LENGTH]
+        values[b, EX], values[b, EY], values[b, EVX], values[b, EVY] = ex, ey, evx, evy
+        values[b, DIST_TERM] = (2 * (evx * evx + evy * evy) + txo * 2 * (ex * evx + ey * evy)
+                                + om2 * (ex * ex + ey * ey - d * d))
+        values[b, RX] = x[kj] - (x[ki] if ki >= 0 else 0.0)
+        values[b, RY] = x[kj + 1] - (x[ki + 1] if ki >= 0 else 0.0)
+        psi = y[n_p + b] + body_geom[b, BETA]
+        values[b, SIN], values[b, COS] = math.sin(psi), math.cos(psi)
+        values[b, RATE], values[b, ACC] = y[n_q + n_p + b], k[n_q + n_p + b]
+
+
+@njit(error_model="numpy", inline="always")
+def _solve_factored(K, first, rhs):
+    """Solve K x = rhs in place with the L D L^T factor of ``kernels._solve_envelope`` in K."""
+    n = rhs.shape[0]
+    for r in range(n):
+        total = rhs[r]
+        for k in range(first[r], r):
+            total -= K[r, k] * rhs[k]
+        rhs[r] = total
+    for r in range(n):
+        rhs[r] /= K[r, r]
+    for r in range(n - 1, -1, -1):
+        x = rhs[r]
+        for k in range(first[r], r):
+            rhs[k] -= K[r, k] * x
+
+
+@njit(error_model="numpy", inline="always")
+def _tangent(dy, joint, dtau, pt_index, body_pts, body_geom, joint_parent, lin_idx, lin_coef, first, base, params, K,
+             aux, values, dr, dbody, out):
+    """out = f_y dy + f_tau dtau e_joint: the derivative of ``kernels._derivative`` at a stage in
+    the direction dy (n_state,) of the state and dtau (N m) of joint ``joint``'s torque. K: the
+    stage's factor, aux its multipliers, pivots and forms, values ``_stage_values``. dr (n_p,),
+    dbody (n_b, N_DIRECTION): scratch."""
+    n_p, n_b = base.shape[0], body_pts.shape[0]
+    n_q = n_p + n_b
+    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
+    for k in range(n_q):
+        out[k] = dy[n_q + k]
+    for r in range(n_p):
+        dr[r] = 0.0
+    for r in range(lin_idx.shape[0]):  # linear constraints: their right-hand side is linear in y
+        dphi, drate = 0.0, 0.0
+        for e in range(lin_idx.shape[1]):
+            k = lin_idx[r, e]
+            if k >= 0:
+                dphi += lin_coef[r, e] * dy[k]
+                drate += lin_coef[r, e] * dy[n_q + k]
+        dcc = alpha * (txo * drate + om2 * dphi)
+        for e in range(lin_idx.shape[1]):
+            k = lin_idx[r, e]
+            if k >= 0:
+                dr[k] -= lin_coef[r, e] * dcc
+    for b in range(n_b):
+        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        ex, ey, evx, evy = values[b, EX], values[b, EY], values[b, EVX], values[b, EVY]
+        dex, dey, devx, devy = dy[kj], dy[kj + 1], dy[n_q + kj], dy[n_q + kj + 1]
+        if ki >= 0:
+            dex, dey, devx, devy = dex - dy[ki], dey - dy[ki + 1], devx - dy[n_q + ki], devy - dy[n_q + ki + 1]
+        # distance: r -= 2 alpha e cd on j (+ on i); K's block 4 alpha e e^T, so -dK x is
+        # -4 alpha (de (e.rel) + e (de.rel)) on j (+ on i), rel = x_j - x_i
+        cd = values[b, DIST_TERM]
+        dcd = 4 * (evx * devx + evy * devy) + 2 * txo * (dex * evx + ex * devx + dey * evy + ey * devy) \
+            + 2 * om2 * (ex * dex + ey * dey)
+        rx, ry = values[b, RX], values[b, RY]
+        e_rel, de_rel = ex * rx + ey * ry, dex * rx + dey * ry
+        gx = 2 * alpha * (dex * cd + ex * dcd) + 4 * alpha * (dex * e_rel + ex * de_rel)
+        gy = 2 * alpha * (dey * cd + ey * dcd) + 4 * alpha * (dey * e_rel + ey * de_rel)
+        dr[kj] -= gx
+        dr[kj + 1] -= gy
+        if ki >= 0:
+            dr[ki] += gx
+            dr[ki + 1] += gy
+        # angle: lambda = Q_phi / pivot
+        d, s, c, w = body_geom[b, LENGTH], values[b, SIN], values[b, COS], values[b, RATE]
+        dpsi, dw = dy[n_p + b], dy[n_q + n_p + b]
+        axis = int(aux[b, FORM])
+        if axis == 1:  # (y_j - y_i) - d sin(psi)
+            dpivot = d * s * dpsi
+            dca = d * c * dpsi * w * w + 2 * d * s * w * dw + txo * (devy + d * s * dpsi * w - d * c * dw) \
+                + om2 * (dey - d * c * dpsi)
+        else:  # (x_j - x_i) - d cos(psi)
+            dpivot = d * c * dpsi
+            dca = -d * s * dpsi * w * w + 2 * d * c * w * dw + txo * (devx + d * c * dpsi * w + d * s * dw) \
+                + om2 * (dex + d * s * dpsi)
+        dq = dtau if b == joint else (-dtau if joint_parent[joint] == b else 0.0)
+        dlam = (dq - aux[b, LAMBDA] * dpivot) / aux[b, PIVOT]
+        dr[kj + axis] -= dlam
+        if ki >= 0:
+            dr[ki + axis] += dlam
+        dbody[b, D_LAMBDA], dbody[b, D_PIVOT], dbody[b, D_VELOCITY_TERM] = dlam, dpivot, dca
+    _solve_factored(K, first, dr)
+    for r in range(n_p):
+        out[n_q + r] = dr[r]
+    for b in range(n_b):
+        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        axis = int(aux[b, FORM])
+        drel = dr[kj + axis] - (dr[ki + axis] if ki >= 0 else 0.0)
+        out[n_q + n_p + b] = (dbody[b, D_LAMBDA] / alpha - dbody[b, D_VELOCITY_TERM] - drel
+                              - values[b, ACC] * dbody[b, D_PIVOT]) / aux[b, PIVOT]
+
+
+@njit(error_model="numpy", inline="always")
+def _stage_sensitivity(S, U, acc, weight, next_step, half, G, param_joint, work, values, dr, dbody, dk, layout):
+    """The tangents K_s of one stage for every parameter q, from its inputs U[q] (the tangent of
+    the stage's state): acc[q] += weight K_s, then U[q] = S[q] + next_step K_s (the next stage's
+    input). ``work`` holds the stage's factor and multipliers (``kernels._rate``), ``values``
+    its ``_stage_values``; G[half, q] is d tau / d p_q (N m per parameter unit) of joint
+    param_joint[q]. layout: the penalty layout (``kernels.rk4``'s order)."""
+    K, aux = work[0], work[2]
+    (pt_index, _, body_pts, body_geom, joint_parent, lin_idx, lin_coef, _, first, base, _, params) = layout
+    for q in range(S.shape[0]):
+        _tangent(U[q], param_joint[q], G[half, q], pt_index, body_pts, body_geom, joint_parent, lin_idx, lin_coef,
+                 first, base, params, K, aux, values, dr, dbody, dk)
+        for m in range(S.shape[1]):
+            acc[q, m] += weight * dk[m]
+            U[q, m] = S[q, m] + next_step * dk[m]
+
+
+@njit(error_model="numpy")
+def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offset, pt_index, pt_fixed, body_pts,
+                    body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent,
+                    n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
+                    applied, dz):
+    """Open-loop RK4 (``kernels.rk4`` in PD mode with zero gains, as ``kernels.rk4_candidates``
+    runs it) and the sensitivities of the joint angles.
+
+    tau, ref, refd: as for ``rk4_candidates``' candidate, shape (2 n_steps + 1, J); G: d tau / d p
+    on the half-step grid, shape (2 n_steps + 1, P), each parameter q moving the torque of joint
+    param_joint[q] only (N m per parameter unit). The initial state does not depend on p. Fills
+    states, rates (n_steps + 1, n_state) and applied (n_steps + 1, J) as ``rk4`` does, and
+    dz (n_steps // every + 1, J, P), the derivative of the joint angles (rad per parameter unit) at
+    every ``every``-th step reached. Returns (status, steps_done)."""
+    layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
+              params)
+    nominal = (n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext)
+    work = _scratch(layout, nominal)
+    n_b, n_p = joint_parent.shape[0], base.shape[0]
+    zero, no_gains = np.zeros(n_b), np.zeros((1, n_b, 2 * n_b))
+    n, P = y0.shape[0], G.shape[1]
+    torque = np.zeros(n_b)
+    y = y0.copy()
+    k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    S, U, acc = np.zeros((P, n)), np.zeros((P, n)), np.zeros((P, n))
+    values, dbody = np.empty((n_b, N_STAGE)), np.empty((n_b, N_DIRECTION))
+    dr, dk = np.empty(n_p), np.empty(n)
+    for i in range(n_steps + 1):
+        j = 2 * i
+        code = _rate(y, j, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque, k1)
+        for m in range(n):
+            states[i, m] = y[m]
+            rates[i, m] = k1[m]
+        for m in range(n_b):
+            applied[i, m] = torque[m]
+        if i % every == 0:
+            for b in range(n_b):
+                parent = joint_parent[b]
+                for q in range(P):
+                    dz[i // every, b, q] = S[q, n_p + b] - (S[q, n_p + parent] if parent >= 0 else 0.0)
+        if code != OK:
+            return code, i
+        if i == n_steps:
+            break
+        for q in range(P):
+            for m in range(n):
+                U[q, m], acc[q, m] = S[q, m], 0.0
+        _stage_values(y, k1, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
+        _stage_sensitivity(S, U, acc, 1.0, 0.5 * dt, j, G, param_joint, work, values, dr, dbody, dk, layout)
+        for m in range(n):
+            tmp[m] = y[m] + 0.5 * dt * k1[m]
+        code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque,
+                     k2)
+        if code == OK:
+            _stage_values(tmp, k2, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
+            _stage_sensitivity(S, U, acc, 2.0, 0.5 * dt, j + 1, G, param_joint, work, values, dr, dbody, dk,
+                               layout)
+            for m in range(n):
+                tmp[m] = y[m] + 0.5 * dt * k2[m]
+            code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
+                         torque, k3)
+        if code == OK:
+            _stage_values(tmp, k3, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
+            _stage_sensitivity(S, U, acc, 2.0, dt, j + 1, G, param_joint, work, values, dr, dbody, dk,
+                               layout)
+            for m in range(n):
+                tmp[m] = y[m] + dt * k3[m]
+            code = _rate(tmp, j + 2, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
+                         torque, k4)
+        if code != OK:
+            return code, i
+        _stage_values(tmp, k4, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
+        _stage_sensitivity(S, U, acc, 1.0, 0.0, j + 2, G, param_joint, work, values, dr, dbody, dk, layout)
+        finite = True
+        for m in range(n):
+            tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
+            finite = finite and math.isfinite(tmp[m])
+        if not finite:
+            return NONFINITE, i
+        viol = _violation(tmp, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
+                          first, base, q_ext, params)
+        if viol > params[VIOLATION]:
+            return CONSTRAINT, i
+        for q in range(P):
+            for m in range(n):
+                S[q, m] += dt / 6.0 * acc[q, m]
+        y[:] = tmp
+    return OK, n_steps
