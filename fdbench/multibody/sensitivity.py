@@ -27,41 +27,64 @@ from ..jit import njit
 from .kernels import (ALPHA, BETA, FORM, LAMBDA, LENGTH, OMEGA2, PD, PIVOT, TWO_XI_OMEGA, VIOLATION, _point, _rate,
                       _scratch, _violation)
 
-# columns of a stage's per-body values (``_stage_values``): the end minus the joint point (m) and
-# its rate (m/s), the distance constraint's velocity term, the solution's relative point
-# acceleration (m/s^2), sin and cos of the body's angle, its rate (rad/s), the angle acceleration
-# (rad/s^2)
-EX, EY, EVX, EVY, DIST_TERM, RX, RY, SIN, COS, RATE, ACC, N_STAGE = range(12)
+# columns of a stage's per-body coefficients (``_stage_values``), with e = r_j - r_i the body's
+# end minus its joint point (m) and de, de' a direction's change of e and e':
+#   the distance rows' change g = de GAIN + e (TX dex + TY dey + TVX dex' + TVY dey'), -g on j, +g on i;
+#   the angle row's pivot change PSI_PIVOT dpsi and velocity term change
+#   PSI_TERM dpsi + RATE_TERM dw + 2 xi omega de'_axis + omega^2 de_axis;
+# the multiplier, 1 / pivot, the angle acceleration (rad/s^2) and the form (the axis) at the stage
+(EX, EY, GAIN, TX, TY, TVX, TVY, PSI_PIVOT, PSI_TERM, RATE_TERM, STAGE_LAMBDA, INV_PIVOT, ACC, AXIS,
+ N_STAGE) = range(15)
 # columns of a direction's per-body tangents: the multiplier, the pivot, the velocity term
 D_LAMBDA, D_PIVOT, D_VELOCITY_TERM, N_DIRECTION = range(4)
 
 
 @njit(error_model="numpy", inline="always")
-def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, base, params, x, values):
-    """The per-body values that every direction's tangent at the state y needs, into values
-    (n_b, N_STAGE): x is the stage's solution of K x = r (the point accelerations) and k its state
-    derivative."""
+def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag):
+    """The coefficients every direction's tangent at the stage state y needs: per body into values
+    (n_b, N_STAGE), and 1 / D of the factor K = L D L^T into inv_diag (n_p,). x: the stage's
+    solution of K x = r (the point accelerations, m/s^2), k its state derivative, aux its
+    multipliers, pivots and forms (``kernels._derivative``).
+
+    The distance rows r -= 2 alpha e cd (cd = 2 |e'|^2 + 2 xi omega 2 e.e' + omega^2 (|e|^2 - d^2))
+    and K's block 4 alpha e e^T, whose change acts on x through -dK x = -4 alpha (de (e.rel) +
+    e (de.rel)), rel = x_j - x_i, give g of the columns' comment."""
     n_p, n_b = base.shape[0], body_pts.shape[0]
     n_q = n_p + n_b
-    txo, om2 = params[TWO_XI_OMEGA], params[OMEGA2]
+    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
+    for r in range(n_p):
+        inv_diag[r] = 1.0 / K[r, r]
     for b in range(n_b):
         ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
         xi, yi, vxi, vyi = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
         ex, ey, evx, evy = y[kj] - xi, y[kj + 1] - yi, y[n_q + kj] - vxi, y[n_q + kj + 1] - vyi
+        rx, ry = x[kj] - (x[ki] if ki >= 0 else 0.0), x[kj + 1] - (x[ki + 1] if ki >= 0 else 0.0)
         d = body_geom[b, LENGTH]
-        values[b, EX], values[b, EY], values[b, EVX], values[b, EVY] = ex, ey, evx, evy
-        values[b, DIST_TERM] = (2 * (evx * evx + evy * evy) + txo * 2 * (ex * evx + ey * evy)
-                                + om2 * (ex * ex + ey * ey - d * d))
-        values[b, RX] = x[kj] - (x[ki] if ki >= 0 else 0.0)
-        values[b, RY] = x[kj + 1] - (x[ki + 1] if ki >= 0 else 0.0)
+        cd = 2 * (evx * evx + evy * evy) + txo * 2 * (ex * evx + ey * evy) + om2 * (ex * ex + ey * ey - d * d)
+        values[b, EX], values[b, EY] = ex, ey
+        values[b, GAIN] = 2 * alpha * cd + 4 * alpha * (ex * rx + ey * ry)
+        values[b, TX] = 4 * alpha * (txo * evx + om2 * ex + rx)
+        values[b, TY] = 4 * alpha * (txo * evy + om2 * ey + ry)
+        values[b, TVX] = 4 * alpha * (2 * evx + txo * ex)
+        values[b, TVY] = 4 * alpha * (2 * evy + txo * ey)
         psi = y[n_p + b] + body_geom[b, BETA]
-        values[b, SIN], values[b, COS] = math.sin(psi), math.cos(psi)
-        values[b, RATE], values[b, ACC] = y[n_q + n_p + b], k[n_q + n_p + b]
+        s, c, w = math.sin(psi), math.cos(psi), y[n_q + n_p + b]
+        if aux[b, FORM] == 1:  # (y_j - y_i) - d sin(psi): pivot -d c, velocity term d s w^2 + txo (ey' - d c w) + ...
+            values[b, PSI_PIVOT] = d * s
+            values[b, PSI_TERM] = d * c * w * w + txo * d * s * w - om2 * d * c
+            values[b, RATE_TERM] = 2 * d * s * w - txo * d * c
+        else:  # (x_j - x_i) - d cos(psi): pivot d s, velocity term d c w^2 + txo (ex' + d s w) + ...
+            values[b, PSI_PIVOT] = d * c
+            values[b, PSI_TERM] = -d * s * w * w + txo * d * c * w + om2 * d * s
+            values[b, RATE_TERM] = 2 * d * c * w + txo * d * s
+        values[b, STAGE_LAMBDA], values[b, INV_PIVOT] = aux[b, LAMBDA], 1.0 / aux[b, PIVOT]
+        values[b, ACC], values[b, AXIS] = k[n_q + n_p + b], aux[b, FORM]
 
 
 @njit(error_model="numpy", inline="always")
-def _solve_factored(K, first, rhs):
-    """Solve K x = rhs in place with the L D L^T factor of ``kernels._solve_envelope`` in K."""
+def _solve_factored(K, first, inv_diag, rhs):
+    """Solve K x = rhs in place with the L D L^T factor of ``kernels._solve_envelope`` in K and
+    1 / D in inv_diag."""
     n = rhs.shape[0]
     for r in range(n):
         total = rhs[r]
@@ -69,7 +92,7 @@ def _solve_factored(K, first, rhs):
             total -= K[r, k] * rhs[k]
         rhs[r] = total
     for r in range(n):
-        rhs[r] /= K[r, r]
+        rhs[r] *= inv_diag[r]
     for r in range(n - 1, -1, -1):
         x = rhs[r]
         for k in range(first[r], r):
@@ -77,12 +100,12 @@ def _solve_factored(K, first, rhs):
 
 
 @njit(error_model="numpy", inline="always")
-def _tangent(dy, joint, dtau, pt_index, body_pts, body_geom, joint_parent, lin_idx, lin_coef, first, base, params, K,
-             aux, values, dr, dbody, out):
+def _tangent(dy, joint, dtau, pt_index, body_pts, joint_parent, lin_idx, lin_coef, first, base, params, K, values,
+             inv_diag, dr, dbody, out):
     """out = f_y dy + f_tau dtau e_joint: the derivative of ``kernels._derivative`` at a stage in
     the direction dy (n_state,) of the state and dtau (N m) of joint ``joint``'s torque. K: the
-    stage's factor, aux its multipliers, pivots and forms, values ``_stage_values``. dr (n_p,),
-    dbody (n_b, N_DIRECTION): scratch."""
+    stage's factor; values, inv_diag: its ``_stage_values``. dr (n_p,), dbody (n_b, N_DIRECTION):
+    scratch."""
     n_p, n_b = base.shape[0], body_pts.shape[0]
     n_q = n_p + n_b
     alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
@@ -104,65 +127,54 @@ def _tangent(dy, joint, dtau, pt_index, body_pts, body_geom, joint_parent, lin_i
                 dr[k] -= lin_coef[r, e] * dcc
     for b in range(n_b):
         ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        ex, ey, evx, evy = values[b, EX], values[b, EY], values[b, EVX], values[b, EVY]
         dex, dey, devx, devy = dy[kj], dy[kj + 1], dy[n_q + kj], dy[n_q + kj + 1]
         if ki >= 0:
             dex, dey, devx, devy = dex - dy[ki], dey - dy[ki + 1], devx - dy[n_q + ki], devy - dy[n_q + ki + 1]
-        # distance: r -= 2 alpha e cd on j (+ on i); K's block 4 alpha e e^T, so -dK x is
-        # -4 alpha (de (e.rel) + e (de.rel)) on j (+ on i), rel = x_j - x_i
-        cd = values[b, DIST_TERM]
-        dcd = 4 * (evx * devx + evy * devy) + 2 * txo * (dex * evx + ex * devx + dey * evy + ey * devy) \
-            + 2 * om2 * (ex * dex + ey * dey)
-        rx, ry = values[b, RX], values[b, RY]
-        e_rel, de_rel = ex * rx + ey * ry, dex * rx + dey * ry
-        gx = 2 * alpha * (dex * cd + ex * dcd) + 4 * alpha * (dex * e_rel + ex * de_rel)
-        gy = 2 * alpha * (dey * cd + ey * dcd) + 4 * alpha * (dey * e_rel + ey * de_rel)
+        t = values[b, TX] * dex + values[b, TY] * dey + values[b, TVX] * devx + values[b, TVY] * devy
+        gx, gy = dex * values[b, GAIN] + values[b, EX] * t, dey * values[b, GAIN] + values[b, EY] * t
+        dpsi, dw = dy[n_p + b], dy[n_q + n_p + b]
+        dpivot = values[b, PSI_PIVOT] * dpsi
+        dca = values[b, PSI_TERM] * dpsi + values[b, RATE_TERM] * dw
+        dq = dtau if b == joint else (-dtau if joint_parent[joint] == b else 0.0)
+        dlam = (dq - values[b, STAGE_LAMBDA] * dpivot) * values[b, INV_PIVOT]
+        if values[b, AXIS] == 1.0:
+            dca += txo * devy + om2 * dey
+            gy += dlam
+        else:
+            dca += txo * devx + om2 * dex
+            gx += dlam
         dr[kj] -= gx
         dr[kj + 1] -= gy
         if ki >= 0:
             dr[ki] += gx
             dr[ki + 1] += gy
-        # angle: lambda = Q_phi / pivot
-        d, s, c, w = body_geom[b, LENGTH], values[b, SIN], values[b, COS], values[b, RATE]
-        dpsi, dw = dy[n_p + b], dy[n_q + n_p + b]
-        axis = int(aux[b, FORM])
-        if axis == 1:  # (y_j - y_i) - d sin(psi)
-            dpivot = d * s * dpsi
-            dca = d * c * dpsi * w * w + 2 * d * s * w * dw + txo * (devy + d * s * dpsi * w - d * c * dw) \
-                + om2 * (dey - d * c * dpsi)
-        else:  # (x_j - x_i) - d cos(psi)
-            dpivot = d * c * dpsi
-            dca = -d * s * dpsi * w * w + 2 * d * c * w * dw + txo * (devx + d * c * dpsi * w + d * s * dw) \
-                + om2 * (dex + d * s * dpsi)
-        dq = dtau if b == joint else (-dtau if joint_parent[joint] == b else 0.0)
-        dlam = (dq - aux[b, LAMBDA] * dpivot) / aux[b, PIVOT]
-        dr[kj + axis] -= dlam
-        if ki >= 0:
-            dr[ki + axis] += dlam
         dbody[b, D_LAMBDA], dbody[b, D_PIVOT], dbody[b, D_VELOCITY_TERM] = dlam, dpivot, dca
-    _solve_factored(K, first, dr)
+    _solve_factored(K, first, inv_diag, dr)
     for r in range(n_p):
         out[n_q + r] = dr[r]
     for b in range(n_b):
         ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        axis = int(aux[b, FORM])
+        axis = 1 if values[b, AXIS] == 1.0 else 0
         drel = dr[kj + axis] - (dr[ki + axis] if ki >= 0 else 0.0)
         out[n_q + n_p + b] = (dbody[b, D_LAMBDA] / alpha - dbody[b, D_VELOCITY_TERM] - drel
-                              - values[b, ACC] * dbody[b, D_PIVOT]) / aux[b, PIVOT]
+                              - values[b, ACC] * dbody[b, D_PIVOT]) * values[b, INV_PIVOT]
 
 
 @njit(error_model="numpy", inline="always")
-def _stage_sensitivity(S, U, acc, weight, next_step, half, G, param_joint, work, values, dr, dbody, dk, layout):
-    """The tangents K_s of one stage for every parameter q, from its inputs U[q] (the tangent of
-    the stage's state): acc[q] += weight K_s, then U[q] = S[q] + next_step K_s (the next stage's
-    input). ``work`` holds the stage's factor and multipliers (``kernels._rate``), ``values``
-    its ``_stage_values``; G[half, q] is d tau / d p_q (N m per parameter unit) of joint
-    param_joint[q]. layout: the penalty layout (``kernels.rk4``'s order)."""
-    K, aux = work[0], work[2]
-    (pt_index, _, body_pts, body_geom, joint_parent, lin_idx, lin_coef, _, first, base, _, params) = layout
+def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, param_joint, work, scratch, layout):
+    """The tangents K_s of the stage at the state y (derivative k) for every parameter q, from
+    their inputs U[q] (the tangents of the stage's state): acc[q] += weight K_s, then
+    U[q] = S[q] + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
+    multipliers (``kernels._rate``); G[half, q] is d tau / d p_q (N m per parameter unit) of joint
+    param_joint[q]; layout: the penalty layout (``kernels.rk4``'s order); scratch: values,
+    inv_diag, dr, dbody, dk of ``_stage_values`` and ``_tangent``."""
+    K, x, aux = work[0], work[1], work[2]
+    values, inv_diag, dr, dbody, dk = scratch
+    (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, _, first, base, _, params) = layout
+    _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag)
     for q in range(S.shape[0]):
-        _tangent(U[q], param_joint[q], G[half, q], pt_index, body_pts, body_geom, joint_parent, lin_idx, lin_coef,
-                 first, base, params, K, aux, values, dr, dbody, dk)
+        _tangent(U[q], param_joint[q], G[half, q], pt_index, body_pts, joint_parent, lin_idx, lin_coef, first, base,
+                 params, K, values, inv_diag, dr, dbody, dk)
         for m in range(S.shape[1]):
             acc[q, m] += weight * dk[m]
             U[q, m] = S[q, m] + next_step * dk[m]
@@ -193,8 +205,7 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     S, U, acc = np.zeros((P, n)), np.zeros((P, n)), np.zeros((P, n))
-    values, dbody = np.empty((n_b, N_STAGE)), np.empty((n_b, N_DIRECTION))
-    dr, dk = np.empty(n_p), np.empty(n)
+    scratch = (np.empty((n_b, N_STAGE)), np.empty(n_p), np.empty(n_p), np.empty((n_b, N_DIRECTION)), np.empty(n))
     for i in range(n_steps + 1):
         j = 2 * i
         code = _rate(y, j, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque, k1)
@@ -215,32 +226,26 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
         for q in range(P):
             for m in range(n):
                 U[q, m], acc[q, m] = S[q, m], 0.0
-        _stage_values(y, k1, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
-        _stage_sensitivity(S, U, acc, 1.0, 0.5 * dt, j, G, param_joint, work, values, dr, dbody, dk, layout)
+        _stage_sensitivity(y, k1, S, U, acc, 1.0, 0.5 * dt, j, G, param_joint, work, scratch, layout)
         for m in range(n):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
         code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque,
                      k2)
         if code == OK:
-            _stage_values(tmp, k2, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
-            _stage_sensitivity(S, U, acc, 2.0, 0.5 * dt, j + 1, G, param_joint, work, values, dr, dbody, dk,
-                               layout)
+            _stage_sensitivity(tmp, k2, S, U, acc, 2.0, 0.5 * dt, j + 1, G, param_joint, work, scratch, layout)
             for m in range(n):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
             code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
                          torque, k3)
         if code == OK:
-            _stage_values(tmp, k3, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
-            _stage_sensitivity(S, U, acc, 2.0, dt, j + 1, G, param_joint, work, values, dr, dbody, dk,
-                               layout)
+            _stage_sensitivity(tmp, k3, S, U, acc, 2.0, dt, j + 1, G, param_joint, work, scratch, layout)
             for m in range(n):
                 tmp[m] = y[m] + dt * k3[m]
             code = _rate(tmp, j + 2, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
                          torque, k4)
         if code != OK:
             return code, i
-        _stage_values(tmp, k4, pt_index, pt_fixed, body_pts, body_geom, base, params, work[1], values)
-        _stage_sensitivity(S, U, acc, 1.0, 0.0, j + 2, G, param_joint, work, values, dr, dbody, dk, layout)
+        _stage_sensitivity(tmp, k4, S, U, acc, 1.0, 0.0, j + 2, G, param_joint, work, scratch, layout)
         finite = True
         for m in range(n):
             tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
@@ -256,3 +261,17 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
                 S[q, m] += dt / 6.0 * acc[q, m]
         y[:] = tmp
     return OK, n_steps
+
+
+def warm_up() -> None:
+    """Load (or compile) the sensitivity kernel on a small library model, so that later timings
+    exclude it."""
+    from .description import find_model
+    from .engine import Engine
+
+    engine = Engine(find_model("forearm"))
+    n, rows = 2, np.zeros((5, 1))
+    y0 = engine.state_from_joints(np.zeros(1), np.zeros(1))
+    rk4_sensitivity(y0, 0.05, n, rows, rows, rows, np.zeros((5, 1)), np.zeros(1, dtype=np.int64), 1,
+                    *engine.simulation_layout(), np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)),
+                    np.empty((n + 1, 1)), np.empty((n + 1, 1, 1)))
