@@ -2,7 +2,7 @@
 
 Every RK4 stage k_s = f(y_s, tau_s) is differentiated with the chain rule,
 K_s = f_y(y_s) dy_s/dp + f_tau(y_s) dtau_s/dp, and the step y+ = y + dt/6 (k1 + 2 k2 + 2 k3 + k4)
-gives S+ = S + dt/6 (K1 + 2 K2 + 2 K3 + K4), S = dy/dp of shape (n_state, P) (stored (P, n_state)).
+gives S+ = S + dt/6 (K1 + 2 K2 + 2 K3 + K4), S = dy/dp of shape (n_state, P).
 f_y S and f_tau are exact: ``_tangent`` is the forward-mode (tangent) derivative of
 ``kernels._derivative`` written by hand, one parameter direction at a time. It differentiates the
 assembly of the points' matrix K and right-hand side r, and for the linear solve K x = r uses
@@ -35,8 +35,6 @@ from .kernels import (ALPHA, BETA, FORM, LAMBDA, LENGTH, OMEGA2, PD, PIVOT, TWO_
 # the multiplier, 1 / pivot, the angle acceleration (rad/s^2) and the form (the axis) at the stage
 (EX, EY, GAIN, TX, TY, TVX, TVY, PSI_PIVOT, PSI_TERM, RATE_TERM, STAGE_LAMBDA, INV_PIVOT, ACC, AXIS,
  N_STAGE) = range(15)
-# columns of a direction's per-body tangents: the multiplier, the pivot, the velocity term
-D_LAMBDA, D_PIVOT, D_VELOCITY_TERM, N_DIRECTION = range(4)
 
 
 @njit(error_model="numpy", inline="always")
@@ -83,101 +81,118 @@ def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, pa
 
 @njit(error_model="numpy", inline="always")
 def _solve_factored(K, first, inv_diag, rhs):
-    """Solve K x = rhs in place with the L D L^T factor of ``kernels._solve_envelope`` in K and
-    1 / D in inv_diag."""
-    n = rhs.shape[0]
+    """Solve K X = rhs in place for the columns of rhs (n_p, P) with the L D L^T factor of
+    ``kernels._solve_envelope`` in K and 1 / D in inv_diag."""
+    n, P = rhs.shape
     for r in range(n):
-        total = rhs[r]
         for k in range(first[r], r):
-            total -= K[r, k] * rhs[k]
-        rhs[r] = total
+            lrk = K[r, k]
+            for q in range(P):
+                rhs[r, q] -= lrk * rhs[k, q]
     for r in range(n):
-        rhs[r] *= inv_diag[r]
+        for q in range(P):
+            rhs[r, q] *= inv_diag[r]
     for r in range(n - 1, -1, -1):
-        x = rhs[r]
         for k in range(first[r], r):
-            rhs[k] -= K[r, k] * x
+            lrk = K[r, k]
+            for q in range(P):
+                rhs[k, q] -= lrk * rhs[r, q]
 
 
 @njit(error_model="numpy", inline="always")
-def _tangent(dy, joint, dtau, pt_index, body_pts, joint_parent, lin_idx, lin_coef, first, base, params, K, values,
-             inv_diag, dr, dbody, out):
-    """out = f_y dy + f_tau dtau e_joint: the derivative of ``kernels._derivative`` at a stage in
-    the direction dy (n_state,) of the state and dtau (N m) of joint ``joint``'s torque. K: the
-    stage's factor; values, inv_diag: its ``_stage_values``. dr (n_p,), dbody (n_b, N_DIRECTION):
-    scratch."""
+def _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
+              dpivot, dca, out):
+    """out = f_y U + f_tau dtau for P directions at once: the derivative of ``kernels._derivative``
+    at a stage in the directions U (n_state, P) of the state and dtau (n_b, P) of the generalised
+    forces of the body angles (N m). K: the stage's factor; values, inv_diag: its
+    ``_stage_values``. dr (n_p, P), dlam, dpivot, dca (n_b, P): scratch."""
     n_p, n_b = base.shape[0], body_pts.shape[0]
     n_q = n_p + n_b
+    P = U.shape[1]
     alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
     for k in range(n_q):
-        out[k] = dy[n_q + k]
+        for q in range(P):
+            out[k, q] = U[n_q + k, q]
     for r in range(n_p):
-        dr[r] = 0.0
+        for q in range(P):
+            dr[r, q] = 0.0
     for r in range(lin_idx.shape[0]):  # linear constraints: their right-hand side is linear in y
-        dphi, drate = 0.0, 0.0
         for e in range(lin_idx.shape[1]):
             k = lin_idx[r, e]
-            if k >= 0:
-                dphi += lin_coef[r, e] * dy[k]
-                drate += lin_coef[r, e] * dy[n_q + k]
-        dcc = alpha * (txo * drate + om2 * dphi)
-        for e in range(lin_idx.shape[1]):
-            k = lin_idx[r, e]
-            if k >= 0:
-                dr[k] -= lin_coef[r, e] * dcc
+            if k < 0:
+                continue
+            for f in range(lin_idx.shape[1]):
+                m = lin_idx[r, f]
+                if m < 0:
+                    continue
+                c_om2, c_txo = alpha * om2 * lin_coef[r, e] * lin_coef[r, f], alpha * txo * lin_coef[r, e] * lin_coef[r, f]
+                for q in range(P):
+                    dr[k, q] -= c_om2 * U[m, q] + c_txo * U[n_q + m, q]
     for b in range(n_b):
         ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        dex, dey, devx, devy = dy[kj], dy[kj + 1], dy[n_q + kj], dy[n_q + kj + 1]
-        if ki >= 0:
-            dex, dey, devx, devy = dex - dy[ki], dey - dy[ki + 1], devx - dy[n_q + ki], devy - dy[n_q + ki + 1]
-        t = values[b, TX] * dex + values[b, TY] * dey + values[b, TVX] * devx + values[b, TVY] * devy
-        gx, gy = dex * values[b, GAIN] + values[b, EX] * t, dey * values[b, GAIN] + values[b, EY] * t
-        dpsi, dw = dy[n_p + b], dy[n_q + n_p + b]
-        dpivot = values[b, PSI_PIVOT] * dpsi
-        dca = values[b, PSI_TERM] * dpsi + values[b, RATE_TERM] * dw
-        dq = dtau if b == joint else (-dtau if joint_parent[joint] == b else 0.0)
-        dlam = (dq - values[b, STAGE_LAMBDA] * dpivot) * values[b, INV_PIVOT]
-        if values[b, AXIS] == 1.0:
-            dca += txo * devy + om2 * dey
-            gy += dlam
-        else:
-            dca += txo * devx + om2 * dex
-            gx += dlam
-        dr[kj] -= gx
-        dr[kj + 1] -= gy
-        if ki >= 0:
-            dr[ki] += gx
-            dr[ki + 1] += gy
-        dbody[b, D_LAMBDA], dbody[b, D_PIVOT], dbody[b, D_VELOCITY_TERM] = dlam, dpivot, dca
+        ex, ey, gain = values[b, EX], values[b, EY], values[b, GAIN]
+        tx, ty, tvx, tvy = values[b, TX], values[b, TY], values[b, TVX], values[b, TVY]
+        psi_pivot, psi_term, rate_term = values[b, PSI_PIVOT], values[b, PSI_TERM], values[b, RATE_TERM]
+        lam, inv_pivot = values[b, STAGE_LAMBDA], values[b, INV_PIVOT]
+        on_y = values[b, AXIS] == 1.0
+        for q in range(P):
+            dex, dey, devx, devy = U[kj, q], U[kj + 1, q], U[n_q + kj, q], U[n_q + kj + 1, q]
+            if ki >= 0:
+                dex, dey = dex - U[ki, q], dey - U[ki + 1, q]
+                devx, devy = devx - U[n_q + ki, q], devy - U[n_q + ki + 1, q]
+            t = tx * dex + ty * dey + tvx * devx + tvy * devy
+            gx, gy = dex * gain + ex * t, dey * gain + ey * t
+            dpsi = U[n_p + b, q]
+            dp = psi_pivot * dpsi
+            dl = (dtau[b, q] - lam * dp) * inv_pivot
+            dc = psi_term * dpsi + rate_term * U[n_q + n_p + b, q]
+            if on_y:
+                dc += txo * devy + om2 * dey
+                gy += dl
+            else:
+                dc += txo * devx + om2 * dex
+                gx += dl
+            dr[kj, q] -= gx
+            dr[kj + 1, q] -= gy
+            if ki >= 0:
+                dr[ki, q] += gx
+                dr[ki + 1, q] += gy
+            dlam[b, q], dpivot[b, q], dca[b, q] = dl, dp, dc
     _solve_factored(K, first, inv_diag, dr)
     for r in range(n_p):
-        out[n_q + r] = dr[r]
+        for q in range(P):
+            out[n_q + r, q] = dr[r, q]
     for b in range(n_b):
         ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
         axis = 1 if values[b, AXIS] == 1.0 else 0
-        drel = dr[kj + axis] - (dr[ki + axis] if ki >= 0 else 0.0)
-        out[n_q + n_p + b] = (dbody[b, D_LAMBDA] / alpha - dbody[b, D_VELOCITY_TERM] - drel
-                              - values[b, ACC] * dbody[b, D_PIVOT]) * values[b, INV_PIVOT]
+        acc, inv_pivot = values[b, ACC], values[b, INV_PIVOT]
+        for q in range(P):
+            drel = dr[kj + axis, q] - (dr[ki + axis, q] if ki >= 0 else 0.0)
+            out[n_q + n_p + b, q] = (dlam[b, q] / alpha - dca[b, q] - drel - acc * dpivot[b, q]) * inv_pivot
 
 
 @njit(error_model="numpy", inline="always")
-def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, param_joint, work, scratch, layout):
-    """The tangents K_s of the stage at the state y (derivative k) for every parameter q, from
-    their inputs U[q] (the tangents of the stage's state): acc[q] += weight K_s, then
-    U[q] = S[q] + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
-    multipliers (``kernels._rate``); G[half, q] is d tau / d p_q (N m per parameter unit) of joint
-    param_joint[q]; layout: the penalty layout (``kernels.rk4``'s order); scratch: values,
-    inv_diag, dr, dbody, dk of ``_stage_values`` and ``_tangent``."""
+def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign, work, scratch, layout):
+    """The tangents K_s of the stage at the state y (derivative k) for every parameter, from their
+    inputs U (n_state, P) (the tangents of the stage's state): acc += weight K_s, then
+    U = S + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
+    multipliers (``kernels._rate``); G[half, q] is d tau / d p_q (N m per parameter unit), which
+    moves the generalised force of body b's angle by torque_sign[b, q] G[half, q]; layout: the
+    penalty layout (``kernels.rk4``'s order); scratch: values, inv_diag, dtau, dr, dlam, dpivot,
+    dca, dk of ``_stage_values`` and ``_tangents``."""
     K, x, aux = work[0], work[1], work[2]
-    values, inv_diag, dr, dbody, dk = scratch
-    (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, _, first, base, _, params) = layout
+    values, inv_diag, dtau, dr, dlam, dpivot, dca, dk = scratch
+    (pt_index, pt_fixed, body_pts, body_geom, _, lin_idx, lin_coef, _, first, base, _, params) = layout
     _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag)
-    for q in range(S.shape[0]):
-        _tangent(U[q], param_joint[q], G[half, q], pt_index, body_pts, joint_parent, lin_idx, lin_coef, first, base,
-                 params, K, values, inv_diag, dr, dbody, dk)
-        for m in range(S.shape[1]):
-            acc[q, m] += weight * dk[m]
-            U[q, m] = S[q, m] + next_step * dk[m]
+    for b in range(torque_sign.shape[0]):
+        for q in range(torque_sign.shape[1]):
+            dtau[b, q] = torque_sign[b, q] * G[half, q]
+    _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
+              dpivot, dca, dk)
+    for m in range(S.shape[0]):
+        for q in range(S.shape[1]):
+            acc[m, q] += weight * dk[m, q]
+            U[m, q] = S[m, q] + next_step * dk[m, q]
 
 
 @njit(error_model="numpy")
@@ -204,8 +219,14 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
     torque = np.zeros(n_b)
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    S, U, acc = np.zeros((P, n)), np.zeros((P, n)), np.zeros((P, n))
-    scratch = (np.empty((n_b, N_STAGE)), np.empty(n_p), np.empty(n_p), np.empty((n_b, N_DIRECTION)), np.empty(n))
+    S, U, acc = np.zeros((n, P)), np.zeros((n, P)), np.zeros((n, P))
+    scratch = (np.empty((n_b, N_STAGE)), np.empty(n_p), np.empty((n_b, P)), np.empty((n_p, P)), np.empty((n_b, P)),
+               np.empty((n_b, P)), np.empty((n_b, P)), np.empty((n, P)))
+    torque_sign = np.zeros((n_b, P))  # joint torque -> generalised forces of the body angles
+    for q in range(P):
+        torque_sign[param_joint[q], q] = 1.0
+        if joint_parent[param_joint[q]] >= 0:
+            torque_sign[joint_parent[param_joint[q]], q] = -1.0
     for i in range(n_steps + 1):
         j = 2 * i
         code = _rate(y, j, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque, k1)
@@ -218,34 +239,34 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
             for b in range(n_b):
                 parent = joint_parent[b]
                 for q in range(P):
-                    dz[i // every, b, q] = S[q, n_p + b] - (S[q, n_p + parent] if parent >= 0 else 0.0)
+                    dz[i // every, b, q] = S[n_p + b, q] - (S[n_p + parent, q] if parent >= 0 else 0.0)
         if code != OK:
             return code, i
         if i == n_steps:
             break
-        for q in range(P):
-            for m in range(n):
-                U[q, m], acc[q, m] = S[q, m], 0.0
-        _stage_sensitivity(y, k1, S, U, acc, 1.0, 0.5 * dt, j, G, param_joint, work, scratch, layout)
+        for m in range(n):
+            for q in range(P):
+                U[m, q], acc[m, q] = S[m, q], 0.0
+        _stage_sensitivity(y, k1, S, U, acc, 1.0, 0.5 * dt, j, G, torque_sign, work, scratch, layout)
         for m in range(n):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
         code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque,
                      k2)
         if code == OK:
-            _stage_sensitivity(tmp, k2, S, U, acc, 2.0, 0.5 * dt, j + 1, G, param_joint, work, scratch, layout)
+            _stage_sensitivity(tmp, k2, S, U, acc, 2.0, 0.5 * dt, j + 1, G, torque_sign, work, scratch, layout)
             for m in range(n):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
             code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
                          torque, k3)
         if code == OK:
-            _stage_sensitivity(tmp, k3, S, U, acc, 2.0, dt, j + 1, G, param_joint, work, scratch, layout)
+            _stage_sensitivity(tmp, k3, S, U, acc, 2.0, dt, j + 1, G, torque_sign, work, scratch, layout)
             for m in range(n):
                 tmp[m] = y[m] + dt * k3[m]
             code = _rate(tmp, j + 2, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
                          torque, k4)
         if code != OK:
             return code, i
-        _stage_sensitivity(tmp, k4, S, U, acc, 1.0, 0.0, j + 2, G, param_joint, work, scratch, layout)
+        _stage_sensitivity(tmp, k4, S, U, acc, 1.0, 0.0, j + 2, G, torque_sign, work, scratch, layout)
         finite = True
         for m in range(n):
             tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
@@ -256,9 +277,9 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
                           first, base, q_ext, params)
         if viol > params[VIOLATION]:
             return CONSTRAINT, i
-        for q in range(P):
-            for m in range(n):
-                S[q, m] += dt / 6.0 * acc[q, m]
+        for m in range(n):
+            for q in range(P):
+                S[m, q] += dt / 6.0 * acc[m, q]
         y[:] = tmp
     return OK, n_steps
 
