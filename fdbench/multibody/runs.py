@@ -111,8 +111,6 @@ def check(spec) -> None:
     from ..integrate import Settings
     from ..model import Penalty
 
-    if spec.gradient != "fd":
-        raise ValueError(f"--gradient exact: not available with --model {spec.model_name} yet (the forearm has it)")
     if spec.command == "control" and (spec.controller or "pd") not in CONTROLLERS:
         raise ValueError(f"--controller {spec.controller}: not available with --model {spec.model_name} yet "
                          f"({', '.join(CONTROLLERS)})")
@@ -120,7 +118,19 @@ def check(spec) -> None:
     # the integrator's checks of its dt or tolerances, and the penalty's
     Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), integrator=spec.integrator, dt=spec.dt, rtol=spec.rtol,
              atol=spec.atol)
-    motions(spec)
+    desired, _ = motions(spec)
+    if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":
+        _check_samples_on_grid(spec, desired)
+
+
+def _check_samples_on_grid(spec, motion) -> None:
+    """ValueError (one line) unless the motion's samples lie on the RK4 grid of ``--dt``, one
+    every so many steps: exact gradients differentiate eq. 18 on the RK4 states themselves."""
+    from ..integrate import steps
+
+    n = steps(spec.dt, motion.duration)
+    if not sim.samples_on_grid(np.linspace(0.0, motion.duration, n + 1), motion.samples):
+        raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
 
 
 def integration(spec) -> dict:
@@ -314,6 +324,10 @@ def _optimize(spec, on_evaluation, on_start):
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
     _warm_up(spec)  # the population kernel and its threads too
+    if spec.gradient == "exact":
+        from .sensitivity import warm_up
+
+        warm_up()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
     if on_start:
@@ -331,8 +345,9 @@ def _optimize(spec, on_evaluation, on_start):
                                 for n in range(1, options["hidden"] + 1)]
     problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
     batch = problem.objectives_scaled if problem.batched else None
-    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation,
-                               batch=batch)
+    gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
+                               batch)
     params = np.asarray(found.x) * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - began
