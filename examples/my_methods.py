@@ -21,8 +21,10 @@ class LinearTorque(TorqueParameterisation):
 
 @OPTIMIZERS.register("random")
 class RandomSearch(Optimizer):
-    summary = "random search around x0"
+    summary = "random search around x0, steps of --opt 'random[scale=...]'"
+    def __init__(self, scale: float = 0.1):  # its options: the command line passes them by name
+        self.scale = scale
     def run(self, f, x0, seed):
         rng = np.random.default_rng(seed)
         while True:                      # the budget wrapper stops it
-            f(x0 + 0.1 * rng.standard_normal(len(x0)))
+            f(x0 + self.scale * rng.standard_normal(len(x0)))

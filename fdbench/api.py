@@ -17,7 +17,7 @@ from pathlib import Path
 
 
 # the method options of 'fdbench report' by default (its runs are stored under these settings)
-REPORT_TORQUE_OPTIONS = {"hidden": 4, "knots": 11, "terms": 4}
+REPORT_TORQUE_OPTIONS = {"hidden": 4, "knots": None, "terms": 4}  # knots None: one every 0.1 s of the motion
 REPORT_OPTIMIZER_OPTIONS = {"sigma0": None, "popsize": None}  # None: each torque's default
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import re
 from typing import Callable, Generic, Iterator, TypeVar
 
 T = TypeVar("T")
@@ -48,6 +49,35 @@ class Registry(Generic[T]):
 
     def items(self):
         return self._entries.items()
+
+
+def parse_method(text: str, option: str) -> tuple[str, dict]:
+    """A method named with its options, as benchopt writes them: ``cmaes[sigma0=0.1,popsize=12]`` ->
+    ('cmaes', {'sigma0': 0.1, 'popsize': 12}); a bare name has none. Values are integers, numbers,
+    true/false or text. ValueError (one line naming ``option``) for anything else."""
+    match = re.fullmatch(r"\s*([^\[\]\s]+)\s*(?:\[(.*)\])?\s*", str(text), re.S)
+    if match is None:
+        raise ValueError(f"{option}: expected NAME or NAME[KEY=VALUE,...], got {text!r}")
+    name, body = match.groups()
+    options = {}
+    for item in [] if body is None or not body.strip() else body.split(","):
+        key, sep, value = (part.strip() for part in item.partition("="))
+        if not sep or not key.isidentifier() or not value:
+            raise ValueError(f"{option}: expected KEY=VALUE inside {name}[...], got {item.strip()!r}")
+        if key in options:
+            raise ValueError(f"{option}: {name}[...] gives {key} twice")
+        options[key] = option_value(value)
+    return name, options
+
+
+def option_value(text: str):
+    """A method option's value from its text: an integer, a number, true/false, or the text itself."""
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text.lower(), text)
 
 
 def unknown_name_message(kind: str, name: str, valid: list[str]) -> str:

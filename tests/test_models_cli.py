@@ -198,7 +198,7 @@ def test_optimize_on_the_arm(tmp_path):
 def test_optimize_on_the_arm_refuses_what_it_lacks():
     for args, word in ((["--hidden", "0", "--torque", "ann"], "--hidden"), (["--budget", "0"], "--budget"),
                        (["--torque", "xx"], "--torque"), (["--integrator", "euler"], "--integrator"),
-                       (["--gradient", "exact"], "--gradient"), (["--plant", "m0=-2"], "m0")):
+                       (["--gradient", "exact", "--opt", "cmaes"], "--gradient"), (["--plant", "m0=-2"], "m0")):
         result = invoke("optimize", "--model", "arm2", *args, code=2)
         assert len(result.stderr.splitlines()) == 1 and word in result.stderr, result.stderr
 

@@ -186,6 +186,51 @@ def _check_gradient(gradient: str, optimizers=None) -> None:
                            f"none is selected by --opt {' --opt '.join(optimizers)}")
 
 
+def _bracketed(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
+    """``NAME[KEY=VALUE,...]`` of --torque, --opt or --controller: (NAME, ``flags`` (the command's
+    own option flags of that kind) with the bracket's options on top), so that a method, a plugin's
+    included, receives any option its class takes. A key it does not take, or one also given as its
+    own flag on the command line, is bad input."""
+    name, given = _bracket_options(ctx, text, option, flags, registry, kind)
+    return name, {**flags, **given}
+
+
+def _bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
+    """``_bracketed`` for a repeatable selection (report, study): the names (None: the default
+    selection) and one set of options for them all, each method keeping those it takes; one key
+    given two values in two brackets is bad input."""
+    if not entries:
+        return entries, flags
+    names, merged, given_by = [], dict(flags), {}
+    for entry in entries:
+        name, given = _bracket_options(ctx, entry, option, flags, registry, kind)
+        names.append(name)
+        for key, value in given.items():
+            if key in given_by and merged[key] != value:
+                raise BadInput(f"{option}: {key} is {merged[key]} in {given_by[key]}[...] and {value} in "
+                               f"{name}[...]; give one value")
+            merged[key], given_by[key] = value, name
+    return names, merged
+
+
+def _bracket_options(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
+    """(NAME, the options of its brackets) of ``NAME[KEY=VALUE,...]``, checked (see ``_bracketed``)."""
+    from ..experiment import check_method_options
+    from ..registry import parse_method
+
+    try:
+        name, given = parse_method(text, option)
+        check_method_options(registry, name, given, kind)
+    except ValueError as exc:
+        message = str(exc)
+        raise BadInput(message if message.startswith(option) else f"{option}: {message}") from None
+    for key in given:
+        source = ctx.get_parameter_source(key) if ctx is not None and key in flags else None
+        if getattr(source, "name", None) in ("COMMANDLINE", "ENVIRONMENT"):
+            raise BadInput(f"{option}: {key} is given both in {name}[...] and as --{key.replace('_', '-')}")
+    return name, given
+
+
 def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
     """Reject an out-of-range method option even when the chosen method does not use it
     (``--terms 0`` with ``--torque cs``): every registered class that takes it checks it."""

@@ -59,7 +59,7 @@ Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (fo
 Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
 
 
-Knots = Annotated[int, typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span (eq. 5: [0, 1] s).")]
+Knots = Annotated[Optional[int], typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span; default one every 0.1 s, as the paper's 11 over eq. 5's 1 s (26 for a 2.5 s recording).", show_default=False)]
 
 
 Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
@@ -91,10 +91,10 @@ Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once,
 
 
 # Options of the commands that run many specs (report, study)
-TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf.")]
+TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf. NAME[KEY=VALUE,...] passes options, e.g. 'cs[knots=21]'.")]
 
 
-OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs.")]
+OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs. NAME[KEY=VALUE,...] passes options, e.g. 'cmaes[sigma0=0.1]'.")]
 
 
 FeedforwardSelection = Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with feedforward (Table 3) or without (Table 2); default both.", show_default=False)]

@@ -14,7 +14,7 @@ from .options import (
     _noise_seed, _spec_inputs, _with_conditions,
 )
 from .common import (
-    OUTPUT_LABELS, _check_finite, _check_gradient, _check_method_options, _check_outputs,
+    OUTPUT_LABELS, _bracketed, _check_finite, _check_gradient, _check_method_options, _check_outputs,
     _check_store, _emit, _finish, _methods_text, _parse_hidden, _progress, _save_history, _say, _store,
     _table_text, _validated,
 )
@@ -89,7 +89,7 @@ def simulate(
 @_with_conditions
 def control(
     ctx: typer.Context,
-    controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods').")] = "pd",
+    controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'lqr[q_angle=1e5]'.")] = "pd",
     kp: Annotated[float, typer.Option("--kp", help="pd: proportional gain, N m/rad (paper: 80).")] = 80.0,
     kd: Annotated[float, typer.Option("--kd", help="pd: derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
     bandwidth: Annotated[float, typer.Option("--bandwidth", help="computed-torque: error-dynamics natural frequency omega_n, rad/s.")] = 20.0,
@@ -117,9 +117,11 @@ def control(
     from ..experiment import control_spec, run
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
-    options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
-    _check_controller(controller, options)
     from ..controllers import CONTROLLERS
+
+    options = dict(kp=kp, kd=kd, bandwidth=bandwidth, damping=damping, q_angle=q_angle, q_rate=q_rate, r_torque=r_torque)
+    controller, options = _bracketed(ctx, controller, "--controller", options, CONTROLLERS, "controller")
+    _check_controller(controller, options)
 
     options = _applicable(ctx, options, CONTROLLERS, controller, "--controller")
     spec = _validated(control_spec(kp, kd, controller, options, **_noise_seed(conditions, seed),
@@ -243,13 +245,13 @@ def methods():
 @_with_conditions
 def optimize(
     ctx: typer.Context,
-    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods').")] = "cs",
-    opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods').")] = "bfgs",
+    torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'cs[knots=21]'.")] = "cs",
+    opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'cmaes[sigma0=0.1,popsize=12]'.")] = "bfgs",
     feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
     budget: Budget = 200,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
     hidden: Hidden = "4",
-    knots: Knots = 11,
+    knots: Knots = None,
     terms: Terms = 4,
     sigma0: Sigma0 = None,
     popsize: Popsize = None,
@@ -283,11 +285,14 @@ def optimize(
     _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db,
                    inputs=_spec_inputs(conditions, kinematics))
     _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
-    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
-    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
-    _check_method_options(torque_options, optimizer_options)
     from ..optimizers import OPTIMIZERS
     from ..torques import TORQUES
+
+    torque, torque_options = _bracketed(ctx, torque, "--torque", {"hidden": _parse_hidden(hidden), "knots": knots,
+                                                                  "terms": terms}, TORQUES, "torque")
+    opt, optimizer_options = _bracketed(ctx, opt, "--opt", {"sigma0": sigma0, "popsize": popsize}, OPTIMIZERS,
+                                        "optimizer")
+    _check_method_options(torque_options, optimizer_options)
 
     torque_options = _applicable(ctx, torque_options, TORQUES, torque, "--torque")
     optimizer_options = _applicable(ctx, optimizer_options, OPTIMIZERS, opt, "--opt")

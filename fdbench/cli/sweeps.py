@@ -20,7 +20,7 @@ from .options import (
     _with_conditions,
 )
 from .common import (
-    _check_choice, _check_finite, _check_gradient, _check_method_options, _check_names, _check_outputs, _emit,
+    _bracketed_all, _check_choice, _check_finite, _check_gradient, _check_method_options, _check_names, _check_outputs, _emit,
     _parse_hidden, _progress, _say, _validated, _with_option,
 )
 
@@ -28,6 +28,7 @@ from .common import (
 @app.command()
 @_with_conditions
 def report(
+    ctx: typer.Context,
     torque: TorqueSelection = None,
     opt: OptSelection = None,
     feedforward: FeedforwardSelection = None,
@@ -45,7 +46,7 @@ def report(
     kp: Kp = 80.0,
     kd: Kd = 0.3,
     hidden: Hidden = "4",
-    knots: Knots = 11,
+    knots: Knots = None,
     terms: Terms = 4,
     sigma0: Sigma0 = None,
     popsize: Popsize = None,
@@ -75,8 +76,8 @@ def report(
     _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=inputs)
     if figures is not None:
         _check_figures_dir(figures, output, db_path, inputs)
-    torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
-                                                       penalty_weight)
+    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, jobs, torque, opt, hidden, knots, terms,
+                                                                    sigma0, popsize, penalty_weight)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control and not beyond:
@@ -128,6 +129,7 @@ def report(
 @app.command()
 @_with_conditions
 def study(
+    ctx: typer.Context,
     kind: Annotated[str, typer.Argument(help="noise: the motion captured with white noise of each level (deg); mismatch: one constant of the simulated body changed by each level (percent) while the methods keep the nominal model.", metavar="noise|mismatch")],
     levels: Annotated[str, typer.Option("--levels", help="The levels, comma-separated: deg for noise (e.g. 0,0.25,0.5,1,2), percent for mismatch (e.g. -20,-10,0,10,20).")] = "",
     param: Annotated[str, typer.Option("--param", help="mismatch: the plant constant changed: L12, L1G, m, I1, F_ext or g (arm2 also L01, L0G, m0, I0; any model: a path such as thigh.mass, see 'fdbench models show').")] = "I1",
@@ -147,7 +149,7 @@ def study(
     kp: Kp = 80.0,
     kd: Kd = 0.3,
     hidden: Hidden = "4",
-    knots: Knots = 11,
+    knots: Knots = None,
     terms: Terms = 4,
     sigma0: Sigma0 = None,
     popsize: Popsize = None,
@@ -191,8 +193,8 @@ def study(
         _check_choice("--param", param, model_keys(conditions["model_name"]))
     if figures is not None:
         _check_study_figures(figures, output, db_path, inputs)
-    torque_options, optimizer_options = _sweep_options(seeds, jobs, torque, opt, hidden, knots, terms, sigma0, popsize,
-                                                       penalty_weight)
+    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, jobs, torque, opt, hidden, knots, terms,
+                                                                    sigma0, popsize, penalty_weight)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
     if not cells and not control:
@@ -284,19 +286,25 @@ def _check_study_figures(directory: Path, output: Optional[Path], db: Path, inpu
     _check_figures_dir(directory, output, db, inputs, FIGURE_NAMES)
 
 
-def _sweep_options(seeds, jobs, torques, optimizers, hidden, knots, terms, sigma0, popsize, penalty_weight):
+def _sweep_options(ctx, seeds, jobs, torques, optimizers, hidden, knots, terms, sigma0, popsize, penalty_weight):
     """The checks shared by the commands that run many specs (report, study), before any work;
-    returns the (torque options, optimizer options) of their cells."""
+    returns the torque and optimiser names (their NAME[KEY=VALUE,...] options taken out) and the
+    (torque options, optimizer options) of their cells."""
+    from ..optimizers import OPTIMIZERS
+    from ..torques import TORQUES
+
     if not 1 <= seeds <= MAX_SEEDS:
         raise BadInput(f"--seeds must be an integer in [1, {MAX_SEEDS}], got {seeds}")
     if jobs is not None and not 1 <= jobs <= MAX_JOBS:
         raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
     _check_finite(sigma0=sigma0 if sigma0 is not None else 1.0, penalty_weight=penalty_weight)
+    torques, torque_options = _bracketed_all(ctx, torques, "--torque", {"hidden": _parse_hidden(hidden), "knots": knots,
+                                                                        "terms": terms}, TORQUES, "torque")
+    optimizers, optimizer_options = _bracketed_all(ctx, optimizers, "--opt", {"sigma0": sigma0, "popsize": popsize},
+                                                   OPTIMIZERS, "optimizer")
     _check_names(torques, optimizers)
-    torque_options = {"hidden": _parse_hidden(hidden), "knots": knots, "terms": terms}
-    optimizer_options = {"sigma0": sigma0, "popsize": popsize}
     _check_method_options(torque_options, optimizer_options)
-    return torque_options, optimizer_options
+    return torques, optimizers, torque_options, optimizer_options
 
 
 def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:

@@ -59,7 +59,7 @@ class JointTrackingProblem(ShootingProblem):
                          else np.zeros((2 * n + 1, n_joints)))
         self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), motion.samples)
                        if self.integrator == "rk4" else 0)  # the population kernel is RK4's
-        self._population = None
+        self._population, self._jacobians = None, None
         self._n_steps = n
         if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
             z0, zd0, _ = motion(np.zeros(1))
@@ -136,6 +136,64 @@ class JointTrackingProblem(ShootingProblem):
         tau = self.torques_on_grid_batch(P)
         args = self.engine.population_args(*self._kernel_start, tau, *self._kernel_rest)
         return self._population(len(P), args)
+
+    def check_exact_gradient(self) -> None:
+        """ValueError with a one-line message where exact gradients are not available: they need
+        RK4 with the motion's samples on its grid and a parameterisation that gives d tau / d p."""
+        if self.integrator != "rk4":
+            raise ValueError(f"--gradient exact needs --integrator rk4, got {self.integrator}")
+        if not self.batched:
+            raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
+        if self._jacobians is None:
+            self._jacobians = [part.on_grid_jacobian(self._half) for part in self.parts]
+        if any(jacobian is None for jacobian in self._jacobians):
+            raise ValueError(f"--gradient exact: torque {self.parts[0].name!r} gives no d tau / d p")
+
+    def torque_jacobian(self, p) -> tuple[np.ndarray, np.ndarray]:
+        """(G, joint): d tau / d p on the half-step grid, shape (2 n + 1, n_params) (N m per
+        parameter unit), parameter q moving the torque of joint joint[q] only (one block per joint)."""
+        self.check_exact_gradient()
+        p = np.asarray(p, dtype=float)
+        with np.errstate(all="ignore"):
+            G = np.concatenate([np.asarray(jacobian(p[a:b]), dtype=float).reshape(len(self._half), b - a)
+                                for jacobian, a, b in zip(self._jacobians, self.blocks[:-1], self.blocks[1:])], axis=1)
+        return np.ascontiguousarray(G), np.repeat(np.arange(len(self.parts)), np.diff(self.blocks))
+
+    def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
+        """Eq. 18 and its exact gradient with respect to p, shape (n_params,), from one RK4
+        simulation with forward sensitivities (``sensitivity.rk4_sensitivity``). The value equals
+        ``objective(p)`` to the last bit (the same states and kernel). Over the m samples reached,
+        with e the joint angle errors (deg, m x J), d RMSE / d p = sum e (180 / pi) dz / dp / (m J RMSE);
+        the penalty term is piecewise constant in p (t_end moves by whole steps), so a failing
+        simulation's gradient is the RMSE's over the samples reached (zero where the RMSE is zero)."""
+        from .kernels import tracking_objective
+        from .sensitivity import rk4_sensitivity
+
+        p = np.asarray(p, dtype=float)
+        G, joint = self.torque_jacobian(p)
+        y0, dt, n, tau, ref, refd, every, angles_ref, weight, *layout = self.engine.population_args(
+            *self._kernel_start, self.torques_on_grid(p)[None], *self._kernel_rest)
+        states, rates = np.empty((n + 1, self.engine.n_state)), np.empty((n + 1, self.engine.n_state))
+        dz = np.empty((n // every + 1, self.engine.n_joints, len(p)))
+        _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates,
+                                  np.empty((n + 1, self.engine.n_joints)), dz)
+        value = tracking_objective(states, done, every, angles_ref, n, weight, self.engine.joint_offset,
+                                   self.engine.joint_parent, self.engine.n_p)
+        m = done // every + 1
+        error = np.degrees(self.engine.joints_from_state(states[: done + 1 : every])[0] - angles_ref[:m])
+        rmse = float(np.sqrt(np.mean(error**2)))
+        gradient = np.zeros(len(p))
+        if math.isfinite(rmse) and rmse > 0:
+            with np.errstate(all="ignore"):
+                gradient = np.degrees(np.einsum("kj,kjq->q", error, dz[:m])) / (error.size * rmse)
+            if not np.all(np.isfinite(gradient)):
+                gradient = np.zeros(len(p))
+        return float(value), gradient
+
+    def value_and_gradient_scaled(self, x) -> tuple[float, np.ndarray]:
+        """``value_and_gradient`` on the scaled parameters x = p / scale."""
+        f, g = self.value_and_gradient(np.asarray(x, dtype=float) * self.scale)
+        return f, g * self.scale
 
 
 def _interp(grid, values, t):

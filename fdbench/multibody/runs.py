@@ -93,15 +93,15 @@ def reference(spec) -> sim.JointInverse:
 
 def describe(spec) -> dict:
     """The record's fields that say which motion, noise, filter, model and plant a run used."""
-    from ..experiment import _options_text
+    from ..method_options import options_text
 
     desired, truth = motions(spec)
     out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
     parts = getattr(desired, "parts", [])
     if parts and hasattr(parts[0], "describe"):
         out["derivatives"] = parts[0].describe().get("derivatives")
-    out.update(noise_deg=spec.noise_deg, model=spec.model_name, model_options=_options_text(spec.model) or None,
-               plant=_options_text(spec.plant) or None)
+    out.update(noise_deg=spec.noise_deg, model=spec.model_name, model_options=options_text(spec.model) or None,
+               plant=options_text(spec.plant) or None)
     return out
 
 
@@ -111,8 +111,6 @@ def check(spec) -> None:
     from ..integrate import Settings
     from ..model import Penalty
 
-    if spec.gradient != "fd":
-        raise ValueError(f"--gradient exact: not available with --model {spec.model_name} yet (the forearm has it)")
     if spec.command == "control" and (spec.controller or "pd") not in CONTROLLERS:
         raise ValueError(f"--controller {spec.controller}: not available with --model {spec.model_name} yet "
                          f"({', '.join(CONTROLLERS)})")
@@ -120,7 +118,19 @@ def check(spec) -> None:
     # the integrator's checks of its dt or tolerances, and the penalty's
     Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), integrator=spec.integrator, dt=spec.dt, rtol=spec.rtol,
              atol=spec.atol)
-    motions(spec)
+    desired, _ = motions(spec)
+    if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":
+        _check_samples_on_grid(spec, desired)
+
+
+def _check_samples_on_grid(spec, motion) -> None:
+    """ValueError (one line) unless the motion's samples lie on the RK4 grid of ``--dt``, one
+    every so many steps: exact gradients differentiate eq. 18 on the RK4 states themselves."""
+    from ..integrate import steps
+
+    n = steps(spec.dt, motion.duration)
+    if not sim.samples_on_grid(np.linspace(0.0, motion.duration, n + 1), motion.samples):
+        raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
 
 
 def integration(spec) -> dict:
@@ -206,7 +216,8 @@ def _gains(spec, controller: str, options: dict):
 
 def run(spec, on_evaluation=None, on_start=None):
     """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
-    from ..experiment import _options_text, base_record
+    from ..experiment import base_record
+    from ..method_options import options_text
 
     if spec.command == "optimize":
         return _optimize(spec, on_evaluation, on_start)
@@ -229,7 +240,7 @@ def run(spec, on_evaluation=None, on_start=None):
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime, controller=controller,
                   **({"kp": spec.kp, "kd": spec.kd} if controller == "pd" else
-                     {"controller_options": _options_text(spec.method_options)}))
+                     {"controller_options": options_text(spec.method_options)}))
     return _outcome(spec, record, result, inverse)
 
 
@@ -306,12 +317,17 @@ def replay(spec, params) -> sim.Simulation:
 # ---------------------------------------------------------------------- optimisation and collocation
 def _optimize(spec, on_evaluation, on_start):
     """Shooting optimisation of per-joint torque parameters (``problem.JointTrackingProblem``)."""
-    from ..experiment import _options_text, base_record
+    from ..experiment import base_record
+    from ..method_options import options_text
     from ..optimizers import make_optimizer
     from ..torques import TORQUES
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
     _warm_up(spec)  # the population kernel and its threads too
+    if spec.gradient == "exact":
+        from .sensitivity import warm_up
+
+        warm_up()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
     if on_start:
@@ -329,8 +345,9 @@ def _optimize(spec, on_evaluation, on_start):
                                 for n in range(1, options["hidden"] + 1)]
     problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
     batch = problem.objectives_scaled if problem.batched else None
-    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation,
-                               batch=batch)
+    gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
+                               batch)
     params = np.asarray(found.x) * problem.scale
     result = problem.simulate(params)
     runtime = time.perf_counter() - began
@@ -338,8 +355,8 @@ def _optimize(spec, on_evaluation, on_start):
     record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
                   evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
                   n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
-                  torque_options=_options_text(sorted(options.items())),
-                  optimizer_options=_options_text(spec.optimizer_options), gradient=spec.gradient,
+                  torque_options=options_text(sorted(options.items())),
+                  optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
     return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
 

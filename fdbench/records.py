@@ -1,0 +1,96 @@
+"""A run's flat record (the command-line contract: ``RECORD_FIELDS``) and its outcome
+(``RunOutcome``: the record, the simulation, the reference, the trajectory table)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import __version__
+from .integrate import SimulationResult
+from .spec import RunSpec
+
+
+# The keys of every record, in this order (JSON keys and CSV header).
+RECORD_FIELDS = (
+    "command", "kinematics", "integrator", "dt", "torque", "optimizer", "feedforward",
+    "kp", "kd", "seed", "budget", "rmse_rot_deg", "rmse_torque_nm", "runtime_s", "evaluations",
+    "best_objective", "initial_objective", "t_end", "status", "message", "stop_reason", "max_violation", "n_params",
+    "torque_options", "optimizer_options", "gradient", "alpha", "xi", "omega", "penalty_weight", "motion", "derivatives",
+    "noise_deg", "model", "model_options", "plant", "spec_hash", "fdbench_version",
+)
+
+
+@dataclass
+class RunOutcome:
+    record: dict
+    result: SimulationResult
+    inverse: object  # InverseResult on the 1 ms samples
+    history: list = field(default_factory=list)  # best-so-far objective per evaluation
+    params: np.ndarray | None = None  # best parameters (optimize)
+    extra: dict = field(default_factory=dict)
+    table: tuple | None = None  # the trajectory as (CSV header, rows (n, k)) when not the forearm's
+
+    def trajectory(self) -> tuple[list, np.ndarray]:
+        """The run's time history on the motion's samples: (CSV header, rows of shape (n, k)), in the
+        units of a motion file (s, deg, deg/s, deg/s^2; torques N m, positions m), so that it can be
+        read back as ``--motion`` (the simulated theta) or ``--torque-file`` (the applied torque)."""
+        if self.table is not None:
+            return self.table
+        r, inv = self.result, self.inverse
+        theta_acc = np.full(len(r.t), np.nan) if r.qdd is None else r.qdd[:, 2]
+        angles = np.degrees([r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, theta_acc, inv.theta_ddot])
+        header = ["t", "theta", "theta_desired", "theta_vel", "theta_vel_desired", "theta_acc", "theta_acc_desired",
+                  "torque", "torque_inverse", "x2", "y2"]
+        return header, np.column_stack([r.t, *angles, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]])
+
+
+
+
+def noise_seed(spec: RunSpec) -> int | None:
+    """The seed a run uses: its own, or 0 for the noise of a run given none (as ``motions``
+    draws it); None for a run that draws nothing."""
+    if spec.seed is not None:
+        return spec.seed
+    return 0 if spec.noise_deg else None
+
+
+def base_record(spec: RunSpec) -> dict:
+    record = dict.fromkeys(RECORD_FIELDS)
+    record.update(
+        command=spec.command, kinematics=spec.kinematics, integrator=spec.integrator, dt=spec.dt,
+        feedforward=spec.feedforward, alpha=spec.alpha, xi=spec.xi, omega=spec.omega,
+        spec_hash=spec.hash(), fdbench_version=__version__, seed=noise_seed(spec),
+    )
+    described = spec.describe()
+    record.update({k: v for k, v in described.items() if k in record})
+    return record
+
+
+def fill_result(record: dict, result: SimulationResult, inverse) -> dict:
+    from .indicators import rmse_rot_deg, rmse_torque_nm
+
+    record.update(
+        rmse_rot_deg=rmse_rot_deg(result, inverse.theta),
+        rmse_torque_nm=rmse_torque_nm(result, inverse.torque),
+        t_end=result.t_end, status=result.status.code, message=result.message,
+        max_violation=result.max_violation,
+    )
+    return record
+
+
+ALPHA_HINT = "; try a larger --alpha (or a smaller --dt with rk4)"
+
+
+def explained(outcome: RunOutcome, spec: RunSpec) -> RunOutcome:
+    """A failed run's message names the likely cause when a constant of the model or the plant
+    is implausible (centimetres typed for metres), instead of the generic hint on --alpha."""
+    from .model import implausible
+
+    causes = implausible(spec.model + spec.plant)
+    record = outcome.record
+    if causes and record.get("status") not in (None, "success"):
+        message = str(record.get("message") or "").replace(ALPHA_HINT, "")
+        record["message"] = f"{message}; likely cause: {'; '.join(causes)}"
+    return outcome

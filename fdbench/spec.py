@@ -1,0 +1,365 @@
+"""A run's full specification (``RunSpec``), its identity (the hash of its canonical settings,
+the digests of its input files) and the constructors of the commands' specs (``control_spec``,
+``optimize_spec``, ``collocate_spec``)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+
+from .integrate import Settings, check_integrator
+from .method_options import accepted_options, check_method_options, options_for, options_text
+from .model import Penalty, forearm_with
+from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ, KINEMATICS
+
+
+COMMANDS = ("control", "optimize", "simulate", "collocate")
+MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
+MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """Everything that determines a run's numbers (the seed included, the runtime excluded)."""
+
+    command: str = "control"
+    kinematics: str = "paper"
+    integrator: str = "rk4"
+    dt: float = 1e-3
+    rtol: float = 1e-6
+    atol: float = 1e-9
+    alpha: float = 1e7
+    xi: float = 1.0
+    omega: float = 10.0
+    kp: float | None = None  # control
+    kd: float | None = None
+    torque: str | None = None  # optimize
+    optimizer: str | None = None
+    feedforward: bool = False
+    seed: int | None = None
+    budget: int | None = None
+    penalty_weight: float = 1.0
+    torque_options: tuple = ()  # sorted (name, value) pairs, e.g. (("hidden", 4),)
+    optimizer_options: tuple = ()
+    inputs: tuple = ()  # (option, SHA-256 of the file's content) of every input file, e.g. (("--torque-file", "ab12..."),)
+    controller: str | None = None  # control: a registered controller; None is the paper's PD (kp, kd)
+    method_options: tuple = ()  # sorted (name, value) pairs of the controller or of collocate
+    # the desired motion: ``kinematics`` names eq. 5's variant or a recorded motion's CSV file
+    radians: bool = False  # the file's angles are in radians (else degrees)
+    cutoff_hz: float = DEFAULT_CUTOFF_HZ  # derivative estimate: zero-lag Butterworth -3 dB frequency, Hz
+    smoothing: str = "butterworth"  # or "spline" (a smoothing spline)
+    spline_lambda: float | None = None  # the smoothing spline's factor (None: generalised cross-validation)
+    sample_dt: float | None = None  # the reporting grid's step, s (None: the motion's samples)
+    noise_deg: float = 0.0  # white Gaussian noise added to the captured angle, deg (seeded by ``seed``)
+    capture_hz: float = DEFAULT_CAPTURE_HZ  # the capture rate of a noisy copy of an analytic motion, Hz
+    plant: tuple = ()  # (key, value) pairs changing the simulated body only
+    model: tuple = ()  # (key, value) pairs changing the nominal model and the simulated body
+    gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
+    model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
+
+    def __post_init__(self):
+        if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
+            from .models import default_motion
+
+            try:
+                object.__setattr__(self, "kinematics", default_motion(self.model_name))
+            except ValueError:  # an unknown model, or one without motions, is for ``validate`` to refuse
+                pass
+
+    def _runs(self):
+        """The module carrying out this spec's runs when its model is not the forearm, else None."""
+        from .models import runs
+
+        return runs(self.model_name)
+
+    def settings(self) -> Settings:
+        """The simulation settings: the plant simulated, the nominal model that inverse dynamics
+        and model-based controllers believe, and the desired motion they are given (the forearm's)."""
+        if self._runs() is not None:
+            raise ValueError(f"the {self.model_name} model has no forearm settings")
+        desired, _ = self.motions()
+        nominal = forearm_with(self.model)
+        plant = forearm_with(self.model + self.plant) if self.plant else nominal
+        return Settings(plant, Penalty(self.alpha, self.xi, self.omega), desired,
+                        self.integrator, self.dt, self.rtol, self.atol, nominal=None if plant == nominal else nominal)
+
+    def motions(self):
+        """(desired, true) motions: the motion given to every method (a noisy capture when
+        ``noise_deg`` > 0) and the one its indicators are measured against."""
+        if self._runs() is not None:
+            return self._runs().motions(self)
+        return _motions(self.kinematics, self.radians, self.cutoff_hz, self.smoothing, self.spline_lambda,
+                        self.sample_dt, self.noise_deg, self.seed or 0, self.capture_hz, dict(self.inputs).get("--motion"))
+
+    def reference(self):
+        """The inverse dynamics of the nominal model on the true motion, on its samples: what the
+        indicators are measured against (InverseResult; the model's own for another model)."""
+        from .inverse import inverse_dynamics
+
+        if self._runs() is not None:
+            return self._runs().reference(self)
+        _, truth = self.motions()
+        return inverse_dynamics(None, forearm_with(self.model), truth)
+
+    def describe(self) -> dict:
+        """The record's fields that say which motion, noise, filter, model and plant a run used."""
+        if self._runs() is not None:
+            return self._runs().describe(self)
+        desired, truth = self.motions()
+        out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
+        if self.kinematics not in KINEMATICS or self.noise_deg:
+            out["derivatives"] = desired.describe().get("derivatives")
+        out["noise_deg"] = self.noise_deg
+        out["model"] = self.model_name
+        out["model_options"] = options_text(self.model) or None
+        out["plant"] = options_text(self.plant) or None
+        return out
+
+    def validate(self) -> "RunSpec":
+        """Raise ValueError with a one-line message for anything out of range; no work done."""
+        from .validation import check_conditions, check_gradient
+
+        if self.command not in COMMANDS:
+            raise ValueError(f"unknown command {self.command!r}; valid: {', '.join(COMMANDS)}")
+        check_integrator(self.integrator)
+        check_conditions(self)
+        if self._runs() is not None:
+            self._runs().check(self)
+        else:
+            self.settings()
+        if self.command == "control" and self.controller not in (None, "pd"):
+            from .controllers import CONTROLLERS, make_controller
+
+            check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
+            make_controller(self.controller, **dict(self.method_options))
+        elif self.command == "control":
+            from .control import check_gain
+
+            check_gain("--kp", self.kp)
+            check_gain("--kd", self.kd)
+        if self.command == "collocate":
+            from .collocation import check_options
+
+            check_options(**dict(self.method_options))
+        if self.command == "optimize":
+            from .optimizers import make_optimizer
+            from .torques import make_torque
+
+            if not isinstance(self.seed, int) or not 0 <= self.seed < MAX_SEED:
+                raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {self.seed}")
+            if not isinstance(self.budget, int) or not 1 <= self.budget <= MAX_BUDGET:
+                raise ValueError(f"--budget must be an integer in [1, {MAX_BUDGET}], got {self.budget}")
+            if not (math.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
+                raise ValueError(f"--penalty-weight must be a non-negative finite number, got {self.penalty_weight}")
+            from .optimizers import OPTIMIZERS
+            from .torques import TORQUES
+
+            options = dict(self.torque_options)
+            check_method_options(TORQUES, self.torque, options, "torque")
+            check_method_options(OPTIMIZERS, self.optimizer, dict(self.optimizer_options), "optimizer")
+            if options.get("hidden") == "auto":
+                options.pop("hidden")
+            torque = make_torque(self.torque, **options)
+            optimizer = make_optimizer(self.optimizer, **dict(self.optimizer_options))
+            check_gradient(self.gradient, optimizer, torque, self.integrator)
+        elif self.gradient != "fd":
+            raise ValueError("--gradient applies to optimisations only")
+        self._check_memory()
+        return self
+
+    def _check_memory(self) -> None:
+        """ValueError (one line naming the option to change) if the run's arrays would not fit in
+        the memory fdbench allows a run (see ``fdbench.memory``)."""
+        from .memory import check_run
+        from .models import n_joints
+
+        truth = self.motions()[1]
+        population, hidden = 1, 0
+        if self.command == "optimize" and self.integrator == "rk4" and self.optimizer == "cmaes":
+            population = dict(self.optimizer_options).get("popsize") or 16  # cma's default is smaller
+            if self.torque == "ann":
+                from .torques.ann import AUTO_MAX_HIDDEN
+
+                hidden = dict(self.torque_options).get("hidden", 4)
+                hidden = AUTO_MAX_HIDDEN if hidden == "auto" else hidden
+        check_run(truth.duration, len(truth.samples), n_joints(self.model_name),
+                  self.dt if self.integrator == "rk4" else None, population, hidden)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+    def canonical(self) -> dict:
+        """The settings that determine the numbers, normalised so that equivalent specs compare
+        equal: -0.0 is 0.0, whole numbers in float fields are floats, the tolerances of the
+        adaptive integrators are left at their defaults for rk4 and the RK4 step for the others,
+        and fields added since the first results schema are left out at their defaults (so that
+        stored runs keep their identity)."""
+        data = self.as_dict()
+        defaults = RunSpec()
+        if self.integrator == "rk4":
+            data["rtol"], data["atol"] = defaults.rtol, defaults.atol
+        else:
+            data["dt"] = defaults.dt
+        for name in FLOAT_FIELDS:
+            if isinstance(data[name], (int, float)) and not isinstance(data[name], bool):
+                data[name] = float(data[name]) + 0.0  # + 0.0 turns -0.0 into 0.0
+        if dict(self.inputs).get("--motion"):  # a recorded motion counts by its content, not its file name
+            data["kinematics"] = "file"
+        if dict(self.inputs).get("--model"):  # so does a model file
+            data["model_name"] = "file"
+        if data.get("controller") == "pd":  # the paper's PD is the default controller
+            data["controller"] = None
+        for name, default in OMITTED_AT_DEFAULT.items():
+            if data.get(name) == default:
+                data.pop(name)
+        return data
+
+    def hash(self) -> str:
+        """A digest of the canonical settings (stable across runs and machines), 16 hex digits."""
+        text = json.dumps(self.canonical(), sort_keys=True, default=str)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight", "cutoff_hz",
+                "spline_lambda", "sample_dt", "noise_deg", "capture_hz")
+MAX_NOISE_DEG = 45.0
+MAX_CAPTURE_HZ = 100_000.0
+
+
+@lru_cache(maxsize=64)
+def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, seed, capture_hz, digest):
+    from .motion import load_motion, noisy
+
+    truth = load_motion(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt)
+    if digest is not None and digest != motion_digest(source):
+        from .files import BadFile
+
+        raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
+    if not noise_deg:
+        return truth, truth
+    return noisy(truth, noise_deg, seed, capture_hz, cutoff_hz, smoothing, spline_lambda), truth
+
+
+def motion_digest(path) -> str:
+    """SHA-256 of a recorded motion file's content."""
+    from .files import read_input_text
+    from .motion import check_source
+
+    check_source(str(path))
+    return hashlib.sha256(read_input_text(path, "--motion").encode()).hexdigest()
+
+
+def model_digest(path) -> str:
+    """SHA-256 of a model file's content."""
+    from .files import read_input_bytes
+
+    return hashlib.sha256(read_input_bytes(path, "--model")).hexdigest()
+
+
+def with_model_file(spec: "RunSpec") -> "RunSpec":
+    """The spec with its model file's content digest among its inputs (none for a library model)."""
+    from dataclasses import replace
+
+    from .models import is_file
+
+    if not is_file(spec.model_name):
+        return spec
+    inputs = tuple(p for p in spec.inputs if p[0] != "--model") + (("--model", model_digest(spec.model_name)),)
+    return replace(spec, inputs=tuple(sorted(inputs)))
+
+
+def with_motion_file(spec: "RunSpec") -> "RunSpec":
+    """The spec with its recorded motion's content digest among its inputs (none for eq. 5)."""
+    from dataclasses import replace
+
+    from .models import named_motions
+
+    if spec.kinematics in named_motions(spec.model_name):
+        return spec
+    inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.kinematics)),)
+    return replace(spec, inputs=tuple(sorted(inputs)))
+# fields a spec's hash leaves out while they hold these values (added after the first results schema)
+OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
+                      "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
+                      "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd",
+                      "model_name": "forearm"}
+
+
+def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
+    """A control spec: the paper's PD (kp, kd) or another registered controller with its options
+    (``controller_options``: names its class takes; another name is a ValueError)."""
+    from .controllers import CONTROLLERS
+
+    options = accepted_options(CONTROLLERS, controller or "pd", controller_options, "controller")
+    if controller in (None, "pd"):
+        return RunSpec(command="control", kp=dict(options).get("kp", kp), kd=dict(options).get("kd", kd),
+                       feedforward=True, **common)
+    return RunSpec(command="control", controller=controller, feedforward=True, method_options=options, **common)
+
+
+def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max_iter=None, max_time=None,
+                   **common) -> RunSpec:
+    """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default."""
+    from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION
+
+    options = dict(nodes=nodes, scheme=scheme,
+                   regularization=DEFAULT_REGULARIZATION if regularization is None else regularization,
+                   max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,
+                   max_time=DEFAULT_MAX_TIME if max_time is None else max_time)
+    return RunSpec(command="collocate", method_options=tuple(sorted(options.items())), **common)
+
+
+def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
+                  torque_options=None, optimizer_options=None, gradient="fd", *, shared_options=False,
+                  **common) -> RunSpec:
+    """An optimisation spec. ``torque_options`` and ``optimizer_options`` name options the torque's
+    and the optimiser's classes take (another name is a ValueError), or, with ``shared_options``
+    (a sweep handing one set to several methods), each keeps those it takes; so the same run has
+    the same hash whichever command asks for it. ``gradient`` "exact" serves gradient-based
+    optimisers only (see ``gradient_for``)."""
+    from .optimizers import OPTIMIZERS
+    from .torques import TORQUES
+
+    if shared_options:
+        torque_options = options_for(TORQUES, torque, torque_options)
+        optimizer_options = options_for(OPTIMIZERS, optimizer, optimizer_options)
+    options = {k: v for k, v in (optimizer_options or {}).items() if v is not None}
+    if torque in TORQUES:  # the parameterisation's defaults for this optimiser, where not given
+        options = {**getattr(TORQUES[torque], "optimizer_defaults", {}).get(optimizer, {}), **options}
+    spec = RunSpec(command="optimize", torque=torque, optimizer=optimizer, feedforward=feedforward,
+                   seed=seed, budget=budget, torque_options=accepted_options(TORQUES, torque, torque_options, "torque"),
+                   optimizer_options=accepted_options(OPTIMIZERS, optimizer, options, "optimizer"),
+                   gradient=gradient, **common)
+    return with_motion_knots(spec, written_out="knots" in (torque_options or {}))
+
+
+def with_motion_knots(spec: RunSpec, written_out: bool) -> RunSpec:
+    """A spline spec without --knots gets one knot every 0.1 s of its motion (``cs.knots_for``).
+    ``written_out`` (the command line's and the report's knots=None) puts the count among the
+    torque options whatever it is; else (the Python API's omitted knots) only where it differs from
+    the class default, so that every stored run keeps its hash."""
+    from dataclasses import replace
+
+    from .torques.cs import DEFAULT_KNOTS, knots_for
+
+    if spec.torque != "cs" or "knots" in dict(spec.torque_options):
+        return spec
+    try:
+        knots = knots_for(spec.motions()[1].duration)
+    except (OSError, ValueError):  # a motion that cannot be read: for ``validate`` to refuse
+        return spec
+    if not written_out and knots == DEFAULT_KNOTS:
+        return spec
+    return replace(spec, torque_options=tuple(sorted(spec.torque_options + (("knots", knots),))))
+
+
+def gradient_for(optimizer: str, gradient: str) -> str:
+    """The gradient option a sweep gives ``optimizer``: ``gradient`` for a gradient-based
+    optimiser, "fd" (the default, no gradient used) for the others."""
+    from .optimizers import OPTIMIZERS
+
+    uses = optimizer in OPTIMIZERS and getattr(OPTIMIZERS[optimizer], "uses_gradient", False)
+    return gradient if uses else "fd"
