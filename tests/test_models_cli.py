@@ -444,3 +444,20 @@ def test_a_missing_model_file_and_one_without_motions_are_one_line_exit_2(tmp_pa
     motion = tmp_path / "m.csv"
     motion.write_text(invoke("inverse", *LEG, "--format", "csv").stdout)
     assert as_json("control", "--model", path, "--motion", motion)["status"] == "success"
+
+
+def test_a_mismatch_study_and_a_report_of_the_leg_by_path(tmp_path):
+    """study mismatch takes a path into the model as --param: level 0 is the plain run, +10 % of
+    the thigh's mass is a heavier plant; a report of the leg has a column per joint."""
+    csv = invoke("study", "mismatch", *LEG, "--param", "thigh.mass", "--levels", "0,10", "--no-feedforward",
+                 "--torque", "cs", "--opt", "bfgs", "--seeds", "1", "--budget", "4", "--jobs", "1",
+                 "--db", tmp_path / "s.sqlite", "-f", "csv", "-q").stdout
+    rows = pd.read_csv(io.StringIO(csv))
+    pd_rows = rows[rows.method.str.startswith("PD")].set_index("level")
+    assert pd_rows.loc[0, "rmse_rot_deg_median"] == pytest.approx(as_json("control", *LEG)["rmse_rot_deg"], rel=1e-12)
+    heavier = as_json("control", *LEG, "--plant", "thigh.mass=8.25")
+    assert pd_rows.loc[10, "rmse_rot_deg_median"] == pytest.approx(heavier["rmse_rot_deg"], rel=1e-12)
+    markdown = invoke("report", *LEG, "--torque", "cs", "--opt", "bfgs", "--feedforward", "--seeds", "1",
+                      "--budget", "3", "--no-beyond", "--jobs", "1", "--db", tmp_path / "r.sqlite", "-q").stdout
+    assert "| method | RMSE_rot (deg) | hip (deg) | knee (deg) | ankle (deg) |" in markdown
+    assert "Kp and Kd per joint" in markdown
