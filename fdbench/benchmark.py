@@ -89,7 +89,7 @@ class Plan:
         return out
 
 
-def make_plan(cells, seeds=5, budget=200, control=True, kp=80.0, kd=0.3, torque_options=None,
+def make_plan(cells, seeds=5, budget=200, control=True, kp=None, kd=None, torque_options=None,
               optimizer_options=None, penalty_weight=1.0, gradient="fd", **common) -> Plan:
     control_run = control_spec(kp, kd, **common) if control else None
     specs = {

@@ -9,7 +9,7 @@ from .inverse import Feedforward
 
 
 def check_gain(name: str, value: float) -> float:
-    if not (math.isfinite(value) and value >= 0):
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
         raise ValueError(f"{name} must be a non-negative finite number, got {value}")
     return value
 

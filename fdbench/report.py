@@ -334,7 +334,7 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     if control:
         rec = control[0].records[0]
         out += ["## PD control with computed feedforward (section 3)", ""] + legend + [""]
-        out += [f"Kp = {rec['kp']} N m/rad, Kd = {rec['kd']} N m s/rad{' on every joint' if arm else ''}.", ""]
+        out += [_gains_text(rec, arm), ""]
         out += _table(control, with_success=False) + [""]
         failures = failure_lines(control)
         out += ["Did not succeed:", ""] + failures + [""] if failures else []
@@ -770,6 +770,16 @@ def condition_settings(spec, specs: list) -> dict:
 
 JOINT_ANGLES = ("each joint's angle (deg): its child body's frame angle relative to its parent's, minus the joint's "
                 "offset, counter-clockwise positive (y up); see 'fdbench models show' for the model's frames")
+
+def _gains_text(record: dict, several: bool) -> str:
+    """The PD gains of a control record: the same on every joint, or each joint's scaled ones."""
+    if record.get("kp") is not None and record.get("kd") is not None:
+        return f"Kp = {record['kp']} N m/rad, Kd = {record['kd']} N m s/rad{' on every joint' if several else ''}."
+    joints = [key[3:] for key in record if key.startswith("kp_")]
+    each = ", ".join(f"{j} {record['kp_' + j]:.4g} and {record['kd_' + j]:.3g}" for j in joints)
+    return ("Kp and Kd per joint: the paper's 80 N m/rad and 0.3 N m s/rad scaled by the joint's inertia "
+            f"(M_jj at the motion's start over the forearm's 0.04 kg m^2): {each}.")
+
 ANGLE_CONVENTION = {
     "forearm": "theta (deg) is the forearm's angle from the horizontal +x axis, counter-clockwise positive (y up); "
                "with the upper arm hanging vertically, theta = elbow flexion - 90 deg",

@@ -138,8 +138,9 @@ class RunSpec:
         elif self.command == "control":
             from .control import check_gain
 
-            check_gain("--kp", self.kp)
-            check_gain("--kd", self.kd)
+            for name, gain in (("--kp", self.kp), ("--kd", self.kd)):  # None: scaled per joint (not the forearm)
+                if gain is not None or self._runs() is None:
+                    check_gain(name, gain)
         if self.command == "collocate":
             from .collocation import check_options
 
@@ -288,15 +289,22 @@ OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "r
                       "model_name": "forearm"}
 
 
-def control_spec(kp=80.0, kd=0.3, controller="pd", controller_options=None, **common) -> RunSpec:
-    """A control spec: the paper's PD (kp, kd) or another registered controller with its options
-    (``controller_options``: names its class takes; another name is a ValueError)."""
+PAPER_KP, PAPER_KD = 80.0, 0.3  # N m/rad, N m s/rad: the paper's PD gains for the forearm
+
+
+def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **common) -> RunSpec:
+    """A control spec: PD (kp, kd) or another registered controller with its options
+    (``controller_options``: names its class takes; another name is a ValueError). Gains not given
+    are the paper's (80, 0.3) for the forearm and, for every other model, None: each joint's scaled
+    to its inertia (``fdbench.multibody.runs.pd_gains``)."""
     from .controllers import CONTROLLERS
 
     options = accepted_options(CONTROLLERS, controller or "pd", controller_options, "controller")
     if controller in (None, "pd"):
-        return RunSpec(command="control", kp=dict(options).get("kp", kp), kd=dict(options).get("kd", kd),
-                       feedforward=True, **common)
+        kp, kd = dict(options).get("kp", kp), dict(options).get("kd", kd)
+        if common.get("model_name", "forearm") == "forearm":
+            kp, kd = PAPER_KP if kp is None else kp, PAPER_KD if kd is None else kd
+        return RunSpec(command="control", kp=kp, kd=kd, feedforward=True, **common)
     return RunSpec(command="control", controller=controller, feedforward=True, method_options=options, **common)
 
 

@@ -74,8 +74,8 @@ def test_computed_torque_on_the_arm():
 def test_plant_mismatch_on_the_arm():
     """--plant changes the simulated body only: the feedforward (and computed torque) keep the
     nominal model, so tracking degrades; --model changes both and tracking stays exact."""
-    both = as_json("control", "--model", "arm2", "--model", "m0=2.5")
-    plant = as_json("control", "--model", "arm2", "--plant", "m0=2.5")
+    both = as_json("control", "--model", "arm2", "--model", "m0=2.5", "--kp", "80", "--kd", "0.3")
+    plant = as_json("control", "--model", "arm2", "--plant", "m0=2.5", "--kp", "80", "--kd", "0.3")
     ct = as_json("control", "--model", "arm2", "--plant", "m0=2.5", "--controller", "computed-torque")
     assert both["rmse_rot_deg"] < 1e-5 and both["model_options"] == "m0=2.5" and both["plant"] is None
     assert plant["plant"] == "m0=2.5" and plant["rmse_rot_deg"] > 0.1 and ct["rmse_rot_deg"] > 0.1
@@ -84,12 +84,27 @@ def test_plant_mismatch_on_the_arm():
     assert plant["rmse_rot_deg"] == pytest.approx(rot, rel=1e-12)
 
 
+def test_pd_gains_follow_each_joints_inertia_unless_given():
+    """Without --kp and --kd each joint gets the paper's 80 and 0.3 scaled by its inertia M_jj at the
+    motion's start over the forearm's 0.04 kg m^2 (the closed form's M11 for the shoulder; the elbow
+    is the forearm itself); given gains are the same on every joint, the runs stored before."""
+    record = as_json("control", "--model", "arm2")
+    z0 = reach(np.zeros(1))[0][0]
+    m11 = 0.06 + 0.04 + 1.0 * 0.30**2 + 2 * 1.0 * 0.30 * 0.11 * math.cos(z0[1])
+    assert record["kp"] is None and record["kp_shoulder"] == pytest.approx(80 * m11 / 0.04, rel=1e-12)
+    assert record["kd_shoulder"] == pytest.approx(0.3 * m11 / 0.04, rel=1e-12)
+    assert (record["kp_elbow"], record["kd_elbow"]) == (pytest.approx(80.0, rel=1e-12), pytest.approx(0.3, rel=1e-12))
+    given = as_json("control", "--model", "arm2", "--kp", "80", "--kd", "0.3")
+    assert given["kp_shoulder"] == given["kp_elbow"] == 80.0 and given["spec_hash"] != record["spec_hash"]
+    assert as_json("control")["kp"] == 80.0  # the forearm keeps the paper's
+
+
 def test_lqr_on_the_arm():
     record = as_json("control", "--model", "arm2", "--controller", "lqr", "--q-angle", "1e5")
     assert record["controller"] == "lqr" and "q_angle=100000.0" in record["controller_options"]
     assert record["status"] == "success" and record["rmse_rot_deg"] < 1e-5 and record["kp"] is None
     heavy = as_json("control", "--model", "arm2", "--controller", "lqr", "--plant", "m0=2.5")
-    pd_heavy = as_json("control", "--model", "arm2", "--plant", "m0=2.5")
+    pd_heavy = as_json("control", "--model", "arm2", "--plant", "m0=2.5", "--kp", "80", "--kd", "0.3")
     assert 0 < heavy["rmse_rot_deg"] < pd_heavy["rmse_rot_deg"]  # stiffer than PD 80 / 0.3
 
 
@@ -429,3 +444,20 @@ def test_a_missing_model_file_and_one_without_motions_are_one_line_exit_2(tmp_pa
     motion = tmp_path / "m.csv"
     motion.write_text(invoke("inverse", *LEG, "--format", "csv").stdout)
     assert as_json("control", "--model", path, "--motion", motion)["status"] == "success"
+
+
+def test_a_mismatch_study_and_a_report_of_the_leg_by_path(tmp_path):
+    """study mismatch takes a path into the model as --param: level 0 is the plain run, +10 % of
+    the thigh's mass is a heavier plant; a report of the leg has a column per joint."""
+    csv = invoke("study", "mismatch", *LEG, "--param", "thigh.mass", "--levels", "0,10", "--no-feedforward",
+                 "--torque", "cs", "--opt", "bfgs", "--seeds", "1", "--budget", "4", "--jobs", "1",
+                 "--db", tmp_path / "s.sqlite", "-f", "csv", "-q").stdout
+    rows = pd.read_csv(io.StringIO(csv))
+    pd_rows = rows[rows.method.str.startswith("PD")].set_index("level")
+    assert pd_rows.loc[0, "rmse_rot_deg_median"] == pytest.approx(as_json("control", *LEG)["rmse_rot_deg"], rel=1e-12)
+    heavier = as_json("control", *LEG, "--plant", "thigh.mass=8.25")
+    assert pd_rows.loc[10, "rmse_rot_deg_median"] == pytest.approx(heavier["rmse_rot_deg"], rel=1e-12)
+    markdown = invoke("report", *LEG, "--torque", "cs", "--opt", "bfgs", "--feedforward", "--seeds", "1",
+                      "--budget", "3", "--no-beyond", "--jobs", "1", "--db", tmp_path / "r.sqlite", "-q").stdout
+    assert "| method | RMSE_rot (deg) | hip (deg) | knee (deg) | ankle (deg) |" in markdown
+    assert "Kp and Kd per joint" in markdown

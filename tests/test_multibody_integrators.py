@@ -145,7 +145,7 @@ def test_bad_integrator_or_tolerance_raises():
 
 def test_the_spec_tolerances_reach_the_simulation():
     """A control run with --integrator lsoda --rtol 1e-8 is the direct simulation with those settings."""
-    record = fdbench.run(fdbench.control_spec(model_name="arm2", integrator="lsoda", rtol=1e-8, atol=1e-11)).record
+    record = fdbench.run(fdbench.control_spec(KP, KD, model_name="arm2", integrator="lsoda", rtol=1e-8, atol=1e-11)).record
     direct = sim.simulate(FEEDFORWARD, ARM, REACH, KP, KD, integrator="lsoda", rtol=1e-8, atol=1e-11)
     expected, _ = sim.rmse_deg(direct, sim.inverse_dynamics(None, ARM, REACH).angles)
     assert record["integrator"] == "lsoda" and record["status"] == "success"

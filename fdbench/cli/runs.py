@@ -90,8 +90,8 @@ def simulate(
 def control(
     ctx: typer.Context,
     controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'lqr[q_angle=1e5]'.")] = "pd",
-    kp: Annotated[float, typer.Option("--kp", help="pd: proportional gain, N m/rad (paper: 80).")] = 80.0,
-    kd: Annotated[float, typer.Option("--kd", help="pd: derivative gain, N m s/rad (paper: 0.3).")] = 0.3,
+    kp: Annotated[Optional[float], typer.Option("--kp", help="pd: proportional gain, N m/rad, on every joint (default: the paper's 80 on the forearm; on another model 80 per 0.04 kg m^2 of each joint's inertia).", show_default=False)] = None,
+    kd: Annotated[Optional[float], typer.Option("--kd", help="pd: derivative gain, N m s/rad, on every joint (default: the paper's 0.3 on the forearm; on another model 0.3 per 0.04 kg m^2 of each joint's inertia).", show_default=False)] = None,
     bandwidth: Annotated[float, typer.Option("--bandwidth", help="computed-torque: error-dynamics natural frequency omega_n, rad/s.")] = 20.0,
     damping: Annotated[float, typer.Option("--damping", help="computed-torque: error-dynamics damping ratio zeta.")] = 1.0,
     q_angle: Annotated[float, typer.Option("--q-angle", help="lqr: weight of the squared angle error, rad^-2 (1e4: 0.01 rad costs as much as 1 N m).")] = 1e4,

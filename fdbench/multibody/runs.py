@@ -201,6 +201,23 @@ def _warm_up(spec) -> None:
 
 
 # ---------------------------------------------------------------------- control
+REFERENCE_INERTIA = 0.04  # kg m^2: the paper's forearm about the elbow, for which Kp 80 and Kd 0.3 were tuned
+
+
+def pd_gains(spec) -> tuple[np.ndarray, np.ndarray]:
+    """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,): the spec's where given (the same on
+    every joint), else the paper's 80 and 0.3 scaled by the joint's inertia I_j / 0.04 kg m^2, I_j the
+    diagonal entry of the nominal model's mass matrix M(z) at the motion's start. Each joint then
+    has the forearm's closed-loop frequency sqrt(Kp / I) and damping (as if the joints were
+    uncoupled); a joint of the forearm's inertia (the arm's elbow) gets exactly 80 and 0.3."""
+    from ..spec import PAPER_KD, PAPER_KP
+
+    z0 = motions(spec)[0](np.zeros(1))[0][0]
+    scale = np.diag(engine(spec, nominal(spec)).mass_matrix(z0)) / REFERENCE_INERTIA
+    return tuple(np.full(len(scale), gain) if gain is not None else paper * scale
+                 for gain, paper in ((spec.kp, PAPER_KP), (spec.kd, PAPER_KD)))
+
+
 def _gains(spec, controller: str, options: dict):
     """The law's keyword arguments of ``simulation.simulate`` and the feedforward label."""
     if controller == "computed-torque":
@@ -211,7 +228,14 @@ def _gains(spec, controller: str, options: dict):
         from .lqr import lqr_gains
 
         return dict(gains=lqr_gains(nominal(spec), motions(spec)[0], **options)), "id"
-    return dict(kp=spec.kp or 0.0, kd=spec.kd or 0.0), "id"
+    kp, kd = pd_gains(spec)
+    return dict(kp=kp, kd=kd), "id"
+
+
+def _per_joint_gains(spec) -> dict:
+    """kp_<joint> and kd_<joint> of a PD run, the gains each joint had."""
+    kp, kd = pd_gains(spec)
+    return {**_per_joint("kp", joints(spec), kp), **_per_joint("kd", joints(spec), kd)}
 
 
 def run(spec, on_evaluation=None, on_start=None):
@@ -239,7 +263,7 @@ def run(spec, on_evaluation=None, on_start=None):
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime, controller=controller,
-                  **({"kp": spec.kp, "kd": spec.kd} if controller == "pd" else
+                  **({"kp": spec.kp, "kd": spec.kd, **_per_joint_gains(spec)} if controller == "pd" else
                      {"controller_options": options_text(spec.method_options)}))
     return _outcome(spec, record, result, inverse)
 
