@@ -7,7 +7,7 @@ Rendering with rich happens here only; heavy imports are made inside the command
 ``fdbench --help`` is instant.
 """
 
-from . import models_command, runs, store_commands, sweeps  # noqa: F401  (registration of the commands)
+from . import models_command, osim_command, runs, store_commands, sweeps  # noqa: F401  (registration of the commands)
 from .app import BadInput, app, main
 
 __all__ = ["BadInput", "app", "main"]
