@@ -160,8 +160,9 @@ def _with_conditions(command):
                 kwargs["kinematics"] = default_motion(conditions["model_name"])
             except ValueError as exc:
                 raise BadInput(str(exc)) from None
+        returned = command(conditions=conditions, **kwargs)
         _warn_opensim(conditions["model_name"], kwargs.get("kinematics"), kwargs.get("quiet", False))
-        return command(conditions=conditions, **kwargs)
+        return returned
 
     wrapper.__signature__ = signature.replace(parameters=kept + added)
     wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
@@ -187,8 +188,9 @@ def _warn_implausible(conditions: dict, quiet: bool) -> None:
 
 
 def _warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
-    """Warnings on stderr: the notes of an OpenSim model's import (--model X.osim) and the columns
-    of an OpenSim motion file (.mot, .sto) that the model lacks."""
+    """Warnings on stderr once a command has run (a refused one says one line only): the notes of
+    an OpenSim model's import (--model X.osim) and the columns of an OpenSim motion file (.mot,
+    .sto) that the model lacks."""
     import sys
 
     from ..models import import_notes, joints

@@ -22,10 +22,7 @@ def import_osim_command(
     max_tilt: Annotated[float, typer.Option("--max-tilt", help=MAX_TILT_HELP)] = 5.0,
     quiet: Quiet = False,
 ):
-    """Convert an OpenSim model into fdbench's model file (TOML, the notes of the import as comments at the top):
-    bodies, pin joints named by their coordinates, gravity, ranges as limits; welded bodies merged; muscles, markers,
-    wrap objects, contact geometry and other forces dropped. Needs pip install 'fdbench[opensim]'. '--model
-    MODEL.osim' on any command converts it on the fly."""
+    """Convert an OpenSim model into fdbench's model file (TOML, with the notes of the import as comments at the top): bodies, pin joints named by their coordinates, gravity, ranges as limits; welded bodies merged; muscles, markers, wrap objects, contact geometry and other forces dropped. Needs pip install 'fdbench\\[opensim]'. '--model MODEL.osim' on any command converts the model on the fly."""
     _check_outputs("toml", ("toml",), inputs={"MODEL.osim": model}, output=output)
     if not 0 <= max_tilt <= 45:
         raise BadInput(f"--max-tilt: must be in [0, 45] deg, got {max_tilt:g}")
