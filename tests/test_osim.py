@@ -319,12 +319,26 @@ def path_knee_model(path: Path) -> Path:
                                                                       ("pelvis_ty", 1, False)]), knee])
 
 
-@pytest.mark.parametrize("case", ["not xml", "no model", "ball joint", "missing", "path knee", "tilt"])
+def coupled_model(path: Path) -> Path:
+    """Two pins whose coordinates a constraint couples."""
+    constraint = ('<ConstraintSet name="constraintset"><objects><CoordinateCouplerConstraint name="couple">'
+                  "<independent_coordinate_names>shoulder</independent_coordinate_names>"
+                  "<dependent_coordinate_name>elbow</dependent_coordinate_name><coupled_coordinates_function>"
+                  "<LinearFunction><coefficients>1 0</coefficients></LinearFunction></coupled_coordinates_function>"
+                  "</CoordinateCouplerConstraint></objects></ConstraintSet>")
+    segment = lambda name: body(name, 1.0, (0.1, 0, 0), (0.01, 0.01, 0.01, 0, 0, 0))  # noqa: E731
+    return osim_file(path, [segment("upper"), segment("lower")],
+                     [joint("PinJoint", "j1", "ground", "upper", [("shoulder", 0.0, False)]),
+                      joint("PinJoint", "j2", "upper", "lower", [("elbow", 0.0, False)], (0.3, 0, 0))], extra=constraint)
+
+
+@pytest.mark.parametrize("case", ["not xml", "no model", "ball joint", "missing", "path knee", "tilt", "constraint"])
 def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, case):
     path = tmp_path / "model.osim"
     expected = {"not xml": "not valid XML", "no model": "not an OpenSim model file", "ball joint": "'neck' (BallJoint)",
                 "missing": "does not exist", "path knee": "'knee' (CustomJoint) moves its child along a path",
-                "tilt": "'r_elbow' (CustomJoint) has its axis 3.52 deg off"}[case]
+                "tilt": "'r_elbow' (CustomJoint) has its axis 3.52 deg off",
+                "constraint": "constraint 'couple' (CoordinateCouplerConstraint)"}[case]
     args = ()
     if case == "not xml":
         path.write_text("<OpenSimDocument><Model name='x'>")
@@ -334,6 +348,8 @@ def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, cas
         ball_model(path)
     elif case == "path knee":
         path_knee_model(path)
+    elif case == "constraint":
+        coupled_model(path)
     elif case == "tilt":
         path, args = ARM26, ("--max-tilt", "3")
     out = tmp_path / "out.toml"

@@ -156,7 +156,7 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
     bodies = _merged_bodies(model, hosts, [pin["child"] for pin in kept])
     data = {"name": _text(model.getName(), 100) or Path(source).stem,
             "description": _description(model, source, element), "gravity": gravity,
-            "bodies": _with_ends(bodies, kept), "joints": kept, "motions": [_mid_range(model, kept)]}
+            "bodies": _with_ends(bodies, kept), "joints": kept, "motions": [_mid_range(kept)]}
     description = model_from_dict(data, source, default_name=Path(source).stem)
     notes = [note for note in (_dropped_note(osim, model), _welded_note(welded),
                                _tilt_note(tilts + gravity_tilt)) if note]
@@ -394,7 +394,7 @@ def _with_ends(bodies: list, joints: list) -> list:
 # ---------------------------------------------------------------------------------------- the rest
 
 
-def _mid_range(model, joints: list) -> dict:
+def _mid_range(joints: list) -> dict:
     """The model's named motion: minimum jerk from the default values to the middle of the ranges."""
     start, goal = {}, {}
     for joint in joints:
