@@ -382,3 +382,13 @@ def test_without_opensim_the_import_names_the_extra_to_install(tmp_path, monkeyp
     monkeypatch.setitem(sys.modules, "opensim", None)
     for args in (("import-osim", path), ("inverse", "--model", path), ("models", "show", path)):
         refused(*args, contains=("pip install 'fdbench[opensim]'",))
+
+
+def test_the_paper_s_forearm_reads_a_mot_as_its_csv(tmp_path):
+    t = np.linspace(0.0, 1.0, 201)
+    theta = -45.0 * t**2  # deg
+    storage = write_storage(tmp_path / "flexion.mot", t, {"theta": theta}, True)
+    plain = tmp_path / "flexion.csv"
+    plain.write_text("t,theta\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, theta)))
+    runs = [invoke("inverse", "--motion", path, "--format", "csv", "--quiet").stdout for path in (storage, plain)]
+    assert runs[0] == runs[1]
