@@ -308,14 +308,21 @@ def read_motion_csv(path, option: str = "--motion", radians: bool = False, **est
     """A recorded joint angle from a CSV file: columns ``t`` (s) and ``theta`` (degrees, or
     radians with ``radians``), optionally ``theta_vel`` and ``theta_acc`` (deg/s, deg/s^2, or rad
     units), any order, any sampling: the columns ``fdbench inverse --format csv`` and
-    ``--save-trajectory`` write. ``estimate``: options of ``SampledMotion``. Raises files.BadFile
-    with a one-line message."""
+    ``--save-trajectory`` write; or an OpenSim storage file (.mot, .sto) with a theta column.
+    ``estimate``: options of ``SampledMotion``. Raises files.BadFile with a one-line message."""
     from pathlib import Path
 
     from .files import BadFile, read_columns
+    from .multibody.osim import is_storage, read_storage
 
     path = Path(path)
-    columns = read_columns(path, option, required=("t", "theta"), optional=rate_column_names("theta"))
+    if is_storage(path):  # OpenSim's .mot or .sto: the header's inDegrees gives the unit
+        columns, in_degrees, _ = read_storage(path, option, ("theta",))
+        radians = not in_degrees
+        if "theta" not in columns:
+            raise BadFile(f"{option}: {path} has no column for joint 'theta'; a motion file needs a time column and theta")
+    else:
+        columns = read_columns(path, option, required=("t", "theta"), optional=rate_column_names("theta"))
     unit = 1.0 if radians else math.pi / 180
     vel, acc = given_rates(columns, "theta", path, option, radians)
     try:

@@ -705,10 +705,10 @@ def _flat(row: Row) -> dict:
 def _model_name(record: dict) -> str:
     """The record's model; runs stored before models had names kept their constant changes in
     ``model`` and are the forearm's."""
-    from .models import names
+    from .models import SUFFIXES, names
 
     model = record.get("model")
-    return model if model in names() or (isinstance(model, str) and model.lower().endswith((".toml", ".json"))) \
+    return model if model in names() or (isinstance(model, str) and model.lower().endswith(SUFFIXES)) \
         else "forearm"
 
 

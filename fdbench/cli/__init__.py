@@ -1,13 +1,15 @@
 """The ``fdbench`` command line, one module per job: ``app`` (the typer app and the contract's
 error handling), ``options`` (options declared once and shared), ``common`` (checks, rendering,
 writing, the store), ``runs`` (the commands of one run), ``sweeps`` (report and study) and ``store_commands`` (``fdbench
-runs``: looking at stored runs) and ``models_command`` (``fdbench models``: the model library).
+runs``: looking at stored runs), ``models_command`` (``fdbench models``: the model library) and
+``osim_command`` (``fdbench import-osim``: an OpenSim model as a model file).
 
 Rendering with rich happens here only; heavy imports are made inside the commands so that
 ``fdbench --help`` is instant.
 """
 
 from . import models_command, runs, store_commands, sweeps  # noqa: F401  (registration of the commands)
+from . import osim_command  # noqa: F401,I001  (registered after the run commands: listed after them in --help)
 from .app import BadInput, app, main
 
 __all__ = ["BadInput", "app", "main"]

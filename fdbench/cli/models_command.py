@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from .app import BadInput, SubcommandGroup, app
-from .common import _check_outputs, _emit
+from .common import _check_outputs, _emit, _say
 from .options import Output
 
 
@@ -62,7 +62,7 @@ def list_models(
 
 @models_app.command("show")
 def show_model(
-    model: Annotated[str, typer.Argument(metavar="NAME|FILE", help="A library model's name or a model file (.toml or .json).", show_default=False)],
+    model: Annotated[str, typer.Argument(metavar="NAME|FILE", help="A library model's name or a model file (.toml, .json, or OpenSim's .osim).", show_default=False)],
     fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
     output: Output = None,
 ):
@@ -83,9 +83,17 @@ def show_model(
 
 
 def _checked(name_or_path: str):
+    from ..models import is_osim
     from ..multibody.description import find_model
 
     try:
+        if is_osim(name_or_path):  # an OpenSim model: its import's notes as warnings
+            from ..multibody.osim import import_osim
+
+            found, notes = import_osim(name_or_path, option="NAME|FILE")
+            for note in notes:
+                _say(False, f"[yellow]warning:[/] {note}")
+            return found
         return find_model(name_or_path, "NAME|FILE")
     except ValueError as exc:
         raise BadInput(str(exc)) from None

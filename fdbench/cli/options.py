@@ -160,7 +160,9 @@ def _with_conditions(command):
                 kwargs["kinematics"] = default_motion(conditions["model_name"])
             except ValueError as exc:
                 raise BadInput(str(exc)) from None
-        return command(conditions=conditions, **kwargs)
+        returned = command(conditions=conditions, **kwargs)
+        _warn_opensim(conditions["model_name"], kwargs.get("kinematics"), kwargs.get("quiet", False))
+        return returned
 
     wrapper.__signature__ = signature.replace(parameters=kept + added)
     wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
@@ -183,6 +185,21 @@ def _warn_implausible(conditions: dict, quiet: bool) -> None:
     for option, pairs in (("--model", conditions["model"]), ("--plant", conditions["plant"])):
         for text in [] if quiet else implausible(pairs):
             sys.stderr.write(f"fdbench: warning: {option}: {text}\n")
+
+
+def _warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
+    """Warnings on stderr once a command has run (a refused one says one line only): the notes of
+    an OpenSim model's import (--model X.osim) and the columns of an OpenSim motion file (.mot,
+    .sto) that the model lacks."""
+    import sys
+
+    from ..models import import_notes, joints
+    from ..multibody.osim import storage_note
+
+    notes = [f"--model: {note}" for note in import_notes(model_name)]
+    notes += [f"--motion: {note}" for note in [storage_note(kinematics, joints(model_name))] if note]
+    for note in [] if quiet else notes:
+        sys.stderr.write(f"fdbench: warning: {note}\n")
 
 
 def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,

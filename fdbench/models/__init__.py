@@ -6,6 +6,8 @@
   (TOML or JSON, ``fdbench.multibody.description``): carried out by the multibody engine
   (``fdbench.multibody.runs``), with the motions the file declares (or a CSV file) and its short
   keys (``[keys]``) or paths into the description for ``--model``/``--plant KEY=VALUE``.
+* An OpenSim model file (``.osim``): converted on the fly by ``fdbench.multibody.osim`` (cached by
+  content), its notes given by ``import_notes``.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import os
 from functools import lru_cache
 
 PAPER = "forearm"
-SUFFIXES = (".toml", ".json")
+SUFFIXES = (".toml", ".json", ".osim")
 
 
 def names() -> list[str]:
@@ -38,7 +40,7 @@ def check_name(name: str) -> str:
         return name
     from ..registry import unknown_name_message
 
-    raise ValueError(unknown_name_message("model", name, names()) + "; or give a model file (.toml or .json)")
+    raise ValueError(unknown_name_message("model", name, names()) + "; or give a model file (.toml, .json or .osim)")
 
 
 def description(name: str):
@@ -55,9 +57,34 @@ def description(name: str):
 
 @lru_cache(maxsize=32)
 def _described(name: str, content: bytes | None):
+    if content is not None and is_osim(name):
+        return _imported(name, content)[0]
     from ..multibody.description import find_model
 
     return find_model(name, "--model")
+
+
+def is_osim(name: str) -> bool:
+    """True for an OpenSim model file's name (.osim)."""
+    return name.lower().endswith(".osim") and name not in names()
+
+
+def import_notes(name: str) -> tuple[str, ...]:
+    """The notes of an OpenSim model's import (what was dropped, welded, projected; one line
+    each), none for other models."""
+    if not is_osim(name):
+        return ()
+    from ..files import read_input_bytes
+
+    return _imported(name, read_input_bytes(name, "--model"))[1]
+
+
+@lru_cache(maxsize=8)
+def _imported(name: str, content: bytes):
+    """(Model, notes) of an OpenSim model file's content (``name`` names it in messages)."""
+    from ..multibody.osim import import_osim_content
+
+    return import_osim_content(content, name)
 
 
 def summary(name: str) -> str:

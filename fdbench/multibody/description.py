@@ -215,12 +215,17 @@ def _distance(a, b) -> float:
 
 def load_model(path, option: str = "model file") -> Model:
     """The checked model of a TOML or JSON file (by its suffix; otherwise JSON if it starts with
-    '{'). ModelError or BadFile (both ValueError, one line naming the file) if it cannot be used."""
+    '{'), or of an OpenSim model (.osim, ``fdbench.multibody.osim``). ModelError or BadFile (both
+    ValueError, one line naming the file) if it cannot be used."""
     from ..files import read_input_text
 
     source = str(path)
-    text = read_input_text(path, option, MAX_FILE_BYTES)
     suffix = Path(source).suffix.lower()
+    if suffix == ".osim":
+        from .osim import import_osim
+
+        return import_osim(path, option=option)[0]
+    text = read_input_text(path, option, MAX_FILE_BYTES)
     is_json = suffix == ".json" or (suffix != ".toml" and text.lstrip().startswith("{"))
     data = _parse_json(text, source) if is_json else _parse_toml(text, source)
     return model_from_dict(data, source, default_name=Path(source).stem)
@@ -886,8 +891,9 @@ def find_model(name_or_path, option: str = "model file") -> Model:
     models = library()
     if text in models:
         return load_model(models[text], option)
-    if text and (Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".toml", ".json")):
+    if text and (Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".toml", ".json", ".osim")):
         return load_model(text, option)
     from ..registry import unknown_name_message
 
-    raise ModelError(option, "", unknown_name_message("model", text, list(models)) + "; or give a model file (.toml or .json)")
+    raise ModelError(option, "", unknown_name_message("model", text, list(models))
+                     + "; or give a model file (.toml, .json or OpenSim's .osim)")

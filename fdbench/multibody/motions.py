@@ -160,16 +160,24 @@ def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool 
     per joint (deg, or rad with ``radians``), names case-insensitive, any order, other columns
     ignored; optional ``<joint>_vel`` and ``<joint>_acc`` (deg/s, deg/s^2, or rad units), the
     derivatives otherwise estimated (``estimate``: options of ``fdbench.motion.SampledMotion``).
+    An OpenSim storage file (.mot, .sto: ``fdbench.multibody.osim.read_storage``) gives its own
+    unit by its header's ``inDegrees`` (``radians`` is not used).
     Raises files.BadFile naming the file (and the joint) in one line."""
     from ..files import BadFile, read_columns
     from ..motion import SampledMotion, given_rates, rate_column_names
+    from .osim import is_storage, read_storage
 
     path, names = Path(path), [joint.lower() for joint in joints]
     optional = tuple(names) + tuple(rate for name in names for rate in rate_column_names(name))
-    columns = read_columns(path, option, required=("t",), optional=optional)
+    if is_storage(path):
+        columns, in_degrees, _ = read_storage(path, option, joints)
+        radians = not in_degrees
+    else:
+        columns = read_columns(path, option, required=("t",), optional=optional)
     for joint, name in zip(joints, names):
         if name not in columns:
-            raise BadFile(f"{option}: {path} has no column for joint {joint!r}; a motion file needs columns t, "
+            needed = "a time column and" if is_storage(path) else "columns t,"
+            raise BadFile(f"{option}: {path} has no column for joint {joint!r}; a motion file needs {needed} "
                           f"{', '.join(joints)} (angles in {'rad' if radians else 'deg'})")
     unit = 1.0 if radians else math.pi / 180
     parts = []

@@ -1,0 +1,39 @@
+"""``fdbench import-osim``: an OpenSim model (.osim) converted into fdbench's model file (TOML)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .app import BadInput, app
+from .common import _check_outputs, _emit, _say
+from .options import Output, Quiet
+
+MAX_TILT_HELP = ("Largest angle (deg, in [0, 45]) by which a joint axis, a child frame or gravity may be off the "
+                 "plane's normal (z) and still be projected onto it; beyond it the import stops naming the joint.")
+
+
+@app.command("import-osim")
+def import_osim_command(
+    model: Annotated[Path, typer.Argument(metavar="MODEL.osim", help="An OpenSim model file.", show_default=False)],
+    output: Output = None,
+    max_tilt: Annotated[float, typer.Option("--max-tilt", help=MAX_TILT_HELP)] = 5.0,
+    quiet: Quiet = False,
+):
+    """Convert an OpenSim model into fdbench's model file (TOML, with the notes of the import as comments at the top): bodies, pin joints named by their coordinates, gravity, ranges as limits; welded bodies merged; muscles, markers, wrap objects, contact geometry and other forces dropped. Needs pip install 'fdbench\\[opensim]'. '--model MODEL.osim' on any command converts the model on the fly."""
+    _check_outputs("toml", ("toml",), inputs={"MODEL.osim": model}, output=output)
+    if not 0 <= max_tilt <= 45:
+        raise BadInput(f"--max-tilt: must be in [0, 45] deg, got {max_tilt:g}")
+    from ..multibody.osim import import_osim, toml_text
+
+    try:
+        found, notes = import_osim(model, max_tilt, option="MODEL.osim")
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    _emit(toml_text(found, notes, model), output)
+    for note in notes:
+        _say(quiet, f"[yellow]warning:[/] {note}")
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output}")

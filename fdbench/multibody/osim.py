@@ -1,0 +1,517 @@
+"""OpenSim models and motions in: an ``.osim`` model as fdbench's planar description, and OpenSim's
+storage files (``.mot``, ``.sto``) as the columns of a motion.
+
+The model is read through the ``opensim`` package (``pip install 'fdbench[opensim]'``), imported
+inside the functions that need it. OpenSim builds the model (``initSystem``) and gives its frames'
+transforms at the default pose; the planar description follows from them:
+
+* The plane is ground's x-y plane (x forward, y up) and its normal ground's z axis. Gravity's
+  x and y are kept.
+* Each one-coordinate joint whose child turns about a fixed axis through a fixed point (a
+  ``PinJoint``, or a ``CustomJoint`` with one rotation by its coordinate and constant translations)
+  becomes a pin joint named after its coordinate (file columns keep OpenSim's names). The axis is
+  found numerically: the child offset frame M's rotation in the parent offset frame F, taken at two
+  values of the coordinate, turns by exactly the change of the coordinate about one axis, and M's
+  origin does not move in F. Then, with h the retained body (or ground) the parent is welded to:
+
+      at_parent = xy of X_hF * p_FM        (the joint point in the parent's frame)
+      at_child  = xy of p_CM               (M's origin in the child's frame)
+      offset    = planar angle of R_hF R_FM(q0) R_CM^T  -  q0
+
+  so that the child frame's angle relative to the parent's is coordinate + offset, as in the
+  description. Offsets along the normal are dropped: they do not change a planar motion. An axis
+  (or a child frame's z axis, or gravity) off the normal by at most ``max_tilt_deg`` is projected
+  onto it, the largest angle said in one note; beyond, the import stops naming the joint.
+* A ``WeldJoint``, or a joint whose coordinates are all locked (at their default values), merges
+  its child into the parent's body: masses add, the centre of mass is the mass-weighted mean and
+  the inertia about the normal adds by the parallel-axis theorem. Bodies welded to ground vanish.
+* Each body keeps its mass, centre of mass (x, y in its frame) and inertia about its z axis at the
+  centre of mass. Coordinate ranges become joint limits; the model gets one named motion,
+  ``mid_range``: minimum jerk in 1 s from the default values to the middle of the ranges.
+* Left out, said in one note: muscles and every other force, markers, wrap objects, contact
+  geometry, controllers and probes (the imported model is driven by joint torques).
+* Refused in one line naming the joint or constraint: a joint with two or more free coordinates
+  (3D joints, a planar ``free`` base), a translation that depends on the coordinate (a knee whose
+  tibia follows a spline of the angle), a rotation that is not the coordinate itself, an axis
+  beyond the tilt tolerance or pointing along -z, constraints (closed loops, couplers).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+INSTALL_HINT = "pip install 'fdbench[opensim]'"
+MAX_OSIM_BYTES = 64 * 2**20
+STORAGE_SUFFIXES = (".mot", ".sto")
+MOTION_NAME = "mid_range"
+MOTION_DURATION = 1.0  # s
+PROBE_STEP = 0.5  # rad: the change of a coordinate that reveals its joint's axis
+SAME_POINT = 1e-9  # m: a joint's point that moves less than this is fixed
+SAME_ANGLE = 1e-9  # rad
+
+
+def _fail(source: str, problem: str):
+    from .description import ModelError
+
+    raise ModelError(source, "", problem)
+
+
+# ---------------------------------------------------------------------------------------- the model
+
+
+def import_osim(path, max_tilt_deg: float = 5.0, option: str = "--model"):
+    """(Model, notes): the planar description of the OpenSim model file ``path`` and the notes of
+    the import (what was dropped, welded or projected; one line each). ``max_tilt_deg``: the
+    largest angle (deg) by which a joint axis may be off the plane's normal. ModelError or
+    files.BadFile (ValueErrors, one line naming the file) when the model cannot be imported."""
+    from ..files import read_input_bytes
+
+    source = str(path)
+    content = read_input_bytes(path, option, MAX_OSIM_BYTES)
+    return import_osim_content(content, source, max_tilt_deg)
+
+
+def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
+    """``import_osim`` of a file's bytes (``source`` names it in messages)."""
+    root = _model_element(content, source)
+    osim = _opensim(source)
+    model, state = _built(osim, content, source)
+    return _describe(osim, model, state, source, root, max_tilt_deg)
+
+
+def _model_element(content: bytes, source: str):
+    """The <Model> element of the file's XML (checked before OpenSim reads it)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        root = ET.fromstring(content)
+    except ET.ParseError as exc:
+        _fail(source, f"not an OpenSim model file: not valid XML ({exc})")
+    element = root if root.tag == "Model" else root.find("Model")
+    if element is None:
+        _fail(source, f"not an OpenSim model file: its root element is <{root.tag}>, expected <OpenSimDocument> "
+                      "holding a <Model>")
+    return element
+
+
+def _opensim(source: str):
+    """The ``opensim`` module, its log silenced (it writes to standard output)."""
+    try:
+        import opensim
+    except ImportError:
+        _fail(source, f"reading an OpenSim model needs the opensim package: {INSTALL_HINT}")
+    opensim.Logger.setLevelString("Off")
+    return opensim
+
+
+def _built(osim, content: bytes, source: str):
+    """(opensim.Model, its default state) of the file's bytes, read from a private copy."""
+    import os
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="fdbench-osim-") as folder:
+        copy = os.path.join(folder, "model.osim")
+        with open(copy, "wb") as handle:
+            handle.write(content)
+        try:
+            model = osim.Model(copy)
+            state = model.initSystem()
+        except Exception as exc:  # noqa: BLE001 - OpenSim's errors are RuntimeErrors of many kinds
+            message = " ".join(str(exc).replace(copy, Path(source).name).split())
+            _fail(source, f"OpenSim cannot build this model: {message[:300]}")
+    return model, state
+
+
+def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
+    from .description import GROUND, model_from_dict
+
+    _refuse_constraints(model, source)
+    joints = _joints_by_child(model, source)
+    kept, welded, tilts, refused = [], [], [], []
+    hosts = {GROUND: (GROUND, np.eye(3), np.zeros(3))}
+    for joint in _tree_order(joints, source):
+        parent, child = _body_name(joint.getParentFrame()), _body_name(joint.getChildFrame())
+        free = [joint.get_coordinates(i) for i in range(joint.numCoordinates())
+                if not joint.get_coordinates(i).getDefaultLocked()]
+        if not free:
+            hosts[child] = _welded_host(hosts[parent], joint, state)
+            welded.append(f"{child} ({_weld_reason(joint)}) into {hosts[parent][0]}")
+            continue
+        hosts[child] = (child, np.eye(3), np.zeros(3))
+        try:
+            pin, tilt = _pin(model, state, joint, free, hosts[parent], max_tilt_deg)
+        except _Refused as exc:
+            refused.append(f"joint {joint.getName()!r} ({joint.getConcreteClassName()}) {exc}")
+            continue
+        kept.append(pin)
+        tilts += tilt
+    if refused:
+        _fail(source, f"cannot be imported: {'; '.join(refused)}; fdbench imports planar trees of pin joints (one "
+                      f"coordinate, a fixed point, the axis within --max-tilt {max_tilt_deg:g} deg of the plane's "
+                      "normal z)")
+    gravity, gravity_tilt = _gravity(model, source, max_tilt_deg)
+    bodies = _merged_bodies(model, hosts, [pin["child"] for pin in kept])
+    data = {"name": _text(model.getName(), 100) or Path(source).stem,
+            "description": _description(model, source, element), "gravity": gravity,
+            "bodies": _with_ends(bodies, kept), "joints": kept, "motions": [_mid_range(kept)]}
+    description = model_from_dict(data, source, default_name=Path(source).stem)
+    notes = [note for note in (_dropped_note(osim, model), _welded_note(welded),
+                               _tilt_note(tilts + gravity_tilt)) if note]
+    return description, tuple(notes)
+
+
+def _body_name(frame) -> str:
+    return frame.findBaseFrame().getName()
+
+
+def _refuse_constraints(model, source: str) -> None:
+    for constraint in model.getConstraintSet():
+        if constraint.get_isEnforced():
+            _fail(source, f"constraint {constraint.getName()!r} ({constraint.getConcreteClassName()}): fdbench imports "
+                          "trees without constraints (no closed loops or coupled coordinates)")
+
+
+def _joints_by_child(model, source: str) -> dict:
+    """{child body: joint}; a body with two parent joints (a closed loop) is refused."""
+    joints = {}
+    for joint in model.getJointSet():
+        child = _body_name(joint.getChildFrame())
+        if child in joints:
+            _fail(source, f"joint {joint.getName()!r}: body {child!r} is already the child of joint "
+                          f"{joints[child].getName()!r} (a closed loop); fdbench imports trees")
+        joints[child] = joint
+    for body in model.getBodySet():
+        if body.getName() not in joints:
+            _fail(source, f"body {body.getName()!r} is attached by no joint; every body must hang from ground")
+    return joints
+
+
+def _tree_order(joints: dict, source: str) -> list:
+    """The joints, each after the joint of its parent body (file order among those ready)."""
+    from .description import GROUND
+
+    order, placed = [], {GROUND}
+    pending = list(joints.values())
+    while pending:
+        ready = [joint for joint in pending if _body_name(joint.getParentFrame()) in placed]
+        if not ready:
+            _fail(source, f"joint {pending[0].getName()!r}: its parent has no path to ground; fdbench imports trees")
+        for joint in ready:
+            order.append(joint)
+            placed.add(_body_name(joint.getChildFrame()))
+            pending.remove(joint)
+    return order
+
+
+def _weld_reason(joint) -> str:
+    if joint.numCoordinates() == 0:
+        return f"{joint.getConcreteClassName()} {joint.getName()!r}"
+    names = ", ".join(joint.get_coordinates(i).getName() for i in range(joint.numCoordinates()))
+    return f"joint {joint.getName()!r}, coordinate {names} locked"
+
+
+# ---------------------------------------------------------------------------------------- frames
+
+
+def _transform(transform) -> tuple[np.ndarray, np.ndarray]:
+    """(R, p) of a SimTK Transform."""
+    R, p = transform.R(), transform.p()
+    return (np.array([[R.get(i, j) for j in range(3)] for i in range(3)]), np.array([p.get(i) for i in range(3)]))
+
+
+def _compose(first, second):
+    """X_AC from X_AB and X_BC, each (R, p)."""
+    return first[0] @ second[0], first[0] @ second[1] + first[1]
+
+
+def _inverse(transform):
+    R, p = transform
+    return R.T, -R.T @ p
+
+
+def _in_base(frame):
+    """X_BF: the offset frame F in its body B."""
+    return _transform(frame.findTransformInBaseFrame())
+
+
+def _between(state, joint):
+    """X_FM: the child offset frame M in the parent offset frame F at ``state``."""
+    return _transform(joint.getChildFrame().findTransformBetween(state, joint.getParentFrame()))
+
+
+def _welded_host(parent_host, joint, state):
+    """(host, R, p) of a welded child: the parent's host and the child's frame in it."""
+    host, R, p = parent_host
+    X_PC = _compose(_compose(_in_base(joint.getParentFrame()), _between(state, joint)),
+                    _inverse(_in_base(joint.getChildFrame())))
+    R_hC, p_hC = _compose((R, p), X_PC)
+    return host, R_hC, p_hC
+
+
+def _angle_axis(R: np.ndarray) -> tuple[float, np.ndarray]:
+    """(angle in [0, pi], unit axis) of a rotation matrix."""
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    angle = math.atan2(np.linalg.norm(w) / 2, (np.trace(R) - 1) / 2)
+    norm = np.linalg.norm(w)
+    return angle, (w / norm if norm > 0 else np.array([0.0, 0.0, 1.0]))
+
+
+def _off_normal(vector: np.ndarray) -> float:
+    """deg: the angle of ``vector`` from +z."""
+    return math.degrees(math.acos(max(-1.0, min(1.0, vector[2] / np.linalg.norm(vector)))))
+
+
+# ---------------------------------------------------------------------------------------- pins
+
+
+class _Refused(Exception):
+    """Why a joint cannot be imported (completed by the joint's name)."""
+
+
+def _pin(model, state, joint, free: list, parent_host, max_tilt_deg: float):
+    """(the description's joint, [(tilt deg, what)]) of a one-coordinate joint about a fixed axis."""
+    if len(free) > 1:
+        raise _Refused(f"has {len(free)} free coordinates ({', '.join(c.getName() for c in free)}): a 3D joint or "
+                       "a free planar base")
+    coordinate, name = free[0], joint.getName()
+    q0 = coordinate.getValue(state)
+    samples = []
+    for q in (q0 + PROBE_STEP, q0 - PROBE_STEP, q0):
+        coordinate.setValue(state, q, False)
+        model.realizePosition(state)
+        samples.append((coordinate.getValue(state), _between(state, joint)))
+    (q1, X1), (q2, X2), (q0, X0) = samples
+    if max(np.linalg.norm(X1[1] - X0[1]), np.linalg.norm(X2[1] - X0[1])) > SAME_POINT:
+        raise _Refused(f"moves its child along a path of coordinate {coordinate.getName()!r}")
+    axis = _rotation_axis(X0[0], X1[0], q1 - q0, coordinate)
+    if not np.allclose(_axis_rotation(axis, q2 - q0) @ X0[0], X2[0], atol=SAME_ANGLE):
+        raise _Refused(f"turns its child about more than one axis with coordinate {coordinate.getName()!r}")
+    host, R_hP, p_hP = parent_host
+    X_hF = _compose((R_hP, p_hP), _in_base(joint.getParentFrame()))
+    X_CM = _in_base(joint.getChildFrame())
+    R_hC = X_hF[0] @ X0[0] @ X_CM[0].T
+    tilts = [(_off_normal(X_hF[0] @ axis), f"{name}'s axis"), (_off_normal(R_hC[:, 2]), f"{name}'s child frame")]
+    for (tilt, _), what in zip(tilts, ("axis", "child frame")):
+        if tilt > 90:
+            raise _Refused(f"has its {what} along -z ({tilt:.3g} deg from +z): fdbench's coordinates turn "
+                           "counter-clockwise about +z")
+        if tilt > max_tilt_deg:
+            raise _Refused(f"has its {what} {tilt:.3g} deg off the plane's normal z")
+    offset = math.atan2(R_hC[1, 0], R_hC[0, 0]) - q0
+    pin = {"name": coordinate.getName(), "type": "pin", "parent": host, "child": _body_name(joint.getChildFrame()),
+           "at_parent": _xy(X_hF[0] @ X0[1] + X_hF[1]), "at_child": _xy(X_CM[1]),
+           "offset": math.remainder(offset, 2 * math.pi)}
+    low, high = coordinate.getRangeMin(), coordinate.getRangeMax()
+    if math.isfinite(low) and math.isfinite(high) and low < high:
+        pin["limits"] = [low, high]
+    pin["_default"] = q0
+    return pin, tilts
+
+
+def _rotation_axis(R0, R1, step: float, coordinate) -> np.ndarray:
+    """The unit axis (in F) about which the child turns by +step from R0 to R1."""
+    angle, axis = _angle_axis(R1 @ R0.T)
+    if abs(angle - abs(step)) > SAME_ANGLE:
+        raise _Refused(f"turns its child by {math.degrees(angle):.4g} deg when coordinate {coordinate.getName()!r} "
+                       f"changes by {math.degrees(abs(step)):.4g} deg: its angle is not the coordinate")
+    return axis if step > 0 else -axis
+
+
+def _axis_rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' rotation by ``angle`` (rad) about the unit ``axis``."""
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def _xy(vector) -> list[float]:
+    return [float(vector[0]), float(vector[1])]
+
+
+def _gravity(model, source: str, max_tilt_deg: float):
+    """([gx, gy] m/s^2, [(tilt deg, 'gravity')] or [])."""
+    g = model.getGravity()
+    g = np.array([g.get(i) for i in range(3)])
+    norm = np.linalg.norm(g)
+    if norm == 0:
+        return [0.0, 0.0], []
+    tilt = math.degrees(math.asin(min(1.0, abs(g[2]) / norm)))
+    if tilt > max_tilt_deg:
+        _fail(source, f"gravity {g.tolist()} is {tilt:.3g} deg off the model's plane (x-y), more than the tolerance "
+                      f"{max_tilt_deg:g} deg (--max-tilt)")
+    return _xy(g), [(tilt, "gravity")] if tilt > 0 else []
+
+
+# ---------------------------------------------------------------------------------------- bodies
+
+
+def _merged_bodies(model, hosts: dict, kept: list) -> list[dict]:
+    """The kept bodies (in ``kept``'s order), each with the bodies welded to it."""
+    parts = {name: [] for name in kept}
+    for body in model.getBodySet():
+        host, R, p = hosts[body.getName()]
+        if host in parts:
+            com = np.array([body.getMassCenter().get(i) for i in range(3)])
+            I = _inertia_matrix(body.get_inertia())
+            parts[host].append((body.getMass(), R @ com + p, R @ I @ R.T))
+    return [_body(name, parts[name]) for name in kept]
+
+
+def _inertia_matrix(vec6) -> np.ndarray:
+    """3x3 inertia about the centre of mass from OpenSim's [Ixx Iyy Izz Ixy Ixz Iyz]."""
+    xx, yy, zz, xy, xz, yz = (vec6.get(i) for i in range(6))
+    return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+
+def _body(name: str, parts: list) -> dict:
+    """A description's body from (mass kg, com m, inertia kg m^2 about the com) parts in its frame."""
+    mass = math.fsum(m for m, _, _ in parts)
+    if len(parts) == 1 or mass == 0:
+        com = parts[0][1]
+    else:
+        com = sum(m * c for m, c, _ in parts) / mass
+    inertia = math.fsum(I[2, 2] + m * ((c[0] - com[0]) ** 2 + (c[1] - com[1]) ** 2) for m, c, I in parts)
+    return {"name": name, "mass": mass, "com": _xy(com), "inertia": inertia}
+
+
+def _with_ends(bodies: list, joints: list) -> list:
+    """The bodies, with an explicit ``end`` where the default one (the first child joint's point)
+    would be within 1 mm of the body's joint point: then the centre of mass, or 0.1 m along x."""
+    from .description import MIN_SEGMENT
+
+    for body in bodies:
+        own = next(j for j in joints if j["child"] == body["name"])
+        first = next((j for j in joints if j["parent"] == body["name"]), None)
+        if first is None or math.dist(first["at_parent"], own["at_child"]) >= MIN_SEGMENT:
+            continue
+        far = math.dist(body["com"], own["at_child"]) >= MIN_SEGMENT
+        body["end"] = body["com"] if far else [own["at_child"][0] + 0.1, own["at_child"][1]]
+    return bodies
+
+
+# ---------------------------------------------------------------------------------------- the rest
+
+
+def _mid_range(joints: list) -> dict:
+    """The model's named motion: minimum jerk from the default values to the middle of the ranges."""
+    start, goal = {}, {}
+    for joint in joints:
+        low, high = joint.get("limits", (joint["_default"], joint["_default"]))
+        start[joint["name"]] = min(max(joint.pop("_default"), low), high)
+        goal[joint["name"]] = (low + high) / 2
+    return {"name": MOTION_NAME, "type": "minimum-jerk", "duration": MOTION_DURATION, "start": start, "goal": goal}
+
+
+def _text(value: str, limit: int) -> str:
+    """One line of at most ``limit`` characters (whitespace collapsed, control characters dropped)."""
+    line = " ".join("".join(c if c.isprintable() else " " for c in str(value)).split())
+    return line if len(line) <= limit else line[: limit - 3] + "..."
+
+
+def _description(model, source: str, element) -> str:
+    credits = element.findtext("credits") or ""
+    text = f"OpenSim model {model.getName()} imported from {Path(source).name}"
+    return _text(text + (f"; credits: {credits}" if credits.strip() else ""), 500)
+
+
+def _dropped_note(osim, model) -> str:
+    """One line: what the import left out (empty if nothing)."""
+    muscles, forces = {}, {}
+    for force in model.getForceSet():
+        kind = muscles if osim.Muscle.safeDownCast(force) is not None else forces
+        name = force.getConcreteClassName()
+        kind[name] = kind.get(name, 0) + 1
+    wraps = sum(body.getWrapObjectSet().getSize() for body in model.getBodySet())
+    wraps += model.getGround().getWrapObjectSet().getSize()
+    counts = [(sum(muscles.values()), "muscle", muscles), (sum(forces.values()), "other force", forces),
+              (model.getMarkerSet().getSize(), "marker", {}), (wraps, "wrap object", {}),
+              (model.getContactGeometrySet().getSize(), "contact geometry", {}),
+              (model.getControllerSet().getSize(), "controller", {}), (model.getProbeSet().getSize(), "probe", {})]
+    parts = [f"{n} {what}{'s' if n > 1 and what != 'contact geometry' else ''}"
+             + (f" ({', '.join(kinds)})" if kinds else "") for n, what, kinds in counts if n]
+    return f"dropped {', '.join(parts)}: the imported model is driven by joint torques" if parts else ""
+
+
+def _welded_note(welded: list) -> str:
+    return f"welded into their parent: {'; '.join(welded)}" if welded else ""
+
+
+def _tilt_note(tilts: list) -> str:
+    if not tilts or max(tilts)[0] == 0:
+        return ""
+    angle, what = max(tilts)
+    return f"projected onto the plane's normal (z): the largest angle off it is {angle:.2f} deg ({what})"
+
+
+# ---------------------------------------------------------------------------------------- motions
+
+
+def is_storage(path) -> bool:
+    """True for an OpenSim storage file's name (.mot, .sto)."""
+    return Path(str(path)).suffix.lower() in STORAGE_SUFFIXES
+
+
+def read_storage(path, option: str, joints) -> tuple[dict, bool, list]:
+    """An OpenSim storage file (.mot, .sto): header lines up to ``endheader`` (``inDegrees=yes|no``,
+    default no), then a tab- or space-separated table with a ``time`` column and columns named by
+    coordinate (or a state's path, ``/jointset/<joint>/<coordinate>/value``). Returns ({'t' and
+    each of ``joints`` (lower case) present: arrays}, in_degrees, labels of the columns not used).
+    Raises files.BadFile in one line."""
+    from ..files import BadFile, read_input_text
+
+    path = Path(path)
+    lines = read_input_text(path, option).splitlines()
+    end = next((i for i, line in enumerate(lines) if line.strip().lower() == "endheader"), None)
+    if end is None:
+        raise BadFile(f"{option}: {path} is not an OpenSim storage file: no 'endheader' line")
+    settings = dict(line.strip().lower().split("=", 1) for line in lines[:end] if "=" in line)
+    in_degrees = settings.get("indegrees", "no").strip() == "yes"
+    rows = [line.split() for line in lines[end + 1:] if line.strip()]
+    if not rows:
+        raise BadFile(f"{option}: {path} has no column labels after 'endheader'")
+    header = [_column_name(label) for label in rows[0]]
+    if "time" not in header:
+        raise BadFile(f"{option}: {path} has no 'time' column after 'endheader'")
+    wanted = {"time": "t"} | {joint.lower(): joint.lower() for joint in joints}
+    columns = {}
+    for k, label in enumerate(header):
+        if label in wanted:
+            try:
+                columns[wanted[label]] = np.array([float(row[k]) for row in rows[1:]])
+            except (ValueError, IndexError):
+                raise BadFile(f"{option}: {path}: column {rows[0][k]!r} holds something that is not a number") from None
+    unused = [label for label, name in zip(rows[0], header) if name not in wanted]
+    return columns, in_degrees, unused
+
+
+def _column_name(label: str) -> str:
+    """A storage column's name, lower case; a state's value '/jointset/<joint>/<coordinate>/value' -> its coordinate."""
+    parts = label.strip().lower().split("/")
+    return parts[-2] if len(parts) > 2 and parts[-1] == "value" else label.strip().lower()
+
+
+def storage_note(path, joints) -> str:
+    """One line naming the columns of an OpenSim storage file that are not the model's coordinates
+    (ignored), or '' (also for a file that cannot be read: its error comes when it is used)."""
+    from ..files import BadFile
+
+    if not is_storage(path):
+        return ""
+    try:
+        _, _, unused = read_storage(path, "--motion", joints)
+    except BadFile:
+        return ""
+    return f"{path}: columns the model lacks were ignored: {', '.join(unused)}" if unused else ""
+
+
+def toml_text(model, notes, source) -> str:
+    """The imported model as a model file: a header of comments (the source, the notes) and the TOML."""
+    from .. import __version__
+    from .description import to_toml
+
+    header = [f"# Imported from the OpenSim model {Path(str(source)).name} by fdbench {__version__} import-osim.",
+              "# SI units, angles in radians; world axes x forward, y up; joints named by OpenSim's coordinates."]
+    header += [f"# note: {note}" for note in notes]
+    return "\n".join(header) + "\n" + to_toml(model)

@@ -1,0 +1,394 @@
+"""OpenSim models and motions in: ``fdbench import-osim``, ``--model MODEL.osim`` and ``--motion
+FILE.mot|FILE.sto``, checked against the .osim files read independently (xml.etree) and against
+OpenSim's own inverse dynamics (its InverseDynamicsSolver, muscles removed)."""
+
+from __future__ import annotations
+
+import io
+import math
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from fdbench.cli import app
+from fdbench.multibody.description import find_model, load_model
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.motions import MinimumJerk
+
+osim = pytest.importorskip("opensim")
+osim.Logger.setLevelString("Off")
+
+from fdbench.multibody.osim import import_osim  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
+SUBJECT01 = ROOT.parent / "shared" / "data" / "opensim" / "subject01.osim"  # beside the source folder
+runner = CliRunner()
+
+
+def invoke(*args, code=0):
+    result = runner.invoke(app, [str(a) for a in args])
+    assert result.exit_code == code, (result.stdout, result.stderr)
+    return result
+
+
+def refused(*args, contains=()):
+    """The command exits 2 with one line on stderr holding every text of ``contains``."""
+    result = invoke(*args, code=2)
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error: "), result.stderr
+    assert "Traceback" not in result.stderr
+    for text in contains:
+        assert text in lines[0], lines[0]
+    return lines[0]
+
+
+# ---------------------------------------------------------------- writing small .osim files
+
+
+def frame(name: str, owner: str, at=(0, 0, 0), rotation=(0, 0, 0)) -> str:
+    return (f'<PhysicalOffsetFrame name="{name}"><socket_parent>{owner}</socket_parent>'
+            f"<translation>{' '.join(map(repr, map(float, at)))}</translation>"
+            f"<orientation>{' '.join(map(repr, map(float, rotation)))}</orientation></PhysicalOffsetFrame>")
+
+
+def body(name: str, mass: float, com, inertia) -> str:
+    return (f'<Body name="{name}"><mass>{mass!r}</mass><mass_center>{" ".join(map(repr, map(float, com)))}'
+            f'</mass_center><inertia>{" ".join(map(repr, map(float, inertia)))}</inertia></Body>')
+
+
+def joint(kind: str, name: str, parent: str, child: str, coordinates=(), parent_at=(0, 0, 0), parent_rotation=(0, 0, 0),
+          child_at=(0, 0, 0), child_rotation=(0, 0, 0)) -> str:
+    """A joint of ``kind`` (PinJoint, WeldJoint, BallJoint...); coordinates: (name, default, locked)."""
+    owner = lambda b: "/ground" if b == "ground" else f"/bodyset/{b}"  # noqa: E731
+    coords = "".join(f'<Coordinate name="{c}"><default_value>{v!r}</default_value><range>-3 3</range>'
+                     f"<locked>{'true' if locked else 'false'}</locked></Coordinate>" for c, v, locked in coordinates)
+    return (f'<{kind} name="{name}"><socket_parent_frame>{name}_p</socket_parent_frame>'
+            f"<socket_child_frame>{name}_c</socket_child_frame>"
+            + (f"<coordinates>{coords}</coordinates>" if coordinates else "")
+            + f"<frames>{frame(name + '_p', owner(parent), parent_at, parent_rotation)}"
+            f"{frame(name + '_c', owner(child), child_at, child_rotation)}</frames></{kind}>")
+
+
+def osim_file(path: Path, bodies, joints, gravity=(0, -9.81, 0), extra: str = "") -> Path:
+    path.write_text('<?xml version="1.0" encoding="UTF-8" ?>\n<OpenSimDocument Version="40000"><Model name="written">'
+                    f"<credits>written by fdbench's tests</credits><gravity>{' '.join(map(repr, map(float, gravity)))}"
+                    f'</gravity><BodySet name="bodyset"><objects>{"".join(bodies)}</objects></BodySet>'
+                    f'<JointSet name="jointset"><objects>{"".join(joints)}</objects></JointSet>{extra}'
+                    "</Model></OpenSimDocument>\n")
+    return path
+
+
+def forearm_osim(path: Path) -> Path:
+    """Table 1's forearm as OpenSim would hold it: one body on a pin at the origin, no load."""
+    return osim_file(path, [body("forearm", 1.0, (0.11, 0, 0), (0.001, 0.0279, 0.0279, 0, 0, 0))],
+                     [joint("PinJoint", "elbow", "ground", "forearm", [("theta", 0.0, False)])])
+
+
+# ---------------------------------------------------------------- OpenSim's inverse dynamics
+
+
+def opensim_inverse_dynamics(path: Path, coordinates, z, zd, zdd) -> np.ndarray:
+    """OpenSim's generalised forces (N m) of ``coordinates`` at the samples (rad, rad/s, rad/s^2),
+    shape (n, J), by its InverseDynamicsSolver on the model with its forces (muscles) removed."""
+    model = osim.Model(str(path))
+    model.updForceSet().clearAndDestroy()
+    state = model.initSystem()
+    found = [model.getCoordinateSet().get(name) for name in coordinates]
+    index = []
+    for coordinate in found:  # the coordinate's place among the system's speeds
+        coordinate.setSpeedValue(state, 1.0)
+        index.append(next(i for i in range(state.getNU()) if state.getU().get(i) == 1.0))
+        coordinate.setSpeedValue(state, 0.0)
+    solver = osim.InverseDynamicsSolver(model)
+    out = np.empty_like(np.asarray(z))
+    for n, (angles, rates, accelerations) in enumerate(zip(z, zd, zdd)):
+        udot = osim.Vector(state.getNU(), 0.0)
+        for coordinate, k, angle, rate, acceleration in zip(found, index, angles, rates, accelerations):
+            coordinate.setValue(state, angle, False)
+            coordinate.setSpeedValue(state, rate)
+            udot.set(k, acceleration)
+        model.realizeVelocity(state)
+        tau = solver.solve(state, udot)
+        out[n] = [tau.get(k) for k in index]
+    return out
+
+
+def minimum_jerk(model, samples: int = 51):
+    """A minimum-jerk motion of every joint of ``model`` (its mid_range), at ``samples`` times."""
+    return MinimumJerk(model.motions[0], model.coordinates)(np.linspace(0.0, 1.0, samples))
+
+
+# ---------------------------------------------------------------- arm26 against its file
+
+
+def test_arm26_imports_the_bodies_joints_and_gravity_of_its_file():
+    model, notes = import_osim(ARM26)
+    xml = ET.parse(ARM26).getroot().find("Model")
+    bodies = {b.get("name"): b for b in xml.find("BodySet/objects")}
+    numbers = lambda e, key: [float(v) for v in e.findtext(key).split()]  # noqa: E731
+    assert [b.name for b in model.bodies] == ["r_humerus", "r_ulna_radius_hand"]  # base, welded to ground, is gone
+    for found in model.bodies:
+        element = bodies[found.name]
+        assert found.mass == float(element.findtext("mass"))
+        assert list(found.com) == numbers(element, "mass_center")[:2]
+        assert found.inertia == numbers(element, "inertia")[2]  # Izz about the centre of mass
+    frames = {f.get("name"): numbers(f, "translation") for f in xml.iter("PhysicalOffsetFrame")}
+    shoulder, elbow = model.joints
+    assert (shoulder.name, shoulder.parent, elbow.name, elbow.parent) == (
+        "r_shoulder_elev", "ground", "r_elbow_flex", "r_humerus")
+    # the shoulder hangs from base, welded 0.8 m above ground's origin
+    assert shoulder.at_parent == pytest.approx(np.add(frames["ground_offset"], frames["base_offset"])[:2], abs=1e-15)
+    assert elbow.at_parent == pytest.approx(frames["r_humerus_offset"][:2], abs=1e-15)
+    assert shoulder.limits == tuple(numbers(next(xml.iter("Coordinate")), "range"))
+    assert model.gravity == tuple(numbers(xml, "gravity")[:2])
+    assert "arm26.osim" in model.description and "Holzbaur" in model.description  # the credits travel with it
+    axes = [numbers(axis, "axis") for axis in xml.iter("TransformAxis") if axis.get("name") == "rotation1"]
+    largest = max(math.degrees(math.acos(a[2] / math.hypot(*a))) for a in axes)
+    assert len(notes) == 3 and 3 < largest < 4
+    assert notes[0].startswith("dropped 6 muscles (Thelen2003Muscle), 3 markers, 4 wrap objects")
+    assert "base" in notes[1] and "into ground" in notes[1]
+    assert f"{largest:.2f} deg" in notes[2]
+
+
+def test_arm26_inverse_dynamics_agrees_with_opensim_and_the_axis_projection_explains_the_difference(tmp_path):
+    model, _ = import_osim(ARM26)
+    z, zd, zdd = minimum_jerk(model)
+    ours = Engine(model).inverse_dynamics(z, zd, zdd)
+    theirs = opensim_inverse_dynamics(ARM26, model.coordinates, z, zd, zdd)
+    # the file's axes are 3.4 and 3.5 deg off the normal: 0.028 N m of torques up to 8 N m
+    assert np.abs(ours - theirs).max() < 0.05 and np.abs(ours - theirs).max() < 0.005 * np.abs(theirs).max()
+    text = ARM26.read_text()
+    for tilted in ("-0.058898020000000002 0.0023 0.99826135999999999", "0.049400010000000001 0.036600010000000002 "
+                   "0.99810825000000003"):
+        assert tilted in text
+        text = text.replace(tilted, "0 0 1")
+    exact = tmp_path / "arm26_exact.osim"
+    exact.write_text(text.replace("0.99826135999999999 -0 0.058898020000000002", "1 0 0")
+                     .replace("0.99810825000000003 0 -0.049400010000000001", "1 0 0"))
+    projected, notes = import_osim(exact)
+    assert projected.bodies == model.bodies and projected.joints == model.joints and len(notes) == 2
+    exact_theirs = opensim_inverse_dynamics(exact, model.coordinates, z, zd, zdd)
+    assert np.abs(ours - exact_theirs).max() < 1e-9  # the whole difference is the projection
+
+
+def test_a_forearm_written_for_opensim_is_the_library_forearm(tmp_path):
+    path = forearm_osim(tmp_path / "forearm.osim")
+    model, notes = import_osim(path)
+    assert notes == () and model.coordinates == ("theta",) and model.loads == ()
+    library = find_model("forearm")
+    s = np.linspace(0.0, 1.0, 41)[:, None]
+    z, zd, zdd = -0.8 * s, 2.0 - s, -3.0 * s  # rad, rad/s, rad/s^2
+    ours = Engine(model).inverse_dynamics(z, zd, zdd)
+    hand = 0.33 * 15.0 * np.cos(z)  # the library's load, 15 N down at 0.33 m, which OpenSim's file has not
+    np.testing.assert_allclose(ours + hand, Engine(library).inverse_dynamics(z, zd, zdd), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(Engine(replace(library, loads=())).inverse_dynamics(z, zd, zdd), ours, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(opensim_inverse_dynamics(path, ["theta"], z, zd, zdd), ours, rtol=0, atol=1e-9)
+
+
+def test_rotated_frames_welds_and_locked_coordinates_map_exactly(tmp_path):
+    """Offsets and rotations about z in both joint frames, a weld whose frame also turns about x
+    (the hand's inertia then mixes), a locked coordinate and out-of-plane offsets: OpenSim's inverse
+    dynamics of the file equals fdbench's of the import."""
+    path = osim_file(tmp_path / "arm.osim", [
+        body("upper", 2.0, (0.01, -0.13, 0.02), (0.02, 0.003, 0.026, 0.001, 0.0, 0.0)),
+        body("forearm", 1.0, (0.0, -0.11, -0.01), (0.01, 0.001, 0.028, 0.0, 0.0, 0.0)),
+        body("hand", 0.4, (0.0, -0.05, 0.01), (0.002, 0.003, 0.004, 0.0001, 0.0002, 0.0003)),
+        body("ring", 0.1, (0.02, 0.0, 0.0), (0.0001, 0.0001, 0.0001, 0, 0, 0)),
+    ], [
+        joint("PinJoint", "shoulder_joint", "ground", "upper", [("shoulder", 0.1, False)], (0.1, 0.2, 0.05),
+              (0, 0, 0.3), (0, 0.05, 0), (0, 0, -0.2)),
+        joint("PinJoint", "elbow_joint", "upper", "forearm", [("elbow", 0.4, False)], (0.02, -0.3, 0.01), (0, 0, 0),
+              (0, 0, 0), (0, 0, 0.5)),
+        joint("WeldJoint", "wrist_weld", "forearm", "hand", (), (0, -0.25, 0), (0.7, 0, 0.4)),
+        joint("PinJoint", "ring_joint", "hand", "ring", [("ring_angle", 0.3, True)], (0.01, -0.08, 0)),
+    ])
+    model, notes = import_osim(path)
+    assert model.coordinates == ("shoulder", "elbow") and [b.name for b in model.bodies] == ["upper", "forearm"]
+    assert model.body("forearm").mass == pytest.approx(1.5)
+    assert notes == ("welded into their parent: hand (WeldJoint 'wrist_weld') into forearm; ring (joint "
+                     "'ring_joint', coordinate ring_angle locked) into forearm",)
+    z, zd, zdd = minimum_jerk(model, 31)
+    ours = Engine(model).inverse_dynamics(z, zd, zdd)
+    theirs = opensim_inverse_dynamics(path, model.coordinates, z, zd, zdd)
+    assert np.abs(theirs).max() > 1.0
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-9)
+
+
+# ---------------------------------------------------------------- the command line
+
+
+def test_import_osim_writes_the_model_file_with_its_notes_and_reads_back_equal(tmp_path):
+    out = tmp_path / "arm26.toml"
+    result = invoke("import-osim", ARM26, "-o", out, "--quiet")
+    assert result.stdout == "" and result.stderr == ""
+    text = out.read_text()
+    assert text.startswith("# Imported from the OpenSim model arm26.osim") and "# note: dropped 6 muscles" in text
+    assert load_model(out) == import_osim(ARM26)[0]
+    assert invoke("import-osim", ARM26).stdout == text  # stdout without -o
+    noisy = invoke("import-osim", ARM26, "-o", tmp_path / "again.toml")
+    assert "dropped 6 muscles" in noisy.stderr and "wrote" in noisy.stderr
+
+
+def test_model_osim_runs_a_command_with_its_notes_as_warnings():
+    table = pd.read_csv(io.StringIO(invoke("inverse", "--model", ARM26, "--format", "csv", "--quiet").stdout))
+    model = import_osim(ARM26)[0]
+    z, zd, zdd = minimum_jerk(model, 1001)
+    expected = Engine(model).inverse_dynamics(z, zd, zdd)
+    np.testing.assert_allclose(table[["r_shoulder_elev_torque", "r_elbow_flex_torque"]], expected, rtol=1e-9,
+                               atol=1e-9)
+    loud = invoke("inverse", "--model", ARM26)
+    warnings = [line for line in loud.stderr.splitlines() if "warning" in line]
+    assert len(warnings) == 3 and all(line.startswith("fdbench: warning: --model: ") for line in warnings)
+    shown = invoke("models", "show", ARM26, "--format", "json").stdout
+    assert '"r_shoulder_elev"' in shown
+
+
+def write_storage(path: Path, t, columns: dict, in_degrees: bool) -> Path:
+    header = ["Coordinates", "version=1", f"nRows={len(t)}", f"nColumns={len(columns) + 1}",
+              f"inDegrees={'yes' if in_degrees else 'no'}", "", "endheader"]
+    rows = ["\t".join(["time", *columns])]
+    rows += ["\t".join(repr(float(v)) for v in [t[n], *(c[n] for c in columns.values())]) for n in range(len(t))]
+    path.write_text("\n".join(header + rows) + "\n")
+    return path
+
+
+def test_motion_mot_in_degrees_or_radians_gives_the_same_run_and_extra_columns_a_note(tmp_path):
+    model = import_osim(ARM26)[0]
+    t = np.linspace(0.0, 1.0, 101)
+    z = MinimumJerk(model.motions[0], model.coordinates)(t)[0]
+    extra = {"pelvis_tx": np.full_like(t, 0.6)}
+    degrees = write_storage(tmp_path / "reach.mot", t, {"r_shoulder_elev": np.degrees(z[:, 0]), **extra,
+                                                        "r_elbow_flex": np.degrees(z[:, 1])}, True)
+    radians = write_storage(tmp_path / "reach.sto", t, {"r_elbow_flex": z[:, 1], "r_shoulder_elev": z[:, 0]}, False)
+    runs = [invoke("inverse", "--model", ARM26, "--motion", path, "--format", "csv") for path in (degrees, radians)]
+    tables = [pd.read_csv(io.StringIO(run.stdout)) for run in runs]
+    np.testing.assert_allclose(tables[0].to_numpy(), tables[1].to_numpy(), rtol=1e-9, atol=1e-9)
+    # the angles read (low-passed at 6 Hz, as a recording is) are the file's, in radians inside
+    np.testing.assert_allclose(np.radians(tables[0]["r_elbow_flex"]), z[:, 1], atol=2e-4)
+    assert "--motion: " in runs[0].stderr and "ignored: pelvis_tx" in runs[0].stderr
+    assert "ignored" not in runs[1].stderr
+    quiet = invoke("inverse", "--model", ARM26, "--motion", degrees, "--quiet")
+    assert quiet.stderr == ""
+
+
+def test_a_mot_without_a_coordinate_is_refused_naming_it(tmp_path):
+    t = np.linspace(0.0, 1.0, 11)
+    path = write_storage(tmp_path / "half.mot", t, {"r_shoulder_elev": 10 * t}, True)
+    out = tmp_path / "out.csv"
+    refused("inverse", "--model", ARM26, "--motion", path, "-o", out, contains=("half.mot", "'r_elbow_flex'"))
+    assert not out.exists()
+    refused("inverse", "--model", ARM26, "--motion", tmp_path / "none.mot", contains=("none.mot",))
+    no_header = tmp_path / "plain.mot"
+    no_header.write_text("time\tr_shoulder_elev\tr_elbow_flex\n0\t0\t0\n1\t1\t1\n")
+    refused("inverse", "--model", ARM26, "--motion", no_header, contains=("endheader",))
+
+
+# ---------------------------------------------------------------- bad models
+
+
+def ball_model(path: Path) -> Path:
+    return osim_file(path, [body("head", 4.0, (0, 0.1, 0), (0.02, 0.02, 0.02, 0, 0, 0))],
+                     [joint("BallJoint", "neck", "ground", "head", [("neck_x", 0, False), ("neck_y", 0, False),
+                                                                    ("neck_z", 0, False)])])
+
+
+def path_knee_model(path: Path) -> Path:
+    """A free planar pelvis and a knee whose shank follows a spline of the angle, as in OpenSim's gait models."""
+    spline = ("<SimmSpline><x> -2 -1 0 1</x><y> -0.01 -0.005 0 0.001</y></SimmSpline>")
+    axes = "".join(
+        f'<TransformAxis name="{name}"><coordinates>{coordinate}</coordinates><axis>{axis}</axis>{function}</TransformAxis>'
+        for name, coordinate, axis, function in [
+            ("rotation1", "knee_angle", "0 0 1", "<LinearFunction><coefficients> 1 0</coefficients></LinearFunction>"),
+            ("rotation2", "", "0 1 0", "<Constant><value>0</value></Constant>"),
+            ("rotation3", "", "1 0 0", "<Constant><value>0</value></Constant>"),
+            ("translation1", "knee_angle", "1 0 0", spline),
+            ("translation2", "", "0 1 0", "<Constant><value>0</value></Constant>"),
+            ("translation3", "", "0 0 1", "<Constant><value>0</value></Constant>")])
+    knee = joint("CustomJoint", "knee", "thigh", "shank", [("knee_angle", 0.0, False)], (0, -0.4, 0))
+    knee = knee.replace("</frames>", f"</frames><SpatialTransform>{axes}</SpatialTransform>")
+    return osim_file(path, [body("thigh", 8.0, (0, -0.2, 0), (0.1, 0.02, 0.1, 0, 0, 0)),
+                            body("shank", 3.5, (0, -0.2, 0), (0.05, 0.005, 0.05, 0, 0, 0))],
+                     [joint("PlanarJoint", "hip", "ground", "thigh", [("pelvis_tilt", 0, False), ("pelvis_tx", 0, False),
+                                                                      ("pelvis_ty", 1, False)]), knee])
+
+
+def coupled_model(path: Path) -> Path:
+    """Two pins whose coordinates a constraint couples."""
+    constraint = ('<ConstraintSet name="constraintset"><objects><CoordinateCouplerConstraint name="couple">'
+                  "<independent_coordinate_names>shoulder</independent_coordinate_names>"
+                  "<dependent_coordinate_name>elbow</dependent_coordinate_name><coupled_coordinates_function>"
+                  "<LinearFunction><coefficients>1 0</coefficients></LinearFunction></coupled_coordinates_function>"
+                  "</CoordinateCouplerConstraint></objects></ConstraintSet>")
+    segment = lambda name: body(name, 1.0, (0.1, 0, 0), (0.01, 0.01, 0.01, 0, 0, 0))  # noqa: E731
+    return osim_file(path, [segment("upper"), segment("lower")],
+                     [joint("PinJoint", "j1", "ground", "upper", [("shoulder", 0.0, False)]),
+                      joint("PinJoint", "j2", "upper", "lower", [("elbow", 0.0, False)], (0.3, 0, 0))], extra=constraint)
+
+
+@pytest.mark.parametrize("case", ["not xml", "no model", "ball joint", "missing", "path knee", "tilt", "constraint"])
+def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, case):
+    path = tmp_path / "model.osim"
+    expected = {"not xml": "not valid XML", "no model": "not an OpenSim model file", "ball joint": "'neck' (BallJoint)",
+                "missing": "does not exist", "path knee": "'knee' (CustomJoint) moves its child along a path",
+                "tilt": "'r_elbow' (CustomJoint) has its axis 3.52 deg off",
+                "constraint": "constraint 'couple' (CoordinateCouplerConstraint)"}[case]
+    args = ()
+    if case == "not xml":
+        path.write_text("<OpenSimDocument><Model name='x'>")
+    elif case == "no model":
+        path.write_text("<?xml version='1.0'?><Storage/>")
+    elif case == "ball joint":
+        ball_model(path)
+    elif case == "path knee":
+        path_knee_model(path)
+    elif case == "constraint":
+        coupled_model(path)
+    elif case == "tilt":
+        path, args = ARM26, ("--max-tilt", "3")
+    out = tmp_path / "out.toml"
+    line = refused("import-osim", path, "-o", out, *args, contains=(expected,))
+    assert not out.exists()
+    if case == "path knee":
+        assert "'hip' (PlanarJoint) has 3 free coordinates" in line  # every joint it cannot take, in one line
+    if case != "tilt":
+        refused("inverse", "--model", path, "-o", out, contains=(expected,))
+        assert not out.exists()
+
+
+@pytest.mark.skipif(not SUBJECT01.exists(), reason="the shared data folder is not beside the source folder")
+def test_the_gait_model_is_refused_naming_its_pelvis_and_knees(tmp_path):
+    line = refused("import-osim", SUBJECT01, "-o", tmp_path / "out.toml",
+                   contains=("'ground_pelvis'", "'knee_r'", "'knee_l'", "path"))
+    assert not (tmp_path / "out.toml").exists() and "hip_r" not in line
+
+
+def test_import_osim_never_writes_over_its_input(tmp_path):
+    copy = tmp_path / "arm26.osim"
+    copy.write_bytes(ARM26.read_bytes())
+    refused("import-osim", copy, "-o", copy)
+    assert copy.read_bytes() == ARM26.read_bytes()
+    refused("import-osim", ARM26, "--max-tilt", "-1", contains=("--max-tilt",))
+
+
+def test_without_opensim_the_import_names_the_extra_to_install(tmp_path, monkeypatch):
+    path = forearm_osim(tmp_path / "fresh.osim")  # content no import has cached
+    monkeypatch.setitem(sys.modules, "opensim", None)
+    for args in (("import-osim", path), ("inverse", "--model", path), ("models", "show", path)):
+        refused(*args, contains=("pip install 'fdbench[opensim]'",))
+
+
+def test_the_paper_s_forearm_reads_a_mot_as_its_csv(tmp_path):
+    t = np.linspace(0.0, 1.0, 201)
+    theta = -45.0 * t**2  # deg
+    storage = write_storage(tmp_path / "flexion.mot", t, {"theta": theta}, True)
+    plain = tmp_path / "flexion.csv"
+    plain.write_text("t,theta\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, theta)))
+    runs = [invoke("inverse", "--motion", path, "--format", "csv", "--quiet").stdout for path in (storage, plain)]
+    assert runs[0] == runs[1]
