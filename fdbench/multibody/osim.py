@@ -51,6 +51,7 @@ MOTION_DURATION = 1.0  # s
 PROBE_STEP = 0.5  # rad: the change of a coordinate that reveals its joint's axis
 SAME_POINT = 1e-9  # m: a joint's point that moves less than this is fixed
 SAME_ANGLE = 1e-9  # rad
+CHILD_TIMEOUT_S = 300  # s: OpenSim's import of one model (its start-up included)
 
 
 def _fail(source: str, problem: str):
@@ -75,11 +76,63 @@ def import_osim(path, max_tilt_deg: float = 5.0, option: str = "--model"):
 
 
 def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
-    """``import_osim`` of a file's bytes (``source`` names it in messages)."""
-    root = _model_element(content, source)
-    osim = _opensim(source)
-    model, state = _built(osim, content, source)
-    return _describe(osim, model, state, source, root, max_tilt_deg)
+    """``import_osim`` of a file's bytes (``source`` names it in messages). OpenSim runs in a child
+    process: its libraries bundle their own CasADi, which cannot share a process with the casadi
+    package that fdbench's collocation and LQR use (whichever loads second fails on missing
+    symbols)."""
+    import base64
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from .description import ModelError, model_from_dict
+
+    _model_element(content, source)  # a file that is not an OpenSim model is refused before a process starts
+    import importlib.util
+
+    if importlib.util.find_spec("opensim") is None:
+        _fail(source, f"reading an OpenSim model needs the opensim package: {INSTALL_HINT}")
+    package_root = str(Path(__file__).resolve().parents[2])  # the child imports this same fdbench
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p))
+    request = json.dumps({"content": base64.b64encode(content).decode(), "source": source,
+                          "max_tilt_deg": max_tilt_deg})
+    done = subprocess.run([sys.executable, "-c", "from fdbench.multibody.osim import _child; _child()"],
+                          input=request, capture_output=True, text=True, env=env, timeout=CHILD_TIMEOUT_S)
+    try:
+        answer = json.loads(done.stdout.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        _fail(source, f"OpenSim's import process failed (exit {done.returncode}): {last[:300]}")
+    if "error" in answer:
+        raise ModelError(*answer["error"])
+    return model_from_dict(answer["model"], source, default_name=Path(source).stem), tuple(answer["notes"])
+
+
+def _child() -> None:
+    """The child process of ``import_osim_content``: a request (JSON on stdin) in, the model's
+    description and the notes, or the ModelError's parts, as one JSON line on stdout."""
+    import base64
+    import io
+    import json
+    import sys
+
+    from .description import ModelError, to_dict
+
+    request = json.loads(sys.stdin.read())
+    content, source = base64.b64decode(request["content"]), request["source"]
+    real_stdout, sys.stdout = sys.stdout, io.StringIO()  # nothing but the answer on the pipe
+    try:
+        osim = _opensim(source)
+        model, state = _built(osim, content, source)
+        found, notes = _describe(osim, model, state, source, _model_element(content, source),
+                                 request["max_tilt_deg"])
+        answer = {"model": to_dict(found), "notes": list(notes)}
+    except ModelError as exc:
+        answer = {"error": [exc.source, exc.key, exc.problem]}
+    finally:
+        sys.stdout = real_stdout
+    print(json.dumps(answer))
 
 
 def _model_element(content: bytes, source: str):
