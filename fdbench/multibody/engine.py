@@ -61,8 +61,8 @@ import numpy as np
 from ..dynamics import OK, VIOLATION_TOL
 
 from .description import Model, resolved_end
-from .kernels import (ALPHA, BETA, COMPUTED, FIXED, GAINS, LENGTH, N_AUX, N_PARAMS, OMEGA2, PD, SWITCH_COS,
-                      TWO_XI_OMEGA, VIOLATION, _derivative, _violation)
+from .kernels import (ALPHA, BETA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA,
+                      VIOLATION)
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
@@ -403,16 +403,14 @@ class Engine:
         """y' = [q', q''] of eq. 12 for the state y (n_state,) and joint torques tau (J,) N m; NaN
         where the leading matrix is singular."""
         y, tau = self._vector(y, self.n_state, "the state"), self._vector(tau, self.n_joints, "tau")
-        out = np.empty(self.n_state)
-        work = _workspace(self.n_p, self.n_joints)
-        code = _derivative(y, tau, *self._kernel_layout, *work, out)
-        if code != OK:
-            out[self.n_q:] = np.nan
-        return out
+        zero = np.zeros((1, self.n_joints))
+        return self.rates(y[None], tau[None], zero, zero, zero, 0.0, 0.0)[0][0]
 
     def constraint_violation(self, y) -> float:
         """max |Phi_i| (m^2 and m) of the state y, the angle constraints in the form in force."""
-        return float(_violation(self._vector(y, self.n_state, "the state"), *self._kernel_layout))
+        from .kernels import constraint_violation
+
+        return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
     def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
         """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
@@ -558,7 +556,3 @@ class Engine:
             gains = np.zeros((1, *shape[1:]))
         return kp, kd, int(mode), gains
 
-
-def _workspace(n_p, n_joints):
-    """The kernels' scratch arrays: the points' matrix, right-hand side, per-body values, torques."""
-    return np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_joints, N_AUX)), np.zeros(n_joints)

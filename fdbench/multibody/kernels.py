@@ -39,171 +39,6 @@ PD, COMPUTED, GAINS = 0, 1, 2  # feedback laws (``rk4``'s mode)
 PHI, COS, SIN, RATE, ACC, JOINT_X, JOINT_Y, ORIGIN_X, ORIGIN_Y, ORIGIN_AX, ORIGIN_AY, N_KIN = range(12)
 
 
-# ---------------------------------------------------------------------- eq. 12
-@njit(inline="always")
-def _point(y, n_q, pt, pt_index, pt_fixed):
-    """x, y, x', y' of a point (fixed points: their position and zero velocity)."""
-    k = pt_index[pt]
-    if k < 0:
-        return pt_fixed[pt, 0], pt_fixed[pt, 1], 0.0, 0.0
-    return y[k], y[k + 1], y[n_q + k], y[n_q + k + 1]
-
-
-@njit(inline="always")
-def _angle_form(c, switch):
-    """1 for the sin form of the angle constraint (|cos| >= switch), 0 for the cos form."""
-    return 1 if abs(c) >= switch else 0
-
-
-@njit(inline="always")
-def _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
-               q_ext, params):
-    """max |Phi_i| (m^2 and m) of the state y: distances, angles (the form in force), linear."""
-    n_b = body_pts.shape[0]
-    n_q = base.shape[0] + n_b
-    worst = 0.0
-    for b in range(n_b):
-        xi, yi, _, _ = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
-        xj, yj, _, _ = _point(y, n_q, body_pts[b, 1], pt_index, pt_fixed)
-        dx, dy, d = xj - xi, yj - yi, body_geom[b, LENGTH]
-        psi = y[base.shape[0] + b] + body_geom[b, BETA]
-        c = math.cos(psi)
-        angle = dy - d * math.sin(psi) if _angle_form(c, params[SWITCH_COS]) == 1 else dx - d * c
-        worst = max(worst, max(abs(dx * dx + dy * dy - d * d), abs(angle)))
-    for r in range(lin_const.shape[0]):
-        value = lin_const[r]
-        for e in range(lin_idx.shape[1]):
-            if lin_idx[r, e] >= 0:
-                value += lin_coef[r, e] * y[lin_idx[r, e]]
-        worst = max(worst, abs(value))
-    return worst
-
-
-@njit(error_model="numpy", inline="always")
-def _derivative(y, tau, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first,
-                base, q_ext, params, K, rhs, aux, q_phi, out):
-    """y' = [q', q''] of eq. 12 into out for the state y and joint torques tau (N m). K, rhs, aux,
-    q_phi: scratch (``_workspace``). Returns OK, or SINGULAR where a pivot of the points' matrix is
-    not positive (then out[n_q:] is left unfinished)."""
-    n_p, n_b = base.shape[0], body_pts.shape[0]
-    n_q = n_p + n_b
-    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
-    for k in range(n_q):
-        out[k] = y[n_q + k]
-    for k in range(n_b):  # joint torques -> generalised forces of the absolute angles
-        q_phi[k] = tau[k]
-    for k in range(n_b):
-        if joint_parent[k] >= 0:
-            q_phi[joint_parent[k]] -= tau[k]
-    for r in range(n_p):
-        rhs[r] = q_ext[r]
-        for c in range(first[r], r + 1):
-            K[r, c] = base[r, c]
-    for r in range(lin_const.shape[0]):  # linear constraints: their J^T J is in base
-        phi, rate = lin_const[r], 0.0
-        for e in range(lin_idx.shape[1]):
-            k = lin_idx[r, e]
-            if k >= 0:
-                phi += lin_coef[r, e] * y[k]
-                rate += lin_coef[r, e] * y[n_q + k]
-        cc = alpha * (txo * rate + om2 * phi)
-        for e in range(lin_idx.shape[1]):
-            k = lin_idx[r, e]
-            if k >= 0:
-                rhs[k] -= lin_coef[r, e] * cc
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        xi, yi, vxi, vyi = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
-        xj, yj, vxj, vyj = y[kj], y[kj + 1], y[n_q + kj], y[n_q + kj + 1]
-        dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
-        d = body_geom[b, LENGTH]
-        psi = y[n_p + b] + body_geom[b, BETA]
-        w = y[n_q + n_p + b]
-        s, c = math.sin(psi), math.cos(psi)
-        # distance: Phi = |dr|^2 - d^2, J = 2 dr on j, -2 dr on i
-        cd = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - d * d)
-        p4 = 4 * alpha
-        K[kj, kj] += p4 * dx * dx
-        K[kj + 1, kj] += p4 * dx * dy
-        K[kj + 1, kj + 1] += p4 * dy * dy
-        rhs[kj] -= 2 * alpha * dx * cd
-        rhs[kj + 1] -= 2 * alpha * dy * cd
-        if ki >= 0:
-            K[ki, ki] += p4 * dx * dx
-            K[ki + 1, ki] += p4 * dx * dy
-            K[ki + 1, ki + 1] += p4 * dy * dy
-            K[kj, ki] -= p4 * dx * dx
-            K[kj, ki + 1] -= p4 * dx * dy
-            K[kj + 1, ki] -= p4 * dx * dy
-            K[kj + 1, ki + 1] -= p4 * dy * dy
-            rhs[ki] += 2 * alpha * dx * cd
-            rhs[ki + 1] += 2 * alpha * dy * cd
-        # angle: its row gives the multiplier lambda = Q_phi / (dPhi/dphi)
-        form = _angle_form(c, params[SWITCH_COS])
-        if form == 1:  # (y_j - y_i) - d sin(psi)
-            pivot = -d * c
-            ca = d * s * w * w + txo * (dvy - d * c * w) + om2 * (dy - d * s)
-            axis = 1
-        else:  # (x_j - x_i) - d cos(psi)
-            pivot = d * s
-            ca = d * c * w * w + txo * (dvx + d * s * w) + om2 * (dx - d * c)
-            axis = 0
-        lam = q_phi[b] / pivot
-        rhs[kj + axis] -= lam
-        if ki >= 0:
-            rhs[ki + axis] += lam
-        aux[b, LAMBDA], aux[b, PIVOT], aux[b, VELOCITY_TERM], aux[b, FORM] = lam, pivot, ca, axis
-    code = _solve_envelope(K, first, rhs)
-    if code != OK:
-        return code
-    for r in range(n_p):
-        out[n_q + r] = rhs[r]
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        axis = int(aux[b, FORM])
-        rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
-        out[n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
-    return OK
-
-
-@njit(error_model="numpy", inline="always")
-def _solve_envelope(K, first, rhs):
-    """Solve K x = rhs in place (x into rhs) for K symmetric positive definite, its lower triangle
-    given inside the envelope first[r] <= c <= r, by L D L^T (L into K's strict lower triangle, D on
-    its diagonal). Returns OK, NONFINITE for a pivot that is NaN, or SINGULAR for one that is not
-    positive (rank lost; rhs is then unfinished)."""
-    n = rhs.shape[0]
-    for r in range(n):
-        fr = first[r]
-        for c in range(fr, r):
-            total = K[r, c]
-            for k in range(max(fr, first[c]), c):
-                total -= K[r, k] * K[c, k]  # K[r, k] holds L[r, k] D[k] until row r is done
-            K[r, c] = total
-        diag = K[r, r]
-        for c in range(fr, r):
-            lrc = K[r, c] / K[c, c]
-            diag -= lrc * K[r, c]
-            K[r, c] = lrc
-        if math.isnan(diag):
-            return NONFINITE
-        if not diag > 0.0:
-            return SINGULAR
-        K[r, r] = diag
-    for r in range(n):  # L z = rhs
-        total = rhs[r]
-        for k in range(first[r], r):
-            total -= K[r, k] * rhs[k]
-        rhs[r] = total
-    for r in range(n):
-        rhs[r] /= K[r, r]
-    for r in range(n - 1, -1, -1):  # L^T x = z, column by column
-        x = rhs[r]
-        for k in range(first[r], r):
-            rhs[k] -= K[r, k] * x
-    return OK
-
-
 # ---------------------------------------------------------------------- inverse dynamics (eq. 3)
 @njit(inline="always")
 def _body_point(kin, b, lx, ly):
@@ -274,64 +109,244 @@ def inverse_torques(z, zd, zdd, joint_parent, joint_offset, joint_at_parent, joi
                      pt_index, mass, q_ext, kin, points, out)
 
 
-# ---------------------------------------------------------------------- feedback laws
-@njit(inline="always")
-def _law_torques(y, half, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, kin, points, z, zd,
-                 v, torque):
-    """The applied joint torques (N m) at the state y and grid index ``half`` into torque (J,).
-    ref holds the reference joint angles plus the plant's joint offsets (``offset``), as z here is
-    the difference of the body angles. mode PD: tau + kp (ref - z) + kd (refd - z'); GAINS: tau +
-    gains[half] [ref - z, refd - z'], accumulated term by term onto tau (so that K = [diag kp,
-    diag kd] gives PD's numbers to the last bit); COMPUTED: the believed model's (``nominal``)
-    inverse dynamics at (z, z') for the accelerations refdd + kp e + kd e', plus tau. z, zd, v: scratch (J,)."""
-    joint_parent, n_p = layout[4], layout[9].shape[0]
-    n_b = joint_parent.shape[0]
+# ---------------------------------------------------------------------- the RK4 driver (eq. 12 under a feedback law)
+@njit(error_model="numpy")
+def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts,
+           body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset,
+           n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied, K, rhs, aux):
+    """``rk4`` whose grid starts at row ``start`` of tau, ref, refd, refdd and gains (step i uses rows
+    start + 2 i, start + 2 i + 1, start + 2 i + 2); with n_steps 0 it evaluates the state derivative
+    of y0 alone (into rates[0]). K (n_p, n_p), rhs (n_p,), aux (J, N_AUX): work arrays that hold,
+    after the call, the last stage's L D L^T factor of the points' matrix, its solution (the point
+    accelerations, m/s^2) and per body the multiplier, pivot, velocity term and form.
+
+    Speed: the stage code is written once, as closures over this function's arrays (numba inlines
+    them without the reference counting that array arguments of inlined functions cost at every
+    call), and runs in a loop over the four stages; row 4 of ``work`` holds the stage's state, rows
+    0 to 3 its derivatives k1 to k4. The operations on every number are the plain formulas'."""
+    n_p, n_b = base.shape[0], joint_parent.shape[0]
     n_q = n_p + n_b
-    for k in range(n_b):
-        p = joint_parent[k]
-        z[k] = y[n_p + k] - (y[n_p + p] if p >= 0 else 0.0)
-        zd[k] = y[n_q + n_p + k] - (y[n_q + n_p + p] if p >= 0 else 0.0)
-    if mode == GAINS:
-        for k in range(n_b):
-            total = tau[half, k]
-            for j in range(n_b):
-                total += gains[half, k, j] * (ref[half, j] - z[j])
-            for j in range(n_b):
-                total += gains[half, k, n_b + j] * (refd[half, j] - zd[j])
-            torque[k] = total
-    elif mode == COMPUTED:
-        for k in range(n_b):
-            v[k] = refdd[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
-            z[k] -= offset[k]
-        n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext = nominal
-        _inverse_torques(z, zd, v, n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass,
-                         n_q_ext, kin, points, torque)
-        for k in range(n_b):
-            torque[k] += tau[half, k]
-    else:
-        for k in range(n_b):
-            torque[k] = tau[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
+    n = 2 * n_q
+    alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
+    p4 = 4 * alpha
+    work = np.empty((5, n))
+    torque, q_phi, z, zd, v = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
+    kin, points = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0]))
+    y = y0.copy()
 
+    def point(pt):
+        """x, y, x', y' of a point of the stage's state (fixed points: their position, zero velocity)."""
+        k = pt_index[pt]
+        if k < 0:
+            return pt_fixed[pt, 0], pt_fixed[pt, 1], 0.0, 0.0
+        return work[4, k], work[4, k + 1], work[4, n_q + k], work[4, n_q + k + 1]
 
-@njit(error_model="numpy", inline="always")
-def _rate(y, half, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, work, torque, out):
-    """The state derivative under the feedback law (``_law_torques``) into out; the applied
-    torques into torque. work: ``_scratch``. Returns a status code (``_derivative``)."""
-    K, rhs, aux, q_phi, kin, points, z, zd, v = work
-    _law_torques(y, half, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, kin, points, z, zd, v,
-                 torque)
-    (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
-     params) = layout
-    return _derivative(y, torque, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
-                       first, base, q_ext, params, K, rhs, aux, q_phi, out)
+    def violation():
+        """max |Phi_i| (m^2 and m) of the stage's state: distances, angles (the form in force), linear."""
+        worst = 0.0
+        for b in range(n_b):
+            xi, yi, _, _ = point(body_pts[b, 0])
+            xj, yj, _, _ = point(body_pts[b, 1])
+            dx, dy, d = xj - xi, yj - yi, body_geom[b, LENGTH]
+            psi = work[4, n_p + b] + body_geom[b, BETA]
+            c = math.cos(psi)
+            angle = dy - d * math.sin(psi) if abs(c) >= switch else dx - d * c
+            worst = max(worst, max(abs(dx * dx + dy * dy - d * d), abs(angle)))
+        for r in range(lin_const.shape[0]):
+            value = lin_const[r]
+            for e in range(lin_idx.shape[1]):
+                if lin_idx[r, e] >= 0:
+                    value += lin_coef[r, e] * work[4, lin_idx[r, e]]
+            worst = max(worst, abs(value))
+        return worst
 
+    def law(half):
+        """The applied joint torques (N m) at the stage's state and grid row ``half`` into torque
+        (``rk4``'s modes). ref holds the reference joint angles plus the plant's joint offsets, as
+        z here is the difference of the body angles."""
+        for k in range(n_b):
+            p = joint_parent[k]
+            z[k] = work[4, n_p + k] - (work[4, n_p + p] if p >= 0 else 0.0)
+            zd[k] = work[4, n_q + n_p + k] - (work[4, n_q + n_p + p] if p >= 0 else 0.0)
+        if mode == GAINS:
+            for k in range(n_b):
+                total = tau[half, k]
+                for j in range(n_b):
+                    total += gains[half, k, j] * (ref[half, j] - z[j])
+                for j in range(n_b):
+                    total += gains[half, k, n_b + j] * (refd[half, j] - zd[j])
+                torque[k] = total
+        elif mode == COMPUTED:
+            for k in range(n_b):
+                v[k] = refdd[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
+                z[k] -= offset[k]
+            _inverse_torques(z, zd, v, n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass,
+                             n_q_ext, kin, points, torque)
+            for k in range(n_b):
+                torque[k] += tau[half, k]
+        else:
+            for k in range(n_b):
+                torque[k] = tau[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
 
-@njit(inline="always")
-def _scratch(layout, nominal):
-    """The work arrays of ``_rate`` for the plant's layout and the believed model's."""
-    n_p, n_b, n_nominal = layout[9].shape[0], layout[2].shape[0], nominal[7].shape[0]
-    return (np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)), np.zeros(n_b), np.zeros((n_b, N_KIN)),
-            np.zeros((3, n_nominal)), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b))
+    def assemble():
+        """The points' matrix K (its envelope) and right-hand side rhs of eq. 12 at the stage's state
+        under the joint torques, and per body the angle row's values into aux."""
+        for k in range(n_b):  # joint torques -> generalised forces of the absolute angles
+            q_phi[k] = torque[k]
+        for k in range(n_b):
+            if joint_parent[k] >= 0:
+                q_phi[joint_parent[k]] -= torque[k]
+        for r in range(n_p):
+            rhs[r] = q_ext[r]
+            for c in range(first[r], r + 1):
+                K[r, c] = base[r, c]
+        for r in range(lin_const.shape[0]):  # linear constraints: their J^T J is in base
+            phi, rate = lin_const[r], 0.0
+            for e in range(lin_idx.shape[1]):
+                k = lin_idx[r, e]
+                if k >= 0:
+                    phi += lin_coef[r, e] * work[4, k]
+                    rate += lin_coef[r, e] * work[4, n_q + k]
+            cc = alpha * (txo * rate + om2 * phi)
+            for e in range(lin_idx.shape[1]):
+                k = lin_idx[r, e]
+                if k >= 0:
+                    rhs[k] -= lin_coef[r, e] * cc
+        for b in range(n_b):
+            ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+            xi, yi, vxi, vyi = point(body_pts[b, 0])
+            xj, yj, vxj, vyj = work[4, kj], work[4, kj + 1], work[4, n_q + kj], work[4, n_q + kj + 1]
+            dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
+            d = body_geom[b, LENGTH]
+            psi = work[4, n_p + b] + body_geom[b, BETA]
+            w = work[4, n_q + n_p + b]
+            s, c = math.sin(psi), math.cos(psi)
+            # distance: Phi = |dr|^2 - d^2, J = 2 dr on j, -2 dr on i
+            cd = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - d * d)
+            K[kj, kj] += p4 * dx * dx
+            K[kj + 1, kj] += p4 * dx * dy
+            K[kj + 1, kj + 1] += p4 * dy * dy
+            rhs[kj] -= 2 * alpha * dx * cd
+            rhs[kj + 1] -= 2 * alpha * dy * cd
+            if ki >= 0:
+                K[ki, ki] += p4 * dx * dx
+                K[ki + 1, ki] += p4 * dx * dy
+                K[ki + 1, ki + 1] += p4 * dy * dy
+                K[kj, ki] -= p4 * dx * dx
+                K[kj, ki + 1] -= p4 * dx * dy
+                K[kj + 1, ki] -= p4 * dx * dy
+                K[kj + 1, ki + 1] -= p4 * dy * dy
+                rhs[ki] += 2 * alpha * dx * cd
+                rhs[ki + 1] += 2 * alpha * dy * cd
+            # angle: its row gives the multiplier lambda = Q_phi / (dPhi/dphi)
+            if abs(c) >= switch:  # the sin form, (y_j - y_i) - d sin(psi)
+                pivot = -d * c
+                ca = d * s * w * w + txo * (dvy - d * c * w) + om2 * (dy - d * s)
+                axis = 1
+            else:  # the cos form, (x_j - x_i) - d cos(psi)
+                pivot = d * s
+                ca = d * c * w * w + txo * (dvx + d * s * w) + om2 * (dx - d * c)
+                axis = 0
+            lam = q_phi[b] / pivot
+            rhs[kj + axis] -= lam
+            if ki >= 0:
+                rhs[ki + axis] += lam
+            aux[b, LAMBDA], aux[b, PIVOT], aux[b, VELOCITY_TERM], aux[b, FORM] = lam, pivot, ca, axis
+
+    def solve():
+        """Solve K x = rhs in place (x into rhs) for K symmetric positive definite, its lower triangle
+        given inside the envelope first[r] <= c <= r, by L D L^T (L into K's strict lower triangle, D
+        on its diagonal). Returns OK, NONFINITE for a pivot that is NaN, or SINGULAR for one that is
+        not positive (rank lost; rhs is then unfinished)."""
+        status = OK
+        for r in range(n_p):
+            fr = first[r]
+            for c in range(fr, r):
+                total = K[r, c]
+                for k in range(max(fr, first[c]), c):
+                    total -= K[r, k] * K[c, k]  # K[r, k] holds L[r, k] D[k] until row r is done
+                K[r, c] = total
+            diag = K[r, r]
+            for c in range(fr, r):
+                lrc = K[r, c] / K[c, c]
+                diag -= lrc * K[r, c]
+                K[r, c] = lrc
+            if math.isnan(diag):
+                status = NONFINITE
+                break
+            if not diag > 0.0:
+                status = SINGULAR
+                break
+            K[r, r] = diag
+        if status == OK:
+            for r in range(n_p):  # L z = rhs
+                total = rhs[r]
+                for k in range(first[r], r):
+                    total -= K[r, k] * rhs[k]
+                rhs[r] = total
+            for r in range(n_p):
+                rhs[r] /= K[r, r]
+            for r in range(n_p - 1, -1, -1):  # L^T x = z, column by column
+                x = rhs[r]
+                for k in range(first[r], r):
+                    rhs[k] -= K[r, k] * x
+        return status
+
+    def derivative(row):
+        """y' = [q', q''] of eq. 12 at the stage's state under torque into work[row]. Returns OK, or
+        the solve's status (then the accelerations are left unfinished)."""
+        for k in range(n_q):
+            work[row, k] = work[4, n_q + k]
+        assemble()
+        status = solve()
+        if status == OK:
+            for r in range(n_p):
+                work[row, n_q + r] = rhs[r]
+            for b in range(n_b):
+                ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+                axis = int(aux[b, FORM])
+                rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
+                work[row, n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
+        return status
+
+    for m in range(n):
+        work[4, m] = y[m]
+    max_viol = violation()
+    code = OK
+    for i in range(n_steps + 1):
+        j = start + 2 * i
+        for stage in range(4):  # k1 at y, k2 and k3 at the half step, k4 at the full step
+            if stage > 0:
+                h = dt if stage == 3 else 0.5 * dt
+                for m in range(n):
+                    work[4, m] = y[m] + h * work[stage - 1, m]
+            law(j + (stage + 1) // 2)
+            code = derivative(stage)
+            if stage == 0:
+                for m in range(n):
+                    states[i, m] = y[m]
+                    rates[i, m] = work[0, m]
+                for m in range(n_b):
+                    applied[i, m] = torque[m]
+            if code != OK or i == n_steps:
+                break
+        if code != OK:
+            return code, i, max_viol
+        if i == n_steps:
+            break
+        finite = True
+        for m in range(n):
+            work[4, m] = y[m] + dt / 6.0 * (work[0, m] + 2.0 * work[1, m] + 2.0 * work[2, m] + work[3, m])
+            finite = finite and math.isfinite(work[4, m])
+        if not finite:
+            return NONFINITE, i, max_viol
+        viol = violation()
+        if viol > params[VIOLATION]:
+            return CONSTRAINT, i, max(max_viol, viol)
+        max_viol = max(max_viol, viol)
+        for m in range(n):
+            y[m] = work[4, m]
+    return OK, n_steps, max_viol
 
 
 @njit(error_model="numpy")
@@ -339,7 +354,10 @@ def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_
         joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent,
         n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied):
     """Classical RK4 of eq. 12 over n_steps steps of dt (s) under the feedback law ``mode`` (PD,
-    COMPUTED or GAINS, see ``_law_torques``), from the state y0 (n_state,).
+    COMPUTED or GAINS), from the state y0 (n_state,). mode PD: tau + kp (ref - z) + kd (refd - z');
+    GAINS: tau + gains[half] [ref - z, refd - z'], accumulated term by term onto tau (so that
+    K = [diag kp, diag kd] gives PD's numbers to the last bit); COMPUTED: the believed model's
+    (``nominal``) inverse dynamics at (z, z') for the accelerations refdd + kp e + kd e', plus tau.
 
     tau, ref, refd, refdd: shape (2 n_steps + 1, J), the feedforward torques (N m), the reference
     joint angles plus the joint offsets (rad), velocities (rad/s) and accelerations (rad/s^2) on
@@ -349,56 +367,11 @@ def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_
     model's inverse-dynamics layout (``Engine.simulation_layout``). Fills states (n+1, n_state),
     rates (n+1, n_state) (the state derivative) and applied (n+1, J) (N m) up to the last step
     reached. Returns (status, steps_done, max constraint violation)."""
-    layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
-              params)
-    nominal = (n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext)
-    work = _scratch(layout, nominal)
-    n = y0.shape[0]
-    torque = np.zeros(joint_parent.shape[0])
-    y = y0.copy()
-    k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
-    max_viol = _violation(y, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first,
-                          base, q_ext, params)
-    for i in range(n_steps + 1):
-        j = 2 * i
-        code = _rate(y, j, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, work, torque, k1)
-        for m in range(n):
-            states[i, m] = y[m]
-            rates[i, m] = k1[m]
-        for m in range(torque.shape[0]):
-            applied[i, m] = torque[m]
-        if code != OK:
-            return code, i, max_viol
-        if i == n_steps:
-            break
-        for m in range(n):
-            tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _rate(tmp, j + 1, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, work, torque, k2)
-        if code == OK:
-            for m in range(n):
-                tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _rate(tmp, j + 1, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, work, torque,
-                         k3)
-        if code == OK:
-            for m in range(n):
-                tmp[m] = y[m] + dt * k3[m]
-            code = _rate(tmp, j + 2, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, work, torque,
-                         k4)
-        if code != OK:
-            return code, i, max_viol
-        finite = True
-        for m in range(n):
-            tmp[m] = y[m] + dt / 6.0 * (k1[m] + 2.0 * k2[m] + 2.0 * k3[m] + k4[m])
-            finite = finite and math.isfinite(tmp[m])
-        if not finite:
-            return NONFINITE, i, max_viol
-        viol = _violation(tmp, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
-                          first, base, q_ext, params)
-        if viol > params[VIOLATION]:
-            return CONSTRAINT, i, max(max_viol, viol)
-        max_viol = max(max_viol, viol)
-        y[:] = tmp
-    return OK, n_steps, max_viol
+    n_p, n_b = base.shape[0], joint_parent.shape[0]
+    return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts,
+                  body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent,
+                  n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
+                  applied, np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)))
 
 
 @njit(error_model="numpy")
@@ -409,16 +382,34 @@ def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_i
     applied, shape (k, J)) of k states (shape (k, n_state)) under ``rk4``'s feedback law, row i with
     row i of tau, ref, refd, refdd (each (k, J)) and of gains ((k, J, 2J) for GAINS); the
     accelerations are NaN where the points' matrix is singular."""
-    layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
-              params)
-    nominal = (n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext)
-    work = _scratch(layout, nominal)
-    n_q = states.shape[1] // 2
+    n_p, n_b, n = base.shape[0], joint_parent.shape[0], states.shape[1]
+    K, rhs, aux = np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX))
+    state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, n_b))
     for i in range(states.shape[0]):
-        code = _rate(states[i], i, mode, tau, ref, refd, refdd, kp, kd, gains, offset, layout, nominal, work,
-                     applied[i], out[i])
+        code, _, _ = _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index,
+                            pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
+                            q_ext, params, n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index,
+                            n_mass, n_q_ext, state, rate, torque, K, rhs, aux)
+        out[i] = rate[0]
+        applied[i] = torque[0]
         if code != OK:
-            out[i, n_q:] = np.nan
+            out[i, n // 2:] = np.nan
+
+
+@njit(error_model="numpy")
+def constraint_violation(y, offset, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef,
+                         lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent, n_at_child, n_owner,
+                         n_local, n_index, n_mass, n_q_ext):
+    """max |Phi_i| (m^2 and m) of the state y (n_state,), the angle constraints in the form in force
+    (the value ``rk4`` checks), over the simulation layout (``Engine.simulation_layout``)."""
+    n_p, n_b, n = base.shape[0], joint_parent.shape[0], y.shape[0]
+    rows, gains = np.zeros((1, n_b)), np.zeros((1, n_b, 2 * n_b))
+    _, _, worst = _drive(y, 0.0, 0, 0, rows, rows, rows, rows, rows[0], rows[0], PD, gains, offset, pt_index, pt_fixed,
+                         body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
+                         n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext,
+                         np.empty((1, n)), np.empty((1, n)), np.empty((1, n_b)), np.zeros((n_p, n_p)), np.zeros(n_p),
+                         np.zeros((n_b, N_AUX)))
+    return worst
 
 
 # ---------------------------------------------------------------------- the population (eq. 18)

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..dynamics import CONSTRAINT, NONFINITE, OK
 from ..jit import njit
-from .kernels import (ALPHA, BETA, FORM, LAMBDA, LENGTH, OMEGA2, PD, PIVOT, TWO_XI_OMEGA, VIOLATION, _point, _rate,
-                      _scratch, _violation)
+from .kernels import (ALPHA, BETA, FORM, LAMBDA, LENGTH, N_AUX, OMEGA2, PD, PIVOT, TWO_XI_OMEGA, VIOLATION,
+                      _drive)
 
 # columns of a stage's per-body coefficients (``_stage_values``), with e = r_j - r_i the body's
 # end minus its joint point (m) and de, de' a direction's change of e and e':
@@ -54,7 +54,10 @@ def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, pa
         inv_diag[r] = 1.0 / K[r, r]
     for b in range(n_b):
         ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        xi, yi, vxi, vyi = _point(y, n_q, body_pts[b, 0], pt_index, pt_fixed)
+        if ki >= 0:
+            xi, yi, vxi, vyi = y[ki], y[ki + 1], y[n_q + ki], y[n_q + ki + 1]
+        else:
+            xi, yi, vxi, vyi = pt_fixed[body_pts[b, 0], 0], pt_fixed[body_pts[b, 0], 1], 0.0, 0.0
         ex, ey, evx, evy = y[kj] - xi, y[kj + 1] - yi, y[n_q + kj] - vxi, y[n_q + kj + 1] - vyi
         rx, ry = x[kj] - (x[ki] if ki >= 0 else 0.0), x[kj + 1] - (x[ki + 1] if ki >= 0 else 0.0)
         d = body_geom[b, LENGTH]
@@ -195,6 +198,26 @@ def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign,
             U[m, q] = S[m, q] + next_step * dk[m, q]
 
 
+@njit(error_model="numpy", inline="always")
+def _stage_rate(y, half, tau, ref, refd, offset, layout, nominal, work, k, torque):
+    """The open-loop state derivative (``kernels.rk4`` in PD mode with zero gains) at the stage
+    state y and grid row ``half`` into k, the joint torques into torque (J,); work (the stage's
+    factor, solution and multipliers) and its buffers. Returns (status, max |Phi_i| of y)."""
+    K, x, aux, state, rate, applied, zero, no_gains = work
+    (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
+     params) = layout
+    n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext = nominal
+    code, _, viol = _drive(y, 0.0, 0, half, tau, ref, refd, ref, zero, zero, PD, no_gains, offset, pt_index, pt_fixed,
+                           body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
+                           n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext,
+                           state, rate, applied, K, x, aux)
+    for m in range(k.shape[0]):
+        k[m] = rate[0, m]
+    for m in range(torque.shape[0]):
+        torque[m] = applied[0, m]
+    return code, viol
+
+
 @njit(error_model="numpy")
 def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offset, pt_index, pt_fixed, body_pts,
                     body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent,
@@ -212,10 +235,10 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
     layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
               params)
     nominal = (n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext)
-    work = _scratch(layout, nominal)
     n_b, n_p = joint_parent.shape[0], base.shape[0]
-    zero, no_gains = np.zeros(n_b), np.zeros((1, n_b, 2 * n_b))
     n, P = y0.shape[0], G.shape[1]
+    work = (np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)), np.empty((1, n)), np.empty((1, n)),
+            np.empty((1, n_b)), np.zeros(n_b), np.zeros((1, n_b, 2 * n_b)))
     torque = np.zeros(n_b)
     y = y0.copy()
     k1, k2, k3, k4, tmp = np.empty(n), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
@@ -229,7 +252,9 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
             torque_sign[joint_parent[param_joint[q]], q] = -1.0
     for i in range(n_steps + 1):
         j = 2 * i
-        code = _rate(y, j, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque, k1)
+        code, viol = _stage_rate(y, j, tau, ref, refd, offset, layout, nominal, work, k1, torque)
+        if i > 0 and viol > params[VIOLATION]:  # the step before left the constraint manifold
+            return CONSTRAINT, i - 1
         for m in range(n):
             states[i, m] = y[m]
             rates[i, m] = k1[m]
@@ -250,20 +275,17 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
         _stage_sensitivity(y, k1, S, U, acc, 1.0, 0.5 * dt, j, G, torque_sign, work, scratch, layout)
         for m in range(n):
             tmp[m] = y[m] + 0.5 * dt * k1[m]
-        code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work, torque,
-                     k2)
+        code, _ = _stage_rate(tmp, j + 1, tau, ref, refd, offset, layout, nominal, work, k2, torque)
         if code == OK:
             _stage_sensitivity(tmp, k2, S, U, acc, 2.0, 0.5 * dt, j + 1, G, torque_sign, work, scratch, layout)
             for m in range(n):
                 tmp[m] = y[m] + 0.5 * dt * k2[m]
-            code = _rate(tmp, j + 1, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
-                         torque, k3)
+            code, _ = _stage_rate(tmp, j + 1, tau, ref, refd, offset, layout, nominal, work, k3, torque)
         if code == OK:
             _stage_sensitivity(tmp, k3, S, U, acc, 2.0, dt, j + 1, G, torque_sign, work, scratch, layout)
             for m in range(n):
                 tmp[m] = y[m] + dt * k3[m]
-            code = _rate(tmp, j + 2, PD, tau, ref, refd, ref, zero, zero, no_gains, offset, layout, nominal, work,
-                         torque, k4)
+            code, _ = _stage_rate(tmp, j + 2, tau, ref, refd, offset, layout, nominal, work, k4, torque)
         if code != OK:
             return code, i
         _stage_sensitivity(tmp, k4, S, U, acc, 1.0, 0.0, j + 2, G, torque_sign, work, scratch, layout)
@@ -273,10 +295,6 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
             finite = finite and math.isfinite(tmp[m])
         if not finite:
             return NONFINITE, i
-        viol = _violation(tmp, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const,
-                          first, base, q_ext, params)
-        if viol > params[VIOLATION]:
-            return CONSTRAINT, i
         for m in range(n):
             for q in range(P):
                 S[m, q] += dt / 6.0 * acc[m, q]
