@@ -131,7 +131,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
     p4 = 4 * alpha
     work = np.empty((5, n))
     torque, q_phi, z, zd, v = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
-    kin, points = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0]))
+    kin, points, trig = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0])), np.zeros((n_b, 2))
     y = y0.copy()
 
     def point(pt):
@@ -142,15 +142,17 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         return work[4, k], work[4, k + 1], work[4, n_q + k], work[4, n_q + k + 1]
 
     def violation():
-        """max |Phi_i| (m^2 and m) of the stage's state: distances, angles (the form in force), linear."""
+        """max |Phi_i| (m^2 and m) of the stage's state: distances, angles (the form in force), linear;
+        sin and cos of the bodies' angles into trig, for the state's first stage."""
         worst = 0.0
         for b in range(n_b):
             xi, yi, _, _ = point(body_pts[b, 0])
             xj, yj, _, _ = point(body_pts[b, 1])
             dx, dy, d = xj - xi, yj - yi, body_geom[b, LENGTH]
             psi = work[4, n_p + b] + body_geom[b, BETA]
-            c = math.cos(psi)
-            angle = dy - d * math.sin(psi) if abs(c) >= switch else dx - d * c
+            s, c = math.sin(psi), math.cos(psi)
+            trig[b, 0], trig[b, 1] = s, c
+            angle = dy - d * s if abs(c) >= switch else dx - d * c
             worst = max(worst, max(abs(dx * dx + dy * dy - d * d), abs(angle)))
         for r in range(lin_const.shape[0]):
             value = lin_const[r]
@@ -188,9 +190,10 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             for k in range(n_b):
                 torque[k] = tau[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
 
-    def assemble():
+    def assemble(carried):
         """The points' matrix K (its envelope) and right-hand side rhs of eq. 12 at the stage's state
-        under the joint torques, and per body the angle row's values into aux."""
+        under the joint torques, and per body the angle row's values into aux. carried: the state's
+        sin and cos are those in trig (the state's violation was computed)."""
         for k in range(n_b):  # joint torques -> generalised forces of the absolute angles
             q_phi[k] = torque[k]
         for k in range(n_b):
@@ -218,9 +221,12 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             xj, yj, vxj, vyj = work[4, kj], work[4, kj + 1], work[4, n_q + kj], work[4, n_q + kj + 1]
             dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
             d = body_geom[b, LENGTH]
-            psi = work[4, n_p + b] + body_geom[b, BETA]
             w = work[4, n_q + n_p + b]
-            s, c = math.sin(psi), math.cos(psi)
+            if carried:
+                s, c = trig[b, 0], trig[b, 1]
+            else:
+                psi = work[4, n_p + b] + body_geom[b, BETA]
+                s, c = math.sin(psi), math.cos(psi)
             # distance: Phi = |dr|^2 - d^2, J = 2 dr on j, -2 dr on i
             cd = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - d * d)
             K[kj, kj] += p4 * dx * dx
@@ -293,11 +299,12 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         return status
 
     def derivative(row):
-        """y' = [q', q''] of eq. 12 at the stage's state under torque into work[row]. Returns OK, or
-        the solve's status (then the accelerations are left unfinished)."""
+        """y' = [q', q''] of eq. 12 at the stage's state under torque into work[row] (row 0: the
+        step's start, whose sin and cos are in trig). Returns OK, or the solve's status (then the
+        accelerations are left unfinished)."""
         for k in range(n_q):
             work[row, k] = work[4, n_q + k]
-        assemble()
+        assemble(row == 0)
         status = solve()
         if status == OK:
             for r in range(n_p):
