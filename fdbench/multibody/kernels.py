@@ -133,12 +133,19 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
     torque, q_phi, z, zd, v = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
     kin, points, trig = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0])), np.zeros((n_b, 2))
     y = y0.copy()
+    # per body, hoisted: the coordinate indices of its points i and j (i: FIXED on ground), and its
+    # d (m), beta (rad) and point i's position (m) where it is fixed
+    ends, shape = np.empty((n_b, 2), dtype=np.int64), np.empty((n_b, 4))
+    for b in range(n_b):
+        ends[b, 0], ends[b, 1] = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        shape[b, 0], shape[b, 1] = body_geom[b, LENGTH], body_geom[b, BETA]
+        shape[b, 2], shape[b, 3] = pt_fixed[body_pts[b, 0], 0], pt_fixed[body_pts[b, 0], 1]
 
-    def point(pt):
-        """x, y, x', y' of a point of the stage's state (fixed points: their position, zero velocity)."""
-        k = pt_index[pt]
+    def joint_point(b):
+        """x, y, x', y' of body b's point i in the stage's state (fixed: its position, zero velocity)."""
+        k = ends[b, 0]
         if k < 0:
-            return pt_fixed[pt, 0], pt_fixed[pt, 1], 0.0, 0.0
+            return shape[b, 2], shape[b, 3], 0.0, 0.0
         return work[4, k], work[4, k + 1], work[4, n_q + k], work[4, n_q + k + 1]
 
     def violation():
@@ -146,10 +153,10 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         sin and cos of the bodies' angles into trig, for the state's first stage."""
         worst = 0.0
         for b in range(n_b):
-            xi, yi, _, _ = point(body_pts[b, 0])
-            xj, yj, _, _ = point(body_pts[b, 1])
-            dx, dy, d = xj - xi, yj - yi, body_geom[b, LENGTH]
-            psi = work[4, n_p + b] + body_geom[b, BETA]
+            xi, yi, _, _ = joint_point(b)
+            kj = ends[b, 1]
+            dx, dy, d = work[4, kj] - xi, work[4, kj + 1] - yi, shape[b, 0]
+            psi = work[4, n_p + b] + shape[b, 1]
             s, c = math.sin(psi), math.cos(psi)
             trig[b, 0], trig[b, 1] = s, c
             angle = dy - d * s if abs(c) >= switch else dx - d * c
@@ -216,16 +223,16 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                 if k >= 0:
                     rhs[k] -= lin_coef[r, e] * cc
         for b in range(n_b):
-            ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-            xi, yi, vxi, vyi = point(body_pts[b, 0])
+            ki, kj = ends[b, 0], ends[b, 1]
+            xi, yi, vxi, vyi = joint_point(b)
             xj, yj, vxj, vyj = work[4, kj], work[4, kj + 1], work[4, n_q + kj], work[4, n_q + kj + 1]
             dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
-            d = body_geom[b, LENGTH]
+            d = shape[b, 0]
             w = work[4, n_q + n_p + b]
             if carried:
                 s, c = trig[b, 0], trig[b, 1]
             else:
-                psi = work[4, n_p + b] + body_geom[b, BETA]
+                psi = work[4, n_p + b] + shape[b, 1]
                 s, c = math.sin(psi), math.cos(psi)
             # distance: Phi = |dr|^2 - d^2, J = 2 dr on j, -2 dr on i
             cd = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - d * d)
@@ -310,7 +317,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             for r in range(n_p):
                 work[row, n_q + r] = rhs[r]
             for b in range(n_b):
-                ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+                ki, kj = ends[b, 0], ends[b, 1]
                 axis = int(aux[b, FORM])
                 rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
                 work[row, n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
