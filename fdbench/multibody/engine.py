@@ -131,6 +131,7 @@ class Engine:
         self._build_matrices()
         self.n_q = self.n_p + self.n_joints
         self.n_state = 2 * self.n_q
+        self._last_start = None  # (z and zd as bytes, the state) of the last ``state_from_joints``
 
     # ------------------------------------------------------------------ layout
     def _build_points(self):
@@ -384,8 +385,11 @@ class Engine:
     def state_from_joints(self, z, zd) -> np.ndarray:
         """y = [q, q'] on the constraint manifold for joint angles z (rad) and rates zd (rad/s), shape (J,)."""
         z, zd = self._vector(z, self.n_joints, "z"), self._vector(zd, self.n_joints, "zd")
-        p, pd, _, (phi, w, *_) = self._free_points(z[None], zd[None], np.zeros((1, self.n_joints)))
-        return np.concatenate([p[0], phi[0], pd[0], w[0]])
+        key = z.tobytes() + zd.tobytes()
+        if self._last_start is None or self._last_start[0] != key:  # a run's start, kept for its repeats
+            p, pd, _, (phi, w, *_) = self._free_points(z[None], zd[None], np.zeros((1, self.n_joints)))
+            self._last_start = key, np.concatenate([p[0], phi[0], pd[0], w[0]])
+        return self._last_start[1].copy()
 
     def joints_from_state(self, y) -> tuple[np.ndarray, np.ndarray]:
         """(z, zd) (rad, rad/s), shapes (J,), from the state y (n_state,) (or (n, n_state) -> (n, J))."""

@@ -122,14 +122,14 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
 
     Speed: the stage code is written once, as closures over this function's arrays (numba inlines
     them without the reference counting that array arguments of inlined functions cost at every
-    call), and runs in a loop over the four stages; row 4 of ``work`` holds the stage's state, rows
+    call), and runs in a loop over the four stages; ``state`` holds the stage's state, ``ks``
     0 to 3 its derivatives k1 to k4. The operations on every number are the plain formulas'."""
     n_p, n_b = base.shape[0], joint_parent.shape[0]
     n_q = n_p + n_b
     n = 2 * n_q
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
-    work = np.empty((5, n))
+    state, ks = np.empty(n), np.empty((4, n))  # the stage's state; the stages' derivatives k1 to k4
     torque, q_phi, z, zd, v = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
     kin, points, trig = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0])), np.zeros((n_b, 2))
     y = y0.copy()
@@ -146,7 +146,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         k = ends[b, 0]
         if k < 0:
             return shape[b, 2], shape[b, 3], 0.0, 0.0
-        return work[4, k], work[4, k + 1], work[4, n_q + k], work[4, n_q + k + 1]
+        return state[k], state[k + 1], state[n_q + k], state[n_q + k + 1]
 
     def violation():
         """max |Phi_i| (m^2 and m) of the stage's state: distances, angles (the form in force), linear;
@@ -155,8 +155,8 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         for b in range(n_b):
             xi, yi, _, _ = joint_point(b)
             kj = ends[b, 1]
-            dx, dy, d = work[4, kj] - xi, work[4, kj + 1] - yi, shape[b, 0]
-            psi = work[4, n_p + b] + shape[b, 1]
+            dx, dy, d = state[kj] - xi, state[kj + 1] - yi, shape[b, 0]
+            psi = state[n_p + b] + shape[b, 1]
             s, c = math.sin(psi), math.cos(psi)
             trig[b, 0], trig[b, 1] = s, c
             angle = dy - d * s if abs(c) >= switch else dx - d * c
@@ -165,7 +165,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             value = lin_const[r]
             for e in range(lin_idx.shape[1]):
                 if lin_idx[r, e] >= 0:
-                    value += lin_coef[r, e] * work[4, lin_idx[r, e]]
+                    value += lin_coef[r, e] * state[lin_idx[r, e]]
             worst = max(worst, abs(value))
         return worst
 
@@ -175,8 +175,8 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         z here is the difference of the body angles."""
         for k in range(n_b):
             p = joint_parent[k]
-            z[k] = work[4, n_p + k] - (work[4, n_p + p] if p >= 0 else 0.0)
-            zd[k] = work[4, n_q + n_p + k] - (work[4, n_q + n_p + p] if p >= 0 else 0.0)
+            z[k] = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0)
+            zd[k] = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
         if mode == GAINS:
             for k in range(n_b):
                 total = tau[half, k]
@@ -215,8 +215,8 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             for e in range(lin_idx.shape[1]):
                 k = lin_idx[r, e]
                 if k >= 0:
-                    phi += lin_coef[r, e] * work[4, k]
-                    rate += lin_coef[r, e] * work[4, n_q + k]
+                    phi += lin_coef[r, e] * state[k]
+                    rate += lin_coef[r, e] * state[n_q + k]
             cc = alpha * (txo * rate + om2 * phi)
             for e in range(lin_idx.shape[1]):
                 k = lin_idx[r, e]
@@ -225,14 +225,14 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         for b in range(n_b):
             ki, kj = ends[b, 0], ends[b, 1]
             xi, yi, vxi, vyi = joint_point(b)
-            xj, yj, vxj, vyj = work[4, kj], work[4, kj + 1], work[4, n_q + kj], work[4, n_q + kj + 1]
+            xj, yj, vxj, vyj = state[kj], state[kj + 1], state[n_q + kj], state[n_q + kj + 1]
             dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
             d = shape[b, 0]
-            w = work[4, n_q + n_p + b]
+            w = state[n_q + n_p + b]
             if carried:
                 s, c = trig[b, 0], trig[b, 1]
             else:
-                psi = work[4, n_p + b] + shape[b, 1]
+                psi = state[n_p + b] + shape[b, 1]
                 s, c = math.sin(psi), math.cos(psi)
             # distance: Phi = |dr|^2 - d^2, J = 2 dr on j, -2 dr on i
             cd = 2 * (dvx * dvx + dvy * dvy) + txo * 2 * (dx * dvx + dy * dvy) + om2 * (dx * dx + dy * dy - d * d)
@@ -306,25 +306,25 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         return status
 
     def derivative(row):
-        """y' = [q', q''] of eq. 12 at the stage's state under torque into work[row] (row 0: the
+        """y' = [q', q''] of eq. 12 at the stage's state under torque into ks[row] (row 0: the
         step's start, whose sin and cos are in trig). Returns OK, or the solve's status (then the
         accelerations are left unfinished)."""
         for k in range(n_q):
-            work[row, k] = work[4, n_q + k]
+            ks[row, k] = state[n_q + k]
         assemble(row == 0)
         status = solve()
         if status == OK:
             for r in range(n_p):
-                work[row, n_q + r] = rhs[r]
+                ks[row, n_q + r] = rhs[r]
             for b in range(n_b):
                 ki, kj = ends[b, 0], ends[b, 1]
                 axis = int(aux[b, FORM])
                 rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
-                work[row, n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
+                ks[row, n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
         return status
 
     for m in range(n):
-        work[4, m] = y[m]
+        state[m] = y[m]
     max_viol = violation()
     code = OK
     for i in range(n_steps + 1):
@@ -333,13 +333,13 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             if stage > 0:
                 h = dt if stage == 3 else 0.5 * dt
                 for m in range(n):
-                    work[4, m] = y[m] + h * work[stage - 1, m]
+                    state[m] = y[m] + h * ks[stage - 1, m]
             law(j + (stage + 1) // 2)
             code = derivative(stage)
             if stage == 0:
                 for m in range(n):
                     states[i, m] = y[m]
-                    rates[i, m] = work[0, m]
+                    rates[i, m] = ks[0, m]
                 for m in range(n_b):
                     applied[i, m] = torque[m]
             if code != OK or i == n_steps:
@@ -350,8 +350,8 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             break
         finite = True
         for m in range(n):
-            work[4, m] = y[m] + dt / 6.0 * (work[0, m] + 2.0 * work[1, m] + 2.0 * work[2, m] + work[3, m])
-            finite = finite and math.isfinite(work[4, m])
+            state[m] = y[m] + dt / 6.0 * (ks[0, m] + 2.0 * ks[1, m] + 2.0 * ks[2, m] + ks[3, m])
+            finite = finite and math.isfinite(state[m])
         if not finite:
             return NONFINITE, i, max_viol
         viol = violation()
@@ -359,7 +359,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             return CONSTRAINT, i, max(max_viol, viol)
         max_viol = max(max_viol, viol)
         for m in range(n):
-            y[m] = work[4, m]
+            y[m] = state[m]
     return OK, n_steps, max_viol
 
 
