@@ -397,10 +397,15 @@ class Engine:
         if y.shape[-1:] != (self.n_state,):
             raise ValueError(f"states must have shape ({self.n_state},) or (n, {self.n_state}), got {y.shape}")
         phi, w = y[..., self.n_p:self.n_q], y[..., self.n_q + self.n_p:]
-        has_parent = self.joint_parent != FIXED
-        parent = np.where(has_parent, self.joint_parent, 0)
-        z = phi - np.where(has_parent, phi[..., parent], 0.0) - self.joint_offset
-        zd = w - np.where(has_parent, w[..., parent], 0.0)
+        z, zd = np.empty(phi.shape), np.empty(w.shape)
+        for k, parent in enumerate(self.joint_parent):  # column by column: no gathered copies
+            if parent == FIXED:
+                np.subtract(phi[..., k], 0.0, out=z[..., k])
+                np.subtract(w[..., k], 0.0, out=zd[..., k])
+            else:
+                np.subtract(phi[..., k], phi[..., parent], out=z[..., k])
+                np.subtract(w[..., k], w[..., parent], out=zd[..., k])
+        z -= self.joint_offset
         return z, zd
 
     def accelerations(self, y, tau) -> np.ndarray:
@@ -475,14 +480,16 @@ class Engine:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt}")
         y0 = self._vector(y0, self.n_state, "the initial state")
-        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, tau_half=tau_half, ref_half=ref_half,
-                                                       refd_half=refd_half, refdd_half=refdd_half)
+        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, copy=False, tau_half=tau_half,
+                                                       ref_half=ref_half, refd_half=refd_half, refdd_half=refdd_half)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
         layout = self.simulation_layout(nominal)
-        states, rates = np.full((n_steps + 1, self.n_state), np.nan), np.full((n_steps + 1, self.n_state), np.nan)
-        applied = np.full((n_steps + 1, self.n_joints), np.nan)
+        states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
+        applied = np.empty((n_steps + 1, self.n_joints))
         code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
                                    gains, *layout, states, rates, applied)
+        for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
+            array[done + 1:] = np.nan
         z, zd = self.joints_from_state(states)
         return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
 
@@ -537,13 +544,16 @@ class Engine:
         """The trailing shapes of ``rk4_candidates``' work buffers: states, rates, applied."""
         return (self.n_state,), (self.n_state,), (self.n_joints,)
 
-    def _half_step_arrays(self, rows: int, **arrays) -> list[np.ndarray]:
-        """Each array as a contiguous float array of shape (rows, J); ValueError naming another shape."""
+    def _half_step_arrays(self, rows: int, copy: bool = True, **arrays) -> list[np.ndarray]:
+        """Each array as a contiguous float array of shape (rows, J) (a copy, or with copy False the
+        array itself where it is one already: for a kernel that only reads it now); ValueError
+        naming another shape."""
         shape = (rows, self.n_joints)
         for name, array in arrays.items():
             if np.shape(array) != shape:
                 raise ValueError(f"{name} must have shape {shape} (the half-step grid), got {np.shape(array)}")
-        return [np.array(array, dtype=float) for array in arrays.values()]
+        convert = np.array if copy else np.ascontiguousarray
+        return [convert(array, dtype=float) for array in arrays.values()]
 
     def _law(self, kp, kd, mode, gains, rows: int):
         """kp, kd (J,), the mode and the gain matrices as the kernels take them."""
