@@ -268,9 +268,12 @@ def test_penalty_parameters_out_of_range_are_refused(penalty, message):
         Engine(forearm_model(), **penalty)
 
 
-def test_a_non_finite_start_stops_as_non_finite():
-    result = Engine(arm2_model()).simulate_pd([float("nan"), 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((21, 2)),
-                                              np.zeros((21, 2)), np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0])
+@pytest.mark.parametrize("model", [forearm_model, arm2_model])  # the unrolled 2 x 2 solve and the general one
+def test_a_non_finite_start_stops_as_non_finite(model):
+    engine = Engine(model())
+    J, nan_first = engine.n_joints, np.r_[float("nan"), np.zeros(engine.n_joints - 1)]
+    result = engine.simulate_pd(nan_first, np.zeros(J), 1e-3, 10, np.zeros((21, J)), np.zeros((21, J)),
+                                np.zeros((21, J)), np.ones(J), np.zeros(J))
     assert (result.status, result.steps_done) == (dynamics.NONFINITE, 0)
 
 

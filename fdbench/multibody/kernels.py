@@ -129,6 +129,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
     n = 2 * n_q
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
+    one_point = n_p == 2 and first[1] == 0  # one free point: the solve's unrolled form
     state, ks = np.empty(n), np.empty((4, n))  # the stage's state; the stages' derivatives k1 to k4
     torque, q_phi, z, zd, v = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
     kin, points, trig = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0])), np.zeros((n_b, 2))
@@ -271,6 +272,21 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         given inside the envelope first[r] <= c <= r, by L D L^T (L into K's strict lower triangle, D
         on its diagonal). Returns OK, NONFINITE for a pivot that is NaN, or SINGULAR for one that is
         not positive (rank lost; rhs is then unfinished)."""
+        if one_point:  # the same operations, unrolled for one free point (a 2 x 2 matrix)
+            if math.isnan(K[0, 0]):
+                return NONFINITE
+            if not K[0, 0] > 0.0:
+                return SINGULAR
+            l10 = K[1, 0] / K[0, 0]
+            diag = K[1, 1] - l10 * K[1, 0]
+            if math.isnan(diag):
+                return NONFINITE
+            if not diag > 0.0:
+                return SINGULAR
+            K[1, 0], K[1, 1] = l10, diag
+            rhs[1] = (rhs[1] - l10 * rhs[0]) / diag
+            rhs[0] = rhs[0] / K[0, 0] - l10 * rhs[1]
+            return OK
         status = OK
         for r in range(n_p):
             fr = first[r]
