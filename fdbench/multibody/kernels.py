@@ -11,11 +11,21 @@ with the calls, each a tuple of arrays in a fixed order:
 * the simulation layout (``Engine.simulation_layout``): the plant's joint offsets, its penalty
   layout, then the inverse-dynamics layout of the model computed-torque control believes.
 
-One RK4 driver (``rk4``) serves every feedback law (``mode``): PD (per-joint PD plus feedforward),
-COMPUTED (computed torque through the believed model's inverse dynamics) and GAINS (a full gain
-matrix on the half-step grid); ``derivatives`` is the same right-hand side for k states at once
-(the adaptive integrators), ``rk4_candidates`` the population's open-loop simulations with eq. 18.
-Strict IEEE arithmetic.
+One RK4 driver (``_drive``, called as ``rk4``) serves every feedback law (``mode``): PD (per-joint
+PD plus feedforward), COMPUTED (computed torque through the believed model's inverse dynamics) and
+GAINS (a full gain matrix on the half-step grid). Its stage code is the only one: ``derivatives``
+(the adaptive integrators' right-hand side for k states), ``constraint_violation``,
+``rk4_candidates`` (the population's open-loop simulations with eq. 18) and the sensitivities
+(``fdbench.multibody.sensitivity``) all run it. Strict IEEE arithmetic.
+
+Speed (``python benchmarks/bench_engine.py``): numba increments and decrements the reference count
+of every array that an inlined function takes at each of its calls whenever the callee branches
+or loops (the LLVM pass that removes the pairs does not see through them), which cost more than
+the arithmetic. So the stage code is closures over the driver's own arrays (inlined without
+such counts), the stages run in one loop, per-body indices and geometry are hoisted out of it, a
+step's start reuses the sin and cos of its violation check, and the solve is unrolled for one free
+point. The operations on every number are those of the plain formulas: the results do not move by
+a bit.
 """
 
 from __future__ import annotations

@@ -3,15 +3,16 @@
 Every RK4 stage k_s = f(y_s, tau_s) is differentiated with the chain rule,
 K_s = f_y(y_s) dy_s/dp + f_tau(y_s) dtau_s/dp, and the step y+ = y + dt/6 (k1 + 2 k2 + 2 k3 + k4)
 gives S+ = S + dt/6 (K1 + 2 K2 + 2 K3 + K4), S = dy/dp of shape (n_state, P).
-f_y S and f_tau are exact: ``_tangent`` is the forward-mode (tangent) derivative of
-``kernels._derivative`` written by hand, one parameter direction at a time. It differentiates the
+f_y S and f_tau are exact: ``_tangent`` is the forward-mode (tangent) derivative of the engine's
+stage code (``kernels._drive``) written by hand, one parameter direction at a time. It differentiates the
 assembly of the points' matrix K and right-hand side r, and for the linear solve K x = r uses
 dx = K^-1 (dr - dK x) with the L D L^T factor the stage has already computed (no refactoring per
-direction); the angle rows follow as in ``_derivative``. The form of each angle constraint is that
+direction); the angle rows follow as in the stage code. The form of each angle constraint is that
 in force at the stage (the derivative of the branch taken).
 
 The states are those of the open-loop ``kernels.rk4`` to the last bit (the same stage code,
-``kernels._rate`` in PD mode with zero gains, is run), so the value and the gradient belong to one
+``kernels._drive`` in PD mode with zero gains, is run for each stage, and it leaves the stage's
+factor, solution and multipliers in its work arrays), so the value and the gradient belong to one
 simulation. The kernels take the engine's layout arrays only, so numba compiles and caches them
 once for every model.
 """
@@ -42,7 +43,7 @@ def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, pa
     """The coefficients every direction's tangent at the stage state y needs: per body into values
     (n_b, N_STAGE), and 1 / D of the factor K = L D L^T into inv_diag (n_p,). x: the stage's
     solution of K x = r (the point accelerations, m/s^2), k its state derivative, aux its
-    multipliers, pivots and forms (``kernels._derivative``).
+    multipliers, pivots and forms (``kernels._drive``'s work arrays).
 
     The distance rows r -= 2 alpha e cd (cd = 2 |e'|^2 + 2 xi omega 2 e.e' + omega^2 (|e|^2 - d^2))
     and K's block 4 alpha e e^T, whose change acts on x through -dK x = -4 alpha (de (e.rel) +
@@ -85,7 +86,7 @@ def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, pa
 @njit(error_model="numpy", inline="always")
 def _solve_factored(K, first, inv_diag, rhs):
     """Solve K X = rhs in place for the columns of rhs (n_p, P) with the L D L^T factor of
-    ``kernels._solve_envelope`` in K and 1 / D in inv_diag."""
+    the stage's solve (``kernels._drive``) in K and 1 / D in inv_diag."""
     n, P = rhs.shape
     for r in range(n):
         for k in range(first[r], r):
@@ -105,7 +106,7 @@ def _solve_factored(K, first, inv_diag, rhs):
 @njit(error_model="numpy", inline="always")
 def _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
               dpivot, dca, out):
-    """out = f_y U + f_tau dtau for P directions at once: the derivative of ``kernels._derivative``
+    """out = f_y U + f_tau dtau for P directions at once: the derivative of the stage code
     at a stage in the directions U (n_state, P) of the state and dtau (n_b, P) of the generalised
     forces of the body angles (N m). K: the stage's factor; values, inv_diag: its
     ``_stage_values``. dr (n_p, P), dlam, dpivot, dca (n_b, P): scratch."""
@@ -179,7 +180,7 @@ def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign,
     """The tangents K_s of the stage at the state y (derivative k) for every parameter, from their
     inputs U (n_state, P) (the tangents of the stage's state): acc += weight K_s, then
     U = S + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
-    multipliers (``kernels._rate``); G[half, q] is d tau / d p_q (N m per parameter unit), which
+    multipliers (``_stage_rate``); G[half, q] is d tau / d p_q (N m per parameter unit), which
     moves the generalised force of body b's angle by torque_sign[b, q] G[half, q]; layout: the
     penalty layout (``kernels.rk4``'s order); scratch: values, inv_diag, dtau, dr, dlam, dpivot,
     dca, dk of ``_stage_values`` and ``_tangents``."""
