@@ -16,7 +16,8 @@ PD plus feedforward), COMPUTED (computed torque through the believed model's inv
 GAINS (a full gain matrix on the half-step grid). Its stage code is the only one: ``derivatives``
 (the adaptive integrators' right-hand side for k states), ``constraint_violation``,
 ``rk4_candidates`` (the population's open-loop simulations with eq. 18) and the sensitivities
-(``fdbench.multibody.sensitivity``) all run it. Strict IEEE arithmetic.
+(``fdbench.multibody.sensitivity``: the driver runs the tangents after each stage) all run it.
+Strict IEEE arithmetic.
 
 Speed (``python benchmarks/bench_engine.py``): numba increments and decrements the reference count
 of every array that an inlined function takes at each of its calls whenever the callee branches
@@ -119,16 +120,195 @@ def inverse_torques(z, zd, zdd, joint_parent, joint_offset, joint_at_parent, joi
                      pt_index, mass, q_ext, kin, points, out)
 
 
+# ---------------------------------------------------------------------- sensitivities of a stage
+# (the tangents of ``fdbench.multibody.sensitivity``, run by the driver after each stage)
+# columns of a stage's per-body coefficients (``_stage_values``), with e = r_j - r_i the body's
+# end minus its joint point (m) and de, de' a direction's change of e and e':
+#   the distance rows' change g = de GAIN + e (TX dex + TY dey + TVX dex' + TVY dey'), -g on j, +g on i;
+#   the angle row's pivot change PSI_PIVOT dpsi and velocity term change
+#   PSI_TERM dpsi + RATE_TERM dw + 2 xi omega de'_axis + omega^2 de_axis;
+# the multiplier, 1 / pivot, the angle acceleration (rad/s^2) and the form (the axis) at the stage
+(EX, EY, GAIN, TX, TY, TVX, TVY, PSI_PIVOT, PSI_TERM, RATE_TERM, STAGE_LAMBDA, INV_PIVOT, STAGE_ACC, AXIS,
+ N_STAGE) = range(15)
+
+
+@njit(error_model="numpy", inline="always")
+def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag):
+    """The coefficients every direction's tangent at the stage state y needs: per body into values
+    (n_b, N_STAGE), and 1 / D of the factor K = L D L^T into inv_diag (n_p,). x: the stage's
+    solution of K x = r (the point accelerations, m/s^2), k its state derivative, aux its
+    multipliers, pivots and forms (``kernels._drive``'s work arrays).
+
+    The distance rows r -= 2 alpha e cd (cd = 2 |e'|^2 + 2 xi omega 2 e.e' + omega^2 (|e|^2 - d^2))
+    and K's block 4 alpha e e^T, whose change acts on x through -dK x = -4 alpha (de (e.rel) +
+    e (de.rel)), rel = x_j - x_i, give g of the columns' comment."""
+    n_p, n_b = base.shape[0], body_pts.shape[0]
+    n_q = n_p + n_b
+    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
+    for r in range(n_p):
+        inv_diag[r] = 1.0 / K[r, r]
+    for b in range(n_b):
+        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        if ki >= 0:
+            xi, yi, vxi, vyi = y[ki], y[ki + 1], y[n_q + ki], y[n_q + ki + 1]
+        else:
+            xi, yi, vxi, vyi = pt_fixed[body_pts[b, 0], 0], pt_fixed[body_pts[b, 0], 1], 0.0, 0.0
+        ex, ey, evx, evy = y[kj] - xi, y[kj + 1] - yi, y[n_q + kj] - vxi, y[n_q + kj + 1] - vyi
+        rx, ry = x[kj] - (x[ki] if ki >= 0 else 0.0), x[kj + 1] - (x[ki + 1] if ki >= 0 else 0.0)
+        d = body_geom[b, LENGTH]
+        cd = 2 * (evx * evx + evy * evy) + txo * 2 * (ex * evx + ey * evy) + om2 * (ex * ex + ey * ey - d * d)
+        values[b, EX], values[b, EY] = ex, ey
+        values[b, GAIN] = 2 * alpha * cd + 4 * alpha * (ex * rx + ey * ry)
+        values[b, TX] = 4 * alpha * (txo * evx + om2 * ex + rx)
+        values[b, TY] = 4 * alpha * (txo * evy + om2 * ey + ry)
+        values[b, TVX] = 4 * alpha * (2 * evx + txo * ex)
+        values[b, TVY] = 4 * alpha * (2 * evy + txo * ey)
+        psi = y[n_p + b] + body_geom[b, BETA]
+        s, c, w = math.sin(psi), math.cos(psi), y[n_q + n_p + b]
+        if aux[b, FORM] == 1:  # (y_j - y_i) - d sin(psi): pivot -d c, velocity term d s w^2 + txo (ey' - d c w) + ...
+            values[b, PSI_PIVOT] = d * s
+            values[b, PSI_TERM] = d * c * w * w + txo * d * s * w - om2 * d * c
+            values[b, RATE_TERM] = 2 * d * s * w - txo * d * c
+        else:  # (x_j - x_i) - d cos(psi): pivot d s, velocity term d c w^2 + txo (ex' + d s w) + ...
+            values[b, PSI_PIVOT] = d * c
+            values[b, PSI_TERM] = -d * s * w * w + txo * d * c * w + om2 * d * s
+            values[b, RATE_TERM] = 2 * d * c * w + txo * d * s
+        values[b, STAGE_LAMBDA], values[b, INV_PIVOT] = aux[b, LAMBDA], 1.0 / aux[b, PIVOT]
+        values[b, STAGE_ACC], values[b, AXIS] = k[n_q + n_p + b], aux[b, FORM]
+
+
+@njit(error_model="numpy", inline="always")
+def _solve_factored(K, first, inv_diag, rhs):
+    """Solve K X = rhs in place for the columns of rhs (n_p, P) with the L D L^T factor of
+    the stage's solve (``kernels._drive``) in K and 1 / D in inv_diag."""
+    n, P = rhs.shape
+    for r in range(n):
+        for k in range(first[r], r):
+            lrk = K[r, k]
+            for q in range(P):
+                rhs[r, q] -= lrk * rhs[k, q]
+    for r in range(n):
+        for q in range(P):
+            rhs[r, q] *= inv_diag[r]
+    for r in range(n - 1, -1, -1):
+        for k in range(first[r], r):
+            lrk = K[r, k]
+            for q in range(P):
+                rhs[k, q] -= lrk * rhs[r, q]
+
+
+@njit(error_model="numpy", inline="always")
+def _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
+              dpivot, dca, out):
+    """out = f_y U + f_tau dtau for P directions at once: the derivative of the stage code
+    at a stage in the directions U (n_state, P) of the state and dtau (n_b, P) of the generalised
+    forces of the body angles (N m). K: the stage's factor; values, inv_diag: its
+    ``_stage_values``. dr (n_p, P), dlam, dpivot, dca (n_b, P): scratch."""
+    n_p, n_b = base.shape[0], body_pts.shape[0]
+    n_q = n_p + n_b
+    P = U.shape[1]
+    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
+    for k in range(n_q):
+        for q in range(P):
+            out[k, q] = U[n_q + k, q]
+    for r in range(n_p):
+        for q in range(P):
+            dr[r, q] = 0.0
+    for r in range(lin_idx.shape[0]):  # linear constraints: their right-hand side is linear in y
+        for e in range(lin_idx.shape[1]):
+            k = lin_idx[r, e]
+            if k < 0:
+                continue
+            for f in range(lin_idx.shape[1]):
+                m = lin_idx[r, f]
+                if m < 0:
+                    continue
+                c_om2, c_txo = alpha * om2 * lin_coef[r, e] * lin_coef[r, f], alpha * txo * lin_coef[r, e] * lin_coef[r, f]
+                for q in range(P):
+                    dr[k, q] -= c_om2 * U[m, q] + c_txo * U[n_q + m, q]
+    for b in range(n_b):
+        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        ex, ey, gain = values[b, EX], values[b, EY], values[b, GAIN]
+        tx, ty, tvx, tvy = values[b, TX], values[b, TY], values[b, TVX], values[b, TVY]
+        psi_pivot, psi_term, rate_term = values[b, PSI_PIVOT], values[b, PSI_TERM], values[b, RATE_TERM]
+        lam, inv_pivot = values[b, STAGE_LAMBDA], values[b, INV_PIVOT]
+        on_y = values[b, AXIS] == 1.0
+        for q in range(P):
+            dex, dey, devx, devy = U[kj, q], U[kj + 1, q], U[n_q + kj, q], U[n_q + kj + 1, q]
+            if ki >= 0:
+                dex, dey = dex - U[ki, q], dey - U[ki + 1, q]
+                devx, devy = devx - U[n_q + ki, q], devy - U[n_q + ki + 1, q]
+            t = tx * dex + ty * dey + tvx * devx + tvy * devy
+            gx, gy = dex * gain + ex * t, dey * gain + ey * t
+            dpsi = U[n_p + b, q]
+            dp = psi_pivot * dpsi
+            dl = (dtau[b, q] - lam * dp) * inv_pivot
+            dc = psi_term * dpsi + rate_term * U[n_q + n_p + b, q]
+            if on_y:
+                dc += txo * devy + om2 * dey
+                gy += dl
+            else:
+                dc += txo * devx + om2 * dex
+                gx += dl
+            dr[kj, q] -= gx
+            dr[kj + 1, q] -= gy
+            if ki >= 0:
+                dr[ki, q] += gx
+                dr[ki + 1, q] += gy
+            dlam[b, q], dpivot[b, q], dca[b, q] = dl, dp, dc
+    _solve_factored(K, first, inv_diag, dr)
+    for r in range(n_p):
+        for q in range(P):
+            out[n_q + r, q] = dr[r, q]
+    for b in range(n_b):
+        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
+        axis = 1 if values[b, AXIS] == 1.0 else 0
+        acc, inv_pivot = values[b, STAGE_ACC], values[b, INV_PIVOT]
+        for q in range(P):
+            drel = dr[kj + axis, q] - (dr[ki + axis, q] if ki >= 0 else 0.0)
+            out[n_q + n_p + b, q] = (dlam[b, q] / alpha - dca[b, q] - drel - acc * dpivot[b, q]) * inv_pivot
+
+
+@njit(error_model="numpy", inline="always")
+def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign, work, scratch, layout):
+    """The tangents K_s of the stage at the state y (derivative k) for every parameter, from their
+    inputs U (n_state, P) (the tangents of the stage's state): acc += weight K_s, then
+    U = S + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
+    multipliers (``_drive``'s K, rhs, aux); G[half, q] is d tau / d p_q (N m per parameter unit), which
+    moves the generalised force of body b's angle by torque_sign[b, q] G[half, q]; layout: the
+    penalty layout (``rk4``'s order); scratch: values, inv_diag, dtau, dr, dlam, dpivot,
+    dca, dk of ``_stage_values`` and ``_tangents``."""
+    K, x, aux = work[0], work[1], work[2]
+    values, inv_diag, dtau, dr, dlam, dpivot, dca, dk = scratch
+    (pt_index, pt_fixed, body_pts, body_geom, _, lin_idx, lin_coef, _, first, base, _, params) = layout
+    _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag)
+    for b in range(torque_sign.shape[0]):
+        for q in range(torque_sign.shape[1]):
+            dtau[b, q] = torque_sign[b, q] * G[half, q]
+    _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
+              dpivot, dca, dk)
+    for m in range(S.shape[0]):
+        for q in range(S.shape[1]):
+            acc[m, q] += weight * dk[m, q]
+            U[m, q] = S[m, q] + next_step * dk[m, q]
+
+
 # ---------------------------------------------------------------------- the RK4 driver (eq. 12 under a feedback law)
 @njit(error_model="numpy")
 def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts,
            body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset,
-           n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied, K, rhs, aux):
+           n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied, K, rhs, aux,
+           G, torque_sign, every, dz):
     """``rk4`` whose grid starts at row ``start`` of tau, ref, refd, refdd and gains (step i uses rows
     start + 2 i, start + 2 i + 1, start + 2 i + 2); with n_steps 0 it evaluates the state derivative
     of y0 alone (into rates[0]). K (n_p, n_p), rhs (n_p,), aux (J, N_AUX): work arrays that hold,
     after the call, the last stage's L D L^T factor of the points' matrix, its solution (the point
     accelerations, m/s^2) and per body the multiplier, pivot, velocity term and form.
+
+    With dz of more than zero rows, also the forward sensitivities of the joint angles
+    (``fdbench.multibody.sensitivity.rk4_sensitivity``): G (2 n_steps + 1, P) d tau / d p on the
+    grid, torque_sign (J, P) the signs with which parameter q moves the body angles' generalised
+    forces, dz (n_steps // every + 1, J, P) the derivatives at every ``every``-th step reached.
 
     Speed: the stage code is written once, as closures over this function's arrays (numba inlines
     them without the reference counting that array arguments of inlined functions cost at every
@@ -140,13 +320,29 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
     one_point = n_p == 2 and first[1] == 0  # one free point: the solve's unrolled form
-    state, ks = np.empty(n), np.empty((4, n))  # the stage's state; the stages' derivatives k1 to k4
-    torque, q_phi, z, zd, v = np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b), np.zeros(n_b)
-    kin, points, trig = np.zeros((n_b, N_KIN)), np.zeros((3, n_mass.shape[0])), np.zeros((n_b, 2))
-    y = y0.copy()
+    # the work arrays: views of one buffer (one allocation per call; the sensitivities call this per stage)
+    n_nominal = n_mass.shape[0]
+    vectors = 6 * n + 5 * n_b  # y, the stage's state, k1 to k4; torque, q_phi, z, zd, v
+    tables = n_b * (N_KIN + 6)  # kin; trig (sin, cos); shape (d, beta, fixed point i)
+    buffer, ends = np.zeros(vectors + tables + 3 * n_nominal), np.empty((n_b, 2), dtype=np.int64)
+    y, state, ks = buffer[:n], buffer[n:2 * n], buffer[2 * n:6 * n].reshape((4, n))
+    per_joint = buffer[6 * n:vectors].reshape((5, n_b))
+    torque, q_phi, z, zd, v = per_joint[0], per_joint[1], per_joint[2], per_joint[3], per_joint[4]
+    kin = buffer[vectors:vectors + n_b * N_KIN].reshape((n_b, N_KIN))
+    trig = buffer[vectors + n_b * N_KIN:vectors + n_b * (N_KIN + 2)].reshape((n_b, 2))
+    shape = buffer[vectors + n_b * (N_KIN + 2):vectors + tables].reshape((n_b, 4))
+    points = buffer[vectors + tables:].reshape((3, n_nominal))
+    for m in range(n):
+        y[m] = y0[m]
+    sensitive, P = dz.shape[0] > 0, G.shape[1]  # the sensitivities: S = dy/dp, stage inputs U, their sum acc
+    S, U, acc = np.zeros((n, P)), np.zeros((n, P)), np.zeros((n, P))
+    tangent_work = (np.empty((n_b, N_STAGE)), np.empty(n_p), np.empty((n_b, P)), np.empty((n_p, P)),
+                    np.empty((n_b, P)), np.empty((n_b, P)), np.empty((n_b, P)), np.empty((n, P)))
+    factor = (K, rhs, aux)
+    layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
+              params)
     # per body, hoisted: the coordinate indices of its points i and j (i: FIXED on ground), and its
     # d (m), beta (rad) and point i's position (m) where it is fixed
-    ends, shape = np.empty((n_b, 2), dtype=np.int64), np.empty((n_b, 4))
     for b in range(n_b):
         ends[b, 0], ends[b, 1] = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
         shape[b, 0], shape[b, 1] = body_geom[b, LENGTH], body_geom[b, BETA]
@@ -368,8 +564,22 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                     rates[i, m] = ks[0, m]
                 for m in range(n_b):
                     applied[i, m] = torque[m]
+                if sensitive and i % every == 0:
+                    for b in range(n_b):
+                        parent = joint_parent[b]
+                        for q in range(P):
+                            dz[i // every, b, q] = S[n_p + b, q] - (S[n_p + parent, q] if parent >= 0 else 0.0)
             if code != OK or i == n_steps:
                 break
+            if sensitive:  # K_s of this stage: acc += weight K_s, U = S + (the next stage's step) K_s
+                if stage == 0:
+                    for m in range(n):
+                        for q in range(P):
+                            U[m, q], acc[m, q] = S[m, q], 0.0
+                weight = 1.0 if stage == 0 or stage == 3 else 2.0
+                next_step = 0.5 * dt if stage < 2 else (dt if stage == 2 else 0.0)
+                _stage_sensitivity(state, ks[stage], S, U, acc, weight, next_step, j + (stage + 1) // 2, G,
+                                   torque_sign, factor, tangent_work, layout)
         if code != OK:
             return code, i, max_viol
         if i == n_steps:
@@ -384,9 +594,19 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
         if viol > params[VIOLATION]:
             return CONSTRAINT, i, max(max_viol, viol)
         max_viol = max(max_viol, viol)
+        if sensitive:
+            for m in range(n):
+                for q in range(P):
+                    S[m, q] += dt / 6.0 * acc[m, q]
         for m in range(n):
             y[m] = state[m]
     return OK, n_steps, max_viol
+
+
+@njit(inline="always")
+def _no_sensitivities(n_b):
+    """``_drive``'s sensitivity arguments for a run without them: G, torque_sign, every, dz."""
+    return np.zeros((1, 0)), np.zeros((n_b, 0)), 1, np.zeros((0, n_b, 0))
 
 
 @njit(error_model="numpy")
@@ -411,7 +631,7 @@ def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_
     return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts,
                   body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent,
                   n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
-                  applied, np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)))
+                  applied, np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)), *_no_sensitivities(n_b))
 
 
 @njit(error_model="numpy")
@@ -425,11 +645,12 @@ def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_i
     n_p, n_b, n = base.shape[0], joint_parent.shape[0], states.shape[1]
     K, rhs, aux = np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX))
     state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, n_b))
+    no_sensitivities = _no_sensitivities(n_b)
     for i in range(states.shape[0]):
         code, _, _ = _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index,
                             pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
                             q_ext, params, n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index,
-                            n_mass, n_q_ext, state, rate, torque, K, rhs, aux)
+                            n_mass, n_q_ext, state, rate, torque, K, rhs, aux, *no_sensitivities)
         out[i] = rate[0]
         applied[i] = torque[0]
         if code != OK:
@@ -448,7 +669,7 @@ def constraint_violation(y, offset, pt_index, pt_fixed, body_pts, body_geom, joi
                          body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
                          n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext,
                          np.empty((1, n)), np.empty((1, n)), np.empty((1, n_b)), np.zeros((n_p, n_p)), np.zeros(n_p),
-                         np.zeros((n_b, N_AUX)))
+                         np.zeros((n_b, N_AUX)), *_no_sensitivities(n_b))
     return worst
 
 
