@@ -9,7 +9,8 @@ the cost per step (us), its ratio to the forearm's, and the growth law fitted to
 
 Then the cost per step of leg3 (three bodies) under each feedback law of the one RK4 driver
 (fdbench.multibody.kernels.rk4): PD, computed torque (the inverse dynamics at every stage) and a
-gain matrix.
+gain matrix; and the library's models (forearm, arm2, leg3) under PD by the kernel alone, with
+their ratio to the forearm's closed-form kernel (the goal for the engine's forearm: at most 1.3x).
 
 Run: python benchmarks/bench_engine.py
 """
@@ -104,6 +105,26 @@ def leg_kernel(mode: int):
                                   states, rates, applied)
 
 
+def library_kernel(name: str):
+    """The compiled RK4 of a library model under PD (kp 80, kd 0.3 per joint) plus the
+    inverse-dynamics feedforward, on a slow sine of every joint about 0.2 rad."""
+    from fdbench.multibody.description import find_model
+
+    engine, n = mb.Engine(find_model(name)), 1000
+    J = engine.n_joints
+    half = np.linspace(0.0, 1.0, 2 * n + 1)[:, None]
+    z = 0.2 + 0.3 * np.sin(2 * math.pi * half) + np.zeros(J)
+    zd = np.broadcast_to(0.6 * math.pi * np.cos(2 * math.pi * half), z.shape).copy()
+    zdd = np.zeros_like(z)
+    tau = engine.inverse_dynamics(z, zd, zdd)
+    kp, kd, no_gains = np.full(J, 80.0), np.full(J, 0.3), np.zeros((1, J, 2 * J))
+    y0 = engine.state_from_joints(z[0], zd[0])
+    states, rates, applied = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)), np.empty((n + 1, J))
+    ref = np.ascontiguousarray(z + engine.joint_offset)
+    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, kernels.PD, no_gains,
+                                  *engine.simulation_layout(), states, rates, applied)
+
+
 def main():
     print(f"fdbench {fdbench.__version__}, {platform.python_implementation()} {platform.python_version()}, "
           f"{platform.machine()}")
@@ -129,6 +150,12 @@ def main():
         assert (code, done) == (dynamics.OK, n), f"leg3 {name}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         print(f"leg3, {name:15s}: {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
+    for name in ("forearm", "arm2", "leg3"):
+        n, fn = library_kernel(name)
+        code, done, _ = fn()
+        assert (code, done) == (dynamics.OK, n), f"{name}: status {code} at step {done}"
+        per_step = best_per_call(fn) / n
+        print(f"library {name:8s} (PD): {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
 
 
 if __name__ == "__main__":

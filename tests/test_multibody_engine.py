@@ -268,7 +268,75 @@ def test_penalty_parameters_out_of_range_are_refused(penalty, message):
         Engine(forearm_model(), **penalty)
 
 
-def test_a_non_finite_start_stops_as_non_finite():
-    result = Engine(arm2_model()).simulate_pd([float("nan"), 0.0], [0.0, 0.0], 1e-3, 10, np.zeros((21, 2)),
-                                              np.zeros((21, 2)), np.zeros((21, 2)), [1.0, 1.0], [0.0, 0.0])
+@pytest.mark.parametrize("model", [forearm_model, arm2_model])  # the unrolled 2 x 2 solve and the general one
+def test_a_non_finite_start_stops_as_non_finite(model):
+    engine = Engine(model())
+    J, nan_first = engine.n_joints, np.r_[float("nan"), np.zeros(engine.n_joints - 1)]
+    result = engine.simulate_pd(nan_first, np.zeros(J), 1e-3, 10, np.zeros((21, J)), np.zeros((21, J)),
+                                np.zeros((21, J)), np.ones(J), np.zeros(J))
     assert (result.status, result.steps_done) == (dynamics.NONFINITE, 0)
+
+
+# ---------------------------------------------------------------------- one stage code for every kernel
+def _tree_run(engine: Engine, n: int = 200, alpha_torque: float = 1.0):
+    """A PD run of the tree model (linear constraints, both angle forms) and its inputs."""
+    half = np.linspace(0.0, 0.2, 2 * n + 1)[:, None]
+    z = np.array([0.3, -0.5, 0.8, 1.2]) + 0.4 * np.sin(8 * half)
+    zd = np.broadcast_to(3.2 * np.cos(8 * half), z.shape).copy()
+    tau = alpha_torque * engine.inverse_dynamics(z, zd, np.zeros_like(z))
+    kp, kd = np.full(4, 40.0), np.full(4, 2.0)
+    return engine.simulate_pd(z[0], zd[0], 0.2 / n, n, tau, z, zd, kp, kd), tau, z, zd, kp, kd
+
+
+def test_rates_at_a_run_s_states_are_the_run_s_rates_to_the_bit():
+    engine = Engine(tree_model())
+    result, tau, z, zd, kp, kd = _tree_run(engine)
+    assert (result.status, result.steps_done) == (dynamics.OK, 200)
+    rates, applied = engine.rates(result.states, tau[::2], z[::2], zd[::2], np.zeros_like(z[::2]), kp, kd)
+    assert np.array_equal(rates, result.rates) and np.array_equal(applied, result.applied)
+
+
+def test_constraint_violation_is_the_largest_residual_of_the_constraints():
+    engine = Engine(tree_model())
+    y = engine.state_from_joints([0.3, -0.5, 0.8, 1.2], [0.1, 0.2, -0.3, 0.4])
+    y += np.random.default_rng(3).normal(0.0, 1e-4, y.shape)
+    residuals = []
+    for b in range(engine.n_joints):
+        xy = [engine.pt_fixed[pt] if engine.pt_index[pt] < 0 else y[engine.pt_index[pt]:engine.pt_index[pt] + 2]
+              for pt in engine.body_pts[b]]
+        (dx, dy), (d, beta) = xy[1] - xy[0], engine.body_geom[b]
+        psi = y[engine.n_p + b] + beta
+        angle = dy - d * math.sin(psi) if abs(math.cos(psi)) >= mb.SIN_FORM_MIN_COS else dx - d * math.cos(psi)
+        residuals += [dx * dx + dy * dy - d * d, angle]
+    for idx, coef, const in zip(engine.lin_idx, engine.lin_coef, engine.lin_const):
+        residuals.append(const + sum(c * y[k] for k, c in zip(idx, coef) if k >= 0))
+    expected = max(abs(r) for r in residuals)
+    assert expected > 1e-5
+    assert engine.constraint_violation(y) == pytest.approx(expected, rel=1e-12)
+
+
+def test_state_from_joints_gives_a_fresh_state_at_every_call():
+    engine = Engine(arm2_model())
+    first = engine.state_from_joints([0.2, 0.4], [0.0, 1.0])
+    expected = first.copy()
+    first[:] = 99.0  # a caller's change must not reach the next call
+    assert np.array_equal(engine.state_from_joints([0.2, 0.4], [0.0, 1.0]), expected)
+    assert not np.array_equal(engine.state_from_joints([0.2, 0.5], [0.0, 1.0]), expected)
+    assert np.array_equal(engine.state_from_joints([0.2, 0.4], [0.0, 1.0]), expected)
+
+
+def test_sensitivities_stop_on_a_constraint_violation_where_rk4_does():
+    from fdbench.multibody.sensitivity import rk4_sensitivity
+
+    engine, n = Engine(forearm_model(), alpha=1.0), 1000  # a penalty too weak to hold the constraint
+    tau, rows = np.full((2 * n + 1, 1), 200.0), np.zeros((2 * n + 1, 1))
+    y0 = engine.state_from_joints([0.0], [0.0])
+    expected = engine.simulate(y0, 1e-3, n, tau, rows, rows, rows, 0.0, 0.0)
+    assert expected.status == dynamics.CONSTRAINT
+    states, rates = np.full((n + 1, 6), np.nan), np.full((n + 1, 6), np.nan)
+    applied, dz = np.full((n + 1, 1), np.nan), np.full((n + 1, 1, 1), np.nan)
+    code, done = rk4_sensitivity(y0, 1e-3, n, tau, rows, rows, np.ones((2 * n + 1, 1)), np.zeros(1, dtype=np.int64),
+                                 1, *engine.simulation_layout(), states, rates, applied, dz)
+    assert (code, done) == (expected.status, expected.steps_done)
+    assert np.array_equal(states, expected.states, equal_nan=True)
+    assert np.isfinite(dz[done, 0, 0]) and np.isnan(dz[done + 1, 0, 0])

@@ -61,8 +61,8 @@ import numpy as np
 from ..dynamics import OK, VIOLATION_TOL
 
 from .description import Model, resolved_end
-from .kernels import (ALPHA, BETA, COMPUTED, FIXED, GAINS, LENGTH, N_AUX, N_PARAMS, OMEGA2, PD, SWITCH_COS,
-                      TWO_XI_OMEGA, VIOLATION, _derivative, _violation)
+from .kernels import (ALPHA, BETA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA,
+                      VIOLATION)
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
@@ -131,6 +131,7 @@ class Engine:
         self._build_matrices()
         self.n_q = self.n_p + self.n_joints
         self.n_state = 2 * self.n_q
+        self._last_start = None  # (z and zd as bytes, the state) of the last ``state_from_joints``
 
     # ------------------------------------------------------------------ layout
     def _build_points(self):
@@ -384,8 +385,11 @@ class Engine:
     def state_from_joints(self, z, zd) -> np.ndarray:
         """y = [q, q'] on the constraint manifold for joint angles z (rad) and rates zd (rad/s), shape (J,)."""
         z, zd = self._vector(z, self.n_joints, "z"), self._vector(zd, self.n_joints, "zd")
-        p, pd, _, (phi, w, *_) = self._free_points(z[None], zd[None], np.zeros((1, self.n_joints)))
-        return np.concatenate([p[0], phi[0], pd[0], w[0]])
+        key = z.tobytes() + zd.tobytes()
+        if self._last_start is None or self._last_start[0] != key:  # a run's start, kept for its repeats
+            p, pd, _, (phi, w, *_) = self._free_points(z[None], zd[None], np.zeros((1, self.n_joints)))
+            self._last_start = key, np.concatenate([p[0], phi[0], pd[0], w[0]])
+        return self._last_start[1].copy()
 
     def joints_from_state(self, y) -> tuple[np.ndarray, np.ndarray]:
         """(z, zd) (rad, rad/s), shapes (J,), from the state y (n_state,) (or (n, n_state) -> (n, J))."""
@@ -393,26 +397,29 @@ class Engine:
         if y.shape[-1:] != (self.n_state,):
             raise ValueError(f"states must have shape ({self.n_state},) or (n, {self.n_state}), got {y.shape}")
         phi, w = y[..., self.n_p:self.n_q], y[..., self.n_q + self.n_p:]
-        has_parent = self.joint_parent != FIXED
-        parent = np.where(has_parent, self.joint_parent, 0)
-        z = phi - np.where(has_parent, phi[..., parent], 0.0) - self.joint_offset
-        zd = w - np.where(has_parent, w[..., parent], 0.0)
+        z, zd = np.empty(phi.shape), np.empty(w.shape)
+        for k, parent in enumerate(self.joint_parent):  # column by column: no gathered copies
+            if parent == FIXED:
+                np.subtract(phi[..., k], 0.0, out=z[..., k])
+                np.subtract(w[..., k], 0.0, out=zd[..., k])
+            else:
+                np.subtract(phi[..., k], phi[..., parent], out=z[..., k])
+                np.subtract(w[..., k], w[..., parent], out=zd[..., k])
+        z -= self.joint_offset
         return z, zd
 
     def accelerations(self, y, tau) -> np.ndarray:
         """y' = [q', q''] of eq. 12 for the state y (n_state,) and joint torques tau (J,) N m; NaN
         where the leading matrix is singular."""
         y, tau = self._vector(y, self.n_state, "the state"), self._vector(tau, self.n_joints, "tau")
-        out = np.empty(self.n_state)
-        work = _workspace(self.n_p, self.n_joints)
-        code = _derivative(y, tau, *self._kernel_layout, *work, out)
-        if code != OK:
-            out[self.n_q:] = np.nan
-        return out
+        zero = np.zeros((1, self.n_joints))
+        return self.rates(y[None], tau[None], zero, zero, zero, 0.0, 0.0)[0][0]
 
     def constraint_violation(self, y) -> float:
         """max |Phi_i| (m^2 and m) of the state y, the angle constraints in the form in force."""
-        return float(_violation(self._vector(y, self.n_state, "the state"), *self._kernel_layout))
+        from .kernels import constraint_violation
+
+        return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
     def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
         """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
@@ -473,14 +480,16 @@ class Engine:
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt}")
         y0 = self._vector(y0, self.n_state, "the initial state")
-        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, tau_half=tau_half, ref_half=ref_half,
-                                                       refd_half=refd_half, refdd_half=refdd_half)
+        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, copy=False, tau_half=tau_half,
+                                                       ref_half=ref_half, refd_half=refd_half, refdd_half=refdd_half)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
         layout = self.simulation_layout(nominal)
-        states, rates = np.full((n_steps + 1, self.n_state), np.nan), np.full((n_steps + 1, self.n_state), np.nan)
-        applied = np.full((n_steps + 1, self.n_joints), np.nan)
+        states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
+        applied = np.empty((n_steps + 1, self.n_joints))
         code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
                                    gains, *layout, states, rates, applied)
+        for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
+            array[done + 1:] = np.nan
         z, zd = self.joints_from_state(states)
         return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
 
@@ -535,13 +544,16 @@ class Engine:
         """The trailing shapes of ``rk4_candidates``' work buffers: states, rates, applied."""
         return (self.n_state,), (self.n_state,), (self.n_joints,)
 
-    def _half_step_arrays(self, rows: int, **arrays) -> list[np.ndarray]:
-        """Each array as a contiguous float array of shape (rows, J); ValueError naming another shape."""
+    def _half_step_arrays(self, rows: int, copy: bool = True, **arrays) -> list[np.ndarray]:
+        """Each array as a contiguous float array of shape (rows, J) (a copy, or with copy False the
+        array itself where it is one already: for a kernel that only reads it now); ValueError
+        naming another shape."""
         shape = (rows, self.n_joints)
         for name, array in arrays.items():
             if np.shape(array) != shape:
                 raise ValueError(f"{name} must have shape {shape} (the half-step grid), got {np.shape(array)}")
-        return [np.array(array, dtype=float) for array in arrays.values()]
+        convert = np.array if copy else np.ascontiguousarray
+        return [convert(array, dtype=float) for array in arrays.values()]
 
     def _law(self, kp, kd, mode, gains, rows: int):
         """kp, kd (J,), the mode and the gain matrices as the kernels take them."""
@@ -558,7 +570,3 @@ class Engine:
             gains = np.zeros((1, *shape[1:]))
         return kp, kd, int(mode), gains
 
-
-def _workspace(n_p, n_joints):
-    """The kernels' scratch arrays: the points' matrix, right-hand side, per-body values, torques."""
-    return np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_joints, N_AUX)), np.zeros(n_joints)
