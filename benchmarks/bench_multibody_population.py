@@ -19,7 +19,6 @@ Run: python benchmarks/bench_multibody_population.py [--model arm2|leg3|FILE]
 from __future__ import annotations
 
 import os
-import time
 
 import numpy as np
 
@@ -31,21 +30,11 @@ from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.multibody.problem import JointTrackingProblem
 from fdbench.population import set_threads
+from timing import best_of
 
 # evaluations per CMA-ES run; baseline calls per round; rounds; runs per cell; the population's size
 BUDGET, CALLS, REPEATS, RUNS, LAMBDA = 200, 50, 7, 5, 40
 CELLS = [("cs", True), ("pf", True), ("ann", False)]
-
-
-def best_of(fn, rounds: int, calls: int = 1) -> float:
-    """The fastest of ``rounds`` rounds of ``calls`` calls of fn, in s per call."""
-    best = np.inf
-    for _ in range(rounds):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best
 
 
 def problem_of(model: str, torque: str, feedforward: bool) -> JointTrackingProblem:

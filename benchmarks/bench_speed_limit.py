@@ -46,10 +46,10 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+from timing import best_of
 
 GOAL = 1.5  # x C, for a CMA-ES evaluation
 BUDGET = 200
@@ -88,13 +88,7 @@ def run_c(binary: Path) -> tuple[str, float]:
 
 def best_per_call(fn, rounds=ROUNDS, calls=CALLS) -> float:
     """Seconds of one call of fn: the minimum over ``rounds`` rounds of ``calls`` calls."""
-    best = np.inf
-    for _ in range(rounds):
-        start = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        best = min(best, (time.perf_counter() - start) / calls)
-    return best
+    return best_of(fn, rounds, calls)
 
 
 def paper_grid():
