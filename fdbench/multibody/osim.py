@@ -93,8 +93,9 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
 
     if importlib.util.find_spec("opensim") is None:
         _fail(source, f"reading an OpenSim model needs the opensim package: {INSTALL_HINT}")
-    package_root = str(Path(__file__).resolve().parents[2])  # the child imports this same fdbench
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p))
+    package_root = str(Path(__file__).resolve().parents[2])  # so that the child finds this fdbench, after
+    # what the user's PYTHONPATH puts first (for an installed fdbench that is site-packages itself)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), package_root) if p))
     request = json.dumps({"content": base64.b64encode(content).decode(), "source": source,
                           "max_tilt_deg": max_tilt_deg})
     done = subprocess.run([sys.executable, "-c", "from fdbench.multibody.osim import _child; _child()"],
