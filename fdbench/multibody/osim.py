@@ -28,12 +28,19 @@ transforms at the default pose; the planar description follows from them:
 * Each body keeps its mass, centre of mass (x, y in its frame) and inertia about its z axis at the
   centre of mass. Coordinate ranges become joint limits; the model gets one named motion,
   ``mid_range``: minimum jerk in 1 s from the default values to the middle of the ranges.
+* A ``PrescribedForce`` of constant functions, its force in ground (``forceIsGlobal``), its point
+  in its frame (not ``pointIsGlobal``) and no torque, on a kept body (or one welded to it), becomes
+  a constant load (its x and y; the point moved into the host body's frame).
 * Left out, said in one note: muscles and every other force, markers, wrap objects, contact
   geometry, controllers and probes (the imported model is driven by joint torques).
 * Refused in one line naming the joint or constraint: a joint with two or more free coordinates
   (3D joints, a planar ``free`` base), a translation that depends on the coordinate (a knee whose
   tibia follows a spline of the angle), a rotation that is not the coordinate itself, an axis
   beyond the tilt tolerance or pointing along -z, constraints (closed loops, couplers).
+
+``to_osim`` writes the other way: a description as an OpenSim model file (XML text, no OpenSim
+needed), one ``Body``, ``PinJoint`` and ``CoordinateActuator`` per body and joint, each load a
+``PrescribedForce``; its import gives the description back.
 """
 
 from __future__ import annotations
@@ -208,11 +215,13 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
                       "normal z)")
     gravity, gravity_tilt = _gravity(model, source, max_tilt_deg)
     bodies = _merged_bodies(model, hosts, [pin["child"] for pin in kept])
+    loads = _constant_loads(osim, model, hosts, {pin["child"] for pin in kept})
     data = {"name": _text(model.getName(), 100) or Path(source).stem,
             "description": _description(model, source, element), "gravity": gravity,
-            "bodies": _with_ends(bodies, kept), "joints": kept, "motions": [_mid_range(kept)]}
+            "bodies": _with_ends(bodies, kept), "joints": kept, "loads": list(loads.values()),
+            "motions": [_mid_range(kept)]}
     description = model_from_dict(data, source, default_name=Path(source).stem)
-    notes = [note for note in (_dropped_note(osim, model), _welded_note(welded),
+    notes = [note for note in (_dropped_note(osim, model, set(loads)), _welded_note(welded),
                                _tilt_note(tilts + gravity_tilt)) if note]
     return description, tuple(notes)
 
@@ -445,6 +454,38 @@ def _with_ends(bodies: list, joints: list) -> list:
     return bodies
 
 
+def _constant_loads(osim, model, hosts: dict, kept: set) -> dict:
+    """{force name: the description's load} of each PrescribedForce that is a constant point force
+    in ground's axes at a fixed point of a kept body (or of a body welded to one)."""
+    loads = {}
+    for force in model.getForceSet():
+        prescribed = osim.PrescribedForce.safeDownCast(force)
+        if prescribed is None or not prescribed.get_appliesForce():
+            continue
+        if not prescribed.getForceIsInGlobalFrame() or prescribed.getPointIsInGlobalFrame():
+            continue
+        vector = _constants(osim, prescribed.getForceFunctions())
+        point = _constants(osim, prescribed.getPointFunctions(), empty=(0.0, 0.0, 0.0))
+        torque = _constants(osim, prescribed.getTorqueFunctions(), empty=(0.0, 0.0, 0.0))
+        frame = prescribed.getFrame()
+        host, R, p = hosts.get(_body_name(frame), (None, None, None))
+        if vector is None or point is None or torque is None or any(torque) or host not in kept:
+            continue
+        R_hF, p_hF = _compose((R, p), _in_base(frame))
+        loads[force.getName()] = {"body": host, "at": _xy(R_hF @ np.array(point) + p_hF), "force": _xy(vector)}
+    return loads
+
+
+def _constants(osim, functions, empty=None):
+    """The three values of a FunctionSet of Constant functions, ``empty`` for an empty set, or None."""
+    if functions.getSize() == 0:
+        return empty
+    values = [osim.Constant.safeDownCast(functions.get(i)) for i in range(functions.getSize())]
+    if len(values) != 3 or any(value is None for value in values):
+        return None
+    return tuple(value.getValue() for value in values)
+
+
 # ---------------------------------------------------------------------------------------- the rest
 
 
@@ -470,10 +511,12 @@ def _description(model, source: str, element) -> str:
     return _text(text + (f"; credits: {credits}" if credits.strip() else ""), 500)
 
 
-def _dropped_note(osim, model) -> str:
-    """One line: what the import left out (empty if nothing)."""
+def _dropped_note(osim, model, kept: set) -> str:
+    """One line: what the import left out (empty if nothing); ``kept``: the forces made loads."""
     muscles, forces = {}, {}
     for force in model.getForceSet():
+        if force.getName() in kept:
+            continue
         kind = muscles if osim.Muscle.safeDownCast(force) is not None else forces
         name = force.getConcreteClassName()
         kind[name] = kind.get(name, 0) + 1
@@ -569,3 +612,89 @@ def toml_text(model, notes, source) -> str:
               "# SI units, angles in radians; world axes x forward, y up; joints named by OpenSim's coordinates."]
     header += [f"# note: {note}" for note in notes]
     return "\n".join(header) + "\n" + to_toml(model)
+
+
+# ---------------------------------------------------------------------------------------- the model out
+
+OSIM_VERSION = "40000"
+DEFAULT_RANGE = (-math.pi, math.pi)  # rad: a coordinate's range in the file when its joint has no limits
+
+
+def to_osim(model) -> str:
+    """The description ``model`` as an OpenSim model file (XML text): per body a ``Body`` (mass kg,
+    centre of mass (x, y, 0) m, inertia kg m^2 about it, Ixx = Iyy = Izz); per joint a ``PinJoint``
+    ``<joint>_joint`` about z whose coordinate is named as the joint (default 0 rad, range its
+    limits or one turn), its parent frame at ``at_parent`` turned by the offset, its child frame at
+    ``at_child``, and a ``CoordinateActuator`` ``<joint>_actuator`` (optimal force 1 N m); per load
+    a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body)."""
+    from .. import __version__
+
+    credits = _text(f"written by fdbench {__version__} export-osim from the model {model.name}"
+                    + (f": {model.description}" if model.description else ""), 500)
+    parts = ['<?xml version="1.0" encoding="UTF-8" ?>', f'<OpenSimDocument Version="{OSIM_VERSION}">',
+             f'<Model name="{_xml(model.name)}">', f"<credits>{_xml(credits)}</credits>",
+             f"<gravity>{_numbers(*model.gravity, 0.0)}</gravity>",
+             '<BodySet name="bodyset"><objects>', *map(_osim_body, model.bodies), "</objects></BodySet>",
+             '<JointSet name="jointset"><objects>', *map(_osim_joint, model.joints), "</objects></JointSet>",
+             '<ForceSet name="forceset"><objects>', *(_osim_load(k, load) for k, load in enumerate(model.loads)),
+             *(_osim_actuator(joint.name) for joint in model.joints), "</objects></ForceSet>",
+             "</Model>", "</OpenSimDocument>"]
+    return "\n".join(parts) + "\n"
+
+
+def _xml(text: str) -> str:
+    from xml.sax.saxutils import escape
+
+    return escape(str(text), {'"': "&quot;"})
+
+
+def _numbers(*values) -> str:
+    """Floats as OpenSim reads them back exactly (shortest round-trip digits)."""
+    return " ".join(repr(float(value)) for value in values)
+
+
+def _frame_path(body: str) -> str:
+    from .description import GROUND
+
+    return "/ground" if body == GROUND else f"/bodyset/{body}"
+
+
+def _osim_body(body) -> str:
+    inertia = float(body.inertia)
+    return (f'<Body name="{body.name}"><mass>{_numbers(body.mass)}</mass>'
+            f"<mass_center>{_numbers(*body.com, 0.0)}</mass_center>"
+            f"<inertia>{_numbers(inertia, inertia, inertia, 0.0, 0.0, 0.0)}</inertia></Body>")
+
+
+def _osim_frame(name: str, body: str, at, angle: float) -> str:
+    return (f'<PhysicalOffsetFrame name="{name}"><socket_parent>{_frame_path(body)}</socket_parent>'
+            f"<translation>{_numbers(*at, 0.0)}</translation>"
+            f"<orientation>{_numbers(0.0, 0.0, angle)}</orientation></PhysicalOffsetFrame>")
+
+
+def _osim_joint(joint) -> str:
+    name = f"{joint.name}_joint"
+    low, high = joint.limits if joint.limits is not None else DEFAULT_RANGE
+    return (f'<PinJoint name="{name}"><socket_parent_frame>{name}_parent</socket_parent_frame>'
+            f"<socket_child_frame>{name}_child</socket_child_frame>"
+            f'<coordinates><Coordinate name="{joint.name}"><default_value>0</default_value>'
+            f"<range>{_numbers(low, high)}</range></Coordinate></coordinates>"
+            f"<frames>{_osim_frame(name + '_parent', joint.parent, joint.at_parent, joint.offset)}"
+            f"{_osim_frame(name + '_child', joint.child, joint.at_child, 0.0)}</frames></PinJoint>")
+
+
+def _constant_set(name: str, values) -> str:
+    constants = "".join(f"<Constant><value>{_numbers(value)}</value></Constant>" for value in values)
+    return f'<FunctionSet name="{name}"><objects>{constants}</objects></FunctionSet>'
+
+
+def _osim_load(k: int, load) -> str:
+    return (f'<PrescribedForce name="load{k}"><socket_frame>{_frame_path(load.body)}</socket_frame>'
+            "<pointIsGlobal>false</pointIsGlobal><forceIsGlobal>true</forceIsGlobal>"
+            f"{_constant_set('forceFunctions', (*load.force, 0.0))}"
+            f"{_constant_set('pointFunctions', (*load.at, 0.0))}</PrescribedForce>")
+
+
+def _osim_actuator(coordinate: str) -> str:
+    return (f'<CoordinateActuator name="{coordinate}_actuator"><coordinate>{coordinate}</coordinate>'
+            "<optimal_force>1</optimal_force></CoordinateActuator>")
