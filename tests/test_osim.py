@@ -21,11 +21,11 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.multibody.description import find_model, load_model
+from fdbench.multibody.description import MotionSpec, find_model, library, load_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk
 
-from fdbench.multibody.osim import import_osim
+from fdbench.multibody.osim import import_osim, to_osim
 
 # OpenSim runs in child processes only: its bundled CasADi cannot share a process with the casadi
 # package the rest of the suite imports (see fdbench.multibody.osim.import_osim_content).
@@ -107,7 +107,8 @@ import opensim as osim
 osim.Logger.setLevelString("Off")
 request = json.loads(sys.stdin.read())
 model = osim.Model(request["path"])
-model.updForceSet().clearAndDestroy()
+if not request["keep_forces"]:
+    model.updForceSet().clearAndDestroy()
 state = model.initSystem()
 found = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
 index = []
@@ -130,11 +131,11 @@ print(json.dumps(out))
 """
 
 
-def opensim_inverse_dynamics(path: Path, coordinates, z, zd, zdd) -> np.ndarray:
+def opensim_inverse_dynamics(path: Path, coordinates, z, zd, zdd, keep_forces: bool = False) -> np.ndarray:
     """OpenSim's generalised forces (N m) of ``coordinates`` at the samples (rad, rad/s, rad/s^2),
-    shape (n, J), by its InverseDynamicsSolver on the model with its forces (muscles) removed, in a
-    child process."""
-    request = json.dumps({"path": str(path), "coordinates": list(coordinates),
+    shape (n, J), by its InverseDynamicsSolver on the model with its forces (muscles) removed unless
+    ``keep_forces``, in a child process."""
+    request = json.dumps({"path": str(path), "coordinates": list(coordinates), "keep_forces": keep_forces,
                           **{k: np.asarray(v, dtype=float).tolist() for k, v in (("z", z), ("zd", zd), ("zdd", zdd))}})
     done = subprocess.run([sys.executable, "-c", OPENSIM_ID], input=request, capture_output=True, text=True,
                           timeout=300)
@@ -417,3 +418,60 @@ def test_the_paper_s_forearm_reads_a_mot_as_its_csv(tmp_path):
     plain.write_text("t,theta\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, theta)))
     runs = [invoke("inverse", "--motion", path, "--format", "csv", "--quiet").stdout for path in (storage, plain)]
     assert runs[0] == runs[1]
+
+
+# ---------------------------------------------------------------- fdbench's models out (export-osim)
+
+
+def swing(model, samples: int = 51):
+    """The model's first motion, or (the forearm has none) every joint from -0.5 to 1.2 rad, in 1 s."""
+    spec = model.motions[0] if model.motions else MotionSpec(
+        "swing", "minimum-jerk", 1.0, tuple((j, -0.5) for j in model.coordinates),
+        tuple((j, 1.2) for j in model.coordinates))
+    return MinimumJerk(spec, model.coordinates)(np.linspace(0.0, spec.duration, samples))
+
+
+@pytest.mark.parametrize("name", ["forearm", "arm2", "leg3"])
+def test_an_exported_model_has_opensim_s_inverse_dynamics_and_imports_back(tmp_path, name):
+    """OpenSim's InverseDynamicsSolver on the written file (its forces kept: the hand load's
+    PrescribedForce, and actuators at zero control) equals fdbench's engine; the file imported
+    back gives the same model and torques."""
+    model = find_model(name)
+    path = tmp_path / f"{name}.osim"
+    path.write_text(to_osim(model))
+    z, zd, zdd = swing(model)
+    ours = Engine(model).inverse_dynamics(z, zd, zdd)
+    theirs = opensim_inverse_dynamics(path, model.coordinates, z, zd, zdd, keep_forces=True)
+    assert np.abs(theirs).max() > 1.0
+    np.testing.assert_allclose(theirs, ours, rtol=0, atol=1e-6)
+    if model.loads:  # the load is in the file: without its force OpenSim's torques lack the hand's moment
+        unloaded = opensim_inverse_dynamics(path, model.coordinates, z, zd, zdd)
+        assert np.abs(unloaded - theirs).max() > 1.0
+    back, notes = import_osim(path)
+    assert back.loads == model.loads and back.gravity == model.gravity
+    # a body's end point of natural coordinates is not OpenSim's: the import puts one only where needed
+    assert [replace(b, end=None) for b in back.bodies] == [replace(b, end=None) for b in model.bodies]
+    assert [replace(j, limits=None) for j in back.joints] == [replace(j, limits=None) for j in model.joints]
+    assert notes == (f"dropped {len(model.joints)} other force{'s' if len(model.joints) > 1 else ''} "
+                     "(CoordinateActuator): the imported model is driven by joint torques",)
+    np.testing.assert_allclose(Engine(back).inverse_dynamics(z, zd, zdd), ours, rtol=0, atol=1e-9)
+
+
+def test_export_osim_writes_the_file_or_stdout_and_never_over_an_input(tmp_path):
+    out = tmp_path / "arm2.osim"
+    result = invoke("export-osim", "arm2", "-o", out, "--quiet")
+    assert result.stdout == "" and result.stderr == ""
+    assert out.read_text() == to_osim(find_model("arm2"))
+    assert invoke("export-osim", "arm2").stdout == out.read_text()  # stdout without -o
+    assert "wrote" in invoke("export-osim", "arm2", "-o", tmp_path / "again.osim").stderr
+    model_file = tmp_path / "mine.toml"
+    model_file.write_text(invoke("models", "show", "forearm", "--format", "toml").stdout)
+    before = model_file.read_bytes()
+    refused("export-osim", model_file, "-o", model_file, contains=("--output",))
+    assert model_file.read_bytes() == before
+    library_file = library()["arm2"]
+    library_bytes = library_file.read_bytes()
+    refused("export-osim", "arm2", "-o", library_file, contains=("--output",))
+    assert library_file.read_bytes() == library_bytes
+    refused("export-osim", "nope", "-o", tmp_path / "nope.osim", contains=("NAME|FILE", "arm2"))
+    assert not (tmp_path / "nope.osim").exists()

@@ -1,4 +1,4 @@
-"""``fdbench import-osim``: an OpenSim model (.osim) converted into fdbench's model file (TOML)."""
+"""``fdbench import-osim`` and ``export-osim``: OpenSim models (.osim) to fdbench's model files (TOML) and back."""
 
 from __future__ import annotations
 
@@ -35,5 +35,27 @@ def import_osim_command(
     _emit(toml_text(found, notes, model), output)
     for note in notes:
         _say(quiet, f"[yellow]warning:[/] {note}")
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output}")
+
+
+@app.command("export-osim")
+def export_osim_command(
+    model: Annotated[str, typer.Argument(metavar="NAME|FILE", help="A library model's name or a model file (.toml, .json, or OpenSim's .osim).", show_default=False)],
+    output: Output = None,
+    quiet: Quiet = False,
+):
+    """Write a model as an OpenSim model file (.osim, OpenSim 4): one Body, PinJoint (its coordinate named as the joint) and CoordinateActuator per body and joint, gravity, each load a constant PrescribedForce. OpenSim's inverse dynamics of the file equals fdbench's; 'fdbench import-osim' reads it back. Needs no OpenSim, except for an .osim input."""
+    from ..multibody.description import find_model, library
+
+    # a library model's file is an input too: the output may not write over it
+    _check_outputs("osim", ("osim",), inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
+    from ..multibody.osim import to_osim
+
+    try:
+        found = find_model(model, "NAME|FILE")
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    _emit(to_osim(found), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output}")
