@@ -12,24 +12,18 @@ Run: python benchmarks/bench_gradient.py
 from __future__ import annotations
 
 import platform
-import time
 
 import numpy as np
 
 from fdbench.experiment import optimize_spec, run
 from fdbench.problem import TrackingProblem
 from fdbench.torques import make_torque
+from timing import best_of
 
 CALLS = 50
 REPEATS = 7
 CASES = [("cs", False), ("cs", True), ("pf", True), ("ann", False)]
 
-
-def seconds(f, x) -> float:
-    start = time.perf_counter()
-    for _ in range(CALLS):
-        f(x)
-    return (time.perf_counter() - start) / CALLS
 
 
 def main() -> None:
@@ -41,8 +35,8 @@ def main() -> None:
         problem.objective_scaled(x), problem.value_and_gradient_scaled(x)  # warm-up
         plain, exact = [], []
         for _ in range(REPEATS):
-            plain.append(seconds(problem.objective_scaled, x))
-            exact.append(seconds(problem.value_and_gradient_scaled, x))
+            plain.append(best_of(lambda: problem.objective_scaled(x), 1, CALLS))
+            exact.append(best_of(lambda: problem.value_and_gradient_scaled(x), 1, CALLS))
         p, e = min(plain), min(exact)
         fd = (problem.n_params + 1) * p
         print(f"{name:<8}{str(ff):<5}{problem.n_params:>4}{1e3 * p:>14.3f}{1e3 * e:>15.3f}{e / p:>8.2f}{fd / e:>10.1f}")

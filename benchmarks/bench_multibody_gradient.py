@@ -12,7 +12,6 @@ Run: python benchmarks/bench_multibody_gradient.py
 from __future__ import annotations
 
 import platform
-import time
 
 import numpy as np
 
@@ -20,18 +19,13 @@ from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.multibody.problem import JointTrackingProblem
+from timing import best_of
 
 CALLS = 10
 REPEATS = 5
 MODELS = ("arm2", "leg3")
 CASES = [("cs", False), ("cs", True), ("pf", True), ("ann", False)]
 
-
-def seconds(f, x) -> float:
-    start = time.perf_counter()
-    for _ in range(CALLS):
-        f(x)
-    return (time.perf_counter() - start) / CALLS
 
 
 def main() -> None:
@@ -47,8 +41,8 @@ def main() -> None:
             problem.objective_scaled(x), problem.value_and_gradient_scaled(x)  # warm-up
             plain, exact = [], []
             for _ in range(REPEATS):
-                plain.append(seconds(problem.objective_scaled, x))
-                exact.append(seconds(problem.value_and_gradient_scaled, x))
+                plain.append(best_of(lambda: problem.objective_scaled(x), 1, CALLS))
+                exact.append(best_of(lambda: problem.value_and_gradient_scaled(x), 1, CALLS))
             p, e = min(plain), min(exact)
             fd = (problem.n_params + 1) * p
             print(f"{name:<7}{torque:<8}{str(ff):<6}{problem.n_params:>4}{1e3 * p:>14.3f}{1e3 * e:>15.3f}"
