@@ -16,21 +16,13 @@ import fdbench
 from fdbench import files
 from fdbench.cli import app
 
+from cli_checks import assert_one_line_error
+
 runner = CliRunner()
 
 
 def invoke(args):
     return runner.invoke(app, [str(a) for a in args])
-
-
-def assert_one_line_error(result, *words):
-    """Exit 2, nothing on stdout, one 'fdbench: error:' line on stderr naming ``words``."""
-    assert result.exit_code == 2, (result.exit_code, result.stderr, result.stdout)
-    assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("fdbench: error:"), result.stderr
-    for word in words:
-        assert word in lines[0], lines[0]
 
 
 def motion_rows(n=101, rate=100.0):

@@ -20,22 +20,13 @@ from fdbench.model import Forearm
 from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, find_model,
                                            library, load_model, resolved_end, to_dict, to_toml, with_changes)
 
+from cli_checks import assert_one_line_error
+
 runner = CliRunner()
 
 
 def invoke(*args):
     return runner.invoke(app, [str(a) for a in args])
-
-
-def assert_one_line_error(result, *words):
-    """Exit 2, nothing on stdout, one 'fdbench: error:' line on stderr naming ``words``."""
-    assert result.exit_code == 2, (result.exit_code, result.stderr, result.stdout)
-    assert result.stdout == ""
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("fdbench: error:"), result.stderr
-    for word in words:
-        assert word in lines[0], lines[0]
-    return lines[0]
 
 
 # ---- the library is the built-in models -------------------------------------------------------

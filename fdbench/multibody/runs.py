@@ -232,12 +232,6 @@ def _gains(spec, controller: str, options: dict):
     return dict(kp=kp, kd=kd), "id"
 
 
-def _per_joint_gains(spec) -> dict:
-    """kp_<joint> and kd_<joint> of a PD run, the gains each joint had."""
-    kp, kd = pd_gains(spec)
-    return {**_per_joint("kp", joints(spec), kp), **_per_joint("kd", joints(spec), kd)}
-
-
 def run(spec, on_evaluation=None, on_start=None):
     """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
     from ..experiment import base_record
@@ -263,7 +257,8 @@ def run(spec, on_evaluation=None, on_start=None):
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime, controller=controller,
-                  **({"kp": spec.kp, "kd": spec.kd, **_per_joint_gains(spec)} if controller == "pd" else
+                  **({"kp": spec.kp, "kd": spec.kd, **_per_joint("kp", joints(spec), law["kp"]),
+                      **_per_joint("kd", joints(spec), law["kd"])} if controller == "pd" else
                      {"controller_options": options_text(spec.method_options)}))
     return _outcome(spec, record, result, inverse)
 
