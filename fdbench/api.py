@@ -12,7 +12,6 @@ registries ``TORQUES`` and ``OPTIMIZERS`` take new methods by decorator.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 
@@ -31,28 +30,12 @@ def simulate(torque=None, **settings):
     torques, shape (n, 2)). ``settings``: the fields of ``RunSpec`` (``kinematics``,
     ``integrator``, ``dt``, ``rtol``, ``atol``, ``alpha``, ``xi``, ``omega``, ``model_name``...);
     a bad value raises ValueError."""
-    import numpy as np
-
-    from .experiment import RunOutcome, RunSpec, base_record, fill_result, run_simulation
-    from .integrate import simulate as integrate, warm_up
-    from .inverse import inverse_dynamics
+    from .experiment import RunSpec, run_simulation
 
     spec = RunSpec(command="simulate", **settings).validate()
-    if torque is None:
-        return run_simulation(spec)
-    if not callable(torque):
+    if torque is not None and not callable(torque):
         raise TypeError("torque must be None or a function of time (s) returning N m")
-    if spec._runs() is not None:
-        return spec._runs().run_simulation(spec, torque=torque)
-    model_settings = spec.settings()
-    warm_up()
-    start = time.perf_counter()
-    inverse = inverse_dynamics(None, model_settings.model, model_settings.kinematics)
-    result = integrate(lambda t: np.asarray(torque(t), dtype=float), model_settings)
-    runtime = time.perf_counter() - start
-    record = fill_result(base_record(spec), result, inverse)
-    record.update(torque=getattr(torque, "__name__", "function"), evaluations=1, runtime_s=runtime)
-    return RunOutcome(record, result, inverse)
+    return run_simulation(spec, torque=torque)
 
 
 def load_runs(db) -> "pandas.DataFrame":  # noqa: F821

@@ -1,24 +1,23 @@
-"""Direct-collocation tracking (as OpenSim Moco, bioptim and Drake transcribe it), solved by IPOPT
-through CasADi.
+"""Direct-collocation tracking of any model (as OpenSim Moco, bioptim and Drake transcribe it), solved by
+IPOPT through CasADi, on the model's minimal equations z'' = M(z)^-1 (tau - h(z, z'))
+(``fdbench.multibody.symbolic``, the limit of the penalty formulation).
 
-The unknowns are theta (rad), theta' (rad/s) and the elbow torque tau (N m) at the N + 1 nodes
-t_k = k h, h = 1 s / N (Hermite-Simpson adds the torque at the N interval midpoints). The
-defect constraints discretise the minimal-coordinate equation of motion
-I1 theta'' = tau - G cos(theta) (``fdbench.minimal``, the limit of the penalty formulation):
+The unknowns are the joint angles z (rad), their rates z' (rad/s) and the joint torques tau (N m) at
+the N + 1 nodes t_k = k h, h = T / N (Hermite-Simpson adds the torques at the N interval midpoints),
+2J states and J torques per node. The defect constraints discretise the equation of motion:
 
 - ``trapezoidal``: x_{k+1} - x_k - h/2 (f_k + f_{k+1}) = 0; the torque is piecewise linear.
 - ``hermite-simpson`` (separated midpoint states written out in compressed form):
   x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1}),  x_{k+1} - x_k - h/6 (f_k + 4 f_m + f_{k+1}) = 0;
   the torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
 
-The objective is the integral over the motion's span of the squared rotation error in degrees^2 plus
-``regularization`` times the integral of tau^2 (N^2 m^2 s), by the scheme's own quadrature
-(trapezoid or Simpson). The initial state is fixed to the desired motion's at t = 0; the final
-state is free. ``casadi`` is imported here only (and in the models' collocation modules).
-
-``transcribe`` is the transcription of any model with J joints whose accelerations are an
-explicit function of its angles, velocities and torques; ``collocate`` is the forearm's (J = 1),
-``fdbench.multibody.collocation.collocate`` every other model's.
+The objective is the integral over the motion's span of the squared joint-angle errors in degrees^2,
+summed over the joints, plus ``regularization`` times the integral of |tau|^2 (N^2 m^2 s), by the
+scheme's own quadrature (trapezoid or Simpson). The initial state is fixed to the desired motion's at
+t = 0; the final state is free; the initial guess is the desired motion and the model's
+inverse-dynamics torques. A motion is anything with ``duration`` (s) and ``motion(t) -> (z, z', z'')``
+(rad, rad/s, rad/s^2), each of shape t.shape + (J,). ``casadi`` is imported only when the
+transcription is built.
 """
 
 from __future__ import annotations
@@ -29,9 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .integrate import Settings
-from .minimal import gravity_moment
-from .motion import desired_motion
 
 SCHEMES = ("hermite-simpson", "trapezoidal")
 DEFAULT_NODES = 100
@@ -226,35 +222,38 @@ def transcribe(acceleration, t: np.ndarray, angles_d: np.ndarray, velocities_d: 
     )
 
 
-def collocate(settings: Settings = Settings(), nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
+def desired_samples(model, motion, t: np.ndarray):
+    """The motion's (z, z', z'') at times t (s), each (len(t), J); ValueError (one line) when the
+    motion does not give one column per joint of the model."""
+    values = tuple(np.asarray(v, dtype=float) for v in motion(t))
+    shape = (len(t), model.n_joints)
+    if any(v.shape != shape for v in values):
+        raise ValueError(f"the motion gives joint values of shape {values[0].shape}; model {model.name!r} needs "
+                         f"{shape} (one column per joint: {', '.join(model.coordinates)})")
+    return values
+
+
+def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
               regularization: float = DEFAULT_REGULARIZATION, max_iter: int = DEFAULT_MAX_ITER,
               max_time: float = DEFAULT_MAX_TIME) -> CollocationResult:
-    """Transcribe and solve the tracking problem of ``settings``' model and kinematics (the
-    forearm): node arrays of shape (N + 1,).
+    """Transcribe and solve the tracking problem of ``motion`` with ``model`` on ``nodes`` intervals
+    over the motion's span: node arrays of shape (N + 1, J) in the model's joint order. ValueError
+    (one line) for options out of range or a motion of other joints; never raises on a solver
+    failure: IPOPT's status says what happened."""
+    from .multibody.symbolic import MinimalDynamics
 
-    Never raises on a solver failure: IPOPT's status says what happened (``success``, ``message``)."""
     check_options(nodes, scheme, regularization, max_iter, max_time)
-    import casadi as ca
-
     began = time.perf_counter()
-    model, kinematics = settings.nominal_model, settings.kinematics
-    G, inertia = gravity_moment(model), model.I1
-    duration = settings.motion.duration
-    n, h = int(nodes), duration / nodes
-    t = np.linspace(0.0, duration, n + 1)
-    th_d, w_d, a_d = desired_motion(t, kinematics)
-    # initial guess: the desired motion and the minimal model's inverse-dynamics torque
-    u_guess = inertia * a_d + G * np.cos(th_d)
-    th_md = um_guess = None
+    dynamics = MinimalDynamics(model)
+    n = int(nodes)
+    t = np.linspace(0.0, motion.duration, n + 1)
+    z_d, w_d, a_d = desired_samples(model, motion, t)
+    z_md = um_guess = None
     if scheme == "hermite-simpson":
-        th_md, _, a_md = desired_motion(t[:-1] + h / 2, kinematics)
-        um_guess = inertia * a_md + G * np.cos(th_md)
-
-    def acceleration(theta, omega, tau):
-        return (tau - G * ca.cos(theta)) / inertia
-
-    return transcribe(acceleration, t, th_d, w_d, th_md, u_guess, um_guess, scheme, regularization, max_iter,
-                      max_time, began)
+        z_md, w_md, a_md = desired_samples(model, motion, t[:-1] + motion.duration / n / 2)
+        um_guess = dynamics.inverse(z_md, w_md, a_md)
+    return transcribe(dynamics.forward_rows, t, z_d, w_d, z_md, dynamics.inverse(z_d, w_d, a_d), um_guess, scheme,
+                      regularization, max_iter, max_time, began)
 
 
 def record_fields(solution: CollocationResult, options: dict, own_rmse_deg: float, replay_message: str) -> dict:

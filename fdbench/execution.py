@@ -139,7 +139,7 @@ def worker_version() -> str:
 
 def warm_up_worker() -> None:
     """Compile or load the kernels once, before the first run (not counted in any runtime)."""
-    from .integrate import warm_up
+    from .multibody.simulation import warm_up
 
     warm_up()
 

@@ -400,20 +400,21 @@ def _csv_rows(path: Path, option: str, text: str) -> list:
 def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple, preferred: tuple = ()
                      ) -> tuple[np.ndarray, np.ndarray]:
     """A history from a CSV file with a header, a column ``t`` (s) and the named ``columns``, or
-    the ``preferred`` names of the same columns where the file has them all (read once).
+    other names of the same columns where the file has them all: ``preferred``, one tuple of names
+    (tried first) or several (tried in order). Read once.
 
     Times must be finite and strictly increasing and cover [0, duration] s; returns t, shape (n,),
     and the columns' values, shape (n, len(columns))."""
     path = Path(path)
-    read = read_columns(path, option, ("t",), tuple(preferred) + tuple(columns)) if preferred else None
-    if read is not None:
-        columns = preferred if all(c in read for c in preferred) else columns
-        if not all(c in read for c in columns):
-            raise BadFile(f"{option}: {path} needs columns 't', {', '.join(repr(c) for c in columns)} "
-                          f"(or {', '.join(repr(c) for c in preferred)}) in its header")
-    else:
-        read = read_columns(path, option, ("t",) + tuple(columns))
-    t, values = read["t"], np.stack([read[c] for c in columns], axis=-1)
+    choices = [tuple(c) for c in preferred] if preferred and not isinstance(preferred[0], str) else [tuple(preferred)]
+    choices = [c for c in choices if c] + [tuple(columns)]
+    read = read_columns(path, option, ("t",), tuple(dict.fromkeys(name for c in choices for name in c)))
+    found = next((c for c in choices if all(name in read for name in c)), None)
+    if found is None:
+        others = " or ".join(", ".join(repr(name) for name in c) for c in choices[:-1])
+        raise BadFile(f"{option}: {path} needs columns 't', {', '.join(repr(c) for c in columns)}"
+                      + (f" (or {others})" if others else "") + " in its header")
+    t, values = read["t"], np.stack([read[c] for c in found], axis=-1)
     if len(t) < 2:
         raise BadFile(f"{option}: {path} needs at least 2 rows of data, found {len(t)}")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(values))):
@@ -423,14 +424,6 @@ def read_history_csv(path: str | os.PathLike, option: str, duration: float, colu
     if t[0] > 1e-9 or t[-1] < duration - 1e-9:
         raise BadFile(f"{option}: {path} covers [{t[0]:g}, {t[-1]:g}] s; it must cover [0, {duration:g}] s")
     return t, values
-
-
-def read_torque_csv(path: str | os.PathLike, option: str = "--torque-file", duration: float = 1.0
-                    ) -> tuple[np.ndarray, np.ndarray]:
-    """A torque history from a CSV file with a header and columns ``t`` (s) and ``torque`` (N m),
-    covering [0, duration] s; returns (t, torque), each shape (n,)."""
-    t, values = read_history_csv(path, option, duration, ("torque",))
-    return t, values[:, 0]
 
 
 def finite_or_none(value):

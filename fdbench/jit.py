@@ -96,7 +96,7 @@ CACHE_DIR = _choose_cache_dir()
 def source_digest(package: Path | None = None) -> str:
     """16 hex digits of SHA-256 over the Python sources of ``package`` (default: fdbench's). numba's
     cache checks the modification time of the file of the function it loads, not of the files its
-    callees were inlined from (a changed fdbench.dynamics would leave population's kernel stale), so
+    callees were inlined from (a changed callee would leave its caller's cached kernel stale), so
     each version of the sources gets its own kernel folder."""
     import hashlib
 

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from . import __version__
 from .files import BadFile, parse_json, read_input_text
-from .motion import KINEMATICS
 
 MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand numbers
 
@@ -93,22 +91,3 @@ def make_saved_torque(saved: dict, option: str = "--params"):
     except (TypeError, ValueError) as exc:
         raise BadFile(f"{option}: {saved['path']}: {exc}") from None
     return torque
-
-
-def load_torque(path, settings, option: str = "--params"):
-    """The forearm's open-loop torque function (t (s) -> N m) of a saved parameter file, a label,
-    and a digest of what the file defines (the torque, its options, feedforward, kinematics,
-    parameters)."""
-    saved = read_params(path, "forearm", settings.motion.name, KINEMATICS, option)
-    if saved["kinematics"] is not None:
-        settings = replace(settings, kinematics=saved["kinematics"])
-    torque = make_saved_torque(saved, option)
-    params, name, ff = saved["params"], saved["torque"], saved["feedforward"]
-    if params.shape != (torque.n_params,):
-        raise BadFile(f"{option}: {path}: expected {torque.n_params} finite parameters for {name}")
-    from .problem import TrackingProblem
-
-    # the problem restores the scaling the parameters refer to and adds the feedforward
-    problem = TrackingProblem(torque, settings, ff)
-    label = f"{name} (feedforward) from {saved['path'].name}" if ff else f"{name} from {saved['path'].name}"
-    return problem.torque_function(params), label, saved["digest"]

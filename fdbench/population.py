@@ -2,10 +2,10 @@
 spread over threads (a compiled kernel that releases the GIL, run by a small thread pool; each
 thread takes every T-th candidate).
 
-Each candidate runs the kernel of a plain simulation (``dynamics.rk4``) on its own torque history,
-in its thread's work buffers, and eq. 18 straight from its states (``tracking_objective``). A
-single evaluation is a population of one through the same kernel, so a population's numbers equal
-those of its candidates evaluated one by one, to the last bit, whatever the number of threads.
+Each candidate runs the kernel of a plain simulation on its own torque history, in its thread's
+work buffers, and eq. 18 straight from its states (``multibody.kernels.rk4_candidates``). A single
+evaluation is a population of one through the same kernel, so a population's numbers equal those
+of its candidates evaluated one by one, to the last bit, whatever the number of threads.
 (numba's ``parallel=True`` was measured too: its OpenMP workers spin while they wait, which on a
 loaded machine made two threads twice as slow as one.)
 """
@@ -18,8 +18,6 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .dynamics import rk4
-from .jit import njit
 
 DEGREES_PER_RADIAN = 180.0 / math.pi
 
@@ -34,38 +32,6 @@ def available_cores() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
-
-
-@njit(nogil=True)
-def tracking_objective(states, done, every, theta_ref, n_steps, penalty_weight):
-    """Eq. 18 from a simulation's states, shape (n_steps+1, 6), filled up to step ``done``:
-    RMSE (deg) of theta at the motion's samples (every ``every``-th step, desired rotation
-    theta_ref (rad), one per sample) over the samples reached, plus penalty_weight times the
-    fraction of the steps not reached. The squared errors are summed sample by sample in order;
-    a non-finite RMSE counts as 0 (the penalty term says it all)."""
-    count = done // every + 1
-    total = 0.0
-    for k in range(count):
-        error = (states[k * every, 2] - theta_ref[k]) * DEGREES_PER_RADIAN
-        total += error * error
-    rmse = math.sqrt(total / count)
-    if not math.isfinite(rmse):
-        rmse = 0.0
-    return rmse + penalty_weight * (1.0 - done / n_steps)
-
-
-@njit(nogil=True)
-def rk4_candidates(y0, dt, n_steps, tau, ref_th_half, ref_w_half, consts, every, theta_ref, penalty_weight, states,
-                   qdd, applied, objective, first, stride):
-    """Open-loop RK4 (``dynamics.rk4`` with zero gains) and eq. 18 (``tracking_objective``) for
-    rows first, first + stride, ... of tau.
-
-    tau: the torques (N m) on the half-step grid, shape (lam, 2 n_steps + 1); states (n+1, 6),
-    qdd (n+1, 3), applied (n+1,): this call's work buffers, reused candidate after candidate;
-    objective (lam,): filled for the rows run. Runs without the GIL."""
-    for c in range(first, tau.shape[0], stride):
-        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref_th_half, ref_w_half, 0.0, 0.0, consts, states, qdd, applied)
-        objective[c] = tracking_objective(states, done, every, theta_ref, n_steps, penalty_weight)
 
 
 def set_threads(threads: int | None) -> int:
@@ -86,10 +52,9 @@ def threads() -> int:
     return _threads["count"] or set_threads(None)
 
 
-def workspace(n_steps: int, count: int, widths=((6,), (3,), ())) -> tuple:
+def workspace(n_steps: int, count: int, widths) -> tuple:
     """Work buffers of ``count`` threads for simulations of n_steps steps, one per entry of
-    ``widths`` (the trailing shape of a row): by default the forearm's states (count, n+1, 6),
-    qdd (count, n+1, 3), applied (count, n+1)."""
+    ``widths`` (the trailing shape of a row), each of shape (count, n_steps + 1, *width)."""
     return tuple(np.empty((count, n_steps + 1, *width)) for width in widths)
 
 
@@ -113,7 +78,7 @@ class Population:
     n_steps steps, keeping the threads' work buffers (``workspace`` with ``widths``) from call to
     call."""
 
-    def __init__(self, kernel, n_steps: int, widths=((6,), (3,), ())):
+    def __init__(self, kernel, n_steps: int, widths):
         self.kernel, self.n_steps, self.widths, self._buffers = kernel, n_steps, widths, None
 
     def __call__(self, count: int, args) -> np.ndarray:
@@ -124,18 +89,3 @@ class Population:
         values = np.empty(count)
         spread(self.kernel, args, self._buffers, values)
         return values
-
-
-def warm_up() -> None:
-    """Load (or compile) the population kernel and start the threads, so that later timings
-    exclude both."""
-    from .integrate import Settings, constants, initial_state
-
-    settings = Settings(dt=0.1)
-    n = 10
-    tau = np.zeros((2, 2 * n + 1))
-    ref = np.zeros(2 * n + 1)
-    half = ref.copy()
-    half.flags.writeable = False  # as integrate.half_step_reference gives them: numba types read-only apart
-    Population(rk4_candidates, n)(2, (initial_state(settings.kinematics, settings.model), 0.1, n, tau, half, half,
-                                     constants(settings), 1, ref, 1.0))

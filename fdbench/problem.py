@@ -1,18 +1,24 @@
-"""The tracking problem of section 4: parameters -> torque history -> forward simulation ->
-objective f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end / T)  (eq. 18; T = 1 s in the paper, the
-motion's duration in general: the penalty is the fraction of the motion not reached)."""
+"""The tracking problem of section 4 on any model of the engine: parameters -> torque histories ->
+forward simulation -> objective
+
+    f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end / T)
+
+(eq. 18 for J joints: RMSE_rot_deg over every joint and all samples reached; T the motion's duration,
+1 s in the paper: the penalty is the fraction of the motion not reached). One block of torque
+parameters per joint (each joint its own instance of the parameterisation, prepared on that joint's
+inverse-dynamics torque), the blocks concatenated into one parameter vector. Optimisers see one
+objective of scaled parameters x = p / scale and work unchanged; budgets keep their meaning (one
+evaluation, one forward simulation).
+"""
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
-from .indicators import rmse_rot_deg, rmse_torque_nm
-from .integrate import (Settings, SimulationResult, constants, half_step_reference, initial_state, simulate,
-                        simulate_rk4_on_grid, steps)
-from .inverse import Feedforward, inverse_dynamics
-from .torques import TorqueParameterisation
+from .multibody import simulation as sim
 
 
 class ShootingProblem:
@@ -40,116 +46,183 @@ class ShootingProblem:
 
 
 class TrackingProblem(ShootingProblem):
-    """Optimise the parameters of ``torque`` so the simulated rotation tracks the desired one.
+    """Optimise per-joint torque parameters so that the simulated body (``engine``) tracks ``motion``.
 
-    With ``feedforward`` the parameterised torque is added to the inverse-dynamics torque
-    (eq. 19); without, it is the whole drive torque (eq. 15). Optimisers work on scaled
-    parameters x = p / scale (``x0``, ``objective_scaled``), which puts every parameter on a
-    comparable footing."""
+    ``torque``: a registered parameterisation's name, made once per joint with ``options``, or a
+    parameterisation (``torques.TorqueParameterisation``), copied once per joint.
+    With ``feedforward`` the parameterised torques are added to the inverse-dynamics torques
+    (eq. 19); without, they are the whole drive torques (eq. 15). ``nominal`` (an engine of the same
+    joints; default: ``engine``) gives the inverse dynamics that prepare the parameters, the
+    feedforward and the objective's reference. ``dt``, ``integrator``, ``rtol`` and ``atol`` say how
+    to simulate (``simulation.simulate``): with rk4 the torques are computed on its half-step grid at
+    once, with an adaptive integrator at the times it asks for."""
 
-    def __init__(self, torque: TorqueParameterisation, settings: Settings = Settings(),
-                 feedforward: bool = False, penalty_weight: float = 1.0):
+    def __init__(self, torque, engine, motion, feedforward: bool = False, penalty_weight: float = 1.0,
+                 dt: float = 1e-3, nominal=None, integrator: str = "rk4", rtol: float = 1e-6, atol: float = 1e-9,
+                 **options):
+        from .integrate import check_integrator, steps
+        from .torques import make_torque
+
         if not (math.isfinite(penalty_weight) and penalty_weight >= 0):
             raise ValueError(f"penalty weight must be a non-negative finite number, got {penalty_weight}")
-        self.torque, self.settings = torque, settings
+        self.engine, self.motion, self.dt = engine, motion, dt
+        self.integrator, self.rtol, self.atol = check_integrator(integrator), rtol, atol
         self.feedforward, self.penalty_weight = feedforward, penalty_weight
-        self.inverse = inverse_dynamics(None, settings.nominal_model, settings.kinematics)
-        self._ff = Feedforward(settings.nominal_model, settings.kinematics)
-        self.duration = settings.motion.duration
-        self.p0 = np.asarray(torque.prepare(self.inverse.t, self.inverse.torque, feedforward), dtype=float)
-        self.scale = np.asarray(torque.scale(), dtype=float)
+        self._nominal = engine if nominal is None else nominal
+        self.inverse = sim.inverse_dynamics(None, self._nominal, motion)
+        self.duration = motion.duration
+        n_joints = self.inverse.torque.shape[1]
+        self.parts = ([make_torque(torque, **options) for _ in range(n_joints)] if isinstance(torque, str)
+                      else [copy.deepcopy(torque) for _ in range(n_joints)])
+        p0 = [np.asarray(part.prepare(self.inverse.t, self.inverse.torque[:, j], feedforward), dtype=float)
+              for j, part in enumerate(self.parts)]
+        self.blocks = np.cumsum([0] + [len(p) for p in p0])
+        self.p0 = np.concatenate(p0)
+        self.scale = np.concatenate([np.asarray(part.scale(), dtype=float) for part in self.parts])
         self.x0 = self.p0 / self.scale
-        self._fast = False
-        self._jacobian, self._dtheta, self._population = None, None, None
-        if settings.integrator == "rk4":
-            n = steps(settings.dt, self.duration)
-            half, _, _ = half_step_reference(n, settings.kinematics)
-            self._half = half
-            self._on_grid_batch = torque.on_grid_batch(half)
-            self._ff_half = np.array(self._ff(half)) if feedforward else None
-            self._fast = settings.motion.uniform and n % (len(self.inverse.t) - 1) == 0
-            if self._fast:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
-                self._n, self._every = n, n // (len(self.inverse.t) - 1)
-                self._theta_ref = np.ascontiguousarray(self.inverse.theta, dtype=float)
-                self._buffers = (np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1))
-                _, ref_th, ref_w = half_step_reference(n, settings.kinematics)
-                # the population kernel's arguments before the torques (see ``population.rk4_candidates``)
-                self._kernel_start = (initial_state(settings.kinematics, settings.model), self.duration / n, n)
-                self._kernel_rest = (ref_th, ref_w, constants(settings), self._every, self._theta_ref)
-
-    def torque_jacobian(self):
-        """The evaluator p -> d tau / d p on the RK4 half-step grid, shape (2 n + 1, n_params)
-        (N m per parameter unit), for exact gradients; None where the parameterisation (or the
-        integrator) gives none. Made on first use."""
-        if self._jacobian is None:
-            grid = self.settings.integrator == "rk4"
-            self._jacobian = (self.torque.on_grid_jacobian(self._half) if grid else None,)
-        return self._jacobian[0]
+        n = steps(dt, self.duration)
+        self._half = np.linspace(0.0, self.duration, 2 * n + 1)
+        self._on_grid_batch = [part.on_grid_batch(self._half) for part in self.parts]
+        self._ff_half = (np.array(sim.inverse_dynamics(self._half, self._nominal, motion).torque) if feedforward
+                         else np.zeros((2 * n + 1, n_joints)))
+        self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), motion.samples)
+                       if self.integrator == "rk4" else 0)  # the population kernel is RK4's
+        self._population, self._jacobians = None, None
+        self._n_steps = n
+        if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
+            z0, zd0, _ = motion(np.zeros(1))
+            ref, refd, _ = (np.ascontiguousarray(r, dtype=float) for r in motion(self._half))
+            # the population kernel's arguments around the candidates' torques (see ``objectives``)
+            self._kernel_start = (engine.state_from_joints(z0[0], zd0[0]), self.duration / n, n)
+            self._kernel_rest = (ref, refd, self._every, np.ascontiguousarray(self.inverse.angles), penalty_weight)
 
     @property
     def n_params(self) -> int:
-        return self.torque.n_params
-
-    def torque_function(self, p):
-        """The open-loop drive torque for parameters p, as a function of time (s) -> N m."""
-        if self.feedforward:
-            return lambda t: self._ff(t) + self.torque.evaluate(p, t)
-        return lambda t: self.torque.evaluate(p, t)
-
-    def torques_on_grid(self, P) -> np.ndarray:
-        """The drive torques (N m) on the RK4 half-step grid for every row of P, shape
-        (lam, n_params) -> (lam, 2 n + 1): the parameterisation's population evaluator, plus the
-        inverse-dynamics torque with feedforward. Row c depends on P[c] alone, to the last bit."""
-        with np.errstate(all="ignore"):
-            tau = self._on_grid_batch(np.atleast_2d(np.asarray(P, dtype=float)))
-            if self._ff_half is not None:
-                tau += self._ff_half
-        return tau
-
-    def simulate(self, p) -> SimulationResult:
-        p = np.asarray(p, dtype=float)
-        if self.settings.integrator == "rk4":
-            return simulate_rk4_on_grid(self.torques_on_grid(p[None])[0], self.settings)
-        return simulate(self.torque_function(p), self.settings)
-
-    def rmse_deg(self, result: SimulationResult) -> float:
-        """RMSE of rotation (deg) against the reference, over the samples reached."""
-        return rmse_rot_deg(result, self.inverse.theta)
+        return int(self.blocks[-1])
 
     @property
     def batched(self) -> bool:
-        """True when ``objectives`` runs a population in one compiled call (RK4 on the samples'
-        grid); else it evaluates the candidates one by one."""
-        return self._fast
+        """True when ``objectives`` runs a population in one compiled call (the motion's samples
+        on the integrator's grid); else it evaluates the candidates one by one."""
+        return bool(self._every)
+
+    def torques_on_grid_batch(self, P) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for every row of P, shape
+        (lam, n_params) -> (lam, 2 n + 1, J): each joint's population evaluator on its block, plus
+        the inverse-dynamics torques with feedforward. Row c depends on P[c] alone, to the last bit."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        with np.errstate(all="ignore"):
+            own = np.stack([f(P[:, a:b]) for f, a, b in zip(self._on_grid_batch, self.blocks[:-1], self.blocks[1:])],
+                           axis=-1)
+        return self._ff_half + own
+
+    def torques_on_grid(self, p) -> np.ndarray:
+        """The drive torques (N m) on the half-step grid for parameters p, shape (2 n + 1, J)."""
+        return self.torques_on_grid_batch(np.asarray(p, dtype=float)[None])[0]
+
+    def torque_function(self, p):
+        """The drive torques for parameters p as a function t (s), shape (k,) -> (k, J) N m (the
+        feedforward, if any, computed at t)."""
+        p = np.asarray(p, dtype=float)
+
+        def drive(t):
+            t = np.asarray(t, dtype=float)
+            own = np.stack([part.evaluate(p[a:b], t) for part, a, b in zip(self.parts, self.blocks[:-1], self.blocks[1:])],
+                           axis=-1)
+            return own + sim.inverse_dynamics(t, self._nominal, self.motion).torque if self.feedforward else own
+
+        return drive
+
+    def simulate(self, p) -> sim.Simulation:
+        """The forward simulation of parameters p: RK4 on the torques of ``torques_on_grid``, or
+        an adaptive integrator on ``torque_function``."""
+        how = dict(dt=self.dt, integrator=self.integrator, rtol=self.rtol, atol=self.atol)
+        if self.integrator != "rk4":
+            return sim.simulate(self.torque_function(p), self.engine, self.motion, **how)
+        tau = self.torques_on_grid(p)
+        half = self._half
+        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.engine, self.motion, **how)
+
+    def rmse_deg(self, result: sim.Simulation) -> float:
+        """RMSE of the joint angles (deg) over every joint and the samples reached."""
+        return sim.rmse_deg(result, self.inverse.angles)[0]
 
     def objectives(self, P) -> np.ndarray:
         """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
-        operations (``torques_on_grid``), the simulations and their objectives in one compiled call
-        spread over threads (``population.Population``). ``objective`` is this with a
-        population of one, so the numbers equal those of the rows one by one, to the last bit."""
+        operations (``torques_on_grid_batch``), the simulations and their objectives in one
+        compiled call spread over threads (``population.Population``). ``objective`` is this with a
+        population of one, so the numbers equal those of the rows one by one, to the last bit,
+        whatever the number of threads."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
-        if not self._fast:
+        if not self.batched:
             return np.array([self.objective(p) for p in P])
         if self._population is None:
-            from .population import Population, rk4_candidates
+            from .population import Population
+            from .multibody.kernels import rk4_candidates
 
-            self._population = Population(rk4_candidates, self._n)
-        tau = self.torques_on_grid(P)
-        return self._population(len(P), (*self._kernel_start, tau, *self._kernel_rest, self.penalty_weight))
+            self._population = Population(rk4_candidates, self._n_steps, self.engine.population_widths)
+        tau = self.torques_on_grid_batch(P)
+        args = self.engine.population_args(*self._kernel_start, tau, *self._kernel_rest)
+        return self._population(len(P), args)
+
+    def check_exact_gradient(self) -> None:
+        """ValueError with a one-line message where exact gradients are not available: they need
+        RK4 with the motion's samples on its grid and a parameterisation that gives d tau / d p."""
+        if self.integrator != "rk4":
+            raise ValueError(f"--gradient exact needs --integrator rk4, got {self.integrator}")
+        if not self.batched:
+            raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
+        if self._jacobians is None:
+            self._jacobians = [part.on_grid_jacobian(self._half) for part in self.parts]
+        if any(jacobian is None for jacobian in self._jacobians):
+            raise ValueError(f"--gradient exact: torque {self.parts[0].name!r} gives no d tau / d p")
+
+    def torque_jacobian(self, p) -> tuple[np.ndarray, np.ndarray]:
+        """(G, joint): d tau / d p on the half-step grid, shape (2 n + 1, n_params) (N m per
+        parameter unit), parameter q moving the torque of joint joint[q] only (one block per joint)."""
+        self.check_exact_gradient()
+        p = np.asarray(p, dtype=float)
+        with np.errstate(all="ignore"):
+            G = np.concatenate([np.asarray(jacobian(p[a:b]), dtype=float).reshape(len(self._half), b - a)
+                                for jacobian, a, b in zip(self._jacobians, self.blocks[:-1], self.blocks[1:])], axis=1)
+        return np.ascontiguousarray(G), np.repeat(np.arange(len(self.parts)), np.diff(self.blocks))
 
     def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
-        """Eq. 18 and its exact gradient with respect to p, shape (n_params,) (see ``gradient``)."""
-        from .gradient import value_and_gradient
+        """Eq. 18 and its exact gradient with respect to p, shape (n_params,), from one RK4
+        simulation with forward sensitivities (``sensitivity.rk4_sensitivity``). The value equals
+        ``objective(p)`` to the last bit (the same states and kernel). Over the m samples reached,
+        with e the joint angle errors (deg, m x J), d RMSE / d p = sum e (180 / pi) dz / dp / (m J RMSE);
+        the penalty term is piecewise constant in p (t_end moves by whole steps), so a failing
+        simulation's gradient is the RMSE's over the samples reached (zero where the RMSE is zero)."""
+        from .multibody.kernels import tracking_objective
+        from .multibody.sensitivity import rk4_sensitivity
 
-        return value_and_gradient(self, np.asarray(p, dtype=float))
+        p = np.asarray(p, dtype=float)
+        G, joint = self.torque_jacobian(p)
+        y0, dt, n, tau, ref, refd, every, angles_ref, weight, *layout = self.engine.population_args(
+            *self._kernel_start, self.torques_on_grid(p)[None], *self._kernel_rest)
+        states, rates = np.empty((n + 1, self.engine.n_state)), np.empty((n + 1, self.engine.n_state))
+        dz = np.empty((n // every + 1, self.engine.n_joints, len(p)))
+        _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates,
+                                  np.empty((n + 1, self.engine.n_joints)), dz)
+        value = tracking_objective(states, done, every, angles_ref, n, weight, self.engine.joint_offset,
+                                   self.engine.joint_parent, self.engine.n_p)
+        m = done // every + 1
+        error = np.degrees(self.engine.joints_from_state(states[: done + 1 : every])[0] - angles_ref[:m])
+        rmse = float(np.sqrt(np.mean(error**2)))
+        gradient = np.zeros(len(p))
+        if math.isfinite(rmse) and rmse > 0:
+            with np.errstate(all="ignore"):
+                gradient = np.degrees(np.einsum("kj,kjq->q", error, dz[:m])) / (error.size * rmse)
+            if not np.all(np.isfinite(gradient)):
+                gradient = np.zeros(len(p))
+        return float(value), gradient
 
     def value_and_gradient_scaled(self, x) -> tuple[float, np.ndarray]:
         """``value_and_gradient`` on the scaled parameters x = p / scale."""
         f, g = self.value_and_gradient(np.asarray(x, dtype=float) * self.scale)
         return f, g * self.scale
 
-    def indicators(self, result: SimulationResult) -> dict:
-        return {
-            "rmse_rot_deg": rmse_rot_deg(result, self.inverse.theta),
-            "rmse_torque_nm": rmse_torque_nm(result, self.inverse.torque),
-        }
+
+def _interp(grid, values, t):
+    return np.stack([np.interp(t, grid, values[:, j]) for j in range(values.shape[1])], axis=-1)

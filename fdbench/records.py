@@ -8,7 +8,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__
-from .integrate import SimulationResult
 from .spec import RunSpec
 
 
@@ -25,27 +24,18 @@ RECORD_FIELDS = (
 @dataclass
 class RunOutcome:
     record: dict
-    result: SimulationResult
-    inverse: object  # InverseResult on the 1 ms samples
+    result: object  # multibody.simulation.Simulation on the motion's samples
+    inverse: object  # multibody.simulation.JointInverse on the motion's samples
     history: list = field(default_factory=list)  # best-so-far objective per evaluation
     params: np.ndarray | None = None  # best parameters (optimize)
     extra: dict = field(default_factory=dict)
-    table: tuple | None = None  # the trajectory as (CSV header, rows (n, k)) when not the forearm's
+    table: tuple | None = None  # the trajectory as (CSV header, rows of shape (n, k))
 
     def trajectory(self) -> tuple[list, np.ndarray]:
         """The run's time history on the motion's samples: (CSV header, rows of shape (n, k)), in the
-        units of a motion file (s, deg, deg/s, deg/s^2; torques N m, positions m), so that it can be
-        read back as ``--motion`` (the simulated theta) or ``--torque-file`` (the applied torque)."""
-        if self.table is not None:
-            return self.table
-        r, inv = self.result, self.inverse
-        theta_acc = np.full(len(r.t), np.nan) if r.qdd is None else r.qdd[:, 2]
-        angles = np.degrees([r.q[:, 2], inv.theta, r.qd[:, 2], inv.theta_dot, theta_acc, inv.theta_ddot])
-        header = ["t", "theta", "theta_desired", "theta_vel", "theta_vel_desired", "theta_acc", "theta_acc_desired",
-                  "torque", "torque_inverse", "x2", "y2"]
-        return header, np.column_stack([r.t, *angles, r.torque, inv.torque, r.q[:, 0], r.q[:, 1]])
-
-
+        units of a motion file (s, deg, deg/s; torques N m), so that it can be read back as
+        ``--motion`` (the simulated angles) or ``--torque-file`` (the applied torques)."""
+        return self.table
 
 
 def noise_seed(spec: RunSpec) -> int | None:
@@ -68,25 +58,13 @@ def base_record(spec: RunSpec) -> dict:
     return record
 
 
-def fill_result(record: dict, result: SimulationResult, inverse) -> dict:
-    from .indicators import rmse_rot_deg, rmse_torque_nm
-
-    record.update(
-        rmse_rot_deg=rmse_rot_deg(result, inverse.theta),
-        rmse_torque_nm=rmse_torque_nm(result, inverse.torque),
-        t_end=result.t_end, status=result.status.code, message=result.message,
-        max_violation=result.max_violation,
-    )
-    return record
-
-
 ALPHA_HINT = "; try a larger --alpha (or a smaller --dt with rk4)"
 
 
 def explained(outcome: RunOutcome, spec: RunSpec) -> RunOutcome:
     """A failed run's message names the likely cause when a constant of the model or the plant
     is implausible (centimetres typed for metres), instead of the generic hint on --alpha."""
-    from .model import implausible
+    from .plausible import implausible
 
     causes = implausible(spec.model + spec.plant)
     record = outcome.record

@@ -8,12 +8,10 @@ import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass
-from functools import lru_cache
 
-from .integrate import Settings, check_integrator
-from .method_options import accepted_options, check_method_options, options_for, options_text
-from .model import Penalty, forearm_with
-from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ, KINEMATICS
+from .integrate import check_integrator
+from .method_options import accepted_options, check_method_options, options_for
+from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
 
 
 COMMANDS = ("control", "optimize", "simulate", "collocate")
@@ -70,53 +68,24 @@ class RunSpec:
                 pass
 
     def _runs(self):
-        """The module carrying out this spec's runs when its model is not the forearm, else None."""
-        from .models import runs
+        """The module carrying out this spec's runs (``fdbench.multibody.runs``, for every model)."""
+        from .multibody import runs
 
-        return runs(self.model_name)
-
-    def settings(self) -> Settings:
-        """The simulation settings: the plant simulated, the nominal model that inverse dynamics
-        and model-based controllers believe, and the desired motion they are given (the forearm's)."""
-        if self._runs() is not None:
-            raise ValueError(f"the {self.model_name} model has no forearm settings")
-        desired, _ = self.motions()
-        nominal = forearm_with(self.model)
-        plant = forearm_with(self.model + self.plant) if self.plant else nominal
-        return Settings(plant, Penalty(self.alpha, self.xi, self.omega), desired,
-                        self.integrator, self.dt, self.rtol, self.atol, nominal=None if plant == nominal else nominal)
+        return runs
 
     def motions(self):
         """(desired, true) motions: the motion given to every method (a noisy capture when
-        ``noise_deg`` > 0) and the one its indicators are measured against."""
-        if self._runs() is not None:
-            return self._runs().motions(self)
-        return _motions(self.kinematics, self.radians, self.cutoff_hz, self.smoothing, self.spline_lambda,
-                        self.sample_dt, self.noise_deg, self.seed or 0, self.capture_hz, dict(self.inputs).get("--motion"))
+        ``noise_deg`` > 0) and the one its indicators are measured against (``JointMotion``)."""
+        return self._runs().motions(self)
 
     def reference(self):
         """The inverse dynamics of the nominal model on the true motion, on its samples: what the
-        indicators are measured against (InverseResult; the model's own for another model)."""
-        from .inverse import inverse_dynamics
-
-        if self._runs() is not None:
-            return self._runs().reference(self)
-        _, truth = self.motions()
-        return inverse_dynamics(None, forearm_with(self.model), truth)
+        indicators are measured against (``multibody.simulation.JointInverse``)."""
+        return self._runs().reference(self)
 
     def describe(self) -> dict:
         """The record's fields that say which motion, noise, filter, model and plant a run used."""
-        if self._runs() is not None:
-            return self._runs().describe(self)
-        desired, truth = self.motions()
-        out = {"motion": desired.name, "duration_s": truth.duration, "samples": len(truth.samples)}
-        if self.kinematics not in KINEMATICS or self.noise_deg:
-            out["derivatives"] = desired.describe().get("derivatives")
-        out["noise_deg"] = self.noise_deg
-        out["model"] = self.model_name
-        out["model_options"] = options_text(self.model) or None
-        out["plant"] = options_text(self.plant) or None
-        return out
+        return self._runs().describe(self)
 
     def validate(self) -> "RunSpec":
         """Raise ValueError with a one-line message for anything out of range; no work done."""
@@ -126,21 +95,13 @@ class RunSpec:
             raise ValueError(f"unknown command {self.command!r}; valid: {', '.join(COMMANDS)}")
         check_integrator(self.integrator)
         check_conditions(self)
-        if self._runs() is not None:
-            self._runs().check(self)
-        else:
-            self.settings()
-        if self.command == "control" and self.controller not in (None, "pd"):
-            from .controllers import CONTROLLERS, make_controller
+        self._runs().check(self)
+        if self.command == "control":
+            from .controllers import CONTROLLERS
 
-            check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
-            make_controller(self.controller, **dict(self.method_options))
-        elif self.command == "control":
-            from .control import check_gain
-
-            for name, gain in (("--kp", self.kp), ("--kd", self.kd)):  # None: scaled per joint (not the forearm)
-                if gain is not None or self._runs() is None:
-                    check_gain(name, gain)
+            if self.controller not in (None, "pd"):
+                check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
+            self._runs().controller(self)  # a ValueError names a bad option or gain
         if self.command == "collocate":
             from .collocation import check_options
 
@@ -228,20 +189,6 @@ FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penal
                 "spline_lambda", "sample_dt", "noise_deg", "capture_hz")
 MAX_NOISE_DEG = 45.0
 MAX_CAPTURE_HZ = 100_000.0
-
-
-@lru_cache(maxsize=64)
-def _motions(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, seed, capture_hz, digest):
-    from .motion import load_motion, noisy
-
-    truth = load_motion(source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt)
-    if digest is not None and digest != motion_digest(source):
-        from .files import BadFile
-
-        raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
-    if not noise_deg:
-        return truth, truth
-    return noisy(truth, noise_deg, seed, capture_hz, cutoff_hz, smoothing, spline_lambda), truth
 
 
 def motion_digest(path) -> str:

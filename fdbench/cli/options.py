@@ -172,7 +172,7 @@ def _with_conditions(command):
 def _warn_implausible(conditions: dict, quiet: bool) -> None:
     """A warning on stderr for each constant a human arm cannot have (the run goes on); constants
     that are refused outright (a negative mass) are left to the error that follows."""
-    from ..model import implausible
+    from ..plausible import implausible
     from ..models import with_changes
 
     try:

@@ -1,12 +1,14 @@
 """The interface of a controller and its registry.
 
-Every controller is one instance of the feedback law compiled in ``dynamics.rk4_feedback``:
+Every controller is one instance of the feedback law the engine's kernels apply per joint
+(``fdbench.multibody.simulation.simulate``):
 
-    tau(t) = tau_ff(t) + kp(t) (theta_d - theta) + kd(t) (theta'_d - theta') + g_c cos(theta)
+    tau(t) = tau_ff(t) + kp (z_d - z) + kd (z'_d - z')        (PD: per-joint gains)
+    tau(t) = tau_ff(t) + K(t) [z_d - z, z'_d - z']            (a gain matrix K(t), shape (J, 2J))
+    tau(t) = M(z) (z''_d + kp e + kd e') + h(z, z')           (computed torque on the nominal model)
 
-A controller designs tau_ff (a torque function) and the ``FeedbackLaw`` (kp, kd, g_c) once per
-run, from the settings' model and kinematics; the simulation then runs without a Python call
-per integration step.
+A controller designs it once per run from a ``Plan`` (the nominal model and the desired motion);
+the simulation then runs without a Python call per integration step.
 """
 
 from __future__ import annotations
@@ -14,9 +16,52 @@ from __future__ import annotations
 import inspect
 import math
 from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
 
-from ..integrate import FeedbackLaw, Settings, TorqueFunction
+import numpy as np
+
 from ..registry import Registry
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a controller designs from: ``engine``, the nominal model's engine
+    (``multibody.engine.Engine``: inverse dynamics, M(z), h); ``model``, its description
+    (``multibody.description.Model``); ``motion``, the desired motion of its J joints
+    (``multibody.motions.JointMotion``)."""
+
+    engine: object
+    model: object
+    motion: object
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        return tuple(self.model.coordinates)
+
+    def feedforward(self):
+        """The nominal model's inverse-dynamics torques on the desired motion, a torque function
+        t (s), shape (k,) -> (k, J) N m."""
+        from ..multibody.simulation import feedforward
+
+        return feedforward(self.engine, self.motion)
+
+
+@dataclass(frozen=True)
+class Design:
+    """A controller's law as the kernels apply it. ``feedforward``: t (s), shape (k,) -> (k, J) N m,
+    or None (none). ``kp``, ``kd``: per-joint gains, shape (J,) (N m/rad, N m s/rad; with
+    ``computed`` the error dynamics' 1/s^2 and 1/s). ``gains``: None or K(t), t shape (k,) ->
+    (k, J, 2J), used instead of kp, kd. ``computed``: computed torque on the nominal model.
+    ``label``: what tau_ff is, for records ("id": the inverse-dynamics torque). ``fields``: the
+    record's extra fields (e.g. the gains per joint)."""
+
+    feedforward: object
+    kp: np.ndarray | float = 0.0
+    kd: np.ndarray | float = 0.0
+    gains: object = None
+    computed: bool = False
+    label: str = "id"
+    fields: dict = field(default_factory=dict)
 
 
 class Controller(ABC):
@@ -26,15 +71,13 @@ class Controller(ABC):
 
     name: str = ""
     summary: str = ""
-    feedforward_label: str = "id"  # what tau_ff is, for records: "id" is the inverse-dynamics torque
 
     @abstractmethod
-    def design(self, settings: Settings) -> tuple[TorqueFunction, FeedbackLaw]:
-        """The feedforward torque tau_ff (t (s), shape (n,) -> N m, shape (n,)) and the feedback
-        law towards the desired motion of ``settings.kinematics``."""
+    def design(self, plan: Plan) -> Design:
+        """The feedforward torques and the feedback law towards ``plan.motion``."""
 
-    def warm_up(self) -> None:
-        """Import what ``design`` needs, so that a run's timing excludes imports."""
+    def warm_up(self, plan: Plan) -> None:
+        """Import or build what ``design`` needs, so that a run's timing excludes it."""
 
     def options(self) -> dict:
         """The options this controller was made with (for records and run hashes)."""
@@ -57,12 +100,17 @@ def accepted_options(name: str, options: dict) -> dict:
 
 
 def check_non_negative(option: str, value: float) -> float:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0):
         raise ValueError(f"{option} must be a non-negative finite number, got {value}")
     return float(value)
 
 
 def check_positive(option: str, value: float) -> float:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0):
         raise ValueError(f"{option} must be a positive finite number, got {value}")
     return float(value)
+
+
+def per_joint(prefix: str, joints, values) -> dict:
+    """Record fields ``<prefix>_<joint>`` of per-joint values."""
+    return {f"{prefix}_{joint}": float(v) for joint, v in zip(joints, values)}

@@ -105,11 +105,11 @@ def n_joints(name: str) -> int:
 
 def named_motions(name: str) -> tuple:
     """The motions model ``name`` knows by name, its default first (any other is a CSV file)."""
-    if name == PAPER:
-        from ..motion import KINEMATICS
+    from ..motion import KINEMATICS
 
-        return tuple(KINEMATICS)
-    return tuple(motion.name for motion in description(name).motions)
+    model = description(name)
+    own = tuple(motion.name for motion in model.motions)
+    return own + (tuple(KINEMATICS) if len(model.coordinates) == 1 else ())  # eq. 5's serve any one joint
 
 
 def default_motion(name: str) -> str:
@@ -123,10 +123,6 @@ def default_motion(name: str) -> str:
 
 def model_keys(name: str) -> tuple:
     """The constants of model ``name`` that --model and --plant KEY=VALUE may change."""
-    if name == PAPER:
-        from ..model import MODEL_KEYS
-
-        return tuple(MODEL_KEYS)
     from ..multibody.description import change_paths
 
     model = description(name)
@@ -136,10 +132,6 @@ def model_keys(name: str) -> tuple:
 def with_changes(name: str, pairs=()):
     """Model ``name`` with some constants changed ((key, value) pairs); ValueError if out of range:
     a ``Forearm`` for the paper's, a ``Model`` description for the others."""
-    if name == PAPER:
-        from ..model import forearm_with
-
-        return forearm_with(pairs)
     from ..multibody.description import with_short_keys
 
     return with_short_keys(description(name), tuple(pairs))
@@ -147,8 +139,6 @@ def with_changes(name: str, pairs=()):
 
 def value_of(name: str, model, key: str) -> float:
     """The value of constant ``key`` (a short key or a path) in ``model`` (from ``with_changes``)."""
-    if name == PAPER:
-        return float(getattr(model, key))
     from ..multibody.description import path_value, short_key_values
 
     values = short_key_values(model)
@@ -158,8 +148,6 @@ def value_of(name: str, model, key: str) -> float:
 def runs(name: str):
     """The module carrying out the runs of model ``name``: None for the paper's forearm (whose runs
     are ``fdbench.experiment``'s own), else ``fdbench.multibody.runs``."""
-    if name == PAPER:
-        return None
     from ..multibody import runs as multibody_runs
 
     return multibody_runs

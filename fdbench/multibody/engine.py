@@ -37,7 +37,7 @@ the matrix's envelope (a band for a chain: the cost grows linearly with the numb
 the angle accelerations follow from the angle constraints' rows. The points' matrix is positive definite for positive masses and
 inertias, and the angle rows' pivots are at least 0.2 d in magnitude, so the formulation has no
 singular configuration: a pivot that is not positive (rank lost) stops a simulation as SINGULAR
-only as a guard, a NaN pivot as NONFINITE, and fdbench.dynamics.COS_TOL has no role here.
+only as a guard, a NaN pivot as NONFINITE.
 
 Mass matrix: each body's natural-coordinate mass matrix on its basic points (Garcia de Jalon and
 Bayo, ch. 3) from its mass, com and inertia; Q_ext: gravity at the com and the loads mapped to the
@@ -58,11 +58,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dynamics import OK, VIOLATION_TOL
 
 from .description import Model, resolved_end
-from .kernels import (ALPHA, BETA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA,
-                      VIOLATION)
+from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
+                      VIOLATION_TOL)
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
@@ -71,7 +70,7 @@ MODES = (PD, COMPUTED, GAINS)  # the feedback laws of ``Engine.simulate``
 
 @dataclass
 class SimResult:
-    """The outcome of ``Engine.simulate``: status (fdbench.dynamics codes: 0 ok, 1 nonfinite,
+    """The outcome of ``Engine.simulate``: status (the kernels' codes: 0 ok, 1 nonfinite,
     2 singular, 3 constraint), the steps done, the joint angles z (rad) and velocities zd (rad/s)
     at the steps, shape (n_steps + 1, J), the largest constraint violation reached (m^2 or m), the
     mixed-coordinate states and their derivatives ``rates`` (n_steps + 1, n_state) and the total

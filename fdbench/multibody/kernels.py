@@ -35,9 +35,12 @@ import math
 
 import numpy as np
 
-from ..dynamics import CONSTRAINT, NONFINITE, OK, SINGULAR
 from ..jit import njit
 from ..population import DEGREES_PER_RADIAN
+
+# a simulation's status codes (``simulation.STATUS_OF_CODE`` names them)
+OK, NONFINITE, SINGULAR, CONSTRAINT = 0, 1, 2, 3
+VIOLATION_TOL = 1e-3  # m (or m^2): a constraint violation beyond this stops a simulation
 
 # named indices into the kernels' arrays
 ALPHA, TWO_XI_OMEGA, OMEGA2, SWITCH_COS, VIOLATION, N_PARAMS = 0, 1, 2, 3, 4, 5  # params

@@ -203,6 +203,8 @@ def joint_motion(name_or_path, model, radians: bool = False, **estimate) -> Join
             return MinimumJerk(spec, model.coordinates)
     from ..motion import KINEMATICS
 
+    if text in KINEMATICS and len(model.coordinates) == 1:  # eq. 5's motions serve any one-joint model
+        return PerJoint([text], model.coordinates)
     if text in KINEMATICS or not (Path(text).exists() or "/" in text or Path(text).suffix):
         from ..registry import unknown_name_message
 

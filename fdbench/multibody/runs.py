@@ -1,8 +1,8 @@
-"""The runs of every model but the paper's forearm, from a ``RunSpec`` (``fdbench.experiment`` hands
-them over): inverse dynamics, open-loop simulation, control (PD per joint with computed
-feedforward, computed torque, LQR), optimisation and direct collocation, on the multibody engine
+"""The runs of every model, from a ``RunSpec`` (``fdbench.runners`` hands them over): inverse
+dynamics, open-loop simulation, control (PD per joint with computed feedforward, computed torque,
+LQR, or a registered controller), optimisation and direct collocation, on the multibody engine
 (``fdbench.multibody``) built from the model's description (a library name or a model file), each
-giving a flat record (the forearm's keys plus per-joint indicators) and a trajectory table.
+giving a flat record (``records.RECORD_FIELDS`` plus per-joint indicators) and a trajectory table.
 
 Indicators for J joints: ``rmse_rot_deg`` is the root mean square over all joints and samples of
 the angle error (deg), ``rmse_torque_nm`` likewise of the torque (N m) against the inverse-dynamics
@@ -11,7 +11,8 @@ torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint
 Files (CSV with a header, names case-insensitive, any order): a motion has ``t`` (s) and one angle
 column per joint (deg, or rad), with optional ``<joint>_vel`` and ``<joint>_acc``; a torque history
 has ``t`` (s) and one column per joint (N m), or ``<joint>_torque`` where the file has them (the
-history of ``inverse --format csv`` or ``--save-trajectory``, whose ``<joint>`` is an angle).
+history of ``inverse --format csv`` or ``--save-trajectory``, whose ``<joint>`` is an angle), and a
+one-joint model's may name its column ``torque``.
 """
 
 from __future__ import annotations
@@ -26,9 +27,6 @@ import numpy as np
 from .. import __version__
 from ..files import BadFile, read_history_csv
 from . import simulation as sim
-
-CONTROLLERS = ("pd", "computed-torque", "lqr")
-
 
 # ---------------------------------------------------------------------- the model and its motion
 def nominal(spec):
@@ -108,16 +106,10 @@ def describe(spec) -> dict:
 def check(spec) -> None:
     """ValueError (one line) for what the engine cannot run, or settings out of range; BadFile for a
     motion file that cannot be used. No simulation is run."""
-    from ..integrate import Settings
-    from ..model import Penalty
+    from ..integrate import check_settings
 
-    if spec.command == "control" and (spec.controller or "pd") not in CONTROLLERS:
-        raise ValueError(f"--controller {spec.controller}: not available with --model {spec.model_name} yet "
-                         f"({', '.join(CONTROLLERS)})")
+    check_settings(spec.integrator, spec.dt, spec.rtol, spec.atol, spec.alpha, spec.xi, spec.omega)
     engine(spec, nominal(spec)), engine(spec)
-    # the integrator's checks of its dt or tolerances, and the penalty's
-    Settings(penalty=Penalty(spec.alpha, spec.xi, spec.omega), integrator=spec.integrator, dt=spec.dt, rtol=spec.rtol,
-             atol=spec.atol)
     desired, _ = motions(spec)
     if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":
         _check_samples_on_grid(spec, desired)
@@ -189,8 +181,10 @@ def _outcome(spec, record: dict, result, inverse, **more):
     record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
                   message=_message(result), max_violation=result.max_violation,
                   **_per_joint("rmse_rot_deg", names, rot_j), **_per_joint("rmse_torque_nm", names, trq_j))
-    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
-    rows = np.column_stack([result.t, np.degrees(result.angles), np.degrees(desired), result.torque, inverse.torque])
+    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_torque", "_torque_inverse")
+                      for j in names]
+    rows = np.column_stack([result.t, *np.degrees([result.angles, desired, result.zd, inverse.velocities]),
+                            result.torque, inverse.torque])
     return RunOutcome(record, result, inverse, table=(header, rows), **more)
 
 
@@ -201,35 +195,28 @@ def _warm_up(spec) -> None:
 
 
 # ---------------------------------------------------------------------- control
-REFERENCE_INERTIA = 0.04  # kg m^2: the paper's forearm about the elbow, for which Kp 80 and Kd 0.3 were tuned
+def controller(spec):
+    """The spec's registered controller (``fdbench.controllers``) with its options; the paper's PD
+    takes the spec's gains (None: scaled per joint)."""
+    from ..controllers import make_controller
+
+    name = spec.controller or "pd"
+    options = {"kp": spec.kp, "kd": spec.kd} if name == "pd" else dict(spec.method_options)
+    return make_controller(name, **options)
 
 
 def pd_gains(spec) -> tuple[np.ndarray, np.ndarray]:
-    """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,): the spec's where given (the same on
-    every joint), else the paper's 80 and 0.3 scaled by the joint's inertia I_j / 0.04 kg m^2, I_j the
-    diagonal entry of the nominal model's mass matrix M(z) at the motion's start. Each joint then
-    has the forearm's closed-loop frequency sqrt(Kp / I) and damping (as if the joints were
-    uncoupled); a joint of the forearm's inertia (the arm's elbow) gets exactly 80 and 0.3."""
-    from ..spec import PAPER_KD, PAPER_KP
+    """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,), of the spec's PD (``controllers.pd.PD``)."""
+    from ..controllers.pd import PD
 
-    z0 = motions(spec)[0](np.zeros(1))[0][0]
-    scale = np.diag(engine(spec, nominal(spec)).mass_matrix(z0)) / REFERENCE_INERTIA
-    return tuple(np.full(len(scale), gain) if gain is not None else paper * scale
-                 for gain, paper in ((spec.kp, PAPER_KP), (spec.kd, PAPER_KD)))
+    return PD(spec.kp, spec.kd).gains(plan(spec))
 
 
-def _gains(spec, controller: str, options: dict):
-    """The law's keyword arguments of ``simulation.simulate`` and the feedforward label."""
-    if controller == "computed-torque":
-        bandwidth, damping = options.get("bandwidth", 20.0), options.get("damping", 1.0)
-        return dict(kp=bandwidth**2, kd=2 * damping * bandwidth, computed=True,
-                    nominal=engine(spec, nominal(spec))), "M(z)*z_ddot_d+h(z,z_dot)"
-    if controller == "lqr":
-        from .lqr import lqr_gains
+def plan(spec):
+    """What a controller designs from: the nominal model's engine and description, the desired motion."""
+    from ..controllers.base import Plan
 
-        return dict(gains=lqr_gains(nominal(spec), motions(spec)[0], **options)), "id"
-    kp, kd = pd_gains(spec)
-    return dict(kp=kp, kd=kd), "id"
+    return Plan(engine(spec, nominal(spec)), nominal(spec), motions(spec)[0])
 
 
 def run(spec, on_evaluation=None, on_start=None):
@@ -244,22 +231,18 @@ def run(spec, on_evaluation=None, on_start=None):
     if spec.command != "control":
         raise ValueError(f"{spec.command}: not available with --model {spec.model_name}")
     _warm_up(spec)
-    controller = spec.controller or "pd"
-    if controller == "lqr":
-        from .lqr import warm_up
-
-        warm_up(nominal(spec))
+    law, known = controller(spec), plan(spec)
+    law.warm_up(known)
     began = time.perf_counter()
     inverse = reference(spec)
-    law, label = _gains(spec, controller, dict(spec.method_options))
-    drive = None if controller == "computed-torque" else sim.feedforward(engine(spec, nominal(spec)), motions(spec)[0])
-    result = _simulate(spec, drive, **law)
+    design = law.design(known)
+    result = _simulate(spec, design.feedforward, kp=design.kp, kd=design.kd, gains=design.gains,
+                       computed=design.computed, nominal=known.engine if design.computed else None)
     runtime = time.perf_counter() - began
     record = base_record(spec)
-    record.update(torque=label, evaluations=1, runtime_s=runtime, controller=controller,
-                  **({"kp": spec.kp, "kd": spec.kd, **_per_joint("kp", joints(spec), law["kp"]),
-                      **_per_joint("kd", joints(spec), law["kd"])} if controller == "pd" else
-                     {"controller_options": options_text(spec.method_options)}))
+    record.update(torque=design.label, evaluations=1, runtime_s=runtime, controller=law.name, **design.fields)
+    if law.name != "pd":
+        record["controller_options"] = options_text(spec.method_options)
     return _outcome(spec, record, result, inverse)
 
 
@@ -281,8 +264,8 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
     elif torque is not None:
         drive, label = torque, getattr(torque, "__name__", "function")
     elif torque_file is not None:
-        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, names,
-                                     preferred=tuple(f"{joint}_torque" for joint in names))
+        preferred = (tuple(f"{joint}_torque" for joint in names),) + ((("torque",),) if len(names) == 1 else ())
+        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, names, preferred)
         drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(names))], axis=-1)  # noqa: E731
         label = f"file:{torque_file}"
         digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
@@ -298,9 +281,9 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
 
 
 def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):
-    from .problem import JointTrackingProblem
+    from ..problem import TrackingProblem
 
-    return JointTrackingProblem(torque, engine(spec), motions(spec)[0], feedforward, penalty_weight,
+    return TrackingProblem(torque, engine(spec), motions(spec)[0], feedforward, penalty_weight,
                                 nominal=engine(spec, nominal(spec)), **integration(spec), **options)
 
 
@@ -335,7 +318,7 @@ def replay(spec, params) -> sim.Simulation:
 
 # ---------------------------------------------------------------------- optimisation and collocation
 def _optimize(spec, on_evaluation, on_start):
-    """Shooting optimisation of per-joint torque parameters (``problem.JointTrackingProblem``)."""
+    """Shooting optimisation of per-joint torque parameters (``fdbench.problem.TrackingProblem``)."""
     from ..experiment import base_record
     from ..method_options import options_text
     from ..optimizers import make_optimizer
@@ -386,9 +369,8 @@ def _collocate(spec):
     collocation's own RMSE over every joint at its nodes (against the true motion), IPOPT's status,
     iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
     arrays of shape (N + 1, J))."""
-    from ..collocation import record_fields
+    from ..collocation import collocate, record_fields
     from ..experiment import base_record
-    from .collocation import collocate
 
     options = dict(spec.method_options)
     _warm_up(spec)

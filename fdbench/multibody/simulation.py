@@ -26,7 +26,7 @@ from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrat
 from .engine import Engine
 from .kernels import COMPUTED, GAINS, PD, VIOLATION
 
-STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # fdbench.dynamics codes
+STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # the kernels' codes
 
 
 @dataclass(frozen=True)
