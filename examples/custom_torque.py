@@ -17,7 +17,9 @@ import sys
 import numpy as np
 
 from fdbench.experiment import optimize_spec, run
-from fdbench.integrate import Settings
+from fdbench.multibody.description import find_model
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.motions import joint_motion
 from fdbench.optimizers import make_optimizer
 from fdbench.problem import TrackingProblem
 from fdbench.torques import TORQUES, TorqueParameterisation
@@ -71,15 +73,17 @@ def main(argv: list[str]) -> int:
         print("usage: custom_torque.py [BUDGET >= 1]", file=sys.stderr)
         return 2
 
-    # 1. the building blocks: a TrackingProblem and an optimiser from the registry
-    problem = TrackingProblem(PiecewiseLinearTorque(knots=8), Settings(), feedforward=False)
+    # 1. the building blocks: the forearm's engine and motion, a TrackingProblem, an optimiser from the registry
+    forearm = find_model("forearm")
+    problem = TrackingProblem(PiecewiseLinearTorque(knots=8), Engine(forearm), joint_motion("paper", forearm))
     optimizer = make_optimizer("bfgs")
     start = problem.simulate(problem.p0)
     result = optimizer.minimize(problem.objective_scaled, problem.x0, budget, seed=0)
     best = problem.simulate(result.x * problem.scale)
     show("pwl + bfgs through the library (TrackingProblem, make_optimizer):", {
-        "initial_rmse_rot_deg": problem.indicators(start)["rmse_rot_deg"],
-        **problem.indicators(best),
+        "initial_rmse_rot_deg": problem.rmse_deg(start),
+        "rmse_rot_deg": problem.rmse_deg(best),
+        "rmse_torque_nm": float(np.sqrt(np.mean((best.torque - problem.inverse.torque) ** 2))),
         "best_objective": result.fun,
         "evaluations": result.evaluations,
         "t_end": best.t_end,
