@@ -267,11 +267,20 @@ def test_centimetres_typed_for_metres_are_warned_about_and_named_as_the_cause():
     assert "likely cause: L12 = 30 m" in record["message"] and "--alpha" not in record["message"]
 
 
-@pytest.mark.parametrize("change, words", [("m=1000", "m = 1000 kg"), ("I1=40", "I1 = 40 kg m^2")])
+@pytest.mark.parametrize("change, words", [("m=0.01", "m = 0.01 kg"), ("I1=40", "I1 = 40 kg m^2")])
 def test_implausible_masses_and_inertias_are_warned_about(change, words):
     result = invoke(["inverse", "--plant", change, "-f", "json"])
     assert result.exit_code == 0, result.stderr
     assert words in result.stderr
+
+
+def test_a_mass_the_inertia_about_the_elbow_cannot_hold_is_refused():
+    """I1 is the inertia about the elbow: 1000 kg at L1G = 0.11 m alone has 12.1 kg m^2 about it,
+    more than I1's 0.04, so no body has these constants (its inertia about the centre of mass would
+    be negative)."""
+    result = invoke(["inverse", "--plant", "m=1000", "-f", "json"])
+    assert result.exit_code == 2 and result.stdout == ""
+    assert "m=1000" in result.stderr and "inertia" in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
 def test_plausible_constants_and_quiet_runs_have_no_warning():

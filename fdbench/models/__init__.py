@@ -1,11 +1,10 @@
-"""The models fdbench simulates, by name or file.
+"""The models fdbench simulates, by name or file, all on the multibody engine (``fdbench.multibody``).
 
-* ``forearm``: Table 1's 1-DOF forearm (``fdbench.model.Forearm``), the paper's model, carried out
-  by ``fdbench.experiment``'s own runs (eq. 5's motions, exact gradients, the paper's kernels).
-* Every other model of the library (``library/*.toml``: ``arm2``, ``leg3``) and any model file
-  (TOML or JSON, ``fdbench.multibody.description``): carried out by the multibody engine
-  (``fdbench.multibody.runs``), with the motions the file declares (or a CSV file) and its short
-  keys (``[keys]``) or paths into the description for ``--model``/``--plant KEY=VALUE``.
+* The library (``library/*.toml``): ``forearm`` (Table 1's 1-DOF forearm, the paper's model and the
+  default; its motions are eq. 5's ``paper`` and ``exact``, which serve any one-joint model),
+  ``arm2``, ``leg3``; and any model file (TOML or JSON, ``fdbench.multibody.description``), with the
+  motions the file declares (or a CSV file) and its short keys (``[keys]``) or paths into the
+  description for ``--model``/``--plant KEY=VALUE``.
 * An OpenSim model file (``.osim``): converted on the fly by ``fdbench.multibody.osim`` (cached by
   content), its notes given by ``import_notes``.
 """
@@ -89,14 +88,12 @@ def _imported(name: str, content: bytes):
 
 def summary(name: str) -> str:
     """One line saying what the model ``name`` is."""
-    if name == PAPER:
-        return "the paper's 1-DOF forearm (Table 1): the elbow fixed at the origin"
     return description(name).description or f"model file {name}"
 
 
 def joints(name: str) -> tuple[str, ...]:
     """The joints (coordinates) of model ``name``, in the model's order: columns of its files."""
-    return ("theta",) if name == PAPER else tuple(description(name).coordinates)
+    return tuple(description(name).coordinates)
 
 
 def n_joints(name: str) -> int:
@@ -130,8 +127,8 @@ def model_keys(name: str) -> tuple:
 
 
 def with_changes(name: str, pairs=()):
-    """Model ``name`` with some constants changed ((key, value) pairs); ValueError if out of range:
-    a ``Forearm`` for the paper's, a ``Model`` description for the others."""
+    """The description (``Model``) of model ``name`` with some constants changed ((key, value) pairs of
+    short keys or paths); ValueError if out of range."""
     from ..multibody.description import with_short_keys
 
     return with_short_keys(description(name), tuple(pairs))
@@ -145,9 +142,3 @@ def value_of(name: str, model, key: str) -> float:
     return values[key] if key in values else path_value(model, key)
 
 
-def runs(name: str):
-    """The module carrying out the runs of model ``name``: None for the paper's forearm (whose runs
-    are ``fdbench.experiment``'s own), else ``fdbench.multibody.runs``."""
-    from ..multibody import runs as multibody_runs
-
-    return multibody_runs
