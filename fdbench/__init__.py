@@ -1,8 +1,10 @@
 """fdbench: a benchmark of trajectory-tracking methods for forward dynamic simulation.
 
-A 1-DOF forearm must follow a prescribed elbow rotation; fdbench compares PD control with
-computed feedforward against optimised torque histories (ANN, cubic spline, parametric
-function) by RMSE of rotation (deg), RMSE of torque (N m) and runtime (s).
+A body (the paper's 1-DOF forearm, a library model, your own model file or an OpenSim model) must
+follow a prescribed motion of its joints; fdbench compares PD control with computed feedforward,
+computed torque, LQR, direct collocation and optimised torque histories (ANN, cubic spline,
+parametric function) by RMSE of rotation (deg), RMSE of torque (N m) and runtime (s), all on one
+planar multibody engine (``fdbench.multibody``).
 
 The entry points for a script (imported on first use, so ``import fdbench`` stays cheap):
 
@@ -10,7 +12,7 @@ The entry points for a script (imported on first use, so ``import fdbench`` stay
   full specification; ``run(spec)`` carries it out and returns a ``RunOutcome`` (``record``:
   the flat record of the command line; ``result``: the simulation; ``history``; ``params``).
 - ``simulate(torque=None, ...)``: open-loop forward dynamics, by default of the
-  inverse-dynamics torque; ``inverse_dynamics()``: that torque on the 1001 samples.
+  inverse-dynamics torques; ``inverse_dynamics(...)``: those torques on the motion's samples.
 - ``TORQUES``, ``OPTIMIZERS``: the registries of torque parameterisations and optimisers.
 - ``load_report(db, ...)``: a stored report's table as a pandas DataFrame; ``load_runs(db)``:
   every stored run.
@@ -20,7 +22,7 @@ __version__ = "0.1.0"
 
 _ENTRY_POINTS = {
     "RunSpec": "experiment", "RunOutcome": "experiment", "run": "experiment", "control_spec": "experiment",
-    "optimize_spec": "experiment", "inverse_dynamics": "inverse", "simulate": "api", "load_report": "api",
+    "optimize_spec": "experiment", "inverse_dynamics": "api", "simulate": "api", "load_report": "api",
     "load_runs": "api", "TORQUES": "torques", "OPTIMIZERS": "optimizers",
 }
 

@@ -38,6 +38,15 @@ def simulate(torque=None, **settings):
     return run_simulation(spec, torque=torque)
 
 
+def inverse_dynamics(**settings):
+    """The nominal model's inverse dynamics on the motion's samples (``multibody.simulation.JointInverse``:
+    ``t`` (s), ``angles`` (rad), ``velocities``, ``accelerations`` and ``torque`` (N m), each of
+    shape (n, J)); ``settings``: the fields of ``RunSpec`` (``model_name``, ``kinematics``, ``model``...)."""
+    from .experiment import RunSpec
+
+    return RunSpec(command="simulate", **settings).validate().reference()
+
+
 def load_runs(db) -> "pandas.DataFrame":  # noqa: F821
     """Every run stored in the results database ``db`` (a path), one row each: the record's
     fields (indicators in deg, N m, s) plus ``id``, ``created_at`` (UTC) and ``machine``."""

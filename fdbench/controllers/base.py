@@ -112,5 +112,5 @@ def check_positive(option: str, value: float) -> float:
 
 
 def per_joint(prefix: str, joints, values) -> dict:
-    """Record fields ``<prefix>_<joint>`` of per-joint values."""
-    return {f"{prefix}_{joint}": float(v) for joint, v in zip(joints, values)}
+    """Record fields ``<prefix>_<joint>`` of per-joint values; none for one joint (the overall value)."""
+    return {f"{prefix}_{joint}": float(v) for joint, v in zip(joints, values)} if len(joints) > 1 else {}

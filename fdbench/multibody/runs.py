@@ -25,6 +25,7 @@ from functools import lru_cache
 import numpy as np
 
 from .. import __version__
+from ..controllers.base import per_joint
 from ..files import BadFile, read_history_csv
 from . import simulation as sim
 
@@ -158,10 +159,6 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     return record, header, rows
 
 
-def _per_joint(prefix: str, names, values) -> dict:
-    return {f"{prefix}_{joint}": float(v) for joint, v in zip(names, values)}
-
-
 def _message(result) -> str:
     text = result.status.value
     if not result.success:
@@ -180,11 +177,9 @@ def _outcome(spec, record: dict, result, inverse, **more):
     trq, trq_j = sim.rmse_torque_nm(result, inverse.torque)
     record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
                   message=_message(result), max_violation=result.max_violation,
-                  **_per_joint("rmse_rot_deg", names, rot_j), **_per_joint("rmse_torque_nm", names, trq_j))
-    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_torque", "_torque_inverse")
-                      for j in names]
-    rows = np.column_stack([result.t, *np.degrees([result.angles, desired, result.zd, inverse.velocities]),
-                            result.torque, inverse.torque])
+                  **per_joint("rmse_rot_deg", names, rot_j), **per_joint("rmse_torque_nm", names, trq_j))
+    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
+    rows = np.column_stack([result.t, np.degrees(result.angles), np.degrees(desired), result.torque, inverse.torque])
     return RunOutcome(record, result, inverse, table=(header, rows), **more)
 
 
