@@ -80,10 +80,8 @@ def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str 
     what the drawn angle is (e.g. 'filtered')."""
     plt = _pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
-    one_joint = np.ndim(inverse.torque) == 1
-    angles = inverse.theta[:, None] if one_joint else inverse.angles
-    torques = inverse.torque[:, None] if one_joint else inverse.torque
-    joints = ("elbow",) if one_joint else inverse.joints
+    one_joint = len(inverse.joints) == 1
+    angles, torques, joints = inverse.angles, inverse.torque, inverse.joints
     for j, joint in enumerate(joints):
         line = ("-", "--", ":", "-.")[j % 4]
         top.plot(inverse.t, np.degrees(angles[:, j]), color="k", linestyle=line,
@@ -92,11 +90,11 @@ def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str 
         if samples is not None:
             top.plot(samples[0], np.degrees(samples[1][:, j]), linestyle="none", marker=".", markersize=2.5,
                      color="tab:orange", alpha=0.7, zorder=0, label=f"{joint}: raw samples")
-    where = f"{inverse.kinematics} kinematics" if one_joint else f"motion {inverse.motion}"
+    where = f"motion {inverse.motion}"
     top.set_title(f"Figure 2: desired rotation and inverse-dynamics torque\n({where})" + (f"\n{note}" if note else ""),
                   fontsize=11 if not note else 9)
     top.set_ylabel("rotation (deg)" if one_joint else "joint angle (deg)")
-    bottom.set_ylabel("elbow torque (N m)" if one_joint else "joint torque (N m)")
+    bottom.set_ylabel(f"{joints[0]} torque (N m)" if one_joint else "joint torque (N m)")
     bottom.set_xlabel("time (s)")
     if not one_joint or reference:
         top.legend(fontsize=7.5)
@@ -109,19 +107,19 @@ def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str 
 def tracking_figure(inverse, curves, path: Path, title: str) -> None:
     """Figures 5 and 6 in three panels against time (s): the rotation (deg) with the desired one
     drawn dashed on top, each method's error against it (deg), and the applied elbow torque (N m)
-    against the inverse-dynamics torque. ``curves`` are (label, style, theta (rad), torque (N m)),
-    arrays of the 1001 samples; ``style`` comes from ``method_style``."""
+    against the inverse-dynamics torque, for a model of one joint. ``curves`` are (label, style,
+    angle (rad), torque (N m)), arrays of the motion's samples; ``style`` comes from ``method_style``."""
     plt = _pyplot()
     fig, (top, middle, bottom) = plt.subplots(3, 1, figsize=(8, 9), sharex=True,
                                               gridspec_kw={"height_ratios": [3, 2, 2]})
-    t = inverse.t
+    t, desired = inverse.t, inverse.angles[:, 0]
     for label, style, theta, torque in curves:
         top.plot(t, np.degrees(theta), label=label, **style)
-        middle.plot(t, np.degrees(theta - inverse.theta), label=label, **style)
+        middle.plot(t, np.degrees(theta - desired), label=label, **style)
         bottom.plot(t, torque, label=label, **style)
-    top.plot(t, np.degrees(inverse.theta), label="desired rotation", **DESIRED)
+    top.plot(t, np.degrees(desired), label="desired rotation", **DESIRED)
     middle.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)  # the desired rotation: no error
-    bottom.plot(t, inverse.torque, label="inverse-dynamics torque", **INVERSE_TORQUE)
+    bottom.plot(t, inverse.torque[:, 0], label="inverse-dynamics torque", **INVERSE_TORQUE)
     top.set_ylabel("rotation (deg)")
     top.set_title(title, fontsize=11)
     top.legend(fontsize=7.5, loc="upper left")
@@ -215,7 +213,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
     def link(name, path):
         written[name] = os.path.relpath(path, base)
 
-    one_joint = np.ndim(inverse.torque) == 1
+    one_joint = len(inverse.joints) == 1
     path = directory / "figure2_inverse_dynamics.png"
     spec = plan.control or plan.all_specs()[0]
     samples, note, reference = figure2_samples(spec)
@@ -224,12 +222,15 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
     link("Figure 2: desired rotation and inverse-dynamics torque", path)
 
     def angles(result):
-        return result.theta if one_joint else result.angles
+        return result.angles[:, 0] if one_joint else result.angles
+
+    def torques(result):
+        return result.torque[:, 0] if one_joint else result.torque
 
     control_curves, reference = [], None
     if plan.control is not None:
         result = run(plan.control).result
-        control_curves = [("PD control + feedforward", method_style(None), angles(result), result.torque)]
+        control_curves = [("PD control + feedforward", method_style(None), angles(result), torques(result))]
         reference = runs[plan.control.hash()]["record"].get("rmse_rot_deg")
     for table, name in ((2, "Figure 5: without feedforward"), (3, "Figure 6: with feedforward")):
         curves = list(control_curves)
@@ -245,7 +246,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
             median_seed = int(np.argsort(values)[len(values) // 2])
             if stored[median_seed]["params"] is not None:
                 result = replay(specs[median_seed], stored[median_seed]["params"])
-                curves.append((row.name, style, angles(result), result.torque))
+                curves.append((row.name, style, angles(result), torques(result)))
             histories = [r["history"] for r in stored if r["history"]]
             if histories:
                 series.append((row.name, style, histories))

@@ -296,8 +296,8 @@ def legend(rows: list[Row], joint_names: tuple = (), duration_s: float | None = 
 
 def _legend_for(rows: list[Row], inverse) -> list[str]:
     """The legend of these rows on the motion of ``inverse`` (its joints, duration, kinematics)."""
-    names = tuple(getattr(inverse, "joints", ()) or ()) if np.ndim(inverse.torque) > 1 else ()
-    return legend(rows, names, float(inverse.t[-1]), getattr(inverse, "kinematics", None))
+    names = tuple(inverse.joints) if len(inverse.joints) > 1 else ()
+    return legend(rows, names, float(inverse.t[-1]), inverse.motion)
 
 
 def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict, figures: dict | None = None,
@@ -308,7 +308,7 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     command that refreshes every run; ``extra_rows`` are the rows of ``beyond`` (the section's
     lines), counted in the comparison."""
     out = ["# fdbench report", ""]
-    arm = getattr(inverse, "torque", np.zeros(1)).ndim > 1  # a model of several joints
+    arm = len(inverse.joints) > 1  # a model of several joints
     if arm:
         intro = ("laid out as Tables 2 and 3 of the paper. The paper has no figures for this model, so none stand "
                  "beside ours; `fdbench report` gives the forearm's.")
@@ -319,7 +319,8 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
     else:
         intro = ("laid out as Tables 2 and 3 of the paper. These runs use other conditions than the paper's (the "
                  "motion, its noise or the model: see the settings), so the paper's figures are not set beside them.")
-    body = (f"the planar two-segment arm ({', '.join(inverse.joints)})" if arm else "a 1-DOF forearm")
+    body = (f"a planar model of {len(inverse.joints)} joints ({', '.join(inverse.joints)})" if arm
+            else "a 1-DOF forearm" if inverse.joints == ("theta",) else f"a one-joint model ({inverse.joints[0]})")
     out += [
         f"Trajectory tracking in the forward dynamic simulation of {body}: PD control{' per joint' if arm else ''} "
         f"with computed feedforward against optimised torque histories, {intro}",
@@ -390,9 +391,11 @@ def _inverse_text(inverse, runtime_s: float) -> list[str]:
     """The inverse-dynamics paragraph: the torque's range per joint, the samples, the runtime."""
     span = f"{len(inverse.t)} samples of [0, {float(inverse.t[-1]):g}] s"
     took = f"computed in {_num(runtime_s * 1e3)} ms"
-    if inverse.torque.ndim == 1:
-        return [f"Elbow torque from {_num(float(inverse.torque.min()))} to {_num(float(inverse.torque.max()))} N m over "
-                f"{span} ({inverse.kinematics} kinematics); {took} (paper: {PAPER_INVERSE_RUNTIME_S} s)."]
+    if len(inverse.joints) == 1:
+        forearm = inverse.joints == ("theta",)
+        return [f"{'Elbow' if forearm else inverse.joints[0]} torque from {_num(float(inverse.torque.min()))} to "
+                f"{_num(float(inverse.torque.max()))} N m over {span} ({inverse.motion} kinematics); {took}"
+                + (f" (paper: {PAPER_INVERSE_RUNTIME_S} s)." if forearm else ".")]
     ranges = ", ".join(f"{joint} from {_num(float(inverse.torque[:, j].min()))} to "
                        f"{_num(float(inverse.torque[:, j].max()))} N m" for j, joint in enumerate(inverse.joints))
     return [f"Joint torques: {ranges}, over {span} (motion {inverse.motion}); {took}."]
@@ -518,11 +521,15 @@ MEASURED = [
     "(`fdbench optimize --torque cs --opt bfgs --budget B -f json`; the whole matrix: "
     "`fdbench report --db budget.sqlite --budget B --seeds 3 -f csv`)",
     "- **Initial step of CMA-ES (ANN with feedforward, Table 3).** The median RMSE_rot over 5 seeds grows with "
-    "`--sigma0` (0.2, the default, then 0.6, 1 and 3), and with the largest step most runs end worse than the "
-    "zero additional torque they start from, as the paper's 27.383 deg is. CMA-ES never evaluates its start "
-    "point, so a step that is large against the scale of the ANN's weights makes every sample worse than its "
-    "start. This explains how a run can end above its start, not the paper's exact figure: its step size is "
-    "not published. "
+    "`--sigma0` (0.2, the default, then 0.6, 1 and 3): CMA-ES never evaluates its start point, so a step that "
+    "is large against the scale of the ANN's weights makes its first samples far worse than the start. Yet "
+    "with the largest step most runs still end better than the zero additional torque they start from, whereas "
+    "the paper's 27.383 deg is far worse than it. Large weights swing the forearm through theta = +-90 deg, "
+    "where the paper's angle constraint is singular: fdbench's engine goes on there (the constraint's cos "
+    "form), while fdbench's earlier forearm kernel, in the paper's form alone, stopped such samples, and with it "
+    "most runs of the largest step ended worse than their start. So a large step explains a run ending above "
+    "its start only together with simulations that fail at the singular configuration; the paper's step size "
+    "and its handling of failed simulations are not published. "
     "(`fdbench report --db sigma.sqlite --torque ann --opt cmaes --feedforward --no-control --sigma0 S -f csv`)",
 ]
 UNEXPLAINED = [

@@ -819,7 +819,7 @@ def test_the_budget_experiment_holds():
 
 def test_the_cmaes_step_experiment_holds(tmp_path):
     text = _measured("Initial step")
-    assert "with the largest step most runs end worse than the zero additional torque" in text
+    assert "with the largest step most runs still end better than the zero additional torque" in text
     medians, successes = [], []
     for sigma in (1, 3):  # the two large steps
         frame = read_csv(invoke("report", "--db", tmp_path / "sigma.sqlite", "--torque", "ann", "--opt", "cmaes",
@@ -827,7 +827,7 @@ def test_the_cmaes_step_experiment_holds(tmp_path):
                                 "--jobs", 1, "--format", "csv", "-q").stdout)
         medians.append(frame.iloc[0].rmse_rot_deg_median)
         successes.append(round(frame.iloc[0].success_rate * 5))
-    assert medians[1] > medians[0] and successes[1] < 3
+    assert medians[1] > medians[0] and successes[1] >= 3
 
 
 # ----------------------------------------------------------------------------- what happened

@@ -41,12 +41,14 @@ def test_noise_sweep_has_one_spec_per_seed_and_level_and_pd_runs_once_without_no
 
 
 def test_mismatch_changes_the_plant_only():
+    from fdbench.models import value_of
+    from fdbench.multibody.runs import nominal, plant
+
     s = sweep("mismatch", (-10.0, 0.0, 10.0))
     for level in (-10.0, 10.0):
         (spec,) = s.specs[("PD + feedforward", level)]
-        settings = spec.settings()
-        assert settings.model.I1 == pytest.approx(0.04 * (1 + level / 100))
-        assert settings.nominal_model.I1 == pytest.approx(0.04)
+        assert value_of("forearm", plant(spec), "I1") == pytest.approx(0.04 * (1 + level / 100))
+        assert value_of("forearm", nominal(spec), "I1") == pytest.approx(0.04)
 
 
 def test_zero_mismatch_is_the_plain_run(tmp_path):

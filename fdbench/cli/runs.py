@@ -220,8 +220,7 @@ def collocate(
 def _collocation_torque_text(solution, spec) -> str:
     """The torque found on the half-step grid of the run's RK4 over the motion's span (so that
     'simulate --torque-file' with the same --dt replays exactly what collocate replayed), as CSV
-    t (s) and torque (N m): one column ``torque`` for the forearm, one per joint for another model
-    (the arm: t, shoulder, elbow)."""
+    t (s) and one torque column per joint (N m): t, theta for the forearm; t, shoulder, elbow for the arm."""
     import numpy as np
 
     from ..files import csv_text
@@ -231,7 +230,7 @@ def _collocation_torque_text(solution, spec) -> str:
     duration = spec.motions()[0].duration
     half = np.linspace(0.0, duration, 2 * steps(spec.dt, duration) + 1)
     torque = solution.torque_samples(half).reshape(len(half), -1)
-    names = ["torque"] if solution.torque.ndim == 1 else list(joints(spec.model_name))
+    names = list(joints(spec.model_name))
     return csv_text(["t", *names], ([f"{t:.17g}", *(f"{q:.17g}" for q in row)] for t, row in zip(half, torque)))
 
 

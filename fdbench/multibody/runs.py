@@ -235,8 +235,9 @@ def run(spec, on_evaluation=None, on_start=None):
                        computed=design.computed, nominal=known.engine if design.computed else None)
     runtime = time.perf_counter() - began
     record = base_record(spec)
-    record.update(torque=design.label, evaluations=1, runtime_s=runtime, controller=law.name, **design.fields)
-    if law.name != "pd":
+    name = spec.controller or "pd"  # the name it is registered under
+    record.update(torque=design.label, evaluations=1, runtime_s=runtime, controller=name, **design.fields)
+    if name != "pd":
         record["controller_options"] = options_text(spec.method_options)
     return _outcome(spec, record, result, inverse)
 
