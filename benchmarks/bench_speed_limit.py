@@ -1,5 +1,5 @@
-"""The forearm against its speed limit: fdbench's costs beside the same algorithm in C, measured in
-one run.
+"""The forearm against its speed limit: fdbench's costs on the multibody engine beside the same
+algorithm in C, measured in one run.
 
 Baseline, measured in the same run: ../shared/bench/pd_forearm.c (or the file given by
 --c-source), compiled with ``cc -O2`` into a temporary folder and run: PD (kp 80, kd 0.3) plus the
@@ -11,20 +11,19 @@ the time of one simulation (mean of 2000 in one process). Its RMSE must equal th
 fdbench, in this process, on one thread (``population.set_threads(1)``), each after a warm-up
 (kernels loaded, cma imported), best of several rounds:
 
-  (a) kernel      the compiled forearm kernel alone (``dynamics.rk4`` on integrate's prepared
-                  arrays: feedforward and reference on the half-step grid, buffers allocated once)
+  (a) kernel      the engine's compiled RK4 alone on the library's forearm
+                  (``multibody.kernels.rk4`` under the same PD law, feedforward and reference on
+                  the half-step grid, buffers allocated once)
   (b) one-shot    ``run(control_spec())``'s runtime_s: the reference, the inverse dynamics, the
-                  feedforward, the simulation and its resampling
+                  controller's design, the simulation and its samples
   (c) CMA-ES      runtime_s / evaluations of ``run(optimize_spec(torque, "cmaes", ...))``, budget
                   BUDGET, for cs and ann without and pf with feedforward: the path ``fdbench
                   optimize`` takes. Beside it, where the time goes, per evaluation: the
                   population's simulations and eq. 18 (``TrackingProblem.objectives_scaled`` on
                   one generation of the cell's size, torques excluded), its torques
-                  (``torques_on_grid``), cma's own work (ask, tell, set-up and the budget's
+                  (``torques_on_grid_batch``), cma's own work (ask, tell, set-up and the budget's
                   records: the same optimiser and options on a trivial objective), and the rest
                   (the problem's set-up, the final simulation of the best parameters)
-  (d) engine      the multibody engine's forearm (``Engine(find_model("forearm")).simulate_pd``,
-                  the same PD law and feedforward) per simulation
 
 Each is printed in ms and as a ratio to C; the goal is at most 1.5x for a CMA-ES evaluation.
 The C loop runs again before every CMA-ES run and its least disturbed time is the baseline (its
@@ -91,53 +90,29 @@ def best_per_call(fn, rounds=ROUNDS, calls=CALLS) -> float:
     return best_of(fn, rounds, calls)
 
 
-def paper_grid():
-    """The paper motion's half-step grid as integrate prepares it: n steps, the reference rotation
-    (rad) and rate (rad/s), and the inverse-dynamics feedforward (N m) on it."""
-    from fdbench.integrate import Settings, half_step_reference, steps
-    from fdbench.inverse import Feedforward
+def forearm_kernel():
+    """(a): one call of the engine's compiled RK4 on the forearm under PD plus feedforward, and the
+    RMSE of rotation (deg) it gives at the steps."""
+    from kernel_call import half_step_grid, model_and_motion, rk4_call
 
-    settings = Settings()
-    n = steps(settings.dt)
-    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
-    return settings, n, ref_th, ref_w, np.array(Feedforward(settings.nominal_model, settings.kinematics)(half))
-
-
-def rmse_deg(theta, ref_th) -> float:
-    """RMSE (deg) of theta at the steps (rad) against the reference on the half-step grid."""
-    return float(np.degrees(np.sqrt(np.mean((theta - ref_th[::2]) ** 2))))
-
-
-def kernel_call():
-    """(a): one call of the compiled kernel under PD plus feedforward, and the RMSE (deg) it gives."""
-    from fdbench import dynamics
-    from fdbench.integrate import constants, initial_state
-
-    settings, n, ref_th, ref_w, tau = paper_grid()
-    states, qdd, applied = np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1)
-    y0, consts = initial_state(settings.kinematics, settings.model), constants(settings)
-
-    def call():
-        return dynamics.rk4(y0, settings.dt, n, tau, ref_th, ref_w, KP, KD, consts, states, qdd, applied)
-
+    engine, motion = model_and_motion("forearm")
+    grid = half_step_grid(engine, motion)
+    call = rk4_call(engine, grid, KP, KD)
     call()
-    return call, rmse_deg(states[:, 2], ref_th)
+    z = engine.joints_from_state(call.states)[0]
+    return call, float(np.degrees(np.sqrt(np.mean((z - grid.ref[::2]) ** 2))))
 
 
-def engine_call():
-    """(d): one ``Engine.simulate_pd`` of the library's forearm under the same law, and its RMSE (deg)."""
-    from fdbench.multibody.description import find_model
-    from fdbench.multibody.engine import Engine
-
-    settings, n, ref_th, ref_w, tau = paper_grid()
-    engine = Engine(find_model("forearm"))
-    ref, refd, tau = (np.ascontiguousarray(a[:, None]) for a in (ref_th, ref_w, tau))
-    kp, kd = np.full(1, KP), np.full(1, KD)
-
-    def call():
-        return engine.simulate_pd(ref_th[:1], ref_w[:1], settings.dt, n, tau, ref, refd, kp, kd)
-
-    return call, rmse_deg(call().z[:, 0], ref_th)
+def c_loop_ms(source: Path | None = None, runs: int = 3) -> float | None:
+    """ms of one simulation of the C loop (source, default ../shared/bench/pd_forearm.c) compiled
+    with cc -O2 in a temporary folder, the least disturbed of ``runs`` runs; None without a C
+    compiler or the source."""
+    source = source or default_c_source()
+    if shutil.which("cc") is None or not source.is_file():
+        return None
+    with tempfile.TemporaryDirectory() as folder:
+        binary = compile_c(source, folder)
+        return min(run_c(binary)[1] for _ in range(runs))
 
 
 def control_runtime(runs: int) -> tuple[float, float]:
@@ -157,11 +132,11 @@ def cell_timers(torque: str, feedforward: bool):
     import fdbench
     from fdbench.optimizers import make_optimizer
     from fdbench.problem import TrackingProblem
-    from fdbench.torques import TORQUES, make_torque
+    from kernel_call import model_and_motion
 
     spec = fdbench.optimize_spec(torque, "cmaes", feedforward, seed=0, budget=BUDGET)
-    options = TORQUES[torque].optimizer_defaults.get("cmaes", {})
-    problem = TrackingProblem(make_torque(torque), feedforward=feedforward)
+    options = dict(spec.optimizer_options)
+    problem = TrackingProblem(torque, *model_and_motion("forearm"), feedforward, **dict(spec.torque_options))
     size = options.get("popsize") or 4 + int(3 * np.log(problem.n_params))  # cma's default generation
     X = problem.x0 + options.get("sigma0", 0.1) * np.random.default_rng(0).standard_normal((size, problem.n_params))
     optimizer = make_optimizer("cmaes", **options)
@@ -172,7 +147,7 @@ def cell_timers(torque: str, feedforward: bool):
 
     def parts():
         population = best_per_call(lambda: problem.objectives_scaled(X), 3, 10) / size
-        torques = best_per_call(lambda: problem.torques_on_grid(X * problem.scale), 3, 10) / size
+        torques = best_per_call(lambda: problem.torques_on_grid_batch(X * problem.scale), 3, 10) / size
         cma = best_per_call(lambda: optimizer.minimize(lambda x: float(x @ x), problem.x0, BUDGET, seed=0,
                                                        batch=lambda P: np.einsum("ij,ij->i", P, P)), 1, 1) / BUDGET
         return np.array([population - torques, torques, cma])
@@ -204,10 +179,9 @@ def main(c_source: Path, runs: int) -> None:
               f"{control_rmse:.{digits}f}")
         if f"{control_rmse:.{digits}f}" != c_text:
             raise SystemExit("error: the C loop and fdbench control disagree: not the same algorithm")
-        kernel, kernel_rmse = kernel_call()
-        engine, engine_rmse = engine_call()
-        rows = [("(a) forearm kernel, dynamics.rk4", best_per_call(kernel), f"rmse {kernel_rmse:.{digits}f}"),
-                ("(b) one-shot run(control_spec())", one_shot, "inverse dynamics, feedforward, resampling")]
+        kernel, kernel_rmse = forearm_kernel()
+        rows = [("(a) engine forearm kernel, kernels.rk4", best_per_call(kernel), f"rmse {kernel_rmse:.{digits}f}"),
+                ("(b) one-shot run(control_spec())", one_shot, "inverse dynamics, PD design, samples")]
         parts = []
         c_times = [c_ms]
         for torque, ff in CELLS:  # runs, their parts and the C loop alternately: each sees the same load
@@ -218,7 +192,6 @@ def main(c_source: Path, runs: int) -> None:
                 per, split = min(per, one_run()), np.minimum(split, cell_parts())
             rows.append((f"(c) CMA-ES {torque}{' + ff' if ff else ''} per evaluation", per, ""))
             parts.append((rows[-1][0], per, split))
-        rows.append(("(d) engine forearm, simulate_pd", best_per_call(engine), f"rmse {engine_rmse:.{digits}f}"))
         c_ms = min(c_times)  # the least disturbed
     c_s = c_ms / 1e3
     print(f"{'single thread, best of ' + str(runs):<42}{'ms':>9}{'x C':>8}")
