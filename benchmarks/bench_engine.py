@@ -1,16 +1,19 @@
 """Cost of one RK4 step of the multibody engine for chains of 1, 2, 3, 5, 8 and 12 bodies against
-the forearm's closed-form kernel (fdbench.dynamics), measured in the same run.
+the engine's forearm (the library's one-body model), measured in the same run.
 
-Both: the compiled RK4 kernel alone (the same inputs every call), dt = 1 ms, 1 s of motion, PD
-feedback (kp 80, kd 0.3 per joint) plus the inverse-dynamics feedforward. The chain's bodies are
-0.3 m bars of 1 kg; its joints follow slow sines clear of the angle constraint's switch. Printed:
-the cost per step (us), its ratio to the forearm's, and the growth law fitted to the ratios
-(least squares of ratio = a + b N; the goal is at most 2N, a banded solve makes it linear).
+Both: the compiled RK4 kernel alone (``multibody.kernels.rk4``, the same inputs every call), dt =
+1 ms, 1 s of motion, PD feedback (kp 80, kd 0.3 per joint) plus the inverse-dynamics feedforward;
+the forearm on the paper motion (eq. 5). The chain's bodies are 0.3 m bars of 1 kg; its joints
+follow slow sines clear of the angle constraint's switch. Printed: the cost per step (us), its
+ratio to the forearm's, and the growth law fitted to the ratios (least squares of ratio = a + b N;
+the goal is at most 2N, a banded solve makes it linear). With a C compiler, the forearm's step
+against that of the same algorithm in C (../shared/bench/pd_forearm.c, cc -O2, as
+bench_speed_limit.py builds and runs it).
 
-Then the cost per step of leg3 (three bodies) under each feedback law of the one RK4 driver
-(fdbench.multibody.kernels.rk4): PD, computed torque (the inverse dynamics at every stage) and a
-gain matrix; and the library's models (forearm, arm2, leg3) under PD by the kernel alone, with
-their ratio to the forearm's closed-form kernel (the goal for the engine's forearm: at most 1.3x).
+Then the cost per step of leg3 (three bodies) under each feedback law of the one RK4 driver: PD,
+computed torque (the inverse dynamics at every stage) and a gain matrix; and the library's models
+(forearm, arm2, leg3) under PD by the kernel alone, with their ratio to the forearm's step on the
+paper motion.
 
 Run: python benchmarks/bench_engine.py
 """
@@ -19,25 +22,24 @@ from __future__ import annotations
 
 import math
 import platform
-import timeit
 
 import numpy as np
 
 import fdbench
-from fdbench import dynamics
-from fdbench.integrate import Settings, constants, half_step_reference, initial_state, steps
-from fdbench.inverse import elbow_torque
 from fdbench.multibody import engine as mb
 from fdbench.multibody import kernels
-
 from fdbench.multibody.description import GROUND, Body, Joint, Model
+from bench_speed_limit import c_loop_ms
+from kernel_call import half_step_grid, model_and_motion, rk4_call
+from timing import best_of
 
 REPEAT, NUMBER = 5, 10
 SIZES = (1, 2, 3, 5, 8, 12)
 
 
 def best_per_call(fn) -> float:
-    return min(timeit.repeat(fn, repeat=REPEAT, number=NUMBER)) / NUMBER
+    """Seconds of one call of fn: the best of REPEAT rounds of NUMBER calls."""
+    return best_of(fn, REPEAT, NUMBER)
 
 
 def chain(n_bodies: int) -> Model:
@@ -49,15 +51,10 @@ def chain(n_bodies: int) -> Model:
 
 
 def forearm_kernel():
-    settings = Settings(kinematics="paper")
-    n = steps(settings.dt)
-    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
-    tau = np.array(elbow_torque(half, settings.model, settings.kinematics))
-    y0, consts = np.array(initial_state(settings.kinematics, settings.model)), constants(settings)
-    states, qdd, applied = np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1)
-    kp, kd = np.full(1, 80.0), np.full(1, 0.3)
-    return n, lambda: dynamics.rk4_feedback(y0, 1.0 / n, n, tau, ref_th, ref_w, kp, kd, 0.0, consts, states, qdd,
-                                            applied)
+    """The engine's forearm on the paper motion under PD plus feedforward: (steps, call)."""
+    engine, motion = model_and_motion("forearm")
+    grid = half_step_grid(engine, motion)
+    return grid.n, rk4_call(engine, grid, 80.0, 0.3)
 
 
 def chain_kernel(n_bodies: int):
@@ -131,12 +128,19 @@ def main():
     n, fn = forearm_kernel()
     fn()
     forearm = best_per_call(fn) / n
-    print(f"forearm (closed form): {forearm * 1e6:.3f} us per RK4 step")
+    print(f"forearm (engine, paper motion): {forearm * 1e6:.3f} us per RK4 step")
+    c_ms = c_loop_ms()
+    if c_ms is None:
+        print("C loop: no C compiler (cc) or no ../shared/bench/pd_forearm.c, not measured")
+    else:
+        wall, cpu = (ms / 1e3 / n for ms in c_ms)
+        print(f"C loop (pd_forearm.c, cc -O2): {wall * 1e6:.3f} us per step (wall), {cpu * 1e6:.3f} (CPU time); "
+              f"engine forearm = {forearm / wall:.2f} x C (wall), {forearm / cpu:.2f} x C (CPU time)")
     ratios = []
     for size in SIZES:
         n, fn = chain_kernel(size)
         code, done, _ = fn()
-        assert (code, done) == (dynamics.OK, n), f"chain of {size}: status {code} at step {done}"
+        assert (code, done) == (kernels.OK, n), f"chain of {size}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         ratios.append(per_step / forearm)
         print(f"chain of {size:2d}: {per_step * 1e6:7.3f} us per step = {ratios[-1]:6.2f} x forearm "
@@ -147,13 +151,13 @@ def main():
     for name, mode in (("PD", kernels.PD), ("computed torque", kernels.COMPUTED), ("gain matrix", kernels.GAINS)):
         n, fn = leg_kernel(mode)
         code, done, _ = fn()
-        assert (code, done) == (dynamics.OK, n), f"leg3 {name}: status {code} at step {done}"
+        assert (code, done) == (kernels.OK, n), f"leg3 {name}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         print(f"leg3, {name:15s}: {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
     for name in ("forearm", "arm2", "leg3"):
         n, fn = library_kernel(name)
         code, done, _ = fn()
-        assert (code, done) == (dynamics.OK, n), f"{name}: status {code} at step {done}"
+        assert (code, done) == (kernels.OK, n), f"{name}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         print(f"library {name:8s} (PD): {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
 

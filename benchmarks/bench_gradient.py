@@ -1,46 +1,77 @@
-"""Cost of an exact gradient: one value-and-gradient pass (the RK4 simulation with its forward
-sensitivities, ``TrackingProblem.value_and_gradient``) against one plain evaluation of the
-objective (the same RK4 simulation without sensitivities, ``TrackingProblem.objective``), and
-against the finite-difference gradient it replaces (n_params + 1 plain evaluations), for each
-torque parameterisation at its default size. Both are measured in the same run, interleaved,
-REPEATS rounds of CALLS calls each after a warm-up; each figure is the minimum over the rounds.
-Then the optimisation the issue names: cs + bfgs, no feedforward, budget 200, fd and exact.
+"""Cost of an exact gradient on the engine's models: one value-and-gradient pass (the RK4 simulation
+with its forward sensitivities, ``TrackingProblem.value_and_gradient_scaled``) against one plain
+evaluation of the objective (the same RK4 simulation without sensitivities,
+``TrackingProblem.objective_scaled``), and against the finite-difference gradient it replaces
+(n_params + 1 plain evaluations), on the forearm (paper motion), arm2 and leg3 (their default
+motions) and a tree (a trunk with two children, one joined between its parent's basic points; a
+1 s minimum-jerk motion), for each torque parameterisation at its default size. Both are measured
+in the same run, interleaved, REPEATS rounds of CALLS calls each after a warm-up; each figure is
+the minimum over the rounds. Then an optimisation on the forearm: cs + bfgs, no feedforward,
+budget 200, with the finite-difference and with the exact gradient.
 
 Run: python benchmarks/bench_gradient.py
 """
 
 from __future__ import annotations
 
+import math
 import platform
 
 import numpy as np
 
 from fdbench.experiment import optimize_spec, run
+from fdbench.multibody import description as d
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.motions import MinimumJerk
 from fdbench.problem import TrackingProblem
-from fdbench.torques import make_torque
+from kernel_call import model_and_motion
 from timing import best_of
 
-CALLS = 50
-REPEATS = 7
+CALLS = 10
+REPEATS = 5
+MODELS = ("forearm", "arm2", "leg3", "tree")
 CASES = [("cs", False), ("cs", True), ("pf", True), ("ann", False)]
 
+
+def tree():
+    """(Engine, motion) of a three-body tree: a trunk hanging from ground with two children, one
+    at its end, one at a point between its basic points, a load on the second; every joint moves
+    by about 0.3 rad in 1 s."""
+    bodies = (d.Body("trunk", 5.0, (0.2, 0.02), 0.08, end=(0.4, 0.0)), d.Body("left", 2.0, (0.15, 0.0), 0.02),
+              d.Body("right", 1.5, (0.12, 0.01), 0.015, end=(0.25, 0.0)))
+    joints = (d.Joint("root", "pin", d.GROUND, "trunk", (0.0, 0.0), (0.0, 0.0), offset=-math.pi / 2),
+              d.Joint("left_joint", "pin", "trunk", "left", (0.4, 0.0), (0.0, 0.0), offset=1.2),
+              d.Joint("right_joint", "pin", "trunk", "right", (0.2, 0.05), (0.0, 0.0), offset=-1.0))
+    model = d.Model("tree", (0.0, -9.81), bodies, joints, loads=(d.Load("right", (0.25, 0.0), (0.0, -5.0)),))
+    motion = d.MotionSpec("move", "minimum-jerk", 1.0, (("root", 0.0), ("left_joint", 0.3), ("right_joint", -0.2)),
+                          (("root", 0.15), ("left_joint", -0.2), ("right_joint", 0.4)))
+    return Engine(model), MinimumJerk(motion, model.coordinates)
+
+
+def per_call(problem) -> tuple[float, float]:
+    """Seconds of one plain evaluation and of one value-and-gradient pass near the start."""
+    x = problem.x0 + 0.01 * np.random.default_rng(0).standard_normal(problem.n_params)
+    problem.objective_scaled(x), problem.value_and_gradient_scaled(x)  # warm-up
+    plain, exact = [], []
+    for _ in range(REPEATS):
+        plain.append(best_of(lambda: problem.objective_scaled(x), 1, CALLS))
+        exact.append(best_of(lambda: problem.value_and_gradient_scaled(x), 1, CALLS))
+    return min(plain), min(exact)
 
 
 def main() -> None:
     print(f"{platform.processor() or platform.machine()}, python {platform.python_version()}")
-    print(f"{'torque':<8}{'ff':<5}{'P':>4}{'objective ms':>14}{'value+grad ms':>15}{'ratio':>8}{'fd/exact':>10}")
-    for name, ff in CASES:
-        problem = TrackingProblem(make_torque(name), feedforward=ff)
-        x = problem.x0 + 0.01 * np.random.default_rng(0).standard_normal(problem.n_params)
-        problem.objective_scaled(x), problem.value_and_gradient_scaled(x)  # warm-up
-        plain, exact = [], []
-        for _ in range(REPEATS):
-            plain.append(best_of(lambda: problem.objective_scaled(x), 1, CALLS))
-            exact.append(best_of(lambda: problem.value_and_gradient_scaled(x), 1, CALLS))
-        p, e = min(plain), min(exact)
-        fd = (problem.n_params + 1) * p
-        print(f"{name:<8}{str(ff):<5}{problem.n_params:>4}{1e3 * p:>14.3f}{1e3 * e:>15.3f}{e / p:>8.2f}{fd / e:>10.1f}")
-    print("\ncs + bfgs, no feedforward, budget 200:")
+    print(f"{'model':<9}{'torque':<8}{'ff':<6}{'P':>4}{'objective ms':>14}{'value+grad ms':>15}{'ratio':>8}"
+          f"{'fd/exact':>10}")
+    for name in MODELS:
+        engine, motion = tree() if name == "tree" else model_and_motion(name)
+        for torque, ff in CASES:
+            problem = TrackingProblem(torque, engine, motion, ff)
+            p, e = per_call(problem)
+            fd = (problem.n_params + 1) * p
+            print(f"{name:<9}{torque:<8}{str(ff):<6}{problem.n_params:>4}{1e3 * p:>14.3f}{1e3 * e:>15.3f}"
+                  f"{e / p:>8.2f}{fd / e:>10.1f}")
+    print("\nforearm, cs + bfgs, no feedforward, budget 200:")
     for gradient in ("fd", "exact"):
         record = run(optimize_spec("cs", "bfgs", budget=200, gradient=gradient)).record
         print(f"  --gradient {gradient:<6} rmse_rot_deg {record['rmse_rot_deg']:.4f}  evaluations {record['evaluations']:>3}"

@@ -2,11 +2,11 @@
 
 For each torque parameterisation (ann, cs without feedforward; pf with feedforward, as in the
 paper's tables) and each of bfgs and cmaes, one optimisation of 200 evaluations with the default
-integrator (compiled RK4, dt = 1 ms, paper kinematics) is timed after a warm-up run (so kernel
-compilation or loading, the ``cma`` import and the ANN pre-training, which is cached, are
-excluded). The time spent integrating in such a run is measured as the time of the same number of
-calls of ``fdbench.integrate.simulate_rk4_on_grid`` on a fixed torque array (the
-inverse-dynamics torque on the half-step grid), so
+integrator (the engine's compiled RK4, dt = 1 ms, the forearm on the paper motion) is timed after
+a warm-up run (so kernel compilation or loading, the ``cma`` import and the ANN pre-training, which
+is cached, are excluded). The time spent integrating in such a run is measured as the time of the
+same number of calls of the engine's RK4 alone (``multibody.kernels.rk4``, open loop, buffers
+allocated once) on a fixed torque array (the inverse-dynamics torque on the half-step grid), so
 
     overhead = (total - integrating) / integrating
 
@@ -14,9 +14,9 @@ is the cost of everything else: torque evaluation, the objective (eq. 18), the o
 The integrating time counts evaluations + 1 simulations (the run simulates its best parameters
 once more for the record). The optimisation and its integrating time are measured alternately,
 REPEATS times each, so both see the same machine load; each figure is the minimum over the
-repeats (the least disturbed by other load). The objective calls the RK4 kernel directly (no
-resampling, preallocated buffers), so ``simulate_rk4_on_grid`` slightly over-states the
-integrating time, and the overhead could come out negative.
+repeats (the least disturbed by other load). A BFGS evaluation simulates one candidate, a CMA-ES
+generation its whole population in one compiled call; both reuse their buffers as the baseline
+does, so the overhead could come out slightly negative.
 
 Run: python benchmarks/bench_optimize.py
 """
@@ -31,9 +31,9 @@ import scipy
 
 import fdbench
 from fdbench.experiment import optimize_spec, run
-from fdbench.integrate import Settings, half_step_reference, simulate_rk4_on_grid, steps, warm_up
-from fdbench.inverse import Feedforward
+from fdbench.multibody.simulation import warm_up
 from fdbench.optimizers import make_optimizer
+from kernel_call import half_step_grid, model_and_motion, rk4_call
 
 BUDGET = 200
 REPEATS = 7
@@ -44,19 +44,19 @@ CELLS = [  # (torque, optimizer, feedforward)
 ]
 
 
-def integrating_time(calls: int, settings: Settings, tau: np.ndarray) -> float:
-    """Seconds for ``calls`` RK4 simulations of the fixed torque tau (half-step grid)."""
+def integrating_time(calls: int, simulate) -> float:
+    """Seconds for ``calls`` calls of simulate (one RK4 simulation each)."""
     start = time.perf_counter()
     for _ in range(calls):
-        simulate_rk4_on_grid(tau, settings)
+        simulate()
     return time.perf_counter() - start
 
 
 def main() -> None:
     wall = time.perf_counter()
-    settings = Settings()  # what optimize_spec's runs use: rk4, dt = 1 ms, paper kinematics
-    half, _, _ = half_step_reference(steps(settings.dt), settings.kinematics)
-    tau = np.array(Feedforward(settings.model, settings.kinematics)(half))
+    engine, motion = model_and_motion("forearm")  # what optimize_spec's runs use: rk4, dt = 1 ms, paper motion
+    grid = half_step_grid(engine, motion)
+    simulate = rk4_call(engine, grid)  # open loop on the inverse-dynamics torques
 
     # warm-up: kernels, optimiser imports (cma), ANN pre-training cache, one short run per cell
     warm_up()
@@ -64,7 +64,7 @@ def main() -> None:
         make_optimizer(name).warm_up()
     for torque, optimizer, feedforward in CELLS:
         run(optimize_spec(torque, optimizer, feedforward, seed=0, budget=5))
-    integrating_time(5, settings, tau)
+    integrating_time(5, simulate)
 
     rows = []
     for torque, optimizer, feedforward in CELLS:
@@ -75,7 +75,7 @@ def main() -> None:
             evaluations.add(record["evaluations"])
             rmse.add(record["rmse_rot_deg"])
             # the run simulated `evaluations` times for the objective, and once more for the record
-            integrating.append(integrating_time(record["evaluations"] + 1, settings, tau))
+            integrating.append(integrating_time(record["evaluations"] + 1, simulate))
         assert len(evaluations) == 1 and len(rmse) == 1, "repeated runs with one seed must agree"
         total, integ = min(totals), min(integrating)
         rows.append((torque, optimizer, "yes" if feedforward else "no", evaluations.pop(), total, integ,
@@ -83,7 +83,7 @@ def main() -> None:
 
     print(f"fdbench {fdbench.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
           f"python {platform.python_version()}, {platform.machine()}")
-    print(f"optimisation of {BUDGET} evaluations, rk4 dt {settings.dt * 1e3:g} ms, {settings.kinematics} kinematics, "
+    print(f"optimisation of {BUDGET} evaluations, rk4 dt {grid.dt * 1e3:g} ms, forearm, {motion.name} motion, "
           f"seed 0; minimum over {REPEATS} runs")
     header = ("torque", "optimizer", "ff", "evals", "total s", "integrating s", "overhead %", "rmse_rot_deg")
     print("  ".join(f"{h:>13}" if i >= 3 else f"{h:<9}" for i, h in enumerate(header)))

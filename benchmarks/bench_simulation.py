@@ -1,105 +1,71 @@
-"""Runtime of one 1-second PD simulation (kp 80, kd 0.3, paper kinematics): the compiled RK4 of
-``fdbench.integrate.simulate`` against scipy ``solve_ivp`` RK45 with a pure-Python right-hand
-side (the un-compiled source of the numba kernel), plus ``fdbench.control.pd_control`` end to end.
+"""Runtime of one PD simulation (the controller's gains per joint plus the inverse-dynamics
+feedforward, each model's default motion: the forearm's paper motion, arm2's reach) by the
+engine's compiled RK4 (dt = 1 ms) against scipy's ``solve_ivp`` (DOP853 and RK45, rtol 1e-6,
+atol 1e-9) on the same problem: ``fdbench.multibody.simulation.simulate`` with integrator rk4,
+dop853 and rk45 (the adaptive methods call the engine's compiled right-hand side once per
+evaluation from Python). Plus ``run(control_spec())`` end to end (inverse dynamics, the
+controller's design, the simulation). Each figure is the best of several rounds after a warm-up.
 
 Run: python benchmarks/bench_simulation.py
 """
 
 from __future__ import annotations
 
-import math
 import platform
 import time
-import timeit
 
 import numpy as np
 import scipy
-from scipy.integrate import solve_ivp
 
 import fdbench
-from fdbench import dynamics
-from fdbench.control import feedforward, pd_control
-from fdbench.indicators import rmse_rot_deg
-from fdbench.integrate import Settings, SimulationResult, Status, initial_state, simulate, warm_up
-from fdbench.inverse import inverse_dynamics
-from fdbench.motion import desired_motion, sample_times
+from fdbench.experiment import control_spec, run
+from fdbench.multibody import simulation as sim
+from kernel_call import model_and_motion
+from timing import best_of
 
-KP, KD = 80.0, 0.3
-SETTINGS = Settings(kinematics="paper")  # compiled RK4, dt = 1 ms
+MODELS = ("forearm", "arm2")
+INTEGRATORS = (("rk4", 7, 20), ("dop853", 3, 1), ("rk45", 3, 1))  # (integrator, rounds, calls per round)
 RTOL, ATOL = 1e-6, 1e-9
 
 
-def python_rhs(ff, consts, kinematics):
-    """Right-hand side of eq. 12 in pure Python: the numba kernel's Python source
-    (``accelerations.py_func``), the same feedforward torque and the same PD law."""
-    accel = dynamics.accelerations.py_func
+def pd_gains(engine, model_name: str, motion):
+    """The PD controller's gains per joint (N m/rad, N m s/rad), shape (J,) each: the forearm's
+    80 and 0.3, scaled for other models (``controllers.pd.PD``)."""
+    from fdbench.controllers.base import Plan
+    from fdbench.controllers.pd import PD
+    from fdbench.models import description
 
-    def rhs(t, y):
-        ref_th, ref_w, _ = desired_motion(t, kinematics)
-        tau = float(ff(np.array([t]))[0]) + KP * (float(ref_th) - y[2]) + KD * (float(ref_w) - y[5])
-        ax, ay, ath, _ = accel(y[0], y[1], y[2], y[3], y[4], y[5], tau, consts)
-        return np.array([y[3], y[4], y[5], ax, ay, ath])
-
-    return rhs
-
-
-def simulate_python(ff, consts):
-    ts = sample_times()
-    return solve_ivp(python_rhs(ff, consts, SETTINGS.kinematics), (0.0, 1.0),
-                     initial_state(SETTINGS.kinematics, SETTINGS.model), method="RK45",
-                     t_eval=ts, rtol=RTOL, atol=ATOL)
-
-
-def as_result(sol) -> SimulationResult:
-    ts = sample_times()
-    q = np.full((len(ts), 3), np.nan)
-    qd = np.full((len(ts), 3), np.nan)
-    q[: sol.y.shape[1]], qd[: sol.y.shape[1]] = sol.y[:3].T, sol.y[3:].T
-    status = Status.SUCCESS if sol.status == 0 else Status.SOLVER
-    return SimulationResult(ts, q, qd, np.full(len(ts), np.nan), float(sol.t[-1]), status, math.nan,
-                            "python-rk45", rhs_evaluations=int(sol.nfev))
-
-
-def best(stmt, number, repeat):
-    """Minimum time (s) of one call over ``repeat`` batches of ``number`` calls."""
-    return min(timeit.repeat(stmt, number=number, repeat=repeat)) / number
+    return PD().gains(Plan(engine, description(model_name), motion))
 
 
 def main() -> None:
     start = time.perf_counter()
-    ff = feedforward(SETTINGS)  # one feedforward object, reused (its memo holds the torque grid)
-    consts = dynamics.kernel_constants(SETTINGS.model, SETTINGS.penalty)
-    theta_desired = inverse_dynamics(kinematics=SETTINGS.kinematics).theta
-
-    # warm up: load or compile the kernels for every signature used below
-    warm_up()
-    compiled = simulate(ff, SETTINGS, KP, KD)
-    pd_control(KP, KD, SETTINGS)
-
-    t_rk4 = best(lambda: simulate(ff, SETTINGS, KP, KD), number=20, repeat=7)
-    t_pd = best(lambda: pd_control(KP, KD, SETTINGS), number=20, repeat=7)
-    sol = simulate_python(ff, consts)
-    t_py = best(lambda: simulate_python(ff, consts), number=1, repeat=3)
-
-    python = as_result(sol)
-    rot_rk4 = rmse_rot_deg(compiled, theta_desired)
-    rot_py = rmse_rot_deg(python, theta_desired)
-
     print(f"fdbench {fdbench.__version__}, numpy {np.__version__}, scipy {scipy.__version__}, "
           f"python {platform.python_version()}, {platform.machine()}")
-    print("PD control, kp 80 N m/rad, kd 0.3 N m s/rad, paper kinematics, t in [0, 1] s "
-          "(min over repeats)")
-    rows = [
-        ("compiled RK4 (dt 1 ms), fdbench simulate()", t_rk4,
-         f"rmse_rot_deg = {rot_rk4:.6f}  ({compiled.rhs_evaluations} rhs evaluations, {compiled.status.name})"),
-        (f"scipy RK45 (rtol {RTOL:g}, atol {ATOL:g}), Python rhs", t_py,
-         f"rmse_rot_deg = {rot_py:.6f}  ({python.rhs_evaluations} rhs evaluations, {python.status.name})"),
-        ("fdbench pd_control() incl. feedforward", t_pd, "(the paper reports 75 ms for its PD simulation)"),
-    ]
-    width = max(len(label) for label, _, _ in rows)
-    for label, seconds, note in rows:
-        print(f"  {label:<{width}}  {seconds * 1e3:9.3f} ms   {note}")
-    print(f"  {'speed-up (Python RK45 / compiled RK4)':<{width}}  {t_py / t_rk4:9.1f} x")
+    print(f"PD with feedforward, t in [0, duration], adaptive methods at rtol {RTOL:g}, atol {ATOL:g} "
+          "(best of several rounds)")
+    sim.warm_up(adaptive=True)
+    for name in MODELS:
+        engine, motion = model_and_motion(name)
+        kp, kd = pd_gains(engine, name, motion)
+        ff = sim.feedforward(engine, motion)
+        desired = sim.inverse_dynamics(None, engine, motion).angles
+        print(f"{name} ({motion.name} motion, {engine.n_joints} joint(s), kp {np.round(kp, 3)}, kd {np.round(kd, 4)}):")
+        times = {}
+        for integrator, rounds, calls in INTEGRATORS:
+            def simulate():
+                return sim.simulate(ff, engine, motion, kp, kd, integrator=integrator, rtol=RTOL, atol=ATOL)
+
+            result = simulate()
+            times[integrator] = best_of(simulate, rounds, calls)
+            evaluations = result.rhs_evaluations or 4 * round(motion.duration / 1e-3)
+            print(f"  {integrator:<7}{times[integrator] * 1e3:9.3f} ms  {times[integrator] / times['rk4']:7.1f} x rk4"
+                  f"   rmse_rot_deg {sim.rmse_deg(result, desired)[0]:.6g}  ({evaluations} rhs evaluations, "
+                  f"{result.status.name})")
+        spec = control_spec(model_name=name)
+        run(spec)
+        one_shot = min(run(spec).record["runtime_s"] for _ in range(7))
+        print(f"  run(control_spec()) end to end: {one_shot * 1e3:.3f} ms")
     print(f"total benchmark time: {time.perf_counter() - start:.1f} s")
 
 

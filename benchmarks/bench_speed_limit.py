@@ -1,5 +1,5 @@
-"""The forearm against its speed limit: fdbench's costs beside the same algorithm in C, measured in
-one run.
+"""The forearm against its speed limit: fdbench's costs on the multibody engine beside the same
+algorithm in C, measured in one run.
 
 Baseline, measured in the same run: ../shared/bench/pd_forearm.c (or the file given by
 --c-source), compiled with ``cc -O2`` into a temporary folder and run: PD (kp 80, kd 0.3) plus the
@@ -11,27 +11,30 @@ the time of one simulation (mean of 2000 in one process). Its RMSE must equal th
 fdbench, in this process, on one thread (``population.set_threads(1)``), each after a warm-up
 (kernels loaded, cma imported), best of several rounds:
 
-  (a) kernel      the compiled forearm kernel alone (``dynamics.rk4`` on integrate's prepared
-                  arrays: feedforward and reference on the half-step grid, buffers allocated once)
+  (a) kernel      the engine's compiled RK4 alone on the library's forearm
+                  (``multibody.kernels.rk4`` under the same PD law, feedforward and reference on
+                  the half-step grid, buffers allocated once)
   (b) one-shot    ``run(control_spec())``'s runtime_s: the reference, the inverse dynamics, the
-                  feedforward, the simulation and its resampling
+                  controller's design, the simulation and its samples
   (c) CMA-ES      runtime_s / evaluations of ``run(optimize_spec(torque, "cmaes", ...))``, budget
                   BUDGET, for cs and ann without and pf with feedforward: the path ``fdbench
                   optimize`` takes. Beside it, where the time goes, per evaluation: the
                   population's simulations and eq. 18 (``TrackingProblem.objectives_scaled`` on
                   one generation of the cell's size, torques excluded), its torques
-                  (``torques_on_grid``), cma's own work (ask, tell, set-up and the budget's
+                  (``torques_on_grid_batch``), cma's own work (ask, tell, set-up and the budget's
                   records: the same optimiser and options on a trivial objective), and the rest
                   (the problem's set-up, the final simulation of the best parameters)
-  (d) engine      the multibody engine's forearm (``Engine(find_model("forearm")).simulate_pd``,
-                  the same PD law and feedforward) per simulation
 
 Each is printed in ms and as a ratio to C; the goal is at most 1.5x for a CMA-ES evaluation.
 The C loop runs again before every CMA-ES run and its least disturbed time is the baseline (its
 median is printed beside it). C's figure is a mean over one block of 2000 simulations (about
 0.25 s), fdbench's are the best of short rounds: on a busy machine the C block is the more likely
 to be interrupted, which flatters the ratios; compare runs whose C minimum is the same. The
-machine's load average is printed.
+columns 'CPU ms' and its 'x C' compare CPU times instead (user and system time, which other
+processes do not inflate; C's over its block of 2000 simulations, the kernel's over as many calls,
+a CMA-ES run's over the whole ``run`` call, its warm-up included): on a busy machine the fairer
+comparison. The machine's load
+average is printed.
 
 Run: python benchmarks/bench_speed_limit.py
 """
@@ -39,17 +42,20 @@ Run: python benchmarks/bench_speed_limit.py
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import platform
 import re
+import resource
 import shutil
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
-from timing import best_of
+from timing import best_of, cpu_per_call
 
 GOAL = 1.5  # x C, for a CMA-ES evaluation
 BUDGET = 200
@@ -58,6 +64,7 @@ ROUNDS, CALLS = 7, 50  # kernel timings: best of ROUNDS rounds of CALLS calls
 KP, KD = 80.0, 0.3
 CELLS = [("cs", False), ("pf", True), ("ann", False)]
 C_FILE = Path("shared", "bench", "pd_forearm.c")
+C_REPETITIONS = 2000  # simulations per run of the C loop (its reps)
 
 
 def default_c_source() -> Path:
@@ -77,13 +84,18 @@ def compile_c(source: Path, folder: str) -> Path:
     return binary
 
 
-def run_c(binary: Path) -> tuple[str, float]:
-    """One run of the C loop: (its RMSE of rotation as printed, deg; ms per simulation)."""
+def run_c(binary: Path) -> tuple[str, float, float]:
+    """One run of the C loop: (its RMSE of rotation as printed, deg; ms per simulation as it
+    prints it, wall time; ms per simulation in CPU time, the process's user + system time over its
+    REPETITIONS simulations, which a busy machine's other work does not inflate)."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     out = subprocess.run([str(binary)], check=True, capture_output=True, text=True).stdout
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     match = re.search(r"rmse_deg\s+(\S+)\s+per_sim_ms\s+(\S+)", out)
     if match is None:
         raise SystemExit(f"error: unexpected output of the C loop: {out.strip()!r}")
-    return match[1], float(match[2])
+    cpu_s = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    return match[1], float(match[2]), 1e3 * cpu_s / C_REPETITIONS
 
 
 def best_per_call(fn, rounds=ROUNDS, calls=CALLS) -> float:
@@ -91,53 +103,40 @@ def best_per_call(fn, rounds=ROUNDS, calls=CALLS) -> float:
     return best_of(fn, rounds, calls)
 
 
-def paper_grid():
-    """The paper motion's half-step grid as integrate prepares it: n steps, the reference rotation
-    (rad) and rate (rad/s), and the inverse-dynamics feedforward (N m) on it."""
-    from fdbench.integrate import Settings, half_step_reference, steps
-    from fdbench.inverse import Feedforward
+def forearm_kernel():
+    """(a): one call of the engine's compiled RK4 on the forearm under PD plus feedforward, and the
+    RMSE of rotation (deg) it gives at the steps."""
+    from kernel_call import half_step_grid, model_and_motion, rk4_call
 
-    settings = Settings()
-    n = steps(settings.dt)
-    half, ref_th, ref_w = half_step_reference(n, settings.kinematics)
-    return settings, n, ref_th, ref_w, np.array(Feedforward(settings.nominal_model, settings.kinematics)(half))
-
-
-def rmse_deg(theta, ref_th) -> float:
-    """RMSE (deg) of theta at the steps (rad) against the reference on the half-step grid."""
-    return float(np.degrees(np.sqrt(np.mean((theta - ref_th[::2]) ** 2))))
-
-
-def kernel_call():
-    """(a): one call of the compiled kernel under PD plus feedforward, and the RMSE (deg) it gives."""
-    from fdbench import dynamics
-    from fdbench.integrate import constants, initial_state
-
-    settings, n, ref_th, ref_w, tau = paper_grid()
-    states, qdd, applied = np.empty((n + 1, 6)), np.empty((n + 1, 3)), np.empty(n + 1)
-    y0, consts = initial_state(settings.kinematics, settings.model), constants(settings)
-
-    def call():
-        return dynamics.rk4(y0, settings.dt, n, tau, ref_th, ref_w, KP, KD, consts, states, qdd, applied)
-
+    engine, motion = model_and_motion("forearm")
+    grid = half_step_grid(engine, motion)
+    call = rk4_call(engine, grid, KP, KD)
     call()
-    return call, rmse_deg(states[:, 2], ref_th)
+    z = engine.joints_from_state(call.states)[0]
+    return call, float(np.degrees(np.sqrt(np.mean((z - grid.ref[::2]) ** 2))))
 
 
-def engine_call():
-    """(d): one ``Engine.simulate_pd`` of the library's forearm under the same law, and its RMSE (deg)."""
-    from fdbench.multibody.description import find_model
-    from fdbench.multibody.engine import Engine
+def c_loop_ms(source: Path | None = None, runs: int = 3) -> tuple[float, float] | None:
+    """ms of one simulation of the C loop (source, default ../shared/bench/pd_forearm.c) compiled
+    with cc -O2 in a temporary folder, in wall time and in CPU time, each the least of ``runs``
+    runs; None without a C compiler or the source."""
+    source = source or default_c_source()
+    if shutil.which("cc") is None or not source.is_file():
+        return None
+    with tempfile.TemporaryDirectory() as folder:
+        binary = compile_c(source, folder)
+        found = [run_c(binary)[1:] for _ in range(runs)]
+    return min(wall for wall, _ in found), min(cpu for _, cpu in found)
 
-    settings, n, ref_th, ref_w, tau = paper_grid()
-    engine = Engine(find_model("forearm"))
-    ref, refd, tau = (np.ascontiguousarray(a[:, None]) for a in (ref_th, ref_w, tau))
-    kp, kd = np.full(1, KP), np.full(1, KD)
 
-    def call():
-        return engine.simulate_pd(ref_th[:1], ref_w[:1], settings.dt, n, tau, ref, refd, kp, kd)
+def timed_run(spec) -> tuple[dict, float]:
+    """``run(spec)``'s record and the CPU time (s) of the whole call (its warm-up of loaded kernels
+    and its record included: an upper bound of its runtime_s's CPU time)."""
+    import fdbench
 
-    return call, rmse_deg(call().z[:, 0], ref_th)
+    start = time.process_time()
+    record = fdbench.run(spec).record
+    return record, time.process_time() - start
 
 
 def control_runtime(runs: int) -> tuple[float, float]:
@@ -152,27 +151,27 @@ def control_runtime(runs: int) -> tuple[float, float]:
 
 def cell_timers(torque: str, feedforward: bool):
     """(c) for one cell: a function that times one BUDGET-evaluation CMA-ES run (runtime_s /
-    evaluations, s) and one that times its parts per evaluation (s): the simulations with eq. 18
+    evaluations and CPU time / evaluations, s) and one that times its parts per evaluation (s): the simulations with eq. 18
     of one generation (torques excluded), its torques, cma's own work on a trivial objective."""
     import fdbench
     from fdbench.optimizers import make_optimizer
     from fdbench.problem import TrackingProblem
-    from fdbench.torques import TORQUES, make_torque
+    from kernel_call import model_and_motion
 
     spec = fdbench.optimize_spec(torque, "cmaes", feedforward, seed=0, budget=BUDGET)
-    options = TORQUES[torque].optimizer_defaults.get("cmaes", {})
-    problem = TrackingProblem(make_torque(torque), feedforward=feedforward)
+    options = dict(spec.optimizer_options)
+    problem = TrackingProblem(torque, *model_and_motion("forearm"), feedforward, **dict(spec.torque_options))
     size = options.get("popsize") or 4 + int(3 * np.log(problem.n_params))  # cma's default generation
     X = problem.x0 + options.get("sigma0", 0.1) * np.random.default_rng(0).standard_normal((size, problem.n_params))
     optimizer = make_optimizer("cmaes", **options)
 
     def one_run():
-        record = fdbench.run(spec).record
-        return record["runtime_s"] / record["evaluations"]
+        record, cpu = timed_run(spec)
+        return np.array([record["runtime_s"], cpu]) / record["evaluations"]
 
     def parts():
         population = best_per_call(lambda: problem.objectives_scaled(X), 3, 10) / size
-        torques = best_per_call(lambda: problem.torques_on_grid(X * problem.scale), 3, 10) / size
+        torques = best_per_call(lambda: problem.torques_on_grid_batch(X * problem.scale), 3, 10) / size
         cma = best_per_call(lambda: optimizer.minimize(lambda x: float(x @ x), problem.x0, BUDGET, seed=0,
                                                        batch=lambda P: np.einsum("ij,ij->i", P, P)), 1, 1) / BUDGET
         return np.array([population - torques, torques, cma])
@@ -197,37 +196,40 @@ def main(c_source: Path, runs: int) -> None:
     set_threads(1)
     with tempfile.TemporaryDirectory() as folder:
         binary = compile_c(c_source, folder)
-        c_text, c_ms = run_c(binary)
+        c_text, c_ms, c_cpu = run_c(binary)
         one_shot, control_rmse = control_runtime(runs)
         digits = len(c_text.split(".")[-1])
         print(f"C loop ({c_source.name}, cc -O2): rmse_rot_deg {c_text}; fdbench control --kp {KP:g} --kd {KD:g}: "
               f"{control_rmse:.{digits}f}")
         if f"{control_rmse:.{digits}f}" != c_text:
             raise SystemExit("error: the C loop and fdbench control disagree: not the same algorithm")
-        kernel, kernel_rmse = kernel_call()
-        engine, engine_rmse = engine_call()
-        rows = [("(a) forearm kernel, dynamics.rk4", best_per_call(kernel), f"rmse {kernel_rmse:.{digits}f}"),
-                ("(b) one-shot run(control_spec())", one_shot, "inverse dynamics, feedforward, resampling")]
+        kernel, kernel_rmse = forearm_kernel()
+        rows = [("(a) engine forearm kernel, kernels.rk4", best_per_call(kernel), cpu_per_call(kernel, C_REPETITIONS),
+                 f"rmse {kernel_rmse:.{digits}f}"),
+                ("(b) one-shot run(control_spec())", one_shot, math.nan,
+                 "inverse dynamics, PD design, samples (CPU: not separable from the run's warm-up)")]
         parts = []
-        c_times = [c_ms]
+        c_times, c_cpus = [c_ms], [c_cpu]
         for torque, ff in CELLS:  # runs, their parts and the C loop alternately: each sees the same load
             one_run, cell_parts = cell_timers(torque, ff)
-            per, split = np.inf, np.full(3, np.inf)
+            per, split = np.full(2, np.inf), np.full(3, np.inf)
             for _ in range(runs):
-                c_times.append(run_c(binary)[1])
-                per, split = min(per, one_run()), np.minimum(split, cell_parts())
-            rows.append((f"(c) CMA-ES {torque}{' + ff' if ff else ''} per evaluation", per, ""))
-            parts.append((rows[-1][0], per, split))
-        rows.append(("(d) engine forearm, simulate_pd", best_per_call(engine), f"rmse {engine_rmse:.{digits}f}"))
-        c_ms = min(c_times)  # the least disturbed
+                _, wall, cpu = run_c(binary)
+                c_times.append(wall), c_cpus.append(cpu)
+                per, split = np.minimum(per, one_run()), np.minimum(split, cell_parts())
+            rows.append((f"(c) CMA-ES {torque}{' + ff' if ff else ''} per evaluation", *per, ""))
+            parts.append((rows[-1][0], per[0], split))
+        c_ms, c_cpu = min(c_times), min(c_cpus)  # the least disturbed
     c_s = c_ms / 1e3
-    print(f"{'single thread, best of ' + str(runs):<42}{'ms':>9}{'x C':>8}")
-    print(f"{'C loop, one PD simulation (the baseline)':<42}{c_ms:>9.4f}{1.0:>8.2f}  "
+    print(f"{'single thread, best of ' + str(runs):<42}{'ms':>9}{'x C':>8}{'CPU ms':>9}{'x C':>8}")
+    print(f"{'C loop, one PD simulation (the baseline)':<42}{c_ms:>9.4f}{1.0:>8.2f}{c_cpu:>9.4f}{1.0:>8.2f}  "
           f"median of {len(c_times)} runs {np.median(c_times):.4f} ms")
-    for label, seconds, note in rows:
+    for label, seconds, cpu, note in rows:
         if label.startswith("(c)"):
-            note = "meets the goal" if seconds <= GOAL * c_s else "misses the goal"
-        print(f"{label:<42}{seconds * 1e3:>9.4f}{seconds / c_s:>8.2f}  {note}".rstrip())
+            note = " ".join(f"{how} {'meets' if ratio <= GOAL else 'misses'} the goal"
+                            for how, ratio in (("wall", seconds / c_s), ("CPU", cpu * 1e3 / c_cpu)))
+        print(f"{label:<42}{seconds * 1e3:>9.4f}{seconds / c_s:>8.2f}{cpu * 1e3:>9.4f}{cpu * 1e3 / c_cpu:>8.2f}  "
+              f"{note}".rstrip())
     print("where a CMA-ES evaluation's time goes (x C): simulations + eq. 18, torques, cma's own work, rest")
     for label, per, (simulations, torques, cma) in parts:
         rest = per - simulations - torques - cma
