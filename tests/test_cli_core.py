@@ -25,11 +25,12 @@ def invoke(*args):
 @pytest.mark.parametrize("kinematics", ["paper", "exact"])
 def test_inverse_csv_is_the_whole_history(kinematics):
     table = pd.read_csv(io.StringIO(invoke("inverse", "--format", "csv", "--kinematics", kinematics).stdout))
-    assert list(table.columns) == ["t", "theta", "theta_vel", "theta_acc", "theta_torque"]  # s, deg, deg/s, deg/s^2, N m
+    # s, deg, deg/s, deg/s^2, N m
+    assert list(table.columns) == ["t", "theta", "theta_vel", "theta_acc", "theta_torque"]
     assert len(table) == 1001 and table.theta[0] == pytest.approx(-45.0)
     np.testing.assert_allclose(np.diff(table.t), 1e-3, atol=1e-12)
-    np.testing.assert_allclose(table.theta_torque, cf.elbow_torque(np.radians(table.theta), np.radians(table.theta_acc)),
-                               rtol=1e-8)
+    expected = cf.elbow_torque(np.radians(table.theta), np.radians(table.theta_acc))
+    np.testing.assert_allclose(table.theta_torque, expected, rtol=1e-8)
 
 
 def test_inverse_summary_formats_agree():

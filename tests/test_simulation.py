@@ -85,8 +85,8 @@ def test_accelerations_on_the_manifold_are_the_minimal_odes(theta, w, tau, log_a
     tolerance = (1e-8 + 30.0 / 10.0**log_alpha) * scale
     assert abs(theta_dd - expected) <= tolerance
     s, c = math.sin(theta), math.cos(theta)
-    np.testing.assert_allclose([x_dd, y_dd], [cf.L12 * (-s * expected - c * w * w), cf.L12 * (c * expected - s * w * w)],
-                               rtol=0, atol=tolerance * cf.L12)
+    hand = cf.L12 * np.array([-s * expected - c * w * w, c * expected - s * w * w])  # m/s^2, turning at radius L12
+    np.testing.assert_allclose([x_dd, y_dd], hand, rtol=0, atol=tolerance * cf.L12)
 
 
 # ----------------------------------------------------------------------------- open loop
