@@ -16,11 +16,11 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.model import Forearm
 from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, find_model,
                                            library, load_model, resolved_end, to_dict, to_toml, with_changes)
 
 from cli_checks import assert_one_line_error
+import forearm_closed_form as cf
 
 runner = CliRunner()
 
@@ -53,15 +53,16 @@ def test_the_library_lists_the_three_models():
 
 
 def test_the_forearm_file_is_table_1():
-    model, forearm = find_model("forearm"), Forearm()
-    assert model.coordinates == ("theta",) and model.gravity == (0.0, -forearm.g)
-    assert resolved_end(model, "forearm") == (forearm.L12, 0.0)  # the load's point, the hand
+    model = find_model("forearm")
+    assert model.coordinates == ("theta",) and model.gravity == (0.0, -cf.G)
+    assert resolved_end(model, "forearm") == (cf.L12, 0.0)  # the load's point, the hand
     _, _, point_mass = bar_point_masses(model, "forearm")
-    assert point_mass == pytest.approx(forearm.point_mass, rel=1e-15)
+    assert point_mass == pytest.approx(cf.I1 / cf.L12**2, rel=1e-15)  # the hand point's mass, I1 / L12^2
     (load,) = model.loads
     body = model.body("forearm")
     load_y = load.force[1] + body.mass * model.gravity[1] * body.com[0] / load.at[0]
-    assert load_y == pytest.approx(forearm.load_y, rel=1e-15)
+    # the load and gravity carried to the hand: -F_ext - m g L1G / L12
+    assert load_y == pytest.approx(-cf.F_EXT - cf.M * cf.G * cf.L1G / cf.L12, rel=1e-15)
 
 
 def test_the_arm2_file_is_the_two_segment_arm():

@@ -4,12 +4,15 @@ parameters the paper gives (never against the code's own output)."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fdbench.inverse import elbow_torque, inverse_dynamics
+import forearm_closed_form as cf
+from fdbench.motion import desired_motion, sample_times
 from fdbench.torques import TORQUES, make_torque
 from fdbench.torques.ann import AnnTorque, select_hidden
 from fdbench.torques.cs import CubicSplineTorque
@@ -26,9 +29,16 @@ VARIANTS = [(name, {}) for name in sorted(TORQUES)] + [
 DENSE = np.linspace(0.0, 1.0, 2001)  # the half-step grid of the 1 ms RK4
 
 
+def elbow_torque(t):
+    """The forearm's inverse-dynamics torque (N m) on eq. 5's paper motion at times t (s), by the closed form."""
+    theta, _, dw = desired_motion(t, "paper")
+    return cf.elbow_torque(theta, dw)
+
+
 @pytest.fixture(scope="module")
 def inv():
-    return inverse_dynamics()
+    """The target torques of an optimisation: the forearm's elbow torque on the 1001 samples."""
+    return SimpleNamespace(t=sample_times(), torque=elbow_torque(sample_times()))
 
 
 def relative_rmse(a, b):
