@@ -108,7 +108,6 @@ def test_pd_gains_are_the_papers_scaled_by_the_elbow_inertia(I1, kp, kd):
     another inertia gets them scaled by I1 / 0.04; given gains are taken as they are."""
     design = make_controller("pd").design(plan(model=with_changes("forearm", (("I1", I1),))))
     np.testing.assert_allclose([design.kp[0], design.kd[0]], [kp, kd], rtol=1e-12)
-    assert (design.fields["kp_theta"], design.fields["kd_theta"]) == pytest.approx((kp, kd), rel=1e-12)
     given_gains = make_controller("pd", kp=50.0, kd=1.0).design(plan())
     assert (given_gains.kp[0], given_gains.kd[0]) == (50.0, 1.0)
 
@@ -202,8 +201,6 @@ def test_a_registered_controller_reaches_the_command_line():
     bad_input(["control", "--controller", "open-loop-test"], "--controller")
 
 
-@pytest.mark.xfail(strict=True, reason="fdbench/multibody/runs.py records the class's `name` attribute, not the "
-                                       "name the controller was registered (and asked for) under")
 def test_a_registered_controller_is_recorded_under_its_registered_name():
     CONTROLLERS.register("open-loop-test")(OpenLoop)
     try:

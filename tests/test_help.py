@@ -194,16 +194,9 @@ def test_no_help_or_message_names_a_package_index_install():
 
 
 BENCHMARKS = sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("bench_*.py"))
-# scripts that still import what the forearm's move onto the engine deleted (fdbench.integrate.Settings,
-# fdbench.dynamics, fdbench.inverse, fdbench.multibody.problem): to be ported
-NOT_PORTED = {"bench_engine.py", "bench_multibody_gradient.py", "bench_multibody_population.py", "bench_optimize.py",
-              "bench_population.py", "bench_simulation.py"}
 
 
-@pytest.mark.parametrize("script", [
-    pytest.param(path, id=path.name, marks=pytest.mark.xfail(
-        strict=True, reason=f"benchmarks/{path.name} imports deleted modules")) if path.name in NOT_PORTED
-    else pytest.param(path, id=path.name) for path in BENCHMARKS])
+@pytest.mark.parametrize("script", BENCHMARKS, ids=[path.name for path in BENCHMARKS])
 def test_every_benchmark_script_answers_help_without_running(script):
     out = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.startswith("usage:"), (script.name, out.stderr[-500:])
