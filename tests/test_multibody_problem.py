@@ -99,7 +99,7 @@ def population(problem, seed=3):
 
 
 def eq18(problem, p) -> float:
-    """Eq. 18 written out here from the candidate's ArmSimulation: RMSE (deg) over both joints and
+    """Eq. 18 written out here from the candidate's Simulation: RMSE (deg) over both joints and
     the samples reached, plus the penalty of the fraction of the motion not reached."""
     result = problem.simulate(p)
     rmse, _ = sim.rmse_deg(result, problem.inverse.angles)
