@@ -33,3 +33,29 @@ def minimal_rhs(tau, I1=I1, **constants):
         return [y[1], (float(tau(t)) - moment * np.cos(y[0])) / I1]
 
     return rhs
+
+
+GRAVITY_TORQUE = load_moment()  # N m: the load's and gravity's torque at theta = 0
+
+
+def torque_along(theta, theta_dot, theta_ddot):
+    """The elbow torque (N m) that moves Table 1's forearm along theta(t) (rad, rad/s, rad/s^2; any
+    shape), eq. 5's (theta, theta', theta'') as they come; theta_dot is unused (one degree of freedom
+    has no velocity terms)."""
+    return elbow_torque(theta, theta_ddot)
+
+
+def feedback_rhs(torque):
+    """The minimal ODE's right-hand side (t, [theta, theta']) -> [theta', theta''] under a feedback
+    torque torque(t, theta, theta_dot) (N m), for scipy's solve_ivp."""
+
+    def rhs(t, y):
+        return [y[1], (torque(t, y[0], y[1]) - GRAVITY_TORQUE * np.cos(y[0])) / I1]
+
+    return rhs
+
+
+def mixed_state(theta, theta_dot):
+    """Eq. 7's state [x2, y2, theta, x2', y2', theta'] of the hand (m, m/s) and the elbow angle, shape (6,)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([L12 * c, L12 * s, theta, -L12 * s * theta_dot, L12 * c * theta_dot, theta_dot])

@@ -1,20 +1,25 @@
-"""Exact gradients (forward sensitivities of the RK4 map) against central differences."""
+"""Exact gradients (forward sensitivities of the engine's RK4 map) on the paper's forearm against
+central differences, and the command line's gradient options."""
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.dynamics import accelerations, kernel_constants
 from fdbench.experiment import optimize_spec
-from fdbench.model import Forearm, Penalty
+from fdbench.multibody.description import find_model
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.motions import joint_motion
 from fdbench.optimizers import make_optimizer
 from fdbench.problem import TrackingProblem
-from fdbench.sensitivity import acceleration_jacobian
-from fdbench.torques import make_torque
 
-CONSTS = kernel_constants(Forearm(), Penalty())
+FOREARM = Engine(find_model("forearm"))
+PAPER = joint_motion("paper", find_model("forearm"))
+
+
+def ForearmProblem(torque, feedforward):
+    """The paper's tracking problem: the forearm on eq. 5."""
+    return TrackingProblem(torque, FOREARM, PAPER, feedforward)
 
 
 def richardson(f, x, h=1e-3):
@@ -24,37 +29,10 @@ def richardson(f, x, h=1e-3):
     return (4 * cd(h / 2) - cd(h)) / 3
 
 
-@settings(max_examples=200, deadline=None)
-@given(th=st.floats(-1.4, 1.4), w=st.floats(-10, 10), vx=st.floats(-1, 1), vy=st.floats(-1, 1),
-       dx=st.floats(-1e-4, 1e-4), dy=st.floats(-1e-4, 1e-4), tau=st.floats(-20, 20))
-def test_acceleration_jacobian_matches_the_complex_step_derivative(th, w, vx, vy, dx, dy, tau):
-    """The complex step Im f(z + i h e_m) / h has no subtractive cancellation (alpha = 1e7 makes
-    real differences too noisy here): a reference accurate to rounding."""
-    import cmath
-
-    import fdbench.dynamics as dynamics
-
-    L = CONSTS[1]
-    z = np.array([L * np.cos(th) + dx, L * np.sin(th) + dy, th, vx, vy, w, tau])
-    jac = np.empty((3, 7))
-    acceleration_jacobian(*z, CONSTS, jac)
-    h = 1e-30
-    real_math = dynamics.math
-    dynamics.math = cmath  # the kernel's Python source, run on complex numbers
-    try:
-        for m in range(7):
-            args = z.astype(complex)
-            args[m] += 1j * h
-            reference = np.array(accelerations.py_func(*args, CONSTS)[:3]).imag / h
-            assert np.allclose(jac[:, m], reference, rtol=1e-6, atol=1e-7 * (np.max(np.abs(jac)) + 1)), m
-    finally:
-        dynamics.math = real_math
-
-
 @pytest.mark.parametrize("torque", ["cs", "pf", "ann"])
 @pytest.mark.parametrize("feedforward", [False, True])
 def test_gradient_matches_central_differences(torque, feedforward):
-    problem = TrackingProblem(make_torque(torque), feedforward=feedforward)
+    problem = ForearmProblem(torque, feedforward)
     x = problem.x0 + 0.01 * np.random.default_rng(1).standard_normal(problem.n_params)
     f, g = problem.value_and_gradient_scaled(x)
     assert f == problem.objective_scaled(x)  # the same simulation, to the last bit
@@ -64,8 +42,8 @@ def test_gradient_matches_central_differences(torque, feedforward):
 
 
 def test_failing_simulation_gradient_is_the_rmse_gradient_over_the_samples_reached():
-    problem = TrackingProblem(make_torque("cs"), feedforward=True)
-    x = np.linspace(2.5, 3.5, problem.n_params)  # a torque that drives theta to pi/2 early
+    problem = ForearmProblem("cs", True)
+    x = np.linspace(2.5, 3.5, problem.n_params)  # a torque that spins the forearm until the constraint breaks
     result = problem.simulate(x * problem.scale)
     assert not result.success and 0 < result.t_end < 1
     f, g = problem.value_and_gradient_scaled(x)
@@ -76,7 +54,7 @@ def test_failing_simulation_gradient_is_the_rmse_gradient_over_the_samples_reach
     for e in np.eye(problem.n_params)[:: 3]:
         assert problem.simulate((x + h * e) * problem.scale).t_end == result.t_end
     fd = richardson(problem.objective_scaled, x, h)
-    # close to the singular leading matrix the differences are noisier than where the run is smooth
+    # near the failure the differences are noisier than where the run is smooth
     assert np.max(np.abs(g - fd)) / np.max(np.abs(fd)) < 1e-5
 
 

@@ -15,9 +15,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
+import forearm_closed_form as forearm
 from fdbench.cli import app
 from fdbench.experiment import control_spec, optimize_spec, with_motion_file
-from fdbench.model import Forearm
 from fdbench.motion import as_motion, butterworth_design_hz, eq5, noisy, read_motion_csv, zero_lag_lowpass
 
 runner = CliRunner()
@@ -181,7 +181,8 @@ def test_inverse_csv_read_back_as_motion_is_the_same_motion(tmp_path, kinematics
     again = csv_frame("inverse", "--motion", path)
     np.testing.assert_allclose(again.theta, np.degrees(theta), rtol=0, atol=1e-9)
     np.testing.assert_allclose(again[["theta_vel", "theta_acc"]], np.degrees([vel, acc]).T, rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(again.torque, named.torque, rtol=1e-12)
+    np.testing.assert_allclose(named.theta_torque, forearm.torque_along(theta, vel, acc), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(again.theta_torque, named.theta_torque, rtol=1e-12)
     from_file, direct = run_json("control", "--motion", path), run_json("control", "--motion", kinematics)
     assert from_file["derivatives"] == "given"
     # RK4's half steps fall between the file's samples: Hermite interpolation there, hence 1e-3
@@ -200,8 +201,17 @@ def test_saved_trajectory_read_back_as_motion_is_the_simulated_angle(tmp_path):
     np.testing.assert_allclose(again[["theta_vel", "theta_acc"]], saved[["theta_vel", "theta_acc"]], rtol=0, atol=1e-9)
     # the simulated acceleration is the simulated velocity's rate
     np.testing.assert_allclose(np.gradient(saved.theta_vel, saved.t)[1:-1], saved.theta_acc[1:-1], rtol=0, atol=0.5)
-    # and its applied torque is a torque file
-    assert run_json("simulate", "--torque-file", trajectory)["torque"].startswith("file:")
+
+
+def test_saved_trajectory_is_a_torque_file_of_the_applied_torque(tmp_path):
+    """Its theta_torque column drives an open-loop simulation: the PD run's applied torque, simulated
+    alone on the same plant, tracks about as the PD run did (its RK4 half steps interpolate the 1 ms
+    samples, hence not to the bit)."""
+    trajectory = tmp_path / "tr.csv"
+    pd_run = run_json("control", "--plant", "m=1.3", "--save-trajectory", trajectory)
+    replay = run_json("simulate", "--plant", "m=1.3", "--torque-file", trajectory)
+    assert replay["torque"].startswith("file:") and replay["status"] == "success"
+    assert replay["rmse_rot_deg"] == pytest.approx(pd_run["rmse_rot_deg"], rel=1e-3)  # open loop alone: 8.3 deg
 
 
 def test_a_file_in_radians_from_an_older_fdbench_needs_radians(tmp_path):
@@ -273,7 +283,7 @@ def test_plant_leaves_the_feedforward_unchanged_and_model_changes_it():
     model = csv_table("inverse", "--model", "I1=0.05")
     assert np.array_equal(plant, nominal)
     # the closed form: the torque changes by (I1' - I1) theta''
-    assert np.allclose(model[:, 4] - nominal[:, 4], (0.05 - Forearm().I1) * np.radians(nominal[:, 3]), atol=1e-10)
+    assert np.allclose(model[:, 4] - nominal[:, 4], (0.05 - forearm.I1) * np.radians(nominal[:, 3]), atol=1e-10)
 
 
 def test_plant_mismatch_makes_open_loop_worse_and_is_measured_against_the_nominal_torque():
@@ -302,12 +312,16 @@ def test_model_file_sets_the_nominal_model(tmp_path):
 @given(scale=st.floats(0.5, 2.0))
 def test_nominal_model_scales_the_feedforward(scale):
     """Inverse dynamics is linear in (I1, F_ext, m): scaling all three scales the torque."""
-    from fdbench.inverse import inverse_dynamics
+    from fdbench.models import with_changes
+    from fdbench.multibody.engine import Engine
+    from fdbench.multibody.motions import joint_motion
+    from fdbench.multibody.simulation import inverse_dynamics
 
-    base = Forearm()
-    scaled = Forearm(I1=base.I1 * scale, F_ext=base.F_ext * scale, m=base.m * scale)
-    a = inverse_dynamics(None, base, "exact").torque
-    b = inverse_dynamics(None, scaled, "exact").torque
+    changes = (("I1", forearm.I1 * scale), ("F_ext", forearm.F_EXT * scale), ("m", forearm.M * scale))
+    base, scaled = with_changes("forearm"), with_changes("forearm", changes)
+    motion = joint_motion("exact", base)
+    a = inverse_dynamics(None, Engine(base), motion).torque
+    b = inverse_dynamics(None, Engine(scaled), motion).torque
     assert np.allclose(b, scale * a, rtol=1e-12, atol=1e-12)
 
 
@@ -335,16 +349,21 @@ def test_recorded_motion_of_2_5_s_runs_through_every_command(tmp_path):
 
 
 def test_torque_parameterisations_spread_over_the_motion():
-    from fdbench.integrate import Settings
+    from fdbench.multibody.description import find_model
+    from fdbench.multibody.engine import Engine
+    from fdbench.multibody.motions import joint_motion
     from fdbench.problem import TrackingProblem
     from fdbench.torques import make_torque
 
-    motion = read_motion_csv(EXAMPLE)
+    model = find_model("forearm")
+    joints = joint_motion(str(EXAMPLE), model)
     for name in ("cs", "pf", "ann"):
-        problem = TrackingProblem(make_torque(name), Settings(kinematics=motion), feedforward=False)
-        fitted = problem.torque.evaluate(problem.p0, problem.inverse.t)
-        rms = np.sqrt(np.mean((fitted - problem.inverse.torque) ** 2))
-        assert rms < 0.2 * np.ptp(problem.inverse.torque), name  # the fit covers all 2.5 s
+        problem = TrackingProblem(name, Engine(model), joints, feedforward=False)
+        fitted = problem.parts[0].evaluate(problem.p0, problem.inverse.t)
+        target = problem.inverse.torque[:, 0]
+        rms = np.sqrt(np.mean((fitted - target) ** 2))
+        assert rms < 0.2 * np.ptp(target), name  # the fit covers all 2.5 s
+    motion = read_motion_csv(EXAMPLE)
     assert make_torque("cs").n_params == 11
     cs = make_torque("cs")
     cs.prepare(motion.samples, np.ones_like(motion.samples), False)

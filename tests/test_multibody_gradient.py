@@ -15,7 +15,7 @@ from fdbench.multibody import description as d
 from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk, joint_motion
-from fdbench.multibody.problem import JointTrackingProblem
+from fdbench.problem import TrackingProblem
 
 
 def richardson(f, x, h=1e-3):
@@ -74,26 +74,26 @@ def test_the_tree_has_linear_constraints_and_both_forms_throughout():
 @pytest.mark.parametrize("feedforward", [False, True])
 def test_gradient_matches_central_differences_on_a_tree(torque, feedforward):
     engine, motion = TREE
-    check_against_differences(JointTrackingProblem(torque, engine, motion, feedforward))
+    check_against_differences(TrackingProblem(torque, engine, motion, feedforward))
 
 
 @pytest.mark.parametrize("torque", ["cs", "pf", "ann"])
 @pytest.mark.parametrize("feedforward", [False, True])
 def test_gradient_matches_central_differences_on_the_leg(torque, feedforward):
     engine, motion = LEG
-    check_against_differences(JointTrackingProblem(torque, engine, motion, feedforward))
+    check_against_differences(TrackingProblem(torque, engine, motion, feedforward))
 
 
 def test_gradient_at_the_initial_guess_is_not_zero():
     engine, motion = LEG
-    problem = JointTrackingProblem("cs", engine, motion)
+    problem = TrackingProblem("cs", engine, motion)
     f, g = problem.value_and_gradient_scaled(problem.x0)
     assert f == problem.objective_scaled(problem.x0) and np.all(np.isfinite(g)) and np.abs(g).max() > 1.0
 
 
 def test_failing_simulation_gradient_is_the_rmse_gradient_over_the_samples_reached():
     engine, motion = TREE
-    problem = JointTrackingProblem("cs", engine, motion, feedforward=True)
+    problem = TrackingProblem("cs", engine, motion, feedforward=True)
     x = np.zeros(problem.n_params)
     x[problem.blocks[1]:problem.blocks[2]] = 10.0  # the left child's torque swings it round until it fails
     result = problem.simulate(x * problem.scale)

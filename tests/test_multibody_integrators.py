@@ -201,10 +201,10 @@ def test_bad_input_exits_2_with_one_line(command, args, word):
 def test_an_adaptive_optimisation_objective_is_the_adaptive_simulations():
     """With an adaptive integrator the arm's objective comes from that integrator's simulation,
     not from the RK4 population kernel."""
-    from fdbench.multibody.problem import JointTrackingProblem
+    from fdbench.problem import TrackingProblem
 
-    problem = JointTrackingProblem("cs", ARM, REACH, True, integrator="rk45", rtol=1e-6, atol=1e-9)
-    rk4 = JointTrackingProblem("cs", ARM, REACH, True)
+    problem = TrackingProblem("cs", ARM, REACH, True, integrator="rk45", rtol=1e-6, atol=1e-9)
+    rk4 = TrackingProblem("cs", ARM, REACH, True)
     assert not problem.batched and rk4.batched
     p = problem.p0 + 0.05 * problem.scale
     adaptive = sim.simulate(problem.torque_function(p), ARM, REACH, integrator="rk45", rtol=1e-6, atol=1e-9)

@@ -12,7 +12,7 @@ from fdbench.multibody import simulation as sim
 from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
-from fdbench.multibody.problem import JointTrackingProblem
+from fdbench.problem import TrackingProblem
 from fdbench.optimizers import make_optimizer
 from fdbench.population import set_threads
 from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
@@ -24,7 +24,7 @@ REACH = joint_motion("reach", find_model("arm2"))
 
 def ArmTrackingProblem(torque, feedforward=False, penalty_weight=1.0, **options):
     """The arm's tracking problem of its reach."""
-    return JointTrackingProblem(torque, ARM, REACH, feedforward, penalty_weight, **options)
+    return TrackingProblem(torque, ARM, REACH, feedforward, penalty_weight, **options)
 
 
 def optimize(problem, optimizer, budget, seed):
@@ -99,7 +99,7 @@ def population(problem, seed=3):
 
 
 def eq18(problem, p) -> float:
-    """Eq. 18 written out here from the candidate's ArmSimulation: RMSE (deg) over both joints and
+    """Eq. 18 written out here from the candidate's Simulation: RMSE (deg) over both joints and
     the samples reached, plus the penalty of the fraction of the motion not reached."""
     result = problem.simulate(p)
     rmse, _ = sim.rmse_deg(result, problem.inverse.angles)

@@ -1,16 +1,20 @@
-"""Population evaluation: one compiled call for many candidates, the same numbers as one by one,
-whatever the thread count."""
+"""Population evaluation on the paper's forearm (a one-joint model of the engine): one compiled call
+for many candidates, the same numbers as one by one, whatever the thread count. The arm's are in
+tests/test_multibody_problem.py."""
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
+import forearm_closed_form as forearm
 from fdbench.experiment import optimize_spec, run
-from fdbench.optimizers import make_optimizer
+from fdbench.motion import eq5
+from fdbench.multibody.description import find_model
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.motions import joint_motion
 from fdbench.population import set_threads
 from fdbench.problem import TrackingProblem
-from fdbench.torques import make_torque
 from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
                                restore_threads)
 
@@ -21,7 +25,9 @@ CELLS = [("cs", False), ("cs", True), ("pf", False), ("pf", True), ("ann", False
 @pytest.fixture(scope="module")
 def problems():
     """One tracking problem per cell, made once (pf's pre-fit takes a moment)."""
-    return {cell: TrackingProblem(make_torque(cell[0]), feedforward=cell[1]) for cell in CELLS}
+    model = find_model("forearm")
+    return {cell: TrackingProblem(cell[0], Engine(model), joint_motion("paper", model), feedforward=cell[1])
+            for cell in CELLS}
 
 
 def population(problem, seed=3):
@@ -43,14 +49,15 @@ def test_population_equals_one_by_one_exactly(cell, problems):
 
 @pytest.mark.parametrize("cell", CELLS, ids=str)
 def test_population_objectives_are_eq18_of_each_simulation(cell, problems):
-    """Checked against eq. 18 written out here from each candidate's SimulationResult."""
+    """Checked against eq. 18 written out here from each candidate's simulated elbow angle and eq. 5."""
     problem = problems[cell]
 
     def eq18(p):
         result = problem.simulate(p)
-        reached = np.isfinite(result.q[:, 2])  # the motion's samples up to t_end
-        rmse = np.sqrt(np.mean(np.degrees(result.q[reached, 2] - problem.inverse.theta[reached]) ** 2))
-        return rmse + 1.0 - result.t_end / problem.duration
+        reached = np.isfinite(result.z[:, 0])  # the motion's samples up to t_end
+        desired = eq5(result.t[reached], "paper")[0]
+        rmse = np.sqrt(np.mean(np.degrees(result.z[reached, 0] - desired) ** 2)) if reached.any() else 0.0
+        return rmse + 1.0 - result.t_end / 1.0
 
     assert_objectives_are(problem, population(problem, seed=5), eq18)
 
@@ -59,22 +66,13 @@ def test_population_objectives_are_eq18_of_each_simulation(cell, problems):
 def test_population_torques_equal_each_candidates_exactly(cell, problems):
     problem = problems[cell]
     P = population(problem) * problem.scale
-    together = problem.torques_on_grid(P)
+    together = problem.torques_on_grid_batch(P)[:, :, 0]
     for c, p in enumerate(P):
-        assert np.array_equal(together[c], problem.torques_on_grid(p[None])[0])
-    if cell[1]:  # with feedforward: the inverse-dynamics torque plus the parameterisation's own
-        own = problem.torque.on_grid(problem._half)(P[0])
-        np.testing.assert_allclose(together[0], own + problem._ff(problem._half), rtol=0, atol=1e-12)
-
-
-def test_cmaes_with_population_evaluation_takes_the_same_path():
-    problem = TrackingProblem(make_torque("cs"))
-    optimizer = make_optimizer("cmaes")
-    plain = optimizer.minimize(problem.objective_scaled, problem.x0, 60, seed=4)
-    set_threads(2)
-    batched = optimizer.minimize(problem.objective_scaled, problem.x0, 60, seed=4, batch=problem.objectives_scaled)
-    assert batched.history == plain.history and np.array_equal(batched.x, plain.x)
-    assert batched.evaluations == plain.evaluations == 60
+        assert np.array_equal(together[c], problem.torques_on_grid(p)[:, 0])
+    if cell[1]:  # with feedforward: the closed-form inverse-dynamics torque plus the parameterisation's own
+        own = problem.parts[0].on_grid(problem._half)(P[0])
+        closed_form = forearm.torque_along(*eq5(problem._half, "paper"))
+        np.testing.assert_allclose(together[0], own + closed_form, rtol=0, atol=1e-9)
 
 
 @pytest.mark.parametrize("torque, feedforward", [("cs", False), ("pf", True), ("ann", False)])

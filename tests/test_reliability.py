@@ -422,8 +422,8 @@ def test_check_distinct_allows_two_outputs_to_a_device():
 def test_byte_order_mark_is_accepted(tmp_path):
     path = tmp_path / "bom.csv"
     path.write_bytes("\ufefft,torque\n0,1\n1,2\n".encode())
-    t, q = files.read_torque_csv(path)
-    assert list(t) == [0.0, 1.0] and list(q) == [1.0, 2.0]
+    t, q = files.read_history_csv(path, "--torque-file", 1.0, ("torque",))
+    assert list(t) == [0.0, 1.0] and list(q[:, 0]) == [1.0, 2.0]
 
 
 def test_input_size_is_limited(tmp_path):
@@ -453,13 +453,20 @@ def test_torque_file_enters_the_hash_by_content(tmp_path):
 
 @pytest.mark.parametrize("terms", [68, 100])
 def test_pf_fit_works_for_every_allowed_term_count(terms):
-    from fdbench.integrate import Settings
-    from fdbench.problem import TrackingProblem
-    from fdbench.torques import make_torque
+    """The fit of every allowed term count reproduces the forearm's closed-form inverse-dynamics torque."""
+    from forearm_closed_form import torque_along as elbow_torque
 
-    problem = TrackingProblem(make_torque("pf", terms=terms), Settings(), feedforward=False)
-    fitted = problem.torque.evaluate(problem.p0, problem.inverse.t)
-    assert np.sqrt(np.mean((fitted - problem.inverse.torque) ** 2)) < 0.01 * np.ptp(problem.inverse.torque)
+    from fdbench.motion import eq5
+    from fdbench.multibody.description import find_model
+    from fdbench.multibody.engine import Engine
+    from fdbench.multibody.motions import joint_motion
+    from fdbench.problem import TrackingProblem
+
+    model = find_model("forearm")
+    problem = TrackingProblem("pf", Engine(model), joint_motion("paper", model), feedforward=False, terms=terms)
+    t = problem.inverse.t
+    fitted, target = problem.parts[0].evaluate(problem.p0, t), elbow_torque(*eq5(t, "paper"))
+    assert np.sqrt(np.mean((fitted - target) ** 2)) < 0.01 * np.ptp(target)
 
 
 def test_cmaes_with_population_two_and_many_parameters():
