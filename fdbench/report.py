@@ -524,7 +524,7 @@ MEASURED = [
     "`--sigma0` (0.2, the default, then 0.6, 1 and 3): CMA-ES never evaluates its start point, so a step that "
     "is large against the scale of the ANN's weights makes its first samples far worse than the start. Yet "
     "with the largest step most runs still end better than the zero additional torque they start from, whereas "
-    "the paper's 27.383 deg is far worse than it. Large weights swing the forearm through theta = +-90 deg, "
+    "the paper's 27.383 deg is far worse than it. Large weights swing the forearm through the vertical, "
     "where the paper's angle constraint is singular: fdbench's engine goes on there (the constraint's cos "
     "form), while fdbench's earlier forearm kernel, in the paper's form alone, stopped such samples, and with it "
     "most runs of the largest step ended worse than their start. So a large step explains a run ending above "

@@ -1,5 +1,5 @@
 """The minimal equations in CasADi (fdbench.multibody.symbolic) and the methods built on them, the
-collocation (fdbench.multibody.collocation) and the time-varying LQR (fdbench.multibody.lqr), for any
+collocation (fdbench.collocation) and the time-varying LQR (fdbench.multibody.lqr), for any
 model description:
 
 - M(z), h(z, z') and the inverse dynamics against the engine's numpy ones and the independent
@@ -146,7 +146,7 @@ def test_linearisation_is_the_derivative_of_the_forward_dynamics(name):
     ("leg3", [0.0, -0.2, 0.0], [0.8, -1.0, 0.2]),  # the thigh swings forward from hanging
 ])
 def test_collocation_tracks_a_minimum_jerk_motion(name, start, goal):
-    from fdbench.multibody.collocation import collocate
+    from fdbench.collocation import collocate
 
     model, motion = find_model(name), MinimumJerk(start, goal)
     result = collocate(model, motion, nodes=30)
@@ -161,7 +161,7 @@ def test_collocation_tracks_a_minimum_jerk_motion(name, start, goal):
 
 
 def test_collocation_refuses_a_motion_of_other_joints_before_any_work():
-    from fdbench.multibody.collocation import collocate
+    from fdbench.collocation import collocate
 
     with pytest.raises(ValueError, match="hip, knee, ankle"):
         collocate(find_model("leg3"), MinimumJerk([0.0, 0.0], [0.1, 0.1]))

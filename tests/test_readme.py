@@ -157,7 +157,7 @@ def test_every_command_of_the_commands_table_runs_as_written(first_report, workd
     assert len(commands) == 12 and all(c.startswith("fdbench ") for c in commands)
     for command in commands:  # in order: inverse writes id.csv, simulate reads it
         sh(command, workdir)
-    assert (workdir / "id.csv").read_text().startswith("t,theta,theta_vel,theta_acc,torque")
+    assert (workdir / "id.csv").read_text().startswith("t,theta,theta_vel,theta_acc,theta_torque")
     assert (workdir / "conv.csv").read_text().splitlines()[0] == "evaluation,best_objective"
     assert len((workdir / "report.csv").read_text().splitlines()) == 15  # header, PD, 4 + 6 cells, 3 beyond
 
@@ -307,7 +307,7 @@ def test_the_commands_of_your_own_data_run_as_written(first_report, tmp_path):
     assert len(commands) == 6
     for command in commands:
         sh(command + " --quiet", top)
-    assert (top / "elbow_torque.csv").read_text().startswith("t,theta,theta_vel,theta_acc,torque")
+    assert (top / "elbow_torque.csv").read_text().startswith("t,theta,theta_vel,theta_acc,theta_torque")
     # fdbench's output is valid input: the history read back as --motion starts where the recording does
     again = json.loads(sh("fdbench inverse --motion elbow_torque.csv --format json", top).stdout)
     first = json.loads(sh("fdbench inverse --motion examples/elbow_flexion.csv --format json", top).stdout)

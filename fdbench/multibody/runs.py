@@ -152,6 +152,8 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
                                                       ("torque_max_nm", inv.torque.max(axis=0)),
                                                       ("torque_min_nm", inv.torque.min(axis=0)))
                  for j, v in zip(names, vals)},
+              **{f"{j}_{end}_deg": float(np.degrees(inv.angles[k, i])) for i, j in enumerate(names)
+                 for end, k in (("start", 0), ("end", -1))},
               "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
               "fdbench_version": __version__}
     header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
@@ -178,9 +180,21 @@ def _outcome(spec, record: dict, result, inverse, **more):
     record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
                   message=_message(result), max_violation=result.max_violation,
                   **per_joint("rmse_rot_deg", names, rot_j), **per_joint("rmse_torque_nm", names, trq_j))
-    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
-    rows = np.column_stack([result.t, np.degrees(result.angles), np.degrees(desired), result.torque, inverse.torque])
+    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_acc", "_acc_desired", "_torque",
+                                          "_torque_inverse") for j in names]
+    angles = (result.angles, desired, result.zd, inverse.velocities, _accelerations(spec, result), inverse.accelerations)
+    rows = np.column_stack([result.t, *np.degrees(angles), result.torque, inverse.torque])
     return RunOutcome(record, result, inverse, table=(header, rows), **more)
+
+
+def _accelerations(spec, result) -> np.ndarray:
+    """The joint accelerations (rad/s^2, shape (n, J)) of a simulation's states under its applied
+    torques (NaN after t_end), so that its trajectory reads back as a motion with its own rates."""
+    plant = engine(spec)
+    zero = np.zeros_like(result.torque)
+    with np.errstate(invalid="ignore"):
+        rates, _ = plant.rates(result.states, result.torque, zero, zero, zero, 0.0, 0.0)
+    return plant.joints_from_state(rates)[1]
 
 
 def _warm_up(spec) -> None:
