@@ -141,6 +141,13 @@ def models_and_states(draw, max_bodies: int = 6):
 
 
 @st.composite
+def models_and_motions(draw, max_bodies: int = 6):
+    """(model, (c, a, f, p)) for a random tree or chain and a sinusoidal motion of its joints."""
+    model = draw(models(max_bodies=max_bodies))
+    return model, draw(sinusoids(len(model.joints)))
+
+
+@st.composite
 def sinusoids(draw, n: int):
     """A smooth reference motion per joint, ref_j(t) = c_j + a_j sin(2 pi f_j t + p_j): returns the
     arrays (c, a, f, p) of shape (n,) (rad, rad, Hz, rad), amplitudes up to 0.5 rad, 0.5 to 2 Hz."""

@@ -1,15 +1,28 @@
 """The multibody engine (fdbench.multibody.engine, the paper's mixed coordinates and penalty
 formulation) against the independent minimal-coordinate reference (tests/reference_dynamics.py:
 recursive Newton-Euler and the kinetic energy's mass matrix, DOP853 at rtol = atol = 1e-12), on the
-built-in forearm and arm and on random chains and trees of 1 to 6 bodies:
+built-in forearm and arm and on random chains and trees of 1 to 6 bodies (tests/multibody_strategies.py):
 
 - inverse dynamics, M(z) and h(z, z') to 1e-9 relative (of the RMS of the reference's values);
 - forward dynamics: the engine's compiled RK4 (dt 1e-4 s) under a per-joint PD law with feedforward
-  torques to 1e-4 degrees of the reference's solution over 0.5 s, on the forearm and the arm. (On
-  random trees the penalty formulation itself departs from the exact dynamics by more: an angle
-  coordinate lags its body by about tau / (alpha omega^2 d^2), up to 7e-4 deg at alpha 1e7, and a
-  larger alpha trades that lag for the leading matrix's conditioning; that comparison waits for a
-  formulation whose angle constraint is scaled to the body.)
+  torques to 1e-4 degrees of the reference's solution over 0.5 s: the forearm and the arm at the
+  paper's penalty (alpha 1e7, omega 10 rad/s), random chains and trees at alpha 1e7, omega 3e3.
+
+Why random trees need the larger omega. A body's angle coordinate carries no mass: its constraint's
+violation Phi_b follows Phi'' + 2 xi omega Phi' + omega^2 Phi = tau_b / (alpha dPhi_b/dphi_b) under the
+net joint torque tau_b on the body, so the angle lags its body by about
+tau_b / (alpha omega^2 d_b^2 cos^2) (d_b: its points' distance; cos^2 >= 0.04, sin^2 in the cos
+form), while the points, hence the bodies, move right. A 5 cm body carrying hundreds of N m lags by
+up to 0.24 deg at (1e7, 10) and still 2.5e-3 deg at (1e9, 10): a larger alpha alone misses 1e-4,
+and it costs digits where a body's mass sits at its joint (the leading matrix's condition grows
+with alpha over the end point's mass I_joint / d^2: 6.1 kg at the pivot with 1e-4 kg m^2 departs
+by 9e-6 deg at alpha 1e7, 1.5e-4 at 1e8, 1.8e-3 at 1e9, whatever omega and dt). The lag falls as
+1 / (alpha omega^2) and the rounding grows with alpha only, so omega carries the factor, up to
+where RK4 (dt 1e-4 s) no longer follows the constraint's own motion at omega: at omega dt = 1 a
+light leaf (0.1 kg, 5 cm) departs by 7.5e-5 deg (3.4e-6 at dt 5e-5, 1.4e-7 at 2.5e-5; NaN at
+omega dt = 3). Random trees run at (1e7, 3e3), omega dt = 0.3: that leaf 4e-6 deg, the 0.24 deg
+tree 9.5e-6, the worst of 30 draws 9.8e-6 and a 60-draw search steered to the largest deviation
+(hypothesis.target) 3.3e-6: a factor 10 under 1e-4 deg. The strategies keep their full ranges.
 
 The two share nothing but the model description: no points, constraints or penalties on the
 reference's side, and the reference is itself checked in tests/test_reference_dynamics.py.
@@ -25,7 +38,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reference_dynamics as ref
-from multibody_strategies import arm2_model, forearm_model, models, models_and_states
+from multibody_strategies import arm2_model, forearm_model, models, models_and_motions, models_and_states
 
 engine_module = pytest.importorskip("fdbench.multibody.engine",
                                     reason="the multibody engine (fdbench.multibody.engine) is not there yet")
@@ -35,6 +48,7 @@ DT = 1e-4  # s, RK4's step: its error (O(dt^4)) is far below 1e-4 degrees at the
 DURATION = 0.5  # s
 BANDWIDTH = 10.0  # rad/s, of each joint's PD loop
 TOLERANCE_DEG = 1e-4
+RANDOM_ALPHA, RANDOM_OMEGA = 1e7, 3e3  # eq. 12 on random trees: omega dt = 0.3 (see the module docstring)
 
 
 def assert_relative(actual, expected, rel, what):
@@ -113,12 +127,13 @@ def pd_gains(t, z):
     return kp, 2 * np.sqrt(kp * inertia)
 
 
-def check_pd_simulation(model, centre, amplitude, frequency, phase, alpha=1e7):
-    """The engine's simulate_pd (penalty factor ``alpha``) against the reference's PD simulation:
+def check_pd_simulation(model, centre, amplitude, frequency, phase, alpha=1e7, omega=10.0):
+    """The engine's simulate_pd (penalty factor ``alpha``, natural frequency ``omega`` rad/s) against
+    the reference's PD simulation:
     the joints track ref_j(t) = centre_j + amplitude_j sin(2 pi frequency_j t + phase_j) from
     0.05 rad off it, under the reference motion's inverse-dynamics torques plus a 3 Hz disturbance
     of 20 kp_j / BANDWIDTH^2 N m (about 0.2 rad of tracking error)."""
-    engine, t = engine_module.Engine(model, alpha=alpha), ref.tree(model)
+    engine, t = engine_module.Engine(model, alpha=alpha, omega=omega), ref.tree(model)
     J = t.n_joints
 
     def motion(time):
@@ -155,3 +170,10 @@ def test_built_in_pd_simulation_matches_the_reference(name):
     model = BUILT_IN[name]()
     J = len(model.joints)
     check_pd_simulation(model, np.full(J, 0.3), np.full(J, 0.4), np.full(J, 1.0), np.zeros(J))
+
+
+@settings(max_examples=5, deadline=None)
+@given(case=models_and_motions())
+def test_pd_simulation_on_random_trees_matches_the_reference(case):
+    model, motion = case
+    check_pd_simulation(model, *motion, alpha=RANDOM_ALPHA, omega=RANDOM_OMEGA)
