@@ -20,6 +20,10 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
     """Carry out a control or optimisation run. ``on_evaluation(count, best)`` reports progress;
     ``on_start(budget)`` is called once compilation and imports are done."""
     spec.validate()
+    if spec.command == "peer":  # OpenSim's and Moco's runs (fdbench.peers)
+        from .peers import run as run_peer
+
+        return explained(run_peer(spec), spec)
     if spec._runs() is not None:
         return explained(spec._runs().run(spec, on_evaluation, on_start), spec)
     if spec.command == "control":

@@ -16,7 +16,7 @@ from .model import Penalty, forearm_with
 from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ, KINEMATICS
 
 
-COMMANDS = ("control", "optimize", "simulate", "collocate")
+COMMANDS = ("control", "optimize", "simulate", "collocate", "peer")  # peer: fdbench.peers
 MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
 MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
 
@@ -141,6 +141,10 @@ class RunSpec:
             for name, gain in (("--kp", self.kp), ("--kd", self.kd)):  # None: scaled per joint (not the forearm)
                 if gain is not None or self._runs() is None:
                     check_gain(name, gain)
+        if self.command == "peer":
+            from .peers import check_spec
+
+            check_spec(self)
         if self.command == "collocate":
             from .collocation import check_options
 
