@@ -409,8 +409,12 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
     if fmt == "json":
         from ..report import json_report
 
-        return json.dumps(json_report(rows + extra_rows + peer_rows, settings_table(plan, seeds, jobs)),
-                          indent=2) + "\n"
+        report = json_report(rows + extra_rows + peer_rows, settings_table(plan, seeds, jobs))
+        if peer_rows:
+            from ..peers.report import with_peer_fields
+
+            with_peer_fields(report["cells"], peer_rows, rows + extra_rows)
+        return json.dumps(report, indent=2) + "\n"
     from ..beyond import beyond_markdown
     from ..report import markdown
 

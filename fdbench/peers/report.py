@@ -109,3 +109,27 @@ def peer_csv_rows(rows: list) -> list[list]:
                               "in_paper": False, "optimizer": ""}.items():
             values[CSV_COLUMNS.index(column)] = value
     return out
+
+
+PEER_FIELDS = ("opensim_version", "solve_time_s", "ipopt_status", "ipopt_iterations", "collocation_rmse_rot_deg",
+               "nodes", "tolerance")
+
+
+def with_peer_fields(cells: list, rows: list, ours: list) -> list:
+    """The JSON report's cells with the peers' own: the peer named in ``torque`` and ``peer``, its
+    record's fields (``PEER_FIELDS``, where it has them) and, beside the fdbench method it stands
+    for among ``ours``, ``vs_fdbench`` (both RMSE_rot, both runtimes, the peer's time over ours)."""
+    pairs = {p["peer"]: p for p in side_by_side(rows, ours)}
+    entries = iter(rows)
+    for cell in cells:
+        if cell.get("table") != "peers":
+            continue
+        row = next(entries)
+        rec = row.records[0]
+        cell.update(torque=rec.get("peer"), peer=rec.get("peer"), feedforward=rec.get("feedforward"), in_paper=False,
+                    optimizer="", **{k: rec[k] for k in PEER_FIELDS if rec.get(k) is not None})
+        pair = pairs.get(row.name)
+        if pair is not None:
+            cell["vs_fdbench"] = {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                                  for k, v in pair.items() if k != "peer"}
+    return cells
