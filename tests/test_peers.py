@@ -114,6 +114,8 @@ def test_the_report_with_peers_has_their_rows_in_markdown_csv_and_json(tmp_path)
     alone = json.loads(invoke("peer", "opensim", "-f", "json", "--db", db, "-q").stdout)
     assert alone["spec_hash"] == spec_hashes["opensim"]
     assert alone["rmse_rot_deg"] == pytest.approx(opensim["rmse_rot_deg_median"], rel=1e-6)
+    listed = pd.read_csv(io.StringIO(invoke("runs", "list", "--db", db, "--command", "peer", "-f", "csv").stdout))
+    assert sorted(listed["method"]) == ["moco", "opensim"]
 
 
 @pytest.mark.parametrize("args, contains", [
