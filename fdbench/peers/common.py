@@ -101,8 +101,7 @@ def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_en
     (fields, (CSV header, rows) of the trajectory)."""
     inverse, truth, torque_ref, samples = reference(spec)
     names = joints(spec)
-    on_samples = lambda values: np.stack([np.interp(samples, t, values[:, j]) for j in range(values.shape[1])], -1)  # noqa: E731
-    z, tau = on_samples(angles), on_samples(torque)
+    z, tau = _on_samples(samples, t, angles), _on_samples(samples, t, torque)
     reached = samples <= t_end + 1e-12
     rot = np.degrees(z - truth)[reached]
     trq = (tau - torque_ref)[reached]
@@ -114,3 +113,8 @@ def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_en
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
     rows = np.column_stack([samples, np.degrees(z), np.degrees(truth), tau, torque_ref])[reached]
     return fields, (header, rows)
+
+
+def _on_samples(samples: np.ndarray, t: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``values`` (shape (m, J), at times t) at the times ``samples``, linear between: shape (n, J)."""
+    return np.stack([np.interp(samples, t, values[:, j]) for j in range(values.shape[1])], axis=-1)

@@ -32,7 +32,8 @@ def gains(spec) -> tuple[np.ndarray, np.ndarray]:
     from ..multibody.runs import pd_gains
 
     kp, kd = pd_gains(spec)
-    return np.asarray(kp, dtype=float).reshape(len(joints(spec))), np.asarray(kd, dtype=float).reshape(len(joints(spec)))
+    shape = len(joints(spec))
+    return np.asarray(kp, dtype=float).reshape(shape), np.asarray(kd, dtype=float).reshape(shape)
 
 
 def run(spec):

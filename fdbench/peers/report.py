@@ -55,11 +55,12 @@ def peers_markdown(rows: list, methods: list[Method], ours: list) -> list[str]:
         out += [f"| {p['fdbench']} | {p['peer']} | {_g(p['rmse_rot_deg_fdbench'])} | {_g(p['rmse_rot_deg_peer'])} "
                 f"| {_g(p['runtime_s_fdbench'])} | {_g(p['runtime_s_peer'])} | {_ratio(p['time_ratio'])} |"
                 for p in pairs]
+    records = [row.records[0] for row in rows]
     details = [f"MocoTrack: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, solve "
-               f"{_g(rec.get('solve_time_s'))} s (tolerance {rec.get('tolerance')}, {rec.get('nodes')} mesh intervals); "
-               f"its own RMSE_rot at its mesh points {_g(rec.get('collocation_rmse_rot_deg'))} deg."
-               for rec in (row.records[0] for row in rows) if rec.get("peer") == "moco"]
-    versions = sorted({str(row.records[0].get("opensim_version")) for row in rows if row.records[0].get("opensim_version")})
+               f"{_g(rec.get('solve_time_s'))} s (tolerance {rec.get('tolerance')}, {rec.get('nodes')} mesh "
+               f"intervals); its own RMSE_rot at its mesh points {_g(rec.get('collocation_rmse_rot_deg'))} deg."
+               for rec in records if rec.get("peer") == "moco"]
+    versions = sorted({str(rec["opensim_version"]) for rec in records if rec.get("opensim_version")})
     out += [""] + details + ([f"OpenSim {', '.join(versions)}."] if versions else [])
     failed = failure_lines(rows)
     if failed:
