@@ -3,7 +3,7 @@
 ``collocate``'s solution is, so that both collocations are judged the same way.
 
 The problem is fdbench's collocation's: CoordinateActuators (optimal force 1 N m, unbounded) at
-every coordinate; the desired motion's states written to a storage table (values and speeds, the
+every coordinate; the desired motion's states written to a temporary .sto file (values and speeds, the
 speeds weighted 0 and used for the initial guess only); the integral of the squared angle errors
 (rad^2, weight 1) plus ``regularization`` / (180/pi)^2 times that of the squared torques (so that,
 in fdbench's units, 1 N m weighs as much as sqrt(regularization) deg, as in ``collocate``); the
@@ -96,6 +96,9 @@ def solve(osim, request: dict) -> dict:
     angles (rad) and speeds (rad/s) at the mesh points and midpoints, shape (m, J), status,
     iterations, objective and solve time (s: the wall time of ``solve``; Moco's own
     ``getSolverDuration`` beside it)."""
+    import os
+    import tempfile
+
     from .child import coordinate_paths, model_from, torque_driven
 
     names = request["coordinates"]
@@ -109,7 +112,10 @@ def solve(osim, request: dict) -> dict:
     track = osim.MocoTrack()
     track.setName("fdbench_peer")
     track.setModel(osim.ModelProcessor(model))
-    track.setStatesReference(osim.TableProcessor(_states_table(osim, paths, t, z, zd)))
+    folder = tempfile.TemporaryDirectory(prefix="fdbench-moco-")
+    reference = os.path.join(folder.name, "states.sto")  # the desired states, as MocoTrack reads them
+    osim.STOFileAdapter.write(_states_table(osim, paths, t, z, zd), reference)
+    track.setStatesReference(osim.TableProcessor(reference))
     track.set_states_global_tracking_weight(1.0)
     weights = osim.MocoWeightSet()
     for path in paths:
@@ -122,6 +128,7 @@ def solve(osim, request: dict) -> dict:
     track.set_final_time(float(t[-1]))
     track.set_mesh_interval(float(t[-1] - t[0]) / request["nodes"])
     study = track.initialize()
+    folder.cleanup()
     problem = study.updProblem()
     for path, angle, rate in zip(paths, z[0], zd[0]):
         problem.setStateInfo(path + "/value", osim.MocoBounds(-STATE_BOUND, STATE_BOUND),
