@@ -93,10 +93,14 @@ def test_opensim_simulates_the_user_s_own_osim_whose_tilted_axes_explain_its_tor
     assert 0.005 < found[ARM26] < 0.05 and found[exact] < found[ARM26] / 10, found
 
 
-def test_moco_s_torque_replayed_follows_its_states_and_nears_the_inverse_dynamics_as_it_converges():
+def test_moco_s_torque_replayed_follows_its_states_and_nears_the_inverse_dynamics_as_it_converges(tmp_path,
+                                                                                                    monkeypatch):
     """MocoTrack of the forearm's exact motion (20 mesh intervals): fdbench's replay of its
     torque follows Moco's own states (the same model, simulated independently), and a tighter
-    IPOPT tolerance brings the tracking and the torque closer to fdbench's inverse dynamics."""
+    IPOPT tolerance brings the tracking and the torque closer to fdbench's inverse dynamics.
+    Nothing is written where the command runs (MocoTrack writes its tracked states file in its
+    own working directory)."""
+    monkeypatch.chdir(tmp_path)
     spec = RunSpec(kinematics="exact")
     inverse = spec.reference()
     found = {}
@@ -114,6 +118,7 @@ def test_moco_s_torque_replayed_follows_its_states_and_nears_the_inverse_dynamic
     peak = np.abs(inverse.torque).max()  # 6 N m
     assert rot_tight < 0.1 and rot_tight < rot_loose / 2 and rot_loose < 1.0, found
     assert torque_tight < 0.1 * peak and torque_tight < torque_loose and error_tight < error_loose, found
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_the_report_with_peers_has_their_rows_in_markdown_csv_and_json(tmp_path):

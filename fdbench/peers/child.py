@@ -13,6 +13,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 from ..multibody.osim import INSTALL_HINT
@@ -32,8 +33,10 @@ def call(request: dict, timeout_s: float = CHILD_TIMEOUT_S) -> dict:
     package_root = str(Path(__file__).resolve().parents[2])  # the child imports this fdbench, after the user's path
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), package_root) if p))
     try:
-        done = subprocess.run([sys.executable, "-c", ENTRY], input=json.dumps(request), capture_output=True, text=True,
-                              env=env, timeout=timeout_s)
+        with tempfile.TemporaryDirectory(prefix="fdbench-opensim-") as folder:  # its working directory: MocoTrack
+            # writes '<name>_tracked_states.sto' there, which must not land in the user's
+            done = subprocess.run([sys.executable, "-c", ENTRY], input=json.dumps(request), capture_output=True,
+                                  text=True, env=env, timeout=timeout_s, cwd=folder)
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"OpenSim's process did not finish within {timeout_s:g} s") from None
     try:
