@@ -110,7 +110,8 @@ def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_en
     if len(names) > 1:
         fields.update({f"rmse_rot_deg_{j}": float(v) for j, v in zip(names, np.sqrt(np.mean(rot**2, axis=0)))})
         fields.update({f"rmse_torque_nm_{j}": float(v) for j, v in zip(names, np.sqrt(np.mean(trq**2, axis=0)))})
-    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
+    header = (["t", "theta", "theta_desired", "torque", "torque_inverse"] if is_forearm(spec)  # the forearm's names
+              else ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names])
     rows = np.column_stack([samples, np.degrees(z), np.degrees(truth), tau, torque_ref])[reached]
     return fields, (header, rows)
 
