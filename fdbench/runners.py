@@ -14,6 +14,10 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
     spec.validate()
     if spec.command == "simulate":
         raise ValueError("simulate runs are carried out by run_simulation")
+    if spec.command == "peer":  # OpenSim's and Moco's runs (fdbench.peers)
+        from .peers import run as run_peer
+
+        return explained(run_peer(spec), spec)
     return explained(spec._runs().run(spec, on_evaluation, on_start), spec)
 
 

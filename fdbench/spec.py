@@ -14,7 +14,7 @@ from .method_options import accepted_options, check_method_options, options_for
 from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
 
 
-COMMANDS = ("control", "optimize", "simulate", "collocate")
+COMMANDS = ("control", "optimize", "simulate", "collocate", "peer")  # peer: fdbench.peers
 MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
 MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
 
@@ -102,6 +102,10 @@ class RunSpec:
             if self.controller not in (None, "pd"):
                 check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
             self._runs().controller(self)  # a ValueError names a bad option or gain
+        if self.command == "peer":
+            from .peers import check_spec
+
+            check_spec(self)
         if self.command == "collocate":
             from .collocation import check_options
 

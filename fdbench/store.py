@@ -351,7 +351,7 @@ def dependency_versions() -> dict:
     from importlib.metadata import PackageNotFoundError, version
 
     versions = {"python": platform.python_version()}
-    for name in ("fdbench", "numpy", "scipy", "numba", "cma", "typer", "rich", "pandas", "matplotlib"):
+    for name in ("fdbench", "numpy", "scipy", "numba", "cma", "typer", "rich", "pandas", "matplotlib", "opensim"):
         try:
             versions[name] = version(name)
         except PackageNotFoundError:

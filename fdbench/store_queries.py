@@ -145,7 +145,7 @@ def read_run_data(path, run_id: int, superseded: bool = False) -> tuple[list, li
 
 def method_label(spec: dict) -> str:
     """A run's method in a few words: 'cs + bfgs + ff' (torque + optimiser, with feedforward),
-    the controller ('pd', 'lqr'), 'collocation', or the command."""
+    the controller ('pd', 'lqr'), 'collocation', the peer ('opensim', 'moco'), or the command."""
     command = spec.get("command")
     if command == "optimize":
         return f"{spec.get('torque')} + {spec.get('optimizer')}" + (" + ff" if spec.get("feedforward") else "")
@@ -153,6 +153,8 @@ def method_label(spec: dict) -> str:
         return spec.get("controller") or "pd"
     if command == "collocate":
         return "collocation"
+    if command == "peer":  # its name among its options: 'opensim', 'moco'
+        return str(dict(spec.get("method_options") or ()).get("peer", command))
     return str(command)
 
 

@@ -35,6 +35,7 @@ def report(
     control: WithControl = True,
     beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation.")] = True,
     all_cells: AllCells = False,
+    peers: Annotated[Optional[str], typer.Option("--peers", metavar="opensim,moco", help="Add the section 'Peers': opensim (OpenSim's forward simulation under the same PD law), moco (MocoTrack, its torque replayed by fdbench), comma-separated. Needs pip install 'fdbench\\[opensim]'.", show_default=False)] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
     jobs: Jobs = None,
@@ -80,9 +81,10 @@ def report(
                                                                     sigma0, popsize, penalty_weight)
     executor = _backend(backend, jobs, scheduler)
     cells = default_cells(torque, opt, feedforward, all_cells)
-    if not cells and not control and not beyond:
+    if not cells and not control and not beyond and not peers:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
     _check_gradient(gradient, opt)
+    peer_names = _peer_names(peers)
     plan = make_plan(
         cells, seeds, budget, control, kp, kd, torque_options=torque_options,
         optimizer_options=optimizer_options, penalty_weight=penalty_weight,
@@ -105,7 +107,19 @@ def report(
             **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
         for method in methods:
             _validated(method.spec)
-    extra = [m.spec for m in methods] if methods else []
+    peer_methods = []
+    if peer_names:
+        from ..peers.report import peer_methods as make_peer_methods
+
+        try:
+            peer_methods = make_peer_methods(peer_names, kp, kd, **_common(kinematics, integrator, dt, rtol, atol,
+                                                                          alpha, xi, omega, conditions))
+        except ValueError as exc:
+            raise BadInput(str(exc)) from None
+        for method in peer_methods:
+            _validated(method.spec)
+        _check_peers_available()
+    extra = ([m.spec for m in methods] if methods else []) + [m.spec for m in peer_methods]
     runs = _run_specs(plan.all_specs() + extra, db_path, db is None, executor, rerun, quiet)
     from ..report import build_rows
 
@@ -120,8 +134,13 @@ def report(
         from ..beyond import beyond_rows
 
         extra_rows = beyond_rows(methods, runs, made)
+    peers_found = None
+    if peer_methods:
+        from ..peers.report import peer_rows
+
+        peers_found = (peer_methods, peer_rows(peer_methods, runs, made))
     _emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
-                       executor.describe(), figures, output, quiet), output)
+                       executor.describe(), figures, output, quiet, peers_found), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
 
@@ -353,20 +372,49 @@ def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
     _say(quiet, f"creating results database {db_path}{hint}")
 
 
+def _peer_names(text: Optional[str]) -> list:
+    """The peers of --peers (none without it); an unknown one is bad input listing the valid."""
+    if text is None:
+        return []
+    from ..peers import parse_names
+
+    try:
+        return parse_names(text)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _check_peers_available() -> None:
+    """Refuse --peers, before any run, where the opensim package cannot be imported."""
+    from ..peers import check_available
+
+    try:
+        check_available()
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+
+
 def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds, jobs, figures, output,
-                 quiet) -> str:
+                 quiet, peers_found=None) -> str:
     from ..report import settings_table
 
+    peer_methods, peer_rows = peers_found or ([], [])
     if fmt == "csv":
         from ..beyond import beyond_csv_rows
         from ..files import csv_text
+        from ..peers.report import peer_csv_rows
         from ..report import CSV_COLUMNS, csv_rows
 
-        return csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows))
+        return csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows) + peer_csv_rows(peer_rows))
     if fmt == "json":
         from ..report import json_report
 
-        return json.dumps(json_report(rows + extra_rows, settings_table(plan, seeds, jobs)), indent=2) + "\n"
+        report = json_report(rows + extra_rows + peer_rows, settings_table(plan, seeds, jobs))
+        if peer_rows:
+            from ..peers.report import with_peer_fields
+
+            with_peer_fields(report["cells"], peer_rows, rows + extra_rows)
+        return json.dumps(report, indent=2) + "\n"
     from ..beyond import beyond_markdown
     from ..report import markdown
 
@@ -377,8 +425,12 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
         links = write_report_figures(plan, runs, rows, inverse, figures, output.parent if output is not None else Path("."))
         _say(quiet, f"wrote {len(links)} figures to {figures}")
     section = beyond_markdown(extra_rows, methods) if methods else None
+    if peer_rows:
+        from ..peers.report import peers_markdown
+
+        section = (section or []) + peers_markdown(peer_rows, peer_methods, rows + extra_rows)
     return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section,
-                    extra_rows=extra_rows)
+                    extra_rows=extra_rows + peer_rows)
 
 
 def _check_figures_dir(directory: Path, output: Optional[Path], db: Path, inputs: dict, names=None) -> None:

@@ -1,0 +1,126 @@
+"""OpenSim in a child process: a peer's request (JSON on stdin) in, its answer (one JSON line on
+stdout) out. OpenSim's libraries bundle their own CasADi, which cannot share a process with the
+casadi package fdbench's collocation uses (see ``fdbench.multibody.osim``), so OpenSim is never
+imported into fdbench's own process.
+
+Parent side: ``call(request)``. Child side: ``main()`` dispatches on ``request["peer"]`` to the
+peer module's ``solve(osim, request)``, and offers the helpers the peers share (``model_from``,
+``torque_driven``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from ..multibody.osim import INSTALL_HINT
+
+CHILD_TIMEOUT_S = 3600  # s: a MocoTrack solve of a large model may take long
+ENTRY = "from fdbench.peers.child import main; main()"
+SOLVERS = {"opensim": "fdbench.peers.opensim_pd", "moco": "fdbench.peers.moco"}
+
+
+class PeerUnavailable(ValueError):
+    """The opensim package cannot be imported where the peers run (one line naming the extra)."""
+
+
+def call(request: dict, timeout_s: float = CHILD_TIMEOUT_S) -> dict:
+    """The child's answer (a dict) to ``request``; PeerUnavailable without the opensim package,
+    RuntimeError (one line) when the child fails."""
+    package_root = str(Path(__file__).resolve().parents[2])  # the child imports this fdbench, after the user's path
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), package_root) if p))
+    try:
+        with tempfile.TemporaryDirectory(prefix="fdbench-opensim-") as folder:  # its working directory: MocoTrack
+            # writes '<name>_tracked_states.sto' there, which must not land in the user's
+            done = subprocess.run([sys.executable, "-c", ENTRY], input=json.dumps(request), capture_output=True,
+                                  text=True, env=env, timeout=timeout_s, cwd=folder)
+    except subprocess.TimeoutExpired:
+        raise RuntimeError(f"OpenSim's process did not finish within {timeout_s:g} s") from None
+    try:
+        answer = json.loads(done.stdout.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        last = (done.stderr.strip().splitlines() or ["no output"])[-1]
+        raise RuntimeError(f"OpenSim's process failed (exit {done.returncode}): {last[:300]}") from None
+    if answer.get("unavailable"):
+        raise PeerUnavailable(f"the peers run OpenSim and need the opensim package: {INSTALL_HINT}")
+    if "error" in answer:
+        raise RuntimeError(answer["error"])
+    return answer
+
+
+def opensim_version() -> str:
+    """OpenSim's version where the peers run ('4.6'); PeerUnavailable without it."""
+    return call({"peer": "version"}, timeout_s=120)["version"]
+
+
+# ---------------------------------------------------------------------------------------- the child
+
+
+def main() -> None:
+    """The child process: one request in, one JSON line out (OpenSim's own output silenced)."""
+    import importlib
+    import io
+
+    request = json.loads(sys.stdin.read())
+    real_stdout, sys.stdout = sys.stdout, io.StringIO()  # nothing but the answer on the pipe
+    try:
+        try:
+            import opensim as osim
+        except ImportError:
+            answer = {"unavailable": True}
+        else:
+            osim.Logger.setLevelString("Off")
+            if request["peer"] == "version":
+                answer = {"version": osim.GetVersion()}
+            else:
+                answer = importlib.import_module(SOLVERS[request["peer"]]).solve(osim, request)
+                answer["version"] = osim.GetVersion()
+    except Exception as exc:  # noqa: BLE001 - OpenSim raises RuntimeErrors of many kinds; the parent records it
+        answer = {"error": " ".join(f"OpenSim: {exc}".split())[:400]}
+    finally:
+        sys.stdout = real_stdout
+    print(json.dumps(answer))
+
+
+def model_from(osim, content: str):
+    """An OpenSim model of the file text ``content`` (read from a private copy), its forces but the
+    PrescribedForces (the loads fdbench keeps) removed: muscles and other forces are not part of a
+    torque-driven model."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="fdbench-peer-") as folder:
+        path = os.path.join(folder, "model.osim")
+        with open(path, "w", encoding="utf-8") as handle:
+            handle.write(content)
+        model = osim.Model(path)
+    forces = model.updForceSet()
+    for i in reversed(range(forces.getSize())):
+        if osim.PrescribedForce.safeDownCast(forces.get(i)) is None:
+            forces.remove(i)
+    return model
+
+
+def torque_driven(osim, model, coordinates, suffix: str):
+    """Add a CoordinateActuator ``<coordinate><suffix>`` (optimal force 1 N m, so its control is
+    its torque, unbounded) at each of ``coordinates``; returns them in that order."""
+    import math
+
+    actuators = []
+    for name in coordinates:
+        actuator = osim.CoordinateActuator(name)
+        actuator.setName(name + suffix)
+        actuator.setOptimalForce(1.0)
+        actuator.setMinControl(-math.inf)
+        actuator.setMaxControl(math.inf)
+        model.addForce(actuator)
+        actuators.append(actuator)
+    return actuators
+
+
+def coordinate_paths(model, coordinates) -> list[str]:
+    """The state paths of the coordinates' values, '/jointset/<joint>/<coordinate>' (after initSystem)."""
+    found = model.getCoordinateSet()
+    return [found.get(name).getAbsolutePathString() for name in coordinates]

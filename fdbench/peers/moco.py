@@ -1,0 +1,177 @@
+"""The ``moco`` peer: OpenSim Moco's MocoTrack, torque-driven, on the same model, motion and mesh as
+``fdbench collocate``; its torque replayed by fdbench's forward simulation exactly as
+``collocate``'s solution is, so that both collocations are judged the same way.
+
+The problem is fdbench's collocation's: CoordinateActuators (optimal force 1 N m, unbounded) at
+every coordinate; the desired motion's states written to a temporary .sto file (values and speeds, the
+speeds weighted 0 and used for the initial guess only); the integral of the squared angle errors
+(rad^2, weight 1) plus ``regularization`` / (180/pi)^2 times that of the squared torques (so that,
+in fdbench's units, 1 N m weighs as much as sqrt(regularization) deg, as in ``collocate``); the
+initial state fixed to the desired motion's; Hermite-Simpson on ``nodes`` mesh intervals; IPOPT
+through CasADi with ``tolerance`` as convergence and constraint tolerance, serial (``parallel``
+0, as fdbench's collocation). Moco's controls at its mesh points and interval midpoints give the
+torque history, interpolated as ``collocate``'s (piecewise quadratic)."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+DEG2 = (180.0 / math.pi) ** 2
+DEFAULT_TOLERANCE = 1e-4  # IPOPT's convergence and constraint tolerance in MocoTrack (Moco's own default is 1e-2)
+STATE_BOUND = 20.0  # rad (and 10x that in rad/s): bounds loose enough never to bind
+SUMMARY = ("OpenSim Moco's MocoTrack, torque-driven (CoordinateActuators), Hermite-Simpson on the mesh of "
+           "'fdbench collocate', tracking the same motion's angles with the same torque regularisation; its "
+           "torque is replayed by fdbench's forward simulation exactly as collocate's is")
+
+
+def run(spec):
+    """The peer's run (``RunOutcome``): MocoTrack in a child process, then its torque replayed by
+    fdbench's forward simulation; Moco's own RMSE_rot at its mesh points, status, iterations and
+    solve time stand beside the replay's indicators."""
+    from ..collocation import CollocationResult
+    from .child import call
+    from .common import desired, joints, osim_texts, replay, warm_up
+
+    options = dict(spec.method_options)
+    names = joints(spec)
+    nominal, _ = osim_texts(spec)  # Moco tracks with the nominal model; the replay simulates the plant
+    samples = spec.motions()[0].samples
+    z, zd, _ = desired(spec, samples)
+    request = {"peer": "moco", "nominal": nominal, "coordinates": list(names), "t": np.asarray(samples).tolist(),
+               "z": z.tolist(), "zd": zd.tolist(), "nodes": options["nodes"],
+               "effort_weight": options["regularization"] / DEG2, "tolerance": options["tolerance"],
+               "max_iter": options["max_iter"]}
+    answer = call(request)
+    warm_up(spec)
+    times, controls = np.array(answer["t"]), np.array(answer["controls"]).reshape(len(answer["t"]), len(names))
+    solution = _as_collocation(CollocationResult, times, controls, answer)
+    began = time.perf_counter()
+    outcome = replay(spec, solution.torque_function())
+    replay_s = time.perf_counter() - began
+    truth = spec.motions()[1]
+    mesh = solution.t
+    angles = np.array(answer["angles"]).reshape(len(times), len(names))[:: 2 if solution.torque_mid is not None else 1]
+    wanted = np.asarray(truth(mesh)[0]).reshape(len(mesh), len(names))
+    own = float(np.sqrt(np.mean(np.degrees(angles - wanted) ** 2)))
+    record = outcome.record
+    success = answer["status"] in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    record.update(torque="moco", evaluations=1, runtime_s=answer["solve_s"] + replay_s, peer="moco",
+                  nodes=options["nodes"], scheme="hermite-simpson", regularization=options["regularization"],
+                  tolerance=options["tolerance"], collocation_rmse_rot_deg=own, ipopt_status=answer["status"],
+                  ipopt_iterations=answer["iterations"], solve_time_s=answer["solve_s"],
+                  moco_solver_duration_s=answer["solver_duration_s"], replay_time_s=replay_s,
+                  opensim_version=answer["version"])
+    if not success:
+        record.update(status="collocation_failed",
+                      message=f"MocoTrack did not solve the problem: {answer['status']} after {answer['iterations']} "
+                              f"iterations; the replay of its last iterate: {record.get('message')}")
+    else:
+        record["message"] = (f"MocoTrack (OpenSim {answer['version']}): {answer['status']} in {answer['iterations']} "
+                             f"iterations; replay: {record.get('message')}")
+    outcome.extra["collocation"] = solution
+    return outcome
+
+
+def _as_collocation(result_class, times: np.ndarray, controls: np.ndarray, answer: dict):
+    """Moco's solution as a ``collocation.CollocationResult`` (node arrays (N + 1, J) and midpoint
+    torques (N, J)), so that its torque is interpolated as collocate's: Hermite-Simpson gives the
+    mesh points and the interval midpoints (2 N + 1 times)."""
+    angles = np.array(answer["angles"]).reshape(controls.shape)
+    speeds = np.array(answer["speeds"]).reshape(controls.shape)
+    if len(times) % 2 == 1 and np.allclose(times[1::2], (times[:-1:2] + times[2::2]) / 2):
+        return result_class("hermite-simpson", times[::2], angles[::2], speeds[::2], controls[::2], controls[1::2],
+                            answer["objective"], answer["status"], answer["iterations"], answer["solve_s"], 0.0)
+    return result_class("trapezoidal", times, angles, speeds, controls, None, answer["objective"], answer["status"],
+                        answer["iterations"], answer["solve_s"], 0.0)
+
+
+# ---------------------------------------------------------------------------------------- the child
+
+
+def solve(osim, request: dict) -> dict:
+    """In OpenSim's process: MocoTrack of the desired states; its times (s), controls (N m),
+    angles (rad) and speeds (rad/s) at the mesh points and midpoints, shape (m, J), status,
+    iterations, objective and solve time (s: the wall time of ``solve``; Moco's own
+    ``getSolverDuration`` beside it)."""
+    import os
+    import tempfile
+
+    from .child import coordinate_paths, model_from, torque_driven
+
+    names = request["coordinates"]
+    model = model_from(osim, request["nominal"])
+    torque_driven(osim, model, names, "_torque")
+    model.finalizeConnections()
+    model.initSystem()
+    paths = coordinate_paths(model, names)
+    t = np.array(request["t"])
+    z, zd = np.array(request["z"]), np.array(request["zd"])
+    track = osim.MocoTrack()
+    track.setName("fdbench_peer")
+    track.setModel(osim.ModelProcessor(model))
+    folder = tempfile.TemporaryDirectory(prefix="fdbench-moco-")
+    reference = os.path.join(folder.name, "states.sto")  # the desired states, as MocoTrack reads them
+    osim.STOFileAdapter.write(_states_table(osim, paths, t, z, zd), reference)
+    track.setStatesReference(osim.TableProcessor(reference))
+    track.set_states_global_tracking_weight(1.0)
+    weights = osim.MocoWeightSet()
+    for path in paths:
+        weights.cloneAndAppend(osim.MocoWeight(path + "/speed", 0.0))
+    track.set_states_weight_set(weights)
+    track.set_track_reference_position_derivatives(False)
+    track.set_apply_tracked_states_to_guess(True)
+    track.set_control_effort_weight(request["effort_weight"])
+    track.set_initial_time(float(t[0]))
+    track.set_final_time(float(t[-1]))
+    track.set_mesh_interval(float(t[-1] - t[0]) / request["nodes"])
+    study = track.initialize()
+    folder.cleanup()
+    problem = study.updProblem()
+    for path, angle, rate in zip(paths, z[0], zd[0]):
+        problem.setStateInfo(path + "/value", osim.MocoBounds(-STATE_BOUND, STATE_BOUND),
+                             osim.MocoInitialBounds(float(angle)))
+        problem.setStateInfo(path + "/speed", osim.MocoBounds(-10 * STATE_BOUND, 10 * STATE_BOUND),
+                             osim.MocoInitialBounds(float(rate)))
+    solver = osim.MocoCasADiSolver.safeDownCast(study.updSolver())
+    solver.set_num_mesh_intervals(int(request["nodes"]))
+    solver.set_transcription_scheme("hermite-simpson")
+    solver.set_optim_convergence_tolerance(float(request["tolerance"]))
+    solver.set_optim_constraint_tolerance(float(request["tolerance"]))
+    solver.set_optim_max_iterations(int(request["max_iter"]))
+    solver.set_parallel(0)
+    solver.set_verbosity(0)
+    solver.set_optim_ipopt_print_level(0)
+    began = time.perf_counter()
+    solution = study.solve()
+    solve_s = time.perf_counter() - began
+    solution.unseal()  # a failed solve's last iterate is replayed too, as collocate's is
+    states = solution.getStatesTrajectoryMat()
+    labels = list(solution.getStateNames())
+    columns = lambda suffix: [labels.index(path + suffix) for path in paths]  # noqa: E731
+    control_labels = list(solution.getControlNames())
+    controls = solution.getControlsTrajectoryMat()[:, [control_labels.index(f"/forceset/{n}_torque") for n in names]]
+    return {"t": np.asarray(solution.getTimeMat()).tolist(), "controls": controls.tolist(),
+            "angles": states[:, columns("/value")].tolist(), "speeds": states[:, columns("/speed")].tolist(),
+            "status": solution.getStatus(), "iterations": int(solution.getNumIterations()),
+            "objective": float(solution.getObjective()), "solve_s": solve_s,
+            "solver_duration_s": float(solution.getSolverDuration())}
+
+
+def _states_table(osim, paths, t, z, zd):
+    """The desired states as a TimeSeriesTable (radians): '<path>/value' and '<path>/speed' columns."""
+    table = osim.TimeSeriesTable()
+    labels = osim.StdVectorString()
+    for suffix in ("/value", "/speed"):
+        for path in paths:
+            labels.append(path + suffix)
+    table.setColumnLabels(labels)
+    table.addTableMetaDataString("inDegrees", "no")
+    for k in range(len(t)):
+        row = osim.RowVector(2 * len(paths), 0.0)
+        for j in range(len(paths)):
+            row[j], row[len(paths) + j] = float(z[k, j]), float(zd[k, j])
+        table.appendRow(float(t[k]), row)
+    return table
