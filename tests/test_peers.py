@@ -112,7 +112,8 @@ def test_moco_s_torque_replayed_follows_its_states_and_nears_the_inverse_dynamic
         header, rows = outcome.trajectory()
         replayed = np.interp(solution.t, rows[:, 0], rows[:, header.index("theta")])
         assert np.abs(replayed - np.degrees(solution.angles[:, 0])).max() < 0.01  # deg: the replay is Moco's trajectory
-        torque_error = np.sqrt(np.mean((solution.torque[:, 0] - np.interp(solution.t, inverse.t, inverse.torque)) ** 2))
+        torque_error = np.sqrt(np.mean((solution.torque[:, 0] - np.interp(solution.t, inverse.t, inverse.torque[:, 0]))
+                                       ** 2))
         found[tolerance] = record["rmse_rot_deg"], record["rmse_torque_nm"], torque_error
     (rot_loose, torque_loose, error_loose), (rot_tight, torque_tight, error_tight) = found[1e-4], found[1e-6]
     peak = np.abs(inverse.torque).max()  # 6 N m

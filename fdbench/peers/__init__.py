@@ -97,11 +97,9 @@ def check_spec(spec) -> None:
         raise ValueError(f"peer {found.name}: options {sorted(set(options) - {'peer'})}, expected "
                          f"{sorted(found.defaults)}")
     if found.name == "opensim":
-        from ..control import check_gain
+        from ..controllers.pd import PD
 
-        for option, gain in (("--kp", spec.kp), ("--kd", spec.kd)):
-            if gain is not None:
-                check_gain(option, gain)
+        PD(spec.kp, spec.kd)  # a ValueError names a bad gain
         return
     from ..collocation import check_options
 
