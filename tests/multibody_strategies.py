@@ -149,3 +149,31 @@ def sinusoids(draw, n: int):
     frequency = draw(st.lists(st.floats(0.5, 2.0), min_size=n, max_size=n).map(np.array))
     phase = draw(vectors(n, math.pi))
     return centre, amplitude, frequency, phase
+
+
+@st.composite
+def joint_paths(draw):
+    """A joint's path: 2 to 8 samples, angles strictly increasing in [-3, 3] rad (at least 0.05 rad
+    apart), x and y within 5 cm."""
+    n = draw(st.integers(2, 8))
+    gaps = draw(st.lists(st.floats(0.05, 1.0), min_size=n - 1, max_size=n - 1))
+    angles = np.cumsum([draw(st.floats(-3.0, -1.0))] + gaps)
+    coordinate = st.floats(-0.05, 0.05)
+    return d.JointPath(tuple(float(a) for a in angles), tuple(draw(coordinate) for _ in range(n)),
+                       tuple(draw(coordinate) for _ in range(n)))
+
+
+@st.composite
+def models_with_paths_and_free_joints(draw, max_bodies: int = 5):
+    """A random model of ``models`` whose joints on ground are free (with some chance, the first
+    always) and whose other joints have paths (with some chance, at least one when there is one)."""
+    import dataclasses
+
+    model = draw(models(min_bodies=2, max_bodies=max_bodies))
+    joints = list(model.joints)
+    for k, joint in enumerate(joints):
+        if joint.parent == d.GROUND and (k == 0 or draw(st.booleans())):
+            joints[k] = dataclasses.replace(joint, type="free", coordinates=(f"a{k}", f"x{k}", f"y{k}"))
+        elif joint.parent != d.GROUND and draw(st.booleans()) or k == len(joints) - 1:
+            joints[k] = dataclasses.replace(joint, path=draw(joint_paths()))
+    return dataclasses.replace(model, joints=tuple(joints))

@@ -25,7 +25,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reference_dynamics as ref
-from multibody_strategies import arm2_model, forearm_model, models, models_and_states
+from multibody_strategies import (arm2_model, forearm_model, models, models_and_states,
+                                 models_with_paths_and_free_joints)
 
 engine_module = pytest.importorskip("fdbench.multibody.engine",
                                     reason="the multibody engine (fdbench.multibody.engine) is not there yet")
@@ -155,3 +156,53 @@ def test_built_in_pd_simulation_matches_the_reference(name):
     model = BUILT_IN[name]()
     J = len(model.joints)
     check_pd_simulation(model, np.full(J, 0.3), np.full(J, 0.4), np.full(J, 1.0), np.zeros(J))
+
+
+# ----------------------------------------------------------------------------- free bases and joint paths
+
+
+def check_general_inverse_dynamics(model, seed):
+    """Inverse dynamics, M(z) and h of a model with free and path joints against the reference's
+    jets (tests/reference_dynamics.GeneralTree), to 1e-9 relative."""
+    engine, t = engine_module.Engine(model), ref.GeneralTree(model)
+    assert engine.joints == model.coordinates and engine.n_joints == t.n_joints
+    rng = np.random.default_rng(seed)
+    z, zd, zdd = rng.uniform(-3, 3, (4, t.n_joints)), rng.uniform(-5, 5, (4, t.n_joints)), rng.uniform(
+        -50, 50, (4, t.n_joints))
+    assert_relative(engine.inverse_dynamics(z, zd, zdd), t.inverse_dynamics(z, zd, zdd), 1e-9, "inverse dynamics")
+    M = engine.mass_matrix(z)
+    assert_relative(M, t.mass_matrix(z), 1e-9, "M(z)")
+    assert np.allclose(M, np.swapaxes(M, 1, 2), rtol=0, atol=1e-12 * np.abs(M).max())
+    assert np.linalg.eigvalsh(M).min() > 0
+    assert_relative(engine.bias(z, zd), t.bias(z, zd), 1e-9, "h(z, z')")
+    assert_relative(engine.inverse_torques(z[0], zd[0], zdd[0]), t.inverse_dynamics(z[0], zd[0], zdd[0]), 1e-9,
+                    "inverse_torques")
+
+
+@settings(max_examples=25, deadline=None)
+@given(model=models_with_paths_and_free_joints(), seed=st.integers(0, 2**16))
+def test_free_and_path_joints_inverse_dynamics_match_the_reference(model, seed):
+    check_general_inverse_dynamics(model, seed)
+
+
+@settings(max_examples=10, deadline=None)
+@given(model=models(), seed=st.integers(0, 2**16))
+def test_the_reference_s_jets_agree_with_its_newton_euler_on_pin_joints(model, seed):
+    """The two constructions of the reference agree where both apply (pin joints only)."""
+    t, general = ref.tree(model), ref.GeneralTree(model)
+    z, zd, zdd = random_states(t.n_joints, 3, seed)
+    assert_relative(general.inverse_dynamics(z, zd, zdd), ref.inverse_dynamics(t, z, zd, zdd), 1e-12, "tau")
+    assert_relative(general.mass_matrix(z), ref.mass_matrix(t, z), 1e-12, "M")
+
+
+@settings(max_examples=10, deadline=None)
+@given(model=models_with_paths_and_free_joints(), seed=st.integers(0, 2**16))
+def test_free_and_path_joint_states_round_trip(model, seed):
+    """joints_from_state(state_from_joints(z, z')) gives z, z' back (a free joint's x, y from its
+    child's point), and the state satisfies the constraints of the pin joints' bodies."""
+    engine = engine_module.Engine(model)
+    rng = np.random.default_rng(seed)
+    z, zd = rng.uniform(-3, 3, engine.n_joints), rng.uniform(-5, 5, engine.n_joints)
+    back = engine.joints_from_state(engine.state_from_joints(z, zd))
+    np.testing.assert_allclose(back[0], z, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back[1], zd, rtol=0, atol=1e-12)
