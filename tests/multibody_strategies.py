@@ -155,12 +155,15 @@ def sinusoids(draw, n: int):
 def joint_paths(draw):
     """A joint's path: 2 to 8 samples, angles strictly increasing in [-3, 3] rad (at least 0.05 rad
     apart), x and y within 5 cm."""
-    n = draw(st.integers(2, 8))
-    gaps = draw(st.lists(st.floats(0.05, 1.0), min_size=n - 1, max_size=n - 1))
-    angles = np.cumsum([draw(st.floats(-3.0, -1.0))] + gaps)
+    def knots(n):
+        gaps = draw(st.lists(st.floats(0.05, 1.0), min_size=n - 1, max_size=n - 1))
+        return tuple(float(a) for a in np.cumsum([draw(st.floats(-3.0, -1.0))] + gaps))
+
+    n, m = draw(st.integers(2, 8)), draw(st.integers(2, 8))
     coordinate = st.floats(-0.05, 0.05)
-    return d.JointPath(tuple(float(a) for a in angles), tuple(draw(coordinate) for _ in range(n)),
-                       tuple(draw(coordinate) for _ in range(n)))
+    y_angles = knots(m) if draw(st.booleans()) else None  # y's own angles (OpenSim's knee)
+    return d.JointPath(knots(n), tuple(draw(coordinate) for _ in range(n)),
+                       tuple(draw(coordinate) for _ in range(n if y_angles is None else m)), y_angles)
 
 
 @st.composite

@@ -380,7 +380,8 @@ class GeneralTree:
         self.column = list(np.cumsum([0] + sizes[:-1]))
         self.n_joints = sum(sizes)
         self.paths = [None if joint.path is None else (ReferenceSpline(joint.path.angles, joint.path.x),
-                                                       ReferenceSpline(joint.path.angles, joint.path.y))
+                                                       ReferenceSpline(joint.path.y_angles or joint.path.angles,
+                                                                       joint.path.y))
                       for joint in model.joints]
 
     def _frames(self, q):

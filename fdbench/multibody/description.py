@@ -83,11 +83,16 @@ class JointPath:
     """The path of a joint's point in its parent's frame: at the coordinate ``angles[i]`` (rad,
     strictly increasing) the child's point sits at at_parent + (x[i], y[i]) (m), in between on
     OpenSim's SimmSpline through the samples (``fdbench.multibody.spline``), beyond them on its end
-    slopes."""
+    slopes. ``y_angles``: y's own angles where they differ from x's (OpenSim's knee)."""
 
     angles: tuple[float, ...]
     x: tuple[float, ...]
     y: tuple[float, ...]
+    y_angles: tuple[float, ...] | None = None
+
+    @property
+    def angles_of_y(self) -> tuple[float, ...]:
+        return self.angles if self.y_angles is None else self.y_angles
 
     def splines(self):
         """The splines (x(angle), y(angle)), fitted once per path."""
@@ -323,7 +328,7 @@ TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": Tru
 BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
 JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
               "offset": False, "limits": False, "path": False, "coordinates": False}
-PATH_KEYS = {"angles": True, "x": True, "y": True}
+PATH_KEYS = {"angles": True, "x": True, "y": True, "y_angles": False}
 LOAD_KEYS = {"body": True, "at": True, "force": True}
 MOTION_KEYS = {"name": True, "type": False, "duration": True, "start": True, "goal": True}
 MOTION_TYPES = ("minimum-jerk",)
@@ -346,7 +351,7 @@ ALLOWED = {
     "path": "a table with angles (rad, strictly increasing), x and y (m), lists of the same length (2 to 1000)",
     "coordinates": "three names [angle, x, y] of a free joint's coordinates",
     "angles": "a list of angles (rad), strictly increasing", "x": "a list of x values (m)",
-    "y": "a list of y values (m)",
+    "y": "a list of y values (m)", "y_angles": "a list of angles (rad), strictly increasing: y's own",
 }
 
 
@@ -515,20 +520,22 @@ def _path(check: _Checker, entry, key: str) -> JointPath:
     """A joint's path table: angles strictly increasing, x and y of the same length."""
     entry = check.table(entry, key, PATH_KEYS)
     lists = {}
-    for name in PATH_KEYS:
+    for name in (name for name in PATH_KEYS if name in entry):
         value = entry[name]
         if not isinstance(value, list) or not 2 <= len(value) <= MAX_PATH_SAMPLES:
             check.fail(f"{key}.{name}", f"must be {ALLOWED[name]} of 2 to {MAX_PATH_SAMPLES} numbers, got {_kind(value)}")
         lists[name] = tuple(check.number(v, f"{key}.{name}[{i}]", what="a number") for i, v in enumerate(value))
-    for name in ("x", "y"):
-        if len(lists[name]) != len(lists["angles"]):
-            check.fail(f"{key}.{name}", f"has {len(lists[name])} values but angles has {len(lists['angles'])}; "
-                                        "give one value per angle")
-    for i in range(1, len(lists["angles"])):
-        if not lists["angles"][i] > lists["angles"][i - 1]:
-            check.fail(f"{key}.angles[{i}]", f"must be more than angles[{i - 1}] ({lists['angles'][i - 1]:g}): "
-                                             f"{ALLOWED['angles']}, got {lists['angles'][i]:g}")
-    return JointPath(lists["angles"], lists["x"], lists["y"])
+    for name, knots in (("x", "angles"), ("y", "y_angles" if "y_angles" in lists else "angles")):
+        if len(lists[name]) != len(lists[knots]):
+            check.fail(f"{key}.{name}", f"has {len(lists[name])} values but {knots} has {len(lists[knots])}; "
+                                        f"give one value per angle")
+    for knots in ("angles", "y_angles"):
+        values = lists.get(knots, ())
+        for i in range(1, len(values)):
+            if not values[i] > values[i - 1]:
+                check.fail(f"{key}.{knots}[{i}]", f"must be more than {knots}[{i - 1}] ({values[i - 1]:g}): "
+                                                  f"{ALLOWED['angles']}, got {values[i]:g}")
+    return JointPath(lists["angles"], lists["x"], lists["y"], lists.get("y_angles"))
 
 
 def _free_coordinates(check: _Checker, value, key: str) -> tuple[str, str, str]:
@@ -549,7 +556,7 @@ def _path_splines(path: JointPath):
     from .spline import fit
 
     if path not in _SPLINES:
-        _SPLINES[path] = (fit(path.angles, path.x), fit(path.angles, path.y))
+        _SPLINES[path] = (fit(path.angles, path.x), fit(path.angles_of_y, path.y))
     return _SPLINES[path]
 
 
@@ -749,7 +756,9 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
         entry = {"name": j.name, "type": j.type, "parent": j.parent, "child": j.child, "at_parent": list(j.at_parent),
                  "at_child": list(j.at_child), "offset": j.offset}
         entry |= {"coordinates": list(j.coordinates)} if j.coordinates is not None else {}
-        entry |= {"path": {"angles": list(j.path.angles), "x": list(j.path.x), "y": list(j.path.y)}} if j.path else {}
+        if j.path is not None:
+            entry["path"] = {"angles": list(j.path.angles), "x": list(j.path.x), "y": list(j.path.y)}
+            entry["path"] |= {"y_angles": list(j.path.y_angles)} if j.path.y_angles is not None else {}
         return entry | ({"limits": list(j.limits)} if j.limits is not None else {})
 
     data = {"name": model.name} | ({"description": model.description} if model.description else {})
