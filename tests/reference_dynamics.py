@@ -229,9 +229,10 @@ def potential_energy(t: Tree, z) -> np.ndarray:
 # ----------------------------------------------------------------------------- simulation
 
 
-def simulate(t: Tree, z0, zd0, t_end, torque, t_eval):
-    """DOP853 (rtol = atol = 1e-12) of the forward dynamics from z0, z'0 (J,) over [0, t_end] s
-    under torque(time, z, z') -> tau (J,) N m. Returns (z, z') at t_eval, each (len(t_eval), J)."""
+def simulate(t: Tree, z0, zd0, t_end, torque, t_eval, tolerance: float = 1e-12):
+    """DOP853 (rtol = atol = ``tolerance``) of the forward dynamics from z0, z'0 (J,) over [0, t_end] s
+    under torque(time, z, z') -> tau (J,) N m (a Tree, or a GeneralTree). Returns (z, z') at t_eval,
+    each (len(t_eval), J)."""
     from scipy.integrate import solve_ivp
 
     J = t.n_joints
@@ -242,13 +243,13 @@ def simulate(t: Tree, z0, zd0, t_end, torque, t_eval):
                          else forward_dynamics(t, z, zd, torque(time, z, zd)))
         return np.concatenate([zd, accelerations])
 
-    sol = solve_ivp(rhs, (0.0, t_end), np.concatenate([z0, zd0]), method="DOP853", rtol=1e-12, atol=1e-12,
+    sol = solve_ivp(rhs, (0.0, t_end), np.concatenate([z0, zd0]), method="DOP853", rtol=tolerance, atol=tolerance,
                     t_eval=t_eval)
     assert sol.success, sol.message
     return sol.y[:J].T, sol.y[J:].T
 
 
-def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval):
+def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval, tolerance: float = 1e-12):
     """The engine's PD law tau = feedforward(t) + kp (ref - z) + kd (ref' - z') per joint, with
     reference(t) -> (ref, ref') (rad, rad/s) and kp (N m/rad), kd (N m s/rad) of shape (J,),
     integrated as ``simulate``. Returns (z, z') at t_eval."""
@@ -258,7 +259,7 @@ def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval)
         ref, refd = reference(time)
         return feedforward(time) + kp * (ref - z) + kd * (refd - zd)
 
-    return simulate(t, z0, zd0, t_end, torque, t_eval)
+    return simulate(t, z0, zd0, t_end, torque, t_eval, tolerance)
 
 
 # ============================================================================= free bases and joint paths
@@ -436,10 +437,11 @@ class GeneralTree:
                 dload[i, :, j] = point[0].a[1], point[1].a[1]
         return dphi, dcom, dload
 
-    def inverse_dynamics_one(self, z, zd, zdd, external=True):
-        """tau (J,) (N m, N for translations) of one state z, z', z'' (J,)."""
+    def inverse_dynamics_one(self, z, zd, zdd, external=True, jacobians=None):
+        """tau (J,) (N m, N for translations) of one state z, z', z'' (J,) (``jacobians``: those of
+        ``_jacobians(z)`` if known)."""
         angle, coms, _ = self._points([Jet(z[i], zd[i], 0.5 * zdd[i]) for i in range(self.n_joints)])
-        dphi, dcom, dload = self._jacobians(z)
+        dphi, dcom, dload = jacobians or self._jacobians(z)
         gravity = np.asarray(self.model.gravity, dtype=float) if external else np.zeros(2)
         tau = np.zeros(self.n_joints)
         for b, body in enumerate(self.bodies):
@@ -472,4 +474,9 @@ class GeneralTree:
 
     def forward_dynamics(self, z, zd, tau):
         """z'' (J,) = M^-1 (tau - h) of one state."""
-        return np.linalg.solve(self.mass_matrix(z), np.asarray(tau, dtype=float) - self.bias(z, zd))
+        jacobians = self._jacobians(z)
+        dphi, dcom, _ = jacobians
+        M = sum(body.mass * dcom[b].T @ dcom[b] + body.inertia * np.outer(dphi[b], dphi[b])
+                for b, body in enumerate(self.bodies))
+        h = self.inverse_dynamics_one(z, zd, np.zeros(self.n_joints), jacobians=jacobians)
+        return np.linalg.solve(M, np.asarray(tau, dtype=float) - h)

@@ -304,13 +304,26 @@ class Engine:
         return (self.pt_index, self.pt_fixed, self.body_pts, self.body_geom, self.joint_parent, self.lin_idx,
                 self.lin_coef, self.lin_const, self.first, self.base, self.q_ext, self.params)
 
-    def require_compiled(self, what: str = "the penalty formulation's simulation") -> None:
+    @property
+    def dense_penalty(self):
+        """Eq. 12 by numpy (``fdbench.multibody.general``) for a model with free or path joints."""
+        if getattr(self, "_dense", None) is None:
+            from .general import DensePenalty
+
+            self._dense = DensePenalty(self)
+        return self._dense
+
+    def _check_nominal(self, nominal) -> None:
+        if nominal is not None and nominal.joints != self.joints:
+            raise ValueError(f"the nominal model's joints {nominal.joints} are not the plant's {self.joints}")
+
+    def require_compiled(self, what: str = "the penalty formulation's compiled kernels") -> None:
         """ValueError (one line) if the model has joints the compiled kernels do not take yet."""
         if not self.compiled:
             kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
                             if j.type == "free" or j.path is not None})
-            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints: {what} does not take them "
-                             "in this version (inverse dynamics, M(z), h and the CasADi equations do)")
+            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints: {what} (the population of "
+                             "open-loop candidates, exact gradients) do not take them in this version")
 
     @property
     def inverse_torques_layout(self) -> tuple:
@@ -478,6 +491,8 @@ class Engine:
         """max |Phi_i| (m^2 and m) of the state y, the angle constraints in the form in force."""
         from .kernels import constraint_violation
 
+        if not self.compiled:
+            return self.dense_penalty.violation(self._vector(y, self.n_state, "the state"))
         return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
     def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
@@ -544,9 +559,19 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, copy=False, tau_half=tau_half,
                                                        ref_half=ref_half, refd_half=refd_half, refdd_half=refdd_half)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
-        layout = self.simulation_layout(nominal)
         states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
         applied = np.empty((n_steps + 1, self.n_joints))
+        if not self.compiled:  # free or path joints: the same driver by numpy
+            from .general import rk4 as dense_rk4
+
+            self._check_nominal(nominal)
+            code, done, max_viol = dense_rk4(self, y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode,
+                                             gains, nominal, states, rates, applied)
+            for array in (states, rates, applied):
+                array[done + 1:] = np.nan
+            z, zd = self.joints_from_state(states)
+            return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
+        layout = self.simulation_layout(nominal)
         code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
                                    gains, *layout, states, rates, applied)
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
@@ -574,6 +599,15 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(k, tau=tau, ref=ref, refd=refd, refdd=refdd)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, k)
         out, applied = np.empty((k, self.n_state)), np.empty((k, self.n_joints))
+        if not self.compiled:  # free or path joints: by numpy
+            from .general import applied_torque
+
+            self._check_nominal(nominal)
+            for i in range(k):
+                applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal)
+                code, rate = self.dense_penalty.derivative(states[i], applied[i])
+                out[i] = rate if code == OK else np.concatenate([states[i, self.n_q:], np.full(self.n_q, np.nan)])
+            return out, applied
         derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
                     *self.simulation_layout(nominal), out, applied)
         return out, applied
