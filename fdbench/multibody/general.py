@@ -114,7 +114,8 @@ class DensePenalty:
         for k, p, ki, at_parent, splines, maps, offset in self.paths:
             theta = q[n_p + k] - (q[n_p + p] if p != FIXED else 0.0) - offset
             rate = v[n_p + k] - (v[n_p + p] if p != FIXED else 0.0)
-            s0, s1, s2 = (np.array([float(sp.evaluate(theta, order)) for sp in splines]) for order in range(3))
+            (x0, x1, x2), (y0, y1, y2) = (spline.at(theta) for spline in splines)
+            s0, s1, s2 = np.array([x0, y0]), np.array([x1, y1]), np.array([x2, y2])
             ri, vi = q[ki:ki + 2], v[ki:ki + 2]
             rows = slice(row, row + 2)
             J[rows, ki:ki + 2] = np.eye(2)
