@@ -1,12 +1,24 @@
-"""A planar multibody model as data: bodies, pin joints and constant point loads, read from a TOML or
-JSON file (the same keys) and checked, in SI units with angles in radians.
+"""A planar multibody model as data: bodies, joints and constant point loads, read from a TOML or
+JSON file (the same keys) and checked, in SI units with angles in radians and translations in m.
 
 The model is a tree rooted at ``ground``: every body is the child of exactly one joint; a joint's
-parent is ground or a body. A joint's coordinate is the child frame's angle relative to its parent
+parent is ground or a body. A joint's angle is the child frame's angle relative to its parent
 frame minus the joint's ``offset``, so a body's frame angle (from world +x, counter-clockwise) is
-the sum of (coordinate + offset) over the joints on its path from ground. The joint's torque acts
-on the child (+) and the parent (-): it is the generalised force of its coordinate. World axes: x
-forward, y up.
+the sum of (angle + offset) over the joints on its path from ground. The joint's torque acts on
+the child (+) and the parent (-): it is the generalised force of its angle. World axes: x forward,
+y up. Joint types:
+
+* ``pin`` (the default): one coordinate, the angle, named by the joint's ``name``. With a
+  ``path`` table (``angles`` rad strictly increasing, ``x``, ``y`` m of the same length, 2 to
+  1000 samples; ``y_angles``: y's own angles) the child's point sits at at_parent + (x(angle),
+  y(angle)) in the parent's frame, on OpenSim's SimmSpline through the samples
+  (``fdbench.multibody.spline``): OpenSim's knee.
+* ``free`` (parent ground only): three coordinates named by ``coordinates``, [angle, x, y]: the
+  child's angle as a pin's, and its point at_child at at_parent + (x, y) (m, world axes): OpenSim's
+  planar pelvis. The generalised forces of x and y are forces (N) on that point.
+
+``Model.coordinates`` lists every coordinate in joint order, ``Model.coordinate_kinds`` says
+which is an angle (rad) and which a translation (m).
 
 Choices made here (documented in the README's "Your own model"):
 

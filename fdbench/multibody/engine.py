@@ -45,6 +45,13 @@ basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels take arr
 layout of indices and constants built once per Engine; they live in fdbench.multibody.kernels), so
 they are compiled once and cached for every model. Strict IEEE arithmetic.
 
+Free and path joints (``fdbench.multibody.description``). A free joint's body has its joint point
+among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
+joint with a path gives its child a joint point of its own, held on the path by two constraints
+that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
+joints' velocity transform; eq. 12 for such models is assembled and solved by numpy
+(``fdbench.multibody.general``), the compiled kernels refusing them (``require_compiled``).
+
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
 angles alone by recursive kinematics of the body points, so a nominal model other than the plant
