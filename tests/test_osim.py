@@ -647,3 +647,21 @@ def test_opensim_s_forward_simulation_of_an_exported_model_agrees_with_fdbench_s
         differences[alpha] = np.degrees(np.abs(ours.z - theirs).max())
     assert differences[1e7] < bound_1e7 and differences[1e9] < bound_1e9, differences
     assert differences[1e9] < differences[1e7] / 20, differences
+
+
+@pytest.mark.skipif(not SUBJECT01.exists(), reason="the shared data folder is not beside the source folder")
+def test_the_walk_s_mot_reads_angles_in_degrees_and_the_pelvis_translations_in_metres():
+    """subject01_walk_IK.mot (inDegrees=yes): its angles become radians, pelvis_tx and pelvis_ty stay
+    in metres (OpenSim's convention), checked against the file's own numbers (to the smoothing of
+    the derivative estimate: a wrong unit would be off by a factor of 57)."""
+    from fdbench.multibody.motions import joint_motion
+
+    model, _ = import_osim(SUBJECT01)
+    path = SUBJECT01.with_name("subject01_walk_IK.mot")
+    table = pd.read_csv(path, sep=r"\s+", skiprows=next(i for i, line in enumerate(path.read_text().splitlines())
+                                                          if line.strip() == "endheader") + 1)
+    motion = joint_motion(str(path), model)
+    z, _, _ = motion(table["time"].to_numpy())
+    for k, (name, kind) in enumerate(zip(model.coordinates, model.coordinate_kinds)):
+        expected = table[name].to_numpy() * (1.0 if kind == "translation" else math.pi / 180)
+        assert np.abs(z[:, k] - expected).max() < (0.005 if kind == "translation" else 0.03), name  # m, rad
