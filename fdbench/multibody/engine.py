@@ -324,13 +324,13 @@ class Engine:
         if nominal is not None and nominal.joints != self.joints:
             raise ValueError(f"the nominal model's joints {nominal.joints} are not the plant's {self.joints}")
 
-    def require_compiled(self, what: str = "the penalty formulation's compiled kernels") -> None:
+    def require_compiled(self, what: str = "the compiled kernels") -> None:
         """ValueError (one line) if the model has joints the compiled kernels do not take yet."""
         if not self.compiled:
             kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
                             if j.type == "free" or j.path is not None})
-            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints: {what} (the population of "
-                             "open-loop candidates, exact gradients) do not take them in this version")
+            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints: {what} does not take "
+                             "them in this version")
 
     @property
     def inverse_torques_layout(self) -> tuple:
@@ -626,6 +626,7 @@ class Engine:
         2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
         J), eq. 18's samples every ``every``-th step with the desired joint angles angles_ref (rad,
         shape (n_steps // every + 1, J)) and its penalty weight (deg)."""
+        self.require_compiled("the population of open-loop candidates")
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):
