@@ -79,50 +79,72 @@ class DensePenalty:
             return fixed, np.zeros(2)
         return q[k:k + 2], v[k:k + 2]
 
-    def constraints(self, q, v):
-        """(Phi (m,), J (m, n_q), J' q' (m,), worst |Phi| with the angle rows' form in force) at q, q'."""
-        m, n_p = self.n_rows, self.n_p
-        Phi, J, Jdv = np.zeros(m), np.zeros((m, self.n_q)), np.zeros(m)
-        row = 0
-        for b, (ki, kj, fixed) in enumerate(self.ends):
-            (ri, vi), (rj, vj) = self._point(q, v, ki, fixed), self._point(q, v, kj)
-            e_, ed = rj - ri, vj - vi
-            d, beta = self.engine.body_geom[b]
-            Phi[row] = e_ @ e_ - d * d
-            J[row, kj:kj + 2] = 2 * e_
-            if ki != FIXED:
-                J[row, ki:ki + 2] = -2 * e_
-            Jdv[row] = 2 * ed @ ed
-            psi, w = q[n_p + b] + beta, v[n_p + b]
-            s, c = math.sin(psi), math.cos(psi)
-            axis = 1 if abs(c) >= self.switch else 0
-            Phi[row + 1] = e_[axis] - d * (s if axis else c)
-            J[row + 1, kj + axis] = 1.0
-            if ki != FIXED:
-                J[row + 1, ki + axis] = -1.0
-            J[row + 1, n_p + b] = -d * c if axis else d * s
-            Jdv[row + 1] = d * s * w * w if axis else d * c * w * w
-            row += 2
-        e = self.engine
+    def _prepare_rows(self):
+        """Index arrays of the bodies' rows (built once): their points' coordinates in the state
+        extended by the fixed points (at the end), the linear rows as a dense matrix."""
+        e, B = self.engine, self.n_b
+        fixed = [k for k, (ki, _, _) in enumerate(self.ends) if ki == FIXED]
+        self._fixed_at = np.array([self.ends[k][2] for k in fixed]).reshape(-1)  # appended positions
+        slot = {k: self.n_q + 2 * n for n, k in enumerate(fixed)}
+        self._i = np.array([slot.get(k, ki) for k, (ki, _, _) in enumerate(self.ends)], dtype=np.int64)
+        self._j = np.array([kj for _, kj, _ in self.ends], dtype=np.int64)
+        self._i_free = np.array([ki != FIXED for ki, _, _ in self.ends])
+        self._d, self._beta = e.body_geom[:, 0].copy(), e.body_geom[:, 1].copy()
+        self._angles = self.n_p + np.arange(B)
+        self._lin = np.zeros((len(e.lin_const), self.n_q))
         for r in range(len(e.lin_const)):
-            Phi[row] = e.lin_const[r]
             for index, coef in zip(e.lin_idx[r], e.lin_coef[r]):
                 if index != FIXED:
-                    Phi[row] += coef * q[index]
-                    J[row, index] += coef
-            row += 1
+                    self._lin[r, index] += coef
+
+    def constraints(self, q, v):
+        """(Phi (m,), J (m, n_q), J' q' (m,)) at q, q': the bodies' distance rows, their angle rows
+        (the form in force), the linear rows, then two rows per path."""
+        if not hasattr(self, "_i"):
+            self._prepare_rows()
+        B, n_p = self.n_b, self.n_p
+        m = self.n_rows
+        Phi, J, Jdv = np.zeros(m), np.zeros((m, self.n_q)), np.zeros(m)
+        qx = np.concatenate([q, self._fixed_at])
+        vx = np.concatenate([v, np.zeros(len(self._fixed_at))])
+        both = np.array([0, 1])
+        ci, cj = self._i[:, None] + both, self._j[:, None] + both  # (B, 2) coordinate indices
+        e_, ed = qx[cj] - qx[ci], vx[cj] - vx[ci]
+        d = self._d
+        dist = np.arange(B)
+        Phi[dist] = np.sum(e_ * e_, axis=1) - d * d
+        J[dist[:, None], cj] = 2 * e_
+        free = self._i_free
+        J[dist[free][:, None], ci[free]] = -2 * e_[free]
+        Jdv[dist] = 2 * np.sum(ed * ed, axis=1)
+        psi, w = q[self._angles] + self._beta, v[self._angles]
+        s, c = np.sin(psi), np.cos(psi)
+        on_y = np.abs(c) >= self.switch  # the sin form
+        axis = on_y.astype(np.int64)
+        rows = B + dist
+        Phi[rows] = np.where(on_y, e_[dist, 1] - d * s, e_[dist, 0] - d * c)
+        J[rows, self._j + axis] = 1.0
+        J[rows[free], self._i[free] + axis[free]] = -1.0
+        J[rows, self._angles] = np.where(on_y, -d * c, d * s)
+        Jdv[rows] = np.where(on_y, d * s, d * c) * w * w
+        row = 2 * B
+        n_lin = len(self._lin)
+        if n_lin:
+            Phi[row:row + n_lin] = self._lin @ q + self.engine.lin_const
+            J[row:row + n_lin] = self._lin
+        row += n_lin
         for k, p, ki, at_parent, splines, maps, offset in self.paths:
             theta = q[n_p + k] - (q[n_p + p] if p != FIXED else 0.0) - offset
             rate = v[n_p + k] - (v[n_p + p] if p != FIXED else 0.0)
             (x0, x1, x2), (y0, y1, y2) = (spline.at(theta) for spline in splines)
             s0, s1, s2 = np.array([x0, y0]), np.array([x1, y1]), np.array([x2, y2])
-            ri, vi = q[ki:ki + 2], v[ki:ki + 2]
-            rows = slice(row, row + 2)
-            J[rows, ki:ki + 2] = np.eye(2)
+            ri = q[ki:ki + 2]
+            rows2 = slice(row, row + 2)
+            J[rows2, ki:ki + 2] = np.eye(2)
             if maps is None:  # on ground: r_i - at_parent - s(theta)
-                Phi[rows] = ri - at_parent - s0
-                J[rows, n_p + k] = -s1
-                Jdv[rows] = -s2 * rate * rate
+                Phi[rows2] = ri - at_parent - s0
+                J[rows2, n_p + k] = -s1
+                Jdv[rows2] = -s2 * rate * rate
             else:
                 base, L = maps
                 pi, pj, _ = self.ends[p]
@@ -133,15 +155,15 @@ class DensePenalty:
                 def G(cc, x):
                     return cc[0] * x + cc[1] * _perp(x)
 
-                Phi[rows] = ri - rpi - G(c0, ep)
-                Gm = c0[0] * np.eye(2) + c0[1] * np.array([[0.0, -1.0], [1.0, 0.0]])
-                J[rows, pj:pj + 2] = -Gm
+                Phi[rows2] = ri - rpi - G(c0, ep)
+                Gm = np.array([[c0[0], -c0[1]], [c0[1], c0[0]]])
+                J[rows2, pj:pj + 2] = -Gm
                 if pi != FIXED:
-                    J[rows, pi:pi + 2] = -np.eye(2) + Gm
+                    J[rows2, pi:pi + 2] = -np.eye(2) + Gm
                 dtheta = -G(c1, ep)
-                J[rows, n_p + k] = dtheta
-                J[rows, n_p + p] = -dtheta
-                Jdv[rows] = -2 * G(c1, epd) * rate - G(c2, ep) * rate * rate
+                J[rows2, n_p + k] = dtheta
+                J[rows2, n_p + p] = -dtheta
+                Jdv[rows2] = -2 * G(c1, epd) * rate - G(c2, ep) * rate * rate
             row += 2
         return Phi, J, Jdv
 
