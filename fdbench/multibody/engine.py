@@ -320,17 +320,23 @@ class Engine:
             self._dense = DensePenalty(self)
         return self._dense
 
-    def _check_nominal(self, nominal) -> None:
-        if nominal is not None and nominal.joints != self.joints:
+    def check_nominal(self, nominal: "Engine | None") -> None:
+        """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque
+        control believes: the same coordinates, and compiled kernels where this engine has them."""
+        if nominal is None:
+            return
+        if nominal.joints != self.joints:
             raise ValueError(f"the nominal model's joints {nominal.joints} are not the plant's {self.joints}")
+        if self.compiled:
+            nominal.require_compiled("computed-torque control of a plant without them")
 
     def require_compiled(self, what: str = "the compiled kernels") -> None:
         """ValueError (one line) if the model has joints the compiled kernels do not take yet."""
         if not self.compiled:
             kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
                             if j.type == "free" or j.path is not None})
-            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints: {what} does not take "
-                             "them in this version")
+            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot take "
+                             "in this version")
 
     @property
     def inverse_torques_layout(self) -> tuple:
@@ -571,7 +577,7 @@ class Engine:
         if not self.compiled:  # free or path joints: the same driver by numpy
             from .general import rk4 as dense_rk4
 
-            self._check_nominal(nominal)
+            self.check_nominal(nominal)
             code, done, max_viol = dense_rk4(self, y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode,
                                              gains, nominal, states, rates, applied)
             for array in (states, rates, applied):
@@ -609,7 +615,7 @@ class Engine:
         if not self.compiled:  # free or path joints: by numpy
             from .general import applied_torque
 
-            self._check_nominal(nominal)
+            self.check_nominal(nominal)
             for i in range(k):
                 applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal)
                 code, rate = self.dense_penalty.derivative(states[i], applied[i])
