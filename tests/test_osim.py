@@ -665,3 +665,14 @@ def test_the_walk_s_mot_reads_angles_in_degrees_and_the_pelvis_translations_in_m
     for k, (name, kind) in enumerate(zip(model.coordinates, model.coordinate_kinds)):
         expected = table[name].to_numpy() * (1.0 if kind == "translation" else math.pi / 180)
         assert np.abs(z[:, k] - expected).max() < (0.005 if kind == "translation" else 0.03), name  # m, rad
+
+
+def test_export_osim_refuses_free_and_path_joints_and_writes_nothing(tmp_path):
+    model, _ = import_osim(path_knee_model(tmp_path / "knee.osim"))
+    source = tmp_path / "knee.toml"
+    from fdbench.multibody.description import to_toml
+
+    source.write_text(to_toml(model))
+    out = tmp_path / "out.osim"
+    refused("export-osim", source, "-o", out, contains=("hip, knee", "free or on a path", "pin joints only"))
+    assert not out.exists()

@@ -799,14 +799,27 @@ OSIM_VERSION = "40000"
 DEFAULT_RANGE = (-math.pi, math.pi)  # rad: a coordinate's range in the file when its joint has no limits
 
 
+def check_exportable(model) -> None:
+    """ModelError (one line) for a model ``to_osim`` cannot write yet: one with free or path joints."""
+    from .description import ModelError
+
+    odd = [j.name for j in model.joints if j.type == "free" or j.path is not None]
+    if odd:
+        raise ModelError(model.name, "", f"joints {', '.join(odd)} are free or on a path: export-osim writes pin "
+                                         "joints only in this version")
+
+
 def to_osim(model) -> str:
     """The description ``model`` as an OpenSim model file (XML text): per body a ``Body`` (mass kg,
     centre of mass (x, y, 0) m, inertia kg m^2 about it, Ixx = Iyy = Izz); per joint a ``PinJoint``
     ``<joint>_joint`` about z whose coordinate is named as the joint (default 0 rad, range its
     limits or one turn), its parent frame at ``at_parent`` turned by the offset, its child frame at
     ``at_child``, and a ``CoordinateActuator`` ``<joint>_actuator`` (optimal force 1 N m); per load
-    a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body)."""
+    a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body).
+    Pin joints only (``check_exportable``)."""
     from .. import __version__
+
+    check_exportable(model)
 
     credits = _text(f"written by fdbench {__version__} export-osim from the model {model.name}"
                     + (f": {model.description}" if model.description else ""), 500)
