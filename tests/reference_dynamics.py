@@ -363,8 +363,9 @@ class ReferenceSpline:
             return y[end] + (t - x[end]) * slope, slope, 0.0
         k = min(max(int(np.searchsorted(x, t, side="right")) - 1, 0), len(x) - 2)
         h, a, b = x[k + 1] - x[k], x[k + 1] - t, t - x[k]
-        value = (m[k] * a**3 + m[k + 1] * b**3) / (6 * h) + (y[k] / h - m[k] * h / 6) * a + (y[k + 1] / h - m[k + 1] * h / 6) * b
-        first = (-m[k] * a**2 + m[k + 1] * b**2) / (2 * h) - (y[k] / h - m[k] * h / 6) + (y[k + 1] / h - m[k + 1] * h / 6)
+        left, right = y[k] / h - m[k] * h / 6, y[k + 1] / h - m[k + 1] * h / 6
+        value = (m[k] * a**3 + m[k + 1] * b**3) / (6 * h) + left * a + right * b
+        first = (-m[k] * a**2 + m[k + 1] * b**2) / (2 * h) - left + right
         second = (m[k] * a + m[k + 1] * b) / h
         return value, first, second
 

@@ -36,8 +36,8 @@ if importlib.util.find_spec("opensim") is None:
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
-SUBJECT01 = next((folder / "shared" / "data" / "opensim" / "subject01.osim" for folder in (ROOT.parent, ROOT.parent.parent)
-                  if (folder / "shared" / "data" / "opensim" / "subject01.osim").exists()),
+SUBJECT01 = next((where for where in (folder / "shared" / "data" / "opensim" / "subject01.osim"
+                                      for folder in (ROOT.parent, ROOT.parent.parent)) if where.exists()),
                  ROOT.parent / "shared" / "data" / "opensim" / "subject01.osim")  # beside the source folder (or one up)
 runner = CliRunner()
 
@@ -376,7 +376,8 @@ def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, cas
     elif case == "ball joint":
         ball_model(path)
     elif case == "path knee":
-        path_knee_model(path, spline="<PiecewiseLinearFunction><x> -2 0 1</x><y> 0 0.01 0</y></PiecewiseLinearFunction>")
+        path_knee_model(path, spline="<PiecewiseLinearFunction><x> -2 0 1</x><y> 0 0.01 0</y>"
+                                     "</PiecewiseLinearFunction>")
     elif case == "constraint":
         coupled_model(path)
     elif case == "tilt":
@@ -410,7 +411,8 @@ def test_a_free_pelvis_and_a_knee_on_a_path_import_with_opensim_s_inverse_dynami
     assert model.coordinates == ("pelvis_tilt", "pelvis_tx", "pelvis_ty", "knee_angle")
     assert model.coordinate_kinds == ("angle", "translation", "translation", "angle")
     assert knee.path.angles == (-2.0, -1.0, 0.0, 1.0) and knee.path.x == (-0.01, -0.005, 0.0, 0.001)
-    assert knee.path.y_angles == (-1.0, 1.0) and knee.path.y == pytest.approx((1.5 * (-0.001 - 0.02), 1.5 * (-0.001 + 0.02)), abs=1e-15)
+    assert knee.path.y_angles == (-1.0, 1.0)  # the line through its values at -1 and 1, scaled by 1.5
+    assert knee.path.y == pytest.approx((1.5 * (-0.001 - 0.02), 1.5 * (-0.001 + 0.02)), abs=1e-15)
     z, zd, zdd = random_states(model, 8, seed=3)
     ours = Engine(model).inverse_dynamics(z, zd, zdd)
     theirs = opensim_inverse_dynamics(path, model.coordinates, z, zd, zdd)

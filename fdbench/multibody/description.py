@@ -535,7 +535,8 @@ def _path(check: _Checker, entry, key: str) -> JointPath:
     for name in (name for name in PATH_KEYS if name in entry):
         value = entry[name]
         if not isinstance(value, list) or not 2 <= len(value) <= MAX_PATH_SAMPLES:
-            check.fail(f"{key}.{name}", f"must be {ALLOWED[name]} of 2 to {MAX_PATH_SAMPLES} numbers, got {_kind(value)}")
+            check.fail(f"{key}.{name}",
+                       f"must be {ALLOWED[name]} of 2 to {MAX_PATH_SAMPLES} numbers, got {_kind(value)}")
         lists[name] = tuple(check.number(v, f"{key}.{name}[{i}]", what="a number") for i, v in enumerate(value))
     for name, knots in (("x", "angles"), ("y", "y_angles" if "y_angles" in lists else "angles")):
         if len(lists[name]) != len(lists[knots]):
