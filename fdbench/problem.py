@@ -86,7 +86,8 @@ class TrackingProblem(ShootingProblem):
         self._ff_half = (np.array(sim.inverse_dynamics(self._half, self._nominal, motion).torque) if feedforward
                          else np.zeros((2 * n + 1, n_joints)))
         self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), motion.samples)
-                       if self.integrator == "rk4" else 0)  # the population kernel is RK4's
+                       if self.integrator == "rk4" and engine.compiled else 0)  # the population kernel is RK4's
+        # (free and path joints: candidates one by one through the engine's numpy eq. 12)
         self._population, self._jacobians = None, None
         self._n_steps = n
         if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
@@ -170,6 +171,7 @@ class TrackingProblem(ShootingProblem):
         RK4 with the motion's samples on its grid and a parameterisation that gives d tau / d p."""
         if self.integrator != "rk4":
             raise ValueError(f"--gradient exact needs --integrator rk4, got {self.integrator}")
+        self.engine.require_compiled("--gradient exact (the compiled sensitivities)")
         if not self.batched:
             raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
         if self._jacobians is None:

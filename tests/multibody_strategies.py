@@ -156,3 +156,34 @@ def sinusoids(draw, n: int):
     frequency = draw(st.lists(st.floats(0.5, 2.0), min_size=n, max_size=n).map(np.array))
     phase = draw(vectors(n, math.pi))
     return centre, amplitude, frequency, phase
+
+
+@st.composite
+def joint_paths(draw):
+    """A joint's path: 2 to 8 samples, angles strictly increasing in [-3, 3] rad (at least 0.05 rad
+    apart), x and y within 5 cm."""
+    def knots(n):
+        gaps = draw(st.lists(st.floats(0.05, 1.0), min_size=n - 1, max_size=n - 1))
+        return tuple(float(a) for a in np.cumsum([draw(st.floats(-3.0, -1.0))] + gaps))
+
+    n, m = draw(st.integers(2, 8)), draw(st.integers(2, 8))
+    coordinate = st.floats(-0.05, 0.05)
+    y_angles = knots(m) if draw(st.booleans()) else None  # y's own angles (OpenSim's knee)
+    return d.JointPath(knots(n), tuple(draw(coordinate) for _ in range(n)),
+                       tuple(draw(coordinate) for _ in range(n if y_angles is None else m)), y_angles)
+
+
+@st.composite
+def models_with_paths_and_free_joints(draw, max_bodies: int = 5):
+    """A random model of ``models`` whose joints on ground are free (with some chance, the first
+    always) and whose other joints have paths (with some chance, at least one when there is one)."""
+    import dataclasses
+
+    model = draw(models(min_bodies=2, max_bodies=max_bodies))
+    joints = list(model.joints)
+    for k, joint in enumerate(joints):
+        if joint.parent == d.GROUND and (k == 0 or draw(st.booleans())):
+            joints[k] = dataclasses.replace(joint, type="free", coordinates=(f"a{k}", f"x{k}", f"y{k}"))
+        elif joint.parent != d.GROUND and draw(st.booleans()) or k == len(joints) - 1:
+            joints[k] = dataclasses.replace(joint, path=draw(joint_paths()))
+    return dataclasses.replace(model, joints=tuple(joints))

@@ -229,24 +229,27 @@ def potential_energy(t: Tree, z) -> np.ndarray:
 # ----------------------------------------------------------------------------- simulation
 
 
-def simulate(t: Tree, z0, zd0, t_end, torque, t_eval):
-    """DOP853 (rtol = atol = 1e-12) of the forward dynamics from z0, z'0 (J,) over [0, t_end] s
-    under torque(time, z, z') -> tau (J,) N m. Returns (z, z') at t_eval, each (len(t_eval), J)."""
+def simulate(t: Tree, z0, zd0, t_end, torque, t_eval, tolerance: float = 1e-12):
+    """DOP853 (rtol = atol = ``tolerance``) of the forward dynamics from z0, z'0 (J,) over [0, t_end] s
+    under torque(time, z, z') -> tau (J,) N m (a Tree, or a GeneralTree). Returns (z, z') at t_eval,
+    each (len(t_eval), J)."""
     from scipy.integrate import solve_ivp
 
     J = t.n_joints
 
     def rhs(time, y):
         z, zd = y[:J], y[J:]
-        return np.concatenate([zd, forward_dynamics(t, z, zd, torque(time, z, zd))])
+        accelerations = (t.forward_dynamics(z, zd, torque(time, z, zd)) if isinstance(t, GeneralTree)
+                         else forward_dynamics(t, z, zd, torque(time, z, zd)))
+        return np.concatenate([zd, accelerations])
 
-    sol = solve_ivp(rhs, (0.0, t_end), np.concatenate([z0, zd0]), method="DOP853", rtol=1e-12, atol=1e-12,
+    sol = solve_ivp(rhs, (0.0, t_end), np.concatenate([z0, zd0]), method="DOP853", rtol=tolerance, atol=tolerance,
                     t_eval=t_eval)
     assert sol.success, sol.message
     return sol.y[:J].T, sol.y[J:].T
 
 
-def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval):
+def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval, tolerance: float = 1e-12):
     """The engine's PD law tau = feedforward(t) + kp (ref - z) + kd (ref' - z') per joint, with
     reference(t) -> (ref, ref') (rad, rad/s) and kp (N m/rad), kd (N m s/rad) of shape (J,),
     integrated as ``simulate``. Returns (z, z') at t_eval."""
@@ -256,4 +259,225 @@ def simulate_pd(t: Tree, z0, zd0, t_end, feedforward, reference, kp, kd, t_eval)
         ref, refd = reference(time)
         return feedforward(time) + kp * (ref - z) + kd * (refd - zd)
 
-    return simulate(t, z0, zd0, t_end, torque, t_eval)
+    return simulate(t, z0, zd0, t_end, torque, t_eval, tolerance)
+
+
+# ============================================================================= free bases and joint paths
+# Trees with free planar joints (three coordinates: angle, x, y of the child's joint point from
+# at_parent, world axes) and pin joints whose point moves along a path in the parent's frame
+# (at_parent + (x(angle), y(angle)), the cubic spline OpenSim's SimmSpline evaluates). Minimal
+# coordinates again, by a construction of its own: every body's angle and centre of mass as
+# functions of the coordinates, evaluated on truncated Taylor series ("jets") along q(s) = q + s u
+# + s^2 w / 2, which give exact first and second derivatives: the Jacobians (u a unit vector, w 0)
+# and the accelerations (u = z', w = z''). The inverse dynamics is d'Alembert's principle in these
+# Jacobians, sum_b J_Gb^T m_b (a_G - g) + J_phi^T I_b alpha_b - sum_loads J_L^T F; M = sum m J_G^T
+# J_G + I J_phi^T J_phi. The spline's second derivatives solve their own linear system (continuity
+# of the first derivative, and at each end the third derivative of the cubic through the four
+# samples nearest it: 6 times their third divided difference).
+
+
+class Jet:
+    """a0 + a1 s + a2 s^2 (s the jet's parameter): numbers or arrays (2,) alike."""
+
+    def __init__(self, a0, a1=0.0, a2=0.0):
+        self.a = (a0, a1, a2)
+
+    @staticmethod
+    def of(value):
+        return value if isinstance(value, Jet) else Jet(value)
+
+    def __add__(self, other):
+        o = Jet.of(other).a
+        return Jet(*(x + y for x, y in zip(self.a, o)))
+
+    __radd__ = __add__
+
+    def __neg__(self):
+        return Jet(*(-x for x in self.a))
+
+    def __sub__(self, other):
+        return self + (-Jet.of(other))
+
+    def __rsub__(self, other):
+        return Jet.of(other) - self
+
+    def __mul__(self, other):
+        (a0, a1, a2), (b0, b1, b2) = self.a, Jet.of(other).a
+        return Jet(a0 * b0, a0 * b1 + a1 * b0, a0 * b2 + a1 * b1 + a2 * b0)
+
+    __rmul__ = __mul__
+
+    def apply(self, f0, f1, f2):
+        """f(jet) for f with value f0, f' f1 and f'' f2 at a0 (a scalar jet)."""
+        a0, a1, a2 = self.a
+        return Jet(f0, f1 * a1, f1 * a2 + 0.5 * f2 * a1 * a1)
+
+
+def jet_sin(x: Jet) -> Jet:
+    return x.apply(np.sin(x.a[0]), np.cos(x.a[0]), -np.sin(x.a[0]))
+
+
+def jet_cos(x: Jet) -> Jet:
+    return x.apply(np.cos(x.a[0]), -np.sin(x.a[0]), -np.cos(x.a[0]))
+
+
+def jet_rotate(angle: Jet, local) -> tuple[Jet, Jet]:
+    """R(angle) local for a body-frame vector local (two jets or numbers): (x, y) jets."""
+    c, s = jet_cos(angle), jet_sin(angle)
+    lx, ly = local
+    return c * lx - s * ly, s * lx + c * ly
+
+
+class ReferenceSpline:
+    """The interpolating cubic through (x, y) with OpenSim's SimmSpline end conditions, continued by
+    its end slopes beyond x; value, first and second derivative by ``at``."""
+
+    def __init__(self, x, y):
+        self.x, self.y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        n, h = len(self.x), np.diff(self.x)
+        self.m = np.zeros(n)  # second derivatives at the knots
+        if n >= 3:
+            A, b = np.zeros((n, n)), np.zeros(n)
+            for i in range(1, n - 1):  # the first derivative is continuous at knot i
+                A[i, i - 1:i + 2] = h[i - 1] / 6, (h[i - 1] + h[i]) / 3, h[i] / 6
+                b[i] = (self.y[i + 1] - self.y[i]) / h[i] - (self.y[i] - self.y[i - 1]) / h[i - 1]
+            A[0, :2], A[-1, -2:] = (-1 / h[0], 1 / h[0]), (-1 / h[-1], 1 / h[-1])  # the end third derivatives
+            if n > 3:
+                b[0] = 6 * self._third_difference(slice(0, 4))
+                b[-1] = 6 * self._third_difference(slice(n - 4, n))
+            self.m = np.linalg.solve(A, b)
+
+    def _third_difference(self, part):
+        x, y = self.x[part], self.y[part]
+        table = list(y)
+        for order in range(1, 4):
+            table = [(table[i + 1] - table[i]) / (x[i + order] - x[i]) for i in range(len(table) - 1)]
+        return table[0]
+
+    def at(self, t: float):
+        """(value, first, second derivative) at the number t."""
+        x, y, m = self.x, self.y, self.m
+        if t < x[0] or t > x[-1]:
+            end = 0 if t < x[0] else -1
+            slope = self.at(x[end])[1]
+            return y[end] + (t - x[end]) * slope, slope, 0.0
+        k = min(max(int(np.searchsorted(x, t, side="right")) - 1, 0), len(x) - 2)
+        h, a, b = x[k + 1] - x[k], x[k + 1] - t, t - x[k]
+        left, right = y[k] / h - m[k] * h / 6, y[k + 1] / h - m[k + 1] * h / 6
+        value = (m[k] * a**3 + m[k + 1] * b**3) / (6 * h) + left * a + right * b
+        first = (-m[k] * a**2 + m[k + 1] * b**2) / (2 * h) - left + right
+        second = (m[k] * a + m[k + 1] * b) / h
+        return value, first, second
+
+
+class GeneralTree:
+    """A model description with pin, path and free joints, in minimal coordinates (the model's
+    coordinates in order: a free joint's angle, x, y), read from its fields only."""
+
+    def __init__(self, model):
+        self.model = model
+        self.of_child = {joint.child: k for k, joint in enumerate(model.joints)}
+        self.bodies = [next(b for b in model.bodies if b.name == joint.child) for joint in model.joints]
+        sizes = [3 if joint.type == "free" else 1 for joint in model.joints]
+        self.column = list(np.cumsum([0] + sizes[:-1]))
+        self.n_joints = sum(sizes)
+        self.paths = [None if joint.path is None else (ReferenceSpline(joint.path.angles, joint.path.x),
+                                                       ReferenceSpline(joint.path.y_angles or joint.path.angles,
+                                                                       joint.path.y))
+                      for joint in model.joints]
+
+    def _frames(self, q):
+        """Per body: (angle jet, origin (x, y) jets) for coordinates q, a list of jets."""
+        angle, origin = [], []
+        for k, joint in enumerate(self.model.joints):
+            c = self.column[k]
+            if joint.parent == GROUND:
+                p_angle, p_origin = Jet(0.0), (Jet(0.0), Jet(0.0))
+            else:
+                p = self.of_child[joint.parent]
+                p_angle, p_origin = angle[p], origin[p]
+            local = [Jet(joint.at_parent[0]), Jet(joint.at_parent[1])]
+            if self.paths[k] is not None:
+                for axis, spline in enumerate(self.paths[k]):
+                    local[axis] = local[axis] + q[c].apply(*spline.at(q[c].a[0]))
+            step = jet_rotate(p_angle, local)
+            point = [p_origin[0] + step[0], p_origin[1] + step[1]]
+            if joint.type == "free":
+                point = [point[0] + q[c + 1], point[1] + q[c + 2]]
+            body_angle = p_angle + q[c] + joint.offset
+            arm = jet_rotate(body_angle, joint.at_child)
+            angle.append(body_angle)
+            origin.append((point[0] - arm[0], point[1] - arm[1]))
+        return angle, origin
+
+    def _points(self, q):
+        """Per body its angle jet and com (x, y) jets; per load its point's (x, y) jets."""
+        angle, origin = self._frames(q)
+        coms = []
+        for k, body in enumerate(self.bodies):
+            arm = jet_rotate(angle[k], body.com)
+            coms.append((origin[k][0] + arm[0], origin[k][1] + arm[1]))
+        loads = []
+        for load in self.model.loads:
+            k = self.of_child[load.body]
+            arm = jet_rotate(angle[k], load.at)
+            loads.append((origin[k][0] + arm[0], origin[k][1] + arm[1]))
+        return angle, coms, loads
+
+    def _jacobians(self, z):
+        """d(angle)/dq (B, J), d(com)/dq (B, 2, J) and d(load point)/dq (L, 2, J) at z."""
+        J = self.n_joints
+        dphi, dcom, dload = np.zeros((len(self.bodies), J)), np.zeros((len(self.bodies), 2, J)), np.zeros(
+            (len(self.model.loads), 2, J))
+        for j in range(J):
+            angle, coms, loads = self._points([Jet(z[i], float(i == j)) for i in range(J)])
+            for b in range(len(self.bodies)):
+                dphi[b, j] = angle[b].a[1]
+                dcom[b, :, j] = coms[b][0].a[1], coms[b][1].a[1]
+            for i, point in enumerate(loads):
+                dload[i, :, j] = point[0].a[1], point[1].a[1]
+        return dphi, dcom, dload
+
+    def inverse_dynamics_one(self, z, zd, zdd, external=True, jacobians=None):
+        """tau (J,) (N m, N for translations) of one state z, z', z'' (J,) (``jacobians``: those of
+        ``_jacobians(z)`` if known)."""
+        angle, coms, _ = self._points([Jet(z[i], zd[i], 0.5 * zdd[i]) for i in range(self.n_joints)])
+        dphi, dcom, dload = jacobians or self._jacobians(z)
+        gravity = np.asarray(self.model.gravity, dtype=float) if external else np.zeros(2)
+        tau = np.zeros(self.n_joints)
+        for b, body in enumerate(self.bodies):
+            acc = np.array([2 * coms[b][0].a[2], 2 * coms[b][1].a[2]])
+            tau += dcom[b].T @ (body.mass * (acc - gravity)) + dphi[b] * body.inertia * 2 * angle[b].a[2]
+        if external:
+            for i, load in enumerate(self.model.loads):
+                tau -= dload[i].T @ np.asarray(load.force, dtype=float)
+        return tau
+
+    def inverse_dynamics(self, z, zd, zdd):
+        """tau (..., J) of z, z', z'' (..., J) (one or a batch of rows)."""
+        z, zd, zdd = (np.asarray(v, dtype=float) for v in (z, zd, zdd))
+        rows = [self.inverse_dynamics_one(a, b, c) for a, b, c in zip(*(v.reshape(-1, self.n_joints)
+                                                                         for v in (z, zd, zdd)))]
+        return np.array(rows).reshape(z.shape)
+
+    def mass_matrix(self, z):
+        """M(z) (J, J) (or (n, J, J)) from the Jacobians of the angles and centres of mass."""
+        z = np.asarray(z, dtype=float)
+        out = []
+        for row in z.reshape(-1, self.n_joints):
+            dphi, dcom, _ = self._jacobians(row)
+            out.append(sum(body.mass * dcom[b].T @ dcom[b] + body.inertia * np.outer(dphi[b], dphi[b])
+                           for b, body in enumerate(self.bodies)))
+        return np.array(out).reshape(z.shape + (self.n_joints,))
+
+    def bias(self, z, zd):
+        return self.inverse_dynamics(z, zd, np.zeros_like(np.asarray(zd, dtype=float)))
+
+    def forward_dynamics(self, z, zd, tau):
+        """z'' (J,) = M^-1 (tau - h) of one state."""
+        jacobians = self._jacobians(z)
+        dphi, dcom, _ = jacobians
+        M = sum(body.mass * dcom[b].T @ dcom[b] + body.inertia * np.outer(dphi[b], dphi[b])
+                for b, body in enumerate(self.bodies))
+        h = self.inverse_dynamics_one(z, zd, np.zeros(self.n_joints), jacobians=jacobians)
+        return np.linalg.solve(M, np.asarray(tau, dtype=float) - h)

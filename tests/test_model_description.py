@@ -224,6 +224,42 @@ BAD = [  # (id, change of BASE, words the message must hold: the key and what is
     ("limits upside down", setting("joints.1.limits", [0.5, -0.5]), ("joints[1].limits", "lower < upper")),
 ]
 
+KNEE_PATH = {"angles": [-1.0, 0.0, 1.0], "x": [0.0, 0.01, 0.02], "y": [0.0, -0.01, 0.0]}
+FREE_HIP = {"type": "free", "coordinates": ["hip_tilt", "hip_tx", "hip_ty"]}
+
+
+def joint_with(k: int, **keys):
+    """A change of BASE: joint k with the keys given (None: removed)."""
+    def change(data):
+        for key, value in keys.items():
+            if value is None:
+                data["joints"][k].pop(key, None)
+            else:
+                data["joints"][k][key] = copy.deepcopy(value)
+    return change
+
+
+BAD += [  # free joints and joint paths
+    ("a free joint not on ground", joint_with(1, **FREE_HIP), ("joints[1].parent", "must be 'ground'", "'thigh'")),
+    ("a free joint without coordinates", joint_with(0, type="free"), ("joints[0].coordinates", "missing", "[angle, x, y]")),
+    ("a free joint with two coordinates", joint_with(0, type="free", coordinates=["a", "b"]),
+     ("joints[0].coordinates", "three names", "a list of 2")),
+    ("a free coordinate named like a body", joint_with(0, type="free", coordinates=["tilt", "Shank", "ty"]),
+     ("joints[0].coordinates[1].name", "already the name of bodies[1]")),
+    ("a free joint with a path", joint_with(0, **FREE_HIP, path=KNEE_PATH), ("joints[0].path", "no path")),
+    ("coordinates on a pin joint", joint_with(1, coordinates=["a", "b", "c"]), ("joints[1].coordinates", "only a free")),
+    ("path angles not increasing", joint_with(1, path=KNEE_PATH | {"angles": [-1.0, 0.5, 0.5]}),
+     ("joints[1].path.angles[2]", "strictly increasing", "more than angles[1]")),
+    ("a NaN in a path", joint_with(1, path=KNEE_PATH | {"x": [math.nan, 0.0, 0.0]}), ("joints[1].path.x[0]", "finite")),
+    ("a path of mismatched lengths", joint_with(1, path=KNEE_PATH | {"y": [0.0, 0.1]}),
+     ("joints[1].path.y", "has 2 values but angles has 3", "one value per angle")),
+    ("a path of one sample", joint_with(1, path={"angles": [0.0], "x": [0.0], "y": [0.0]}),
+     ("joints[1].path.angles", "strictly increasing", "2 to 1000")),
+    ("a path without y", joint_with(1, path={"angles": [0.0, 1.0], "x": [0.0, 0.0]}), ("joints[1].path.y", "missing")),
+    ("a path's unknown key", joint_with(1, path=KNEE_PATH | {"z": [0.0, 0.0, 0.0]}),
+     ("joints[1].path.z", "unknown key")),
+]
+
 SWING = {"name": "swing", "type": "minimum-jerk", "duration": 1.0, "start": {"hip": -0.3, "knee": -0.2, "ankle": 0.1},
          "goal": {"hip": 0.6, "knee": -1.0, "ankle": -0.2}}
 
@@ -465,3 +501,36 @@ def test_the_readme_example_message_is_what_fdbench_says(tmp_path, monkeypatch):
 def test_an_empty_model_name_is_an_unknown_name_not_the_current_folder():
     result = CliRunner().invoke(app, ["models", "show", ""])
     assert result.exit_code == 2 and "unknown model ''" in result.stderr and "directory" not in result.stderr
+
+
+# ---- free joints and joint paths -------------------------------------------------------------------
+
+
+def test_free_and_path_joints_read_back_equal_and_show(tmp_path):
+    """A model with a free base and a knee on a path: its TOML and JSON read back to an equal Model,
+    its coordinates are the free joint's three then the pins', with their kinds, and ``models show``
+    lists them."""
+    from multibody_strategies import models_with_paths_and_free_joints
+
+    data = copy.deepcopy(BASE)
+    joint_with(0, **FREE_HIP)(data)
+    joint_with(1, path=KNEE_PATH | {"y_angles": [-2.0, 2.0], "y": [0.0, 0.01]})(data)
+    model = find_model_from(data)
+    assert model.coordinates == ("hip_tilt", "hip_tx", "hip_ty", "knee", "ankle")
+    assert model.coordinate_kinds == ("angle", "translation", "translation", "angle", "angle")
+    assert model.n_joints == 5 and model.joint_named("knee").path.angles_of_y == (-2.0, 2.0)
+    for text, suffix in ((to_toml(model), ".toml"), (json.dumps(to_dict(model)), ".json")):
+        path = tmp_path / f"walk{suffix}"
+        path.write_text(text)
+        assert load_model(path) == model
+    shown = invoke("models", "show", tmp_path / "walk.toml")
+    assert shown.exit_code == 0 and "hip_tilt, hip_tx, hip_ty, knee, ankle" in shown.output
+    assert_models_round_trip = given(models_with_paths_and_free_joints())(
+        lambda random_model: _reads_back(tmp_path, random_model))
+    assert_models_round_trip()
+
+
+def _reads_back(folder, model):
+    path = folder / "random.toml"
+    path.write_text(to_toml(model))
+    assert load_model(path) == model

@@ -38,7 +38,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reference_dynamics as ref
-from multibody_strategies import arm2_model, forearm_model, models, models_and_motions, models_and_states
+from multibody_strategies import (arm2_model, forearm_model, models, models_and_motions, models_and_states,
+                                  models_with_paths_and_free_joints)
 
 engine_module = pytest.importorskip("fdbench.multibody.engine",
                                     reason="the multibody engine (fdbench.multibody.engine) is not there yet")
@@ -177,3 +178,108 @@ def test_built_in_pd_simulation_matches_the_reference(name):
 def test_pd_simulation_on_random_trees_matches_the_reference(case):
     model, motion = case
     check_pd_simulation(model, *motion, alpha=RANDOM_ALPHA, omega=RANDOM_OMEGA)
+
+
+# ----------------------------------------------------------------------------- free bases and joint paths
+
+
+def check_general_inverse_dynamics(model, seed):
+    """Inverse dynamics, M(z) and h of a model with free and path joints against the reference's
+    jets (tests/reference_dynamics.GeneralTree), to 1e-9 relative."""
+    engine, t = engine_module.Engine(model), ref.GeneralTree(model)
+    assert engine.joints == model.coordinates and engine.n_joints == t.n_joints
+    rng = np.random.default_rng(seed)
+    z, zd, zdd = rng.uniform(-3, 3, (4, t.n_joints)), rng.uniform(-5, 5, (4, t.n_joints)), rng.uniform(
+        -50, 50, (4, t.n_joints))
+    assert_relative(engine.inverse_dynamics(z, zd, zdd), t.inverse_dynamics(z, zd, zdd), 1e-9, "inverse dynamics")
+    M = engine.mass_matrix(z)
+    assert_relative(M, t.mass_matrix(z), 1e-9, "M(z)")
+    assert np.allclose(M, np.swapaxes(M, 1, 2), rtol=0, atol=1e-12 * np.abs(M).max())
+    assert np.linalg.eigvalsh(M).min() > 0
+    assert_relative(engine.bias(z, zd), t.bias(z, zd), 1e-9, "h(z, z')")
+    assert_relative(engine.inverse_torques(z[0], zd[0], zdd[0]), t.inverse_dynamics(z[0], zd[0], zdd[0]), 1e-9,
+                    "inverse_torques")
+
+
+@settings(max_examples=25, deadline=None)
+@given(model=models_with_paths_and_free_joints(), seed=st.integers(0, 2**16))
+def test_free_and_path_joints_inverse_dynamics_match_the_reference(model, seed):
+    check_general_inverse_dynamics(model, seed)
+
+
+@settings(max_examples=10, deadline=None)
+@given(model=models(), seed=st.integers(0, 2**16))
+def test_the_reference_s_jets_agree_with_its_newton_euler_on_pin_joints(model, seed):
+    """The two constructions of the reference agree where both apply (pin joints only)."""
+    t, general = ref.tree(model), ref.GeneralTree(model)
+    z, zd, zdd = random_states(t.n_joints, 3, seed)
+    assert_relative(general.inverse_dynamics(z, zd, zdd), ref.inverse_dynamics(t, z, zd, zdd), 1e-12, "tau")
+    assert_relative(general.mass_matrix(z), ref.mass_matrix(t, z), 1e-12, "M")
+
+
+@settings(max_examples=10, deadline=None)
+@given(model=models_with_paths_and_free_joints(), seed=st.integers(0, 2**16))
+def test_free_and_path_joint_states_round_trip(model, seed):
+    """joints_from_state(state_from_joints(z, z')) gives z, z' back (a free joint's x, y from its
+    child's point), and the state satisfies the constraints of the pin joints' bodies."""
+    engine = engine_module.Engine(model)
+    rng = np.random.default_rng(seed)
+    z, zd = rng.uniform(-3, 3, engine.n_joints), rng.uniform(-5, 5, engine.n_joints)
+    back = engine.joints_from_state(engine.state_from_joints(z, zd))
+    np.testing.assert_allclose(back[0], z, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back[1], zd, rtol=0, atol=1e-12)
+
+
+def hopper_model():
+    """A free pelvis (tilt, x, y), a thigh on a pin and a shank on a knee path (y with its own angles)."""
+    from fdbench.multibody import description as d
+
+    knee = d.JointPath((-2.0, -1.0, 0.0, 0.5), (0.0, 0.01, 0.02, 0.015), (-0.01, 0.0, 0.005), (-1.5, 0.0, 1.0))
+    return d.Model(name="hopper", gravity=(0.0, -9.81),
+                   bodies=(d.Body("pelvis", 10.0, (0.0, -0.05), 0.2), d.Body("thigh", 5.0, (0.02, -0.2), 0.08),
+                           d.Body("shank", 3.0, (0.0, -0.2), 0.05)),
+                   joints=(d.Joint("base", "free", "ground", "pelvis", (0.0, 1.0), (0.0, 0.0),
+                                   coordinates=("tilt", "tx", "ty")),
+                           d.Joint("hip", "pin", "pelvis", "thigh", (0.0, -0.1), (0.0, 0.0), offset=-1.5),
+                           d.Joint("knee", "pin", "thigh", "shank", (0.0, -0.4), (0.0, 0.0), path=knee)))
+
+
+def test_free_base_and_knee_path_pd_simulation_matches_the_reference():
+    """The engine's RK4 of eq. 12 (numpy for these joints, dt 1 ms) under PD with feedforward and a
+    3 Hz disturbance against the reference's DOP853 of the minimal equations, over 0.3 s: within
+    1e-4 deg (angles) and 1e-6 m (the pelvis's x, y) at alpha 1e9, and the penalty's departure
+    shrinks as 1/alpha (between 30x and 300x larger at alpha 1e7)."""
+    model = hopper_model()
+    t = ref.GeneralTree(model)
+    J = t.n_joints
+    centre, amplitude = np.array([0.1, 0.0, 0.0, 0.3, -0.5]), np.array([0.2, 0.05, 0.03, 0.4, 0.4])
+
+    def motion(time):
+        arg, w = 2 * np.pi * np.asarray(time)[..., None], 2 * np.pi
+        return centre + amplitude * np.sin(arg), amplitude * w * np.cos(arg), -amplitude * w**2 * np.sin(arg)
+
+    kp = np.array([400.0, 2000.0, 2000.0, 200.0, 100.0])
+    kd = 2 * np.sqrt(kp * np.array([0.5, 18.0, 18.0, 0.5, 0.2]))
+    nominal = engine_module.Engine(model)
+
+    def feedforward(time):  # any torque history will do: both sides get the same
+        return nominal.inverse_dynamics(*motion(time)) + 0.1 * kp * np.sin(6 * np.pi * np.asarray(time)[..., None]
+                                                                           + np.arange(J))
+
+    dt, n_steps, every = 1e-3, 300, 50
+    half = np.arange(2 * n_steps + 1) * (dt / 2)
+    z0, zd0, _ = motion(0.0)
+    z0 = z0 + 0.02
+    times = np.arange(0, n_steps + 1, every) * dt
+    expected, _ = ref.simulate_pd(t, z0, zd0, n_steps * dt, feedforward, lambda time: motion(time)[:2], kp, kd, times,
+                                  tolerance=1e-10)
+    assert np.abs(expected - motion(times)[0]).max() > 0.05  # the disturbance is felt
+    errors = {}
+    for alpha in (1e7, 1e9):
+        result = engine_module.Engine(model, alpha=alpha).simulate_pd(z0, zd0, dt, n_steps, feedforward(half),
+                                                                      motion(half)[0], motion(half)[1], kp, kd)
+        assert (result.status, result.steps_done) == (0, n_steps)
+        errors[alpha] = np.abs(result.z[::every] - expected).max(axis=0)
+    angles = [0, 3, 4]
+    assert np.degrees(errors[1e9][angles]).max() < 1e-4 and errors[1e9][1:3].max() < 1e-6, errors
+    assert 30 < errors[1e7].max() / errors[1e9].max() < 300, errors

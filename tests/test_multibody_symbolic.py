@@ -18,9 +18,10 @@ import math
 import numpy as np
 import pytest
 from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import reference_dynamics as ref
-from multibody_strategies import models_and_states
+from multibody_strategies import models_and_states, models_with_paths_and_free_joints
 
 from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine
@@ -216,3 +217,20 @@ def test_lqr_refuses_weights_of_another_number_of_joints():
 
     with pytest.raises(ValueError, match="q_angle must be one number or 3"):
         lqr_gains(find_model("leg3"), Hold([0.0, 0.0, 0.0], duration=1.0), q_angle=[1.0, 2.0])
+
+
+@settings(max_examples=8, deadline=None)
+@given(model=models_with_paths_and_free_joints(max_bodies=3), seed=st.integers(0, 2**16))
+def test_free_and_path_joints_match_the_reference(model, seed):
+    """The CasADi equations of models with free joints and joint paths (the spline by if_else) against
+    the reference's jets: inverse dynamics, M, h to 1e-9 relative, and the forward dynamics inverts
+    the inverse dynamics."""
+    dynamics, t = MinimalDynamics(model), ref.GeneralTree(model)
+    rng = np.random.default_rng(seed)
+    J = t.n_joints
+    z, zd, zdd = rng.uniform(-3, 3, (3, J)), rng.uniform(-5, 5, (3, J)), rng.uniform(-50, 50, (3, J))
+    assert_relative(dynamics.inverse(z, zd, zdd), t.inverse_dynamics(z, zd, zdd), 1e-9, "inverse dynamics")
+    assert_relative(dynamics.mass_matrix(z), t.mass_matrix(z), 1e-9, "M(z)")
+    assert_relative(dynamics.bias(z, zd), t.bias(z, zd), 1e-9, "h(z, z')")
+    tau = t.inverse_dynamics(z, zd, zdd)
+    assert_relative(dynamics.forward(z, zd, tau), zdd, 1e-8, "forward dynamics")

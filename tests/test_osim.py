@@ -36,7 +36,9 @@ if importlib.util.find_spec("opensim") is None:
 
 ROOT = Path(__file__).resolve().parent.parent
 ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
-SUBJECT01 = ROOT.parent / "shared" / "data" / "opensim" / "subject01.osim"  # beside the source folder
+SUBJECT01 = next((where for where in (folder / "shared" / "data" / "opensim" / "subject01.osim"
+                                      for folder in (ROOT.parent, ROOT.parent.parent)) if where.exists()),
+                 ROOT.parent / "shared" / "data" / "opensim" / "subject01.osim")  # beside the source folder (or one up)
 runner = CliRunner()
 
 
@@ -324,9 +326,10 @@ def ball_model(path: Path) -> Path:
                                                                     ("neck_z", 0, False)])])
 
 
-def path_knee_model(path: Path) -> Path:
-    """A free planar pelvis and a knee whose shank follows a spline of the angle, as in OpenSim's gait models."""
-    spline = ("<SimmSpline><x> -2 -1 0 1</x><y> -0.01 -0.005 0 0.001</y></SimmSpline>")
+def path_knee_model(path: Path, spline: str = "<SimmSpline><x> -2 -1 0 1</x><y> -0.01 -0.005 0 0.001</y></SimmSpline>",
+                    knee_y: str = "<Constant><value>0</value></Constant>") -> Path:
+    """A free planar pelvis and a knee whose shank follows a spline of the angle, as in OpenSim's gait
+    models: ``spline`` the knee's translation along x, ``knee_y`` along y (functions of knee_angle)."""
     axes = "".join(
         f'<TransformAxis name="{name}"><coordinates>{coordinate}</coordinates><axis>{axis}</axis>{function}</TransformAxis>'
         for name, coordinate, axis, function in [
@@ -334,7 +337,7 @@ def path_knee_model(path: Path) -> Path:
             ("rotation2", "", "0 1 0", "<Constant><value>0</value></Constant>"),
             ("rotation3", "", "1 0 0", "<Constant><value>0</value></Constant>"),
             ("translation1", "knee_angle", "1 0 0", spline),
-            ("translation2", "", "0 1 0", "<Constant><value>0</value></Constant>"),
+            ("translation2", "knee_angle" if "Constant" not in knee_y else "", "0 1 0", knee_y),
             ("translation3", "", "0 0 1", "<Constant><value>0</value></Constant>")])
     knee = joint("CustomJoint", "knee", "thigh", "shank", [("knee_angle", 0.0, False)], (0, -0.4, 0))
     knee = knee.replace("</frames>", f"</frames><SpatialTransform>{axes}</SpatialTransform>")
@@ -361,7 +364,8 @@ def coupled_model(path: Path) -> Path:
 def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, case):
     path = tmp_path / "model.osim"
     expected = {"not xml": "not valid XML", "no model": "not an OpenSim model file", "ball joint": "'neck' (BallJoint)",
-                "missing": "does not exist", "path knee": "'knee' (CustomJoint) moves its child along a path",
+                "missing": "does not exist",
+                "path knee": "'knee' (CustomJoint) has a PiecewiseLinearFunction as translation1 of 'knee_angle'",
                 "tilt": "'r_elbow' (CustomJoint) has its axis 3.52 deg off",
                 "constraint": "constraint 'couple' (CoordinateCouplerConstraint)"}[case]
     args = ()
@@ -372,7 +376,8 @@ def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, cas
     elif case == "ball joint":
         ball_model(path)
     elif case == "path knee":
-        path_knee_model(path)
+        path_knee_model(path, spline="<PiecewiseLinearFunction><x> -2 0 1</x><y> 0 0.01 0</y>"
+                                     "</PiecewiseLinearFunction>")
     elif case == "constraint":
         coupled_model(path)
     elif case == "tilt":
@@ -380,18 +385,99 @@ def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, cas
     out = tmp_path / "out.toml"
     line = refused("import-osim", path, "-o", out, *args, contains=(expected,))
     assert not out.exists()
-    if case == "path knee":
-        assert "'hip' (PlanarJoint) has 3 free coordinates" in line  # every joint it cannot take, in one line
     if case != "tilt":
         refused("inverse", "--model", path, "-o", out, contains=(expected,))
         assert not out.exists()
 
 
+def random_states(model, count: int, seed: int):
+    """count random (z, z', z''), each (count, J): angles in [-1, 0.15] rad (the knees' range), the
+    translations about their defaults, rates up to 3 (rad or m)/s, accelerations up to 20 /s^2."""
+    rng = np.random.default_rng(seed)
+    shape = (count, model.n_joints)
+    return rng.uniform(-1.0, 0.15, shape), rng.uniform(-3, 3, shape), rng.uniform(-20, 20, shape)
+
+
+def test_a_free_pelvis_and_a_knee_on_a_path_import_with_opensim_s_inverse_dynamics(tmp_path):
+    """OpenSim's PlanarJoint becomes a free joint (angle, x, y) and a CustomJoint whose translations
+    are a SimmSpline and a LinearFunction (scaled by a MultiplierFunction) of the knee angle a pin
+    on a path; fdbench's inverse dynamics equals OpenSim's to 1e-9 relative."""
+    knee_y = ("<MultiplierFunction><function><LinearFunction><coefficients> 0.02 -0.001</coefficients>"
+              "</LinearFunction></function><scale>1.5</scale></MultiplierFunction>")
+    path = path_knee_model(tmp_path / "knee.osim", knee_y=knee_y)
+    model, _ = import_osim(path)
+    hip, knee = model.joints
+    assert (hip.type, hip.coordinates, hip.parent) == ("free", ("pelvis_tilt", "pelvis_tx", "pelvis_ty"), "ground")
+    assert model.coordinates == ("pelvis_tilt", "pelvis_tx", "pelvis_ty", "knee_angle")
+    assert model.coordinate_kinds == ("angle", "translation", "translation", "angle")
+    assert knee.path.angles == (-2.0, -1.0, 0.0, 1.0) and knee.path.x == (-0.01, -0.005, 0.0, 0.001)
+    assert knee.path.y_angles == (-1.0, 1.0)  # the line through its values at -1 and 1, scaled by 1.5
+    assert knee.path.y == pytest.approx((1.5 * (-0.001 - 0.02), 1.5 * (-0.001 + 0.02)), abs=1e-15)
+    z, zd, zdd = random_states(model, 8, seed=3)
+    ours = Engine(model).inverse_dynamics(z, zd, zdd)
+    theirs = opensim_inverse_dynamics(path, model.coordinates, z, zd, zdd)
+    assert np.abs(ours - theirs).max() < 1e-9 * np.abs(theirs).max()
+
+
 @pytest.mark.skipif(not SUBJECT01.exists(), reason="the shared data folder is not beside the source folder")
-def test_the_gait_model_is_refused_naming_its_pelvis_and_knees(tmp_path):
-    line = refused("import-osim", SUBJECT01, "-o", tmp_path / "out.toml",
-                   contains=("'ground_pelvis'", "'knee_r'", "'knee_l'", "path"))
-    assert not (tmp_path / "out.toml").exists() and "hip_r" not in line
+def test_the_gait_model_imports_with_opensim_s_inverse_dynamics(tmp_path):
+    """subject01.osim: the pelvis a free joint, the knees pins on OpenSim's splines (x and y with their
+    own knots), muscles dropped; its inverse dynamics equals OpenSim's InverseDynamicsSolver's to
+    1e-9 relative on random states (forces up to about 2 kN)."""
+    model, notes = import_osim(SUBJECT01)
+    assert model.coordinates == ("pelvis_tilt", "pelvis_tx", "pelvis_ty", "hip_flexion_r", "hip_flexion_l",
+                                 "lumbar_extension", "knee_angle_r", "knee_angle_l", "ankle_angle_r", "ankle_angle_l")
+    assert model.joints[0].type == "free" and model.joints[0].name == "ground_pelvis"
+    knees = [j for j in model.joints if j.name.startswith("knee")]
+    assert len(knees) == 2 and all(len(j.path.angles) == 12 and len(j.path.y_angles) == 7 for j in knees)
+    assert notes[0].startswith("dropped 18 muscles")
+    z, zd, zdd = random_states(model, 5, seed=0)
+    ours = Engine(model).inverse_dynamics(z, zd, zdd)
+    theirs = opensim_inverse_dynamics(SUBJECT01, model.coordinates, z, zd, zdd)
+    assert np.abs(ours - theirs).max() < 1e-9 * np.abs(theirs).max()
+
+
+OPENSIM_SPLINE = """
+import json, sys
+import opensim as osim
+request = json.loads(sys.stdin.read())
+out = []
+for x, y in request["samples"]:
+    spline = osim.SimmSpline()
+    for a, b in zip(x, y):
+        spline.addPoint(a, b)
+    values = []
+    for t in request["at"]:
+        v = osim.Vector(1, t)
+        values.append([spline.calcValue(v)] + [spline.calcDerivative(osim.StdVectorInt([0] * k), v) for k in (1, 2)])
+    out.append(values)
+print(json.dumps(out))
+"""
+
+
+def test_the_path_spline_is_opensim_s_simmspline():
+    """fdbench.multibody.spline against OpenSim's own SimmSpline (calcValue, calcDerivative of orders
+    1 and 2) on random samples of 2 to 12 knots, inside and beyond the knots (its end slopes), to 1e-12
+    of the values' scale."""
+    from fdbench.multibody.spline import fit
+
+    rng = np.random.default_rng(7)
+    samples = []
+    for n in (2, 3, 4, 5, 7, 12):
+        x = np.cumsum(rng.uniform(0.05, 0.8, n)) - 2.0
+        samples.append((x.tolist(), rng.normal(0, 0.03, n).tolist()))
+    at = np.linspace(-2.5, 6.0, 121).tolist()
+    done = subprocess.run([sys.executable, "-c", OPENSIM_SPLINE], input=json.dumps({"samples": samples, "at": at}),
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    theirs = np.array(json.loads(done.stdout.strip().splitlines()[-1]))  # (splines, points, order)
+    for (x, y), expected in zip(samples, theirs):
+        spline = fit(x, y)
+        ours = np.stack([spline.evaluate(at, order) for order in range(3)], axis=-1)
+        one_by_one = np.array([spline.at(t) for t in at])  # the simulation's path
+        scale = np.abs(expected).max(axis=0)
+        for values in (ours, one_by_one):
+            assert np.all(np.abs(values - expected) <= 1e-12 * scale), (len(x), np.abs(values - expected).max(axis=0))
 
 
 def test_import_osim_never_writes_over_its_input(tmp_path):
@@ -563,3 +649,32 @@ def test_opensim_s_forward_simulation_of_an_exported_model_agrees_with_fdbench_s
         differences[alpha] = np.degrees(np.abs(ours.z - theirs).max())
     assert differences[1e7] < bound_1e7 and differences[1e9] < bound_1e9, differences
     assert differences[1e9] < differences[1e7] / 20, differences
+
+
+@pytest.mark.skipif(not SUBJECT01.exists(), reason="the shared data folder is not beside the source folder")
+def test_the_walk_s_mot_reads_angles_in_degrees_and_the_pelvis_translations_in_metres():
+    """subject01_walk_IK.mot (inDegrees=yes): its angles become radians, pelvis_tx and pelvis_ty stay
+    in metres (OpenSim's convention), checked against the file's own numbers (to the smoothing of
+    the derivative estimate: a wrong unit would be off by a factor of 57)."""
+    from fdbench.multibody.motions import joint_motion
+
+    model, _ = import_osim(SUBJECT01)
+    path = SUBJECT01.with_name("subject01_walk_IK.mot")
+    table = pd.read_csv(path, sep=r"\s+", skiprows=next(i for i, line in enumerate(path.read_text().splitlines())
+                                                          if line.strip() == "endheader") + 1)
+    motion = joint_motion(str(path), model)
+    z, _, _ = motion(table["time"].to_numpy())
+    for k, (name, kind) in enumerate(zip(model.coordinates, model.coordinate_kinds)):
+        expected = table[name].to_numpy() * (1.0 if kind == "translation" else math.pi / 180)
+        assert np.abs(z[:, k] - expected).max() < (0.005 if kind == "translation" else 0.03), name  # m, rad
+
+
+def test_export_osim_refuses_free_and_path_joints_and_writes_nothing(tmp_path):
+    model, _ = import_osim(path_knee_model(tmp_path / "knee.osim"))
+    source = tmp_path / "knee.toml"
+    from fdbench.multibody.description import to_toml
+
+    source.write_text(to_toml(model))
+    out = tmp_path / "out.osim"
+    refused("export-osim", source, "-o", out, contains=("hip, knee", "free or on a path", "pin joints only"))
+    assert not out.exists()

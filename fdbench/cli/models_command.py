@@ -130,7 +130,7 @@ def _show_text(model, source: str) -> str:
         bodies.append({"name": body.name, "mass": f"{body.mass:.6g}", "com": _point(body.com),
                        "inertia": f"{body.inertia:.6g}", "joint": model.parent_joint(body.name).name,
                        "end": _point(end) + ("" if given_by == "end" else f" ({_END_ORIGIN[given_by.split()[0]]})")})
-    joints = [{"#": str(k), "name": j.name, "type": j.type, "parent": j.parent, "child": j.child,
+    joints = [{"#": str(k), "name": j.name, "type": _joint_type(j), "parent": j.parent, "child": j.child,
                "at_parent": _point(j.at_parent), "at_child": _point(j.at_child), "offset": f"{j.offset:.6g}",
                "limits": "" if j.limits is None else _point(j.limits)} for k, j in enumerate(model.joints)]
     loads = [{"#": str(i), "body": load.body, "at": _point(load.at), "force": _point(load.force)}
@@ -144,15 +144,30 @@ def _show_text(model, source: str) -> str:
     return text + _motions_text(model) + _keys_text(model)
 
 
+def _joint_type(joint) -> str:
+    """'pin', 'pin on a path (n samples)' or 'free (angle, x, y)'."""
+    if joint.type == "free":
+        return f"free ({', '.join(joint.coordinates)})"
+    return joint.type + (f" on a path ({len(joint.path.angles)} samples)" if joint.path is not None else "")
+
+
 def _motions_text(model) -> str:
-    """The named motions (the first the default): each joint's start -> goal in degrees."""
+    """The named motions (the first the default): each coordinate's start -> goal in degrees (an
+    angle) or metres (a translation)."""
     import math
 
     from .store_commands import _table
 
+    kinds = dict(zip(model.coordinates, model.coordinate_kinds))
+
+    def span(joint, a, b):
+        if kinds.get(joint) == "translation":
+            return {f"{joint} (m)": f"{a:.4g} -> {b:.4g}"}
+        return {f"{joint} (deg)": f"{math.degrees(a):.4g} -> {math.degrees(b):.4g}"}
+
     rows = [{"name": m.name + (" (default)" if i == 0 else ""), "type": m.type, "duration (s)": f"{m.duration:.6g}"}
-            | {f"{joint} (deg)": f"{math.degrees(a):.4g} -> {math.degrees(b):.4g}"
-               for (joint, a), (_, b) in zip(m.start, m.goal)} for i, m in enumerate(model.motions)]
+            | {key: value for (joint, a), (_, b) in zip(m.start, m.goal) for key, value in span(joint, a, b).items()}
+            for i, m in enumerate(model.motions)]
     return _table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
 
 

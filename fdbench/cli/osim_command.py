@@ -50,10 +50,11 @@ def export_osim_command(
 
     # a library model's file is an input too: the output may not write over it
     _check_outputs("osim", ("osim",), inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
-    from ..multibody.osim import to_osim
+    from ..multibody.osim import check_exportable, to_osim
 
     try:
         found = find_model(model, "NAME|FILE")
+        check_exportable(found)
     except ValueError as exc:
         raise BadInput(str(exc)) from None
     _emit(to_osim(found), output)

@@ -1,12 +1,24 @@
-"""A planar multibody model as data: bodies, pin joints and constant point loads, read from a TOML or
-JSON file (the same keys) and checked, in SI units with angles in radians.
+"""A planar multibody model as data: bodies, joints and constant point loads, read from a TOML or
+JSON file (the same keys) and checked, in SI units with angles in radians and translations in m.
 
 The model is a tree rooted at ``ground``: every body is the child of exactly one joint; a joint's
-parent is ground or a body. A joint's coordinate is the child frame's angle relative to its parent
+parent is ground or a body. A joint's angle is the child frame's angle relative to its parent
 frame minus the joint's ``offset``, so a body's frame angle (from world +x, counter-clockwise) is
-the sum of (coordinate + offset) over the joints on its path from ground. The joint's torque acts
-on the child (+) and the parent (-): it is the generalised force of its coordinate. World axes: x
-forward, y up.
+the sum of (angle + offset) over the joints on its path from ground. The joint's torque acts on
+the child (+) and the parent (-): it is the generalised force of its angle. World axes: x forward,
+y up. Joint types:
+
+* ``pin`` (the default): one coordinate, the angle, named by the joint's ``name``. With a
+  ``path`` table (``angles`` rad strictly increasing, ``x``, ``y`` m of the same length, 2 to
+  1000 samples; ``y_angles``: y's own angles) the child's point sits at at_parent + (x(angle),
+  y(angle)) in the parent's frame, on OpenSim's SimmSpline through the samples
+  (``fdbench.multibody.spline``): OpenSim's knee.
+* ``free`` (parent ground only): three coordinates named by ``coordinates``, [angle, x, y]: the
+  child's angle as a pin's, and its point at_child at at_parent + (x, y) (m, world axes): OpenSim's
+  planar pelvis. The generalised forces of x and y are forces (N) on that point.
+
+``Model.coordinates`` lists every coordinate in joint order, ``Model.coordinate_kinds`` says
+which is an angle (rad) and which a translation (m).
 
 Choices made here (documented in the README's "Your own model"):
 
@@ -50,7 +62,9 @@ MAX_MAGNITUDE = 1e6  # any number of a model file, in its unit
 MAX_BODIES = 1000  # bodies, joints or loads of one model
 MAX_FILE_BYTES = 2**20  # a model file
 MIN_SEGMENT = 1e-3  # m: a body's end point is at least this far from its joint point
-JOINT_TYPES = ("pin",)
+JOINT_TYPES = ("pin", "free")
+ANGLE, TRANSLATION = "angle", "translation"  # the kinds of coordinates (rad, m)
+MAX_PATH_SAMPLES = 1000  # samples of a joint's path
 RESERVED_SUFFIXES = ("_vel", "_acc", "_torque", "_desired", "_inverse")  # columns made from a joint's name
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
 LIBRARY = Path(__file__).resolve().parent.parent / "models" / "library"
@@ -77,11 +91,36 @@ class Body:
 
 
 @dataclass(frozen=True)
+class JointPath:
+    """The path of a joint's point in its parent's frame: at the coordinate ``angles[i]`` (rad,
+    strictly increasing) the child's point sits at at_parent + (x[i], y[i]) (m), in between on
+    OpenSim's SimmSpline through the samples (``fdbench.multibody.spline``), beyond them on its end
+    slopes. ``y_angles``: y's own angles where they differ from x's (OpenSim's knee)."""
+
+    angles: tuple[float, ...]
+    x: tuple[float, ...]
+    y: tuple[float, ...]
+    y_angles: tuple[float, ...] | None = None
+
+    @property
+    def angles_of_y(self) -> tuple[float, ...]:
+        return self.angles if self.y_angles is None else self.y_angles
+
+    def splines(self):
+        """The splines (x(angle), y(angle)), fitted once per path."""
+        return _path_splines(self)
+
+
+@dataclass(frozen=True)
 class Joint:
-    """A joint whose coordinate is named ``name``: the point ``at_parent`` of the parent's frame
-    (world axes for ground) coincides with ``at_child`` of the child's frame (m); ``offset`` (rad)
-    is the child frame's angle relative to the parent's when the coordinate is 0; ``limits`` (rad)
-    are informative."""
+    """A joint: the point ``at_parent`` of the parent's frame (world axes for ground) coincides with
+    ``at_child`` of the child's frame (m); ``offset`` (rad) is the child frame's angle relative to the
+    parent's when the angle is 0; ``limits`` (rad) are informative.
+
+    type 'pin': one coordinate, the angle, named ``name``; with a ``path`` the child's point moves
+    along it with the angle (at_parent + path(angle)). type 'free' (parent ground only): three
+    coordinates named by ``coordinates``, (angle, x, y): the angle as a pin's, and the child's point
+    at at_parent + (x, y) (m, world axes)."""
 
     name: str
     type: str
@@ -91,6 +130,13 @@ class Joint:
     at_child: tuple[float, float]
     offset: float = 0.0
     limits: tuple[float, float] | None = None
+    path: JointPath | None = None
+    coordinates: tuple[str, str, str] | None = None
+
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        """The joint's coordinates: (name,) for a pin, its three for a free joint."""
+        return self.coordinates if self.type == "free" else (self.name,)
 
 
 @dataclass(frozen=True)
@@ -132,12 +178,31 @@ class Model:
 
     @property
     def coordinates(self) -> tuple[str, ...]:
-        """The joints' names in order: the model's coordinates."""
-        return tuple(joint.name for joint in self.joints)
+        """The model's coordinates in order: a pin joint's name, a free joint's three (angle, x, y)."""
+        return tuple(name for joint in self.joints for name in joint.coordinate_names)
+
+    @property
+    def coordinate_kinds(self) -> tuple[str, ...]:
+        """Per coordinate, ANGLE ('angle', rad) or TRANSLATION ('translation', m)."""
+        return tuple(kind for joint in self.joints
+                     for kind in ((ANGLE, TRANSLATION, TRANSLATION) if joint.type == "free" else (ANGLE,)))
 
     @property
     def n_joints(self) -> int:
-        return len(self.joints)
+        """The number of coordinates (a free joint has three)."""
+        return len(self.coordinates)
+
+    @property
+    def has_path_or_free_joints(self) -> bool:
+        """Whether a joint has a path or is free (what the compiled kernels do not take yet)."""
+        return any(joint.path is not None or joint.type == "free" for joint in self.joints)
+
+    def joint_named(self, name: str) -> Joint:
+        """The joint called ``name`` (a joint's name, not a free joint's coordinate)."""
+        for joint in self.joints:
+            if joint.name == name:
+                return joint
+        raise KeyError(f"no joint {name!r} in model {self.name!r}")
 
     @property
     def total_mass(self) -> float:
@@ -274,7 +339,8 @@ TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": Tru
             "motions": False, "keys": False}
 BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
 JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
-              "offset": False, "limits": False}
+              "offset": False, "limits": False, "path": False, "coordinates": False}
+PATH_KEYS = {"angles": True, "x": True, "y": True, "y_angles": False}
 LOAD_KEYS = {"body": True, "at": True, "force": True}
 MOTION_KEYS = {"name": True, "type": False, "duration": True, "start": True, "goal": True}
 MOTION_TYPES = ("minimum-jerk",)
@@ -286,7 +352,7 @@ ALLOWED = {
     "joints": "a list of tables ([[joints]] in TOML)", "loads": "a list of tables ([[loads]] in TOML)",
     "mass": "a positive number (kg)", "com": "[x, y] (m, in the body's frame)",
     "inertia": "a positive number (kg m^2, about the centre of mass)",
-    "end": "[x, y] (m, in the body's frame)", "type": "pin", "parent": "a body's name or 'ground'",
+    "end": "[x, y] (m, in the body's frame)", "type": "pin or free", "parent": "a body's name or 'ground'",
     "child": "a body's name", "at_parent": "[x, y] (m, in the parent's frame)",
     "at_child": "[x, y] (m, in the child's frame)", "offset": "a number (rad)",
     "limits": "[lower, upper] (rad, lower < upper)", "body": "a body's name", "at": "[x, y] (m, in the body's frame)",
@@ -294,6 +360,10 @@ ALLOWED = {
     "keys": "a table of short names, each a path of with_changes ([keys] in TOML)",
     "duration": "a positive number (s)", "start": "a table {joint = angle} (rad), every joint",
     "goal": "a table {joint = angle} (rad), every joint",
+    "path": "a table with angles (rad, strictly increasing), x and y (m), lists of the same length (2 to 1000)",
+    "coordinates": "three names [angle, x, y] of a free joint's coordinates",
+    "angles": "a list of angles (rad), strictly increasing", "x": "a list of x values (m)",
+    "y": "a list of y values (m)", "y_angles": "a list of angles (rad), strictly increasing: y's own",
 }
 
 
@@ -405,7 +475,7 @@ def model_from_dict(data, source: str, default_name: str | None = None) -> Model
     order = _topological_order(check, bodies, joints)
     model = Model(name, gravity, tuple(bodies), tuple(joints[k] for k in order), tuple(loads), description)
     _check_ends(check, model, bodies, order)
-    motions = tuple(_motion(check, entry, f"motions[{i}]", model.coordinates)
+    motions = tuple(_motion(check, entry, f"motions[{i}]", model.coordinates, model.coordinate_kinds)
                     for i, entry in enumerate(check.entries(data, "motions")))
     _check_motion_names(check, motions)
     return replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model))
@@ -430,11 +500,23 @@ def _joint(check: _Checker, entry, key: str) -> Joint:
                                   f"{', <joint>'.join(RESERVED_SUFFIXES)}); choose another name")
     kind = entry.get("type", "pin")
     if kind not in JOINT_TYPES:
-        check.fail(f"{key}.type", f"{kind!r} is not a joint type fdbench knows; valid: "
-                                  f"{', '.join(JOINT_TYPES)} (only pin joints in this version)")
+        check.fail(f"{key}.type", f"{_kind(kind)} is not a joint type fdbench knows; valid: {', '.join(JOINT_TYPES)}")
     limits = check.pair(entry["limits"], f"{key}.limits") if "limits" in entry else None
     if limits is not None and not limits[0] < limits[1]:
         check.fail(f"{key}.limits", f"must be [lower, upper] with lower < upper (rad), got {list(limits)}")
+    path = _path(check, entry["path"], f"{key}.path") if "path" in entry else None
+    coordinates = None
+    if kind == "free":
+        if path is not None:
+            check.fail(f"{key}.path", "a free joint has no path (its x and y are coordinates); remove path")
+        if "coordinates" not in entry:
+            check.fail(f"{key}.coordinates", f"missing; give {ALLOWED['coordinates']}")
+        coordinates = _free_coordinates(check, entry["coordinates"], f"{key}.coordinates")
+        if entry["parent"] != GROUND:
+            check.fail(f"{key}.parent", f"a free joint's parent must be 'ground', got {_kind(entry['parent'])}")
+    elif "coordinates" in entry:
+        check.fail(f"{key}.coordinates", "only a free joint names coordinates (a pin's coordinate is its name); "
+                                         "remove coordinates or give type = \"free\"")
     return Joint(
         name=name, type=kind,
         parent=_reference(check, entry["parent"], f"{key}.parent"),
@@ -442,8 +524,53 @@ def _joint(check: _Checker, entry, key: str) -> Joint:
         at_parent=check.pair(entry["at_parent"], f"{key}.at_parent"),
         at_child=check.pair(entry.get("at_child", [0.0, 0.0]), f"{key}.at_child"),
         offset=check.number(entry.get("offset", 0.0), f"{key}.offset"),
-        limits=limits,
+        limits=limits, path=path, coordinates=coordinates,
     )
+
+
+def _path(check: _Checker, entry, key: str) -> JointPath:
+    """A joint's path table: angles strictly increasing, x and y of the same length."""
+    entry = check.table(entry, key, PATH_KEYS)
+    lists = {}
+    for name in (name for name in PATH_KEYS if name in entry):
+        value = entry[name]
+        if not isinstance(value, list) or not 2 <= len(value) <= MAX_PATH_SAMPLES:
+            check.fail(f"{key}.{name}",
+                       f"must be {ALLOWED[name]} of 2 to {MAX_PATH_SAMPLES} numbers, got {_kind(value)}")
+        lists[name] = tuple(check.number(v, f"{key}.{name}[{i}]", what="a number") for i, v in enumerate(value))
+    for name, knots in (("x", "angles"), ("y", "y_angles" if "y_angles" in lists else "angles")):
+        if len(lists[name]) != len(lists[knots]):
+            check.fail(f"{key}.{name}", f"has {len(lists[name])} values but {knots} has {len(lists[knots])}; "
+                                        f"give one value per angle")
+    for knots in ("angles", "y_angles"):
+        values = lists.get(knots, ())
+        for i in range(1, len(values)):
+            if not values[i] > values[i - 1]:
+                check.fail(f"{key}.{knots}[{i}]", f"must be more than {knots}[{i - 1}] ({values[i - 1]:g}): "
+                                                  f"{ALLOWED['angles']}, got {values[i]:g}")
+    return JointPath(lists["angles"], lists["x"], lists["y"], lists.get("y_angles"))
+
+
+def _free_coordinates(check: _Checker, value, key: str) -> tuple[str, str, str]:
+    if not isinstance(value, list) or len(value) != 3:
+        check.fail(key, f"must be {ALLOWED['coordinates']}, got {_kind(value)}")
+    names = tuple(check.name(v, f"{key}[{i}]") for i, v in enumerate(value))
+    for i, name in enumerate(names):
+        if name.lower() == "t" or name.lower().endswith(RESERVED_SUFFIXES):
+            check.fail(f"{key}[{i}]", f"{name!r} would clash with the columns of motion and torque files; "
+                                      "choose another name")
+    return names
+
+
+_SPLINES: dict = {}
+
+
+def _path_splines(path: JointPath):
+    from .spline import fit
+
+    if path not in _SPLINES:
+        _SPLINES[path] = (fit(path.angles, path.x), fit(path.angles_of_y, path.y))
+    return _SPLINES[path]
 
 
 def _load(check: _Checker, entry, key: str) -> Load:
@@ -458,18 +585,18 @@ def _reference(check: _Checker, value, key: str) -> str:
     return value
 
 
-def _motion(check: _Checker, entry, key: str, joints: tuple) -> MotionSpec:
+def _motion(check: _Checker, entry, key: str, joints: tuple, kinds: tuple = ()) -> MotionSpec:
     entry = check.table(entry, key, MOTION_KEYS)
     kind = entry.get("type", MOTION_TYPES[0])
     if kind not in MOTION_TYPES:
         check.fail(f"{key}.type", f"{_kind(kind)} is not a motion type fdbench knows; valid: {', '.join(MOTION_TYPES)}")
     return MotionSpec(name=check.name(entry["name"], f"{key}.name"), type=kind,
                       duration=check.number(entry["duration"], f"{key}.duration", positive=True),
-                      start=_joint_angles(check, entry["start"], f"{key}.start", joints),
-                      goal=_joint_angles(check, entry["goal"], f"{key}.goal", joints))
+                      start=_joint_angles(check, entry["start"], f"{key}.start", joints, kinds),
+                      goal=_joint_angles(check, entry["goal"], f"{key}.goal", joints, kinds))
 
 
-def _joint_angles(check: _Checker, value, key: str, joints: tuple) -> tuple[tuple[str, float], ...]:
+def _joint_angles(check: _Checker, value, key: str, joints: tuple, kinds: tuple = ()) -> tuple[tuple[str, float], ...]:
     """{joint = angle} (rad) naming every joint once: (joint, angle) pairs in the model's order."""
     if not isinstance(value, dict):
         check.fail(key, f"must be {ALLOWED[key.rsplit('.', 1)[-1]]}, got {_kind(value)}")
@@ -480,8 +607,11 @@ def _joint_angles(check: _Checker, value, key: str, joints: tuple) -> tuple[tupl
             check.fail(f"{key}.{name}", unknown_name_message("joint", name, list(joints)))
     for joint in joints:
         if joint not in value:
-            check.fail(f"{key}.{joint}", f"missing; give the angle (rad) of every joint: {', '.join(joints)}")
-    return tuple((joint, check.number(value[joint], f"{key}.{joint}", what="an angle (rad)")) for joint in joints)
+            check.fail(f"{key}.{joint}", f"missing; give the value (rad; m for a translation) of every joint: "
+                                         f"{', '.join(joints)}")
+    what = dict(zip(joints, kinds or ())) if kinds else {}
+    return tuple((joint, check.number(value[joint], f"{key}.{joint}", what="a translation (m)" if what.get(joint) ==
+                                      TRANSLATION else "an angle (rad)")) for joint in joints)
 
 
 def _check_motion_names(check: _Checker, motions: tuple) -> None:
@@ -542,6 +672,8 @@ def _check_names(check: _Checker, bodies: list, joints: list) -> None:
     """Names of bodies and joints are distinct, ignoring case."""
     seen = {}
     named = [(f"bodies[{i}]", b.name) for i, b in enumerate(bodies)] + [(f"joints[{k}]", j.name) for k, j in enumerate(joints)]
+    named += [(f"joints[{k}].coordinates[{i}]", name) for k, j in enumerate(joints) if j.type == "free"
+              for i, name in enumerate(j.coordinates) if name != j.name]
     for key, name in named:
         earlier = seen.setdefault(name.lower(), key)
         if earlier != key:
@@ -636,6 +768,10 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
     def joint(j: Joint) -> dict:
         entry = {"name": j.name, "type": j.type, "parent": j.parent, "child": j.child, "at_parent": list(j.at_parent),
                  "at_child": list(j.at_child), "offset": j.offset}
+        entry |= {"coordinates": list(j.coordinates)} if j.coordinates is not None else {}
+        if j.path is not None:
+            entry["path"] = {"angles": list(j.path.angles), "x": list(j.path.x), "y": list(j.path.y)}
+            entry["path"] |= {"y_angles": list(j.path.y_angles)} if j.path.y_angles is not None else {}
         return entry | ({"limits": list(j.limits)} if j.limits is not None else {})
 
     data = {"name": model.name} | ({"description": model.description} if model.description else {})
@@ -744,7 +880,7 @@ def _set(data: dict, model: Model, path: str, value: float) -> str:
             entry, key = data["bodies"][names.index(name)], f"bodies[{names.index(name)}]"
             return key + _set_field(entry, rest, value, lambda: list(resolved_end(model, name)))
         else:
-            k = model.coordinates.index(name)
+            k = [j.name for j in model.joints].index(name)
             return f"joints[{k}]" + _set_field(data["joints"][k], rest, value, None)
     return f"loads[{index}]" + _set_field(data["loads"][index], rest, value, None)
 
@@ -787,7 +923,7 @@ def inertia_about(model: Model, body_name: str, joint_name: str) -> float:
 
 def _joint_point(model: Model, body_name: str, joint_name: str) -> tuple[float, float]:
     """The joint's point in the body's frame (m): at_child if the body is its child, else at_parent."""
-    joint = model.joints[model.coordinates.index(joint_name)]
+    joint = model.joint_named(joint_name)
     return joint.at_child if joint.child == body_name else joint.at_parent
 
 
@@ -797,7 +933,7 @@ def path_value(model: Model, path: str) -> float:
     axis = {"x": 0, "y": 1}.get(component)
     if axis is None:  # <body>.mass, <body>.inertia, <joint>.offset
         name, field = path.split(".")
-        return getattr(model.body(name) if field != "offset" else model.joints[model.coordinates.index(name)], field)
+        return getattr(model.body(name) if field != "offset" else model.joint_named(name), field)
     if head == "gravity":
         return model.gravity[axis]
     owner, _, field = head.rpartition(".")
@@ -805,8 +941,8 @@ def path_value(model: Model, path: str) -> float:
         return getattr(model.loads[int(owner[6:-1])], field)[axis]
     if field == "force":
         return next(load for load in model.loads if load.body == owner).force[axis]
-    if owner in model.coordinates:
-        return getattr(model.joints[model.coordinates.index(owner)], field)[axis]
+    if owner in [joint.name for joint in model.joints]:
+        return getattr(model.joint_named(owner), field)[axis]
     return (resolved_end(model, owner) if field == "end" else model.body(owner).com)[axis]
 
 

@@ -45,6 +45,13 @@ basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels take arr
 layout of indices and constants built once per Engine; they live in fdbench.multibody.kernels), so
 they are compiled once and cached for every model. Strict IEEE arithmetic.
 
+Free and path joints (``fdbench.multibody.description``). A free joint's body has its joint point
+among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
+joint with a path gives its child a joint point of its own, held on the path by two constraints
+that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
+joints' velocity transform; eq. 12 for such models is assembled and solved by numpy
+(``fdbench.multibody.general``), the compiled kernels refusing them (``require_compiled``).
+
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
 angles alone by recursive kinematics of the body points, so a nominal model other than the plant
@@ -92,6 +99,12 @@ def _rotate(angle, local):
     return np.stack([local[0] * c - local[1] * s, local[0] * s + local[1] * c], axis=-1)
 
 
+def _rotate_each(angle, local):
+    """R(angle_i) local_i for angles (n,) and vectors local (n, 2): shape (n, 2)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([local[:, 0] * c - local[:, 1] * s, local[:, 0] * s + local[:, 1] * c], axis=-1)
+
+
 def _perp(v):
     """R90 v, the vector turned by +90 deg, for v of shape (..., 2)."""
     return np.stack([-v[..., 1], v[..., 0]], axis=-1)
@@ -121,14 +134,18 @@ class Engine:
             if not (math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value}")
         self.model = model
-        self.joints = tuple(joint.name for joint in model.joints)
+        self.joints = tuple(model.coordinates)  # the coordinates (a free joint has three)
         self.n_joints = len(self.joints)
+        self.n_bodies = len(model.joints)
+        # per joint: the column of its angle among the coordinates (a free joint's x, y follow it)
+        self.joint_column = np.cumsum([0] + [len(j.coordinate_names) for j in model.joints][:-1]).astype(np.int64)
+        self.compiled = not model.has_path_or_free_joints
         self.params = np.zeros(N_PARAMS)
         self.params[ALPHA], self.params[TWO_XI_OMEGA], self.params[OMEGA2] = alpha, 2 * xi * omega, omega**2
         self.params[SWITCH_COS], self.params[VIOLATION] = SIN_FORM_MIN_COS, VIOLATION_TOL
         self._build_points()
         self._build_matrices()
-        self.n_q = self.n_p + self.n_joints
+        self.n_q = self.n_p + self.n_bodies  # the points and one angle per body
         self.n_state = 2 * self.n_q
         self._last_start = None  # (z and zd as bytes, the state) of the last ``state_from_joints``
 
@@ -156,7 +173,9 @@ class Engine:
         for b, joint in enumerate(model.joints):
             p = self.joint_parent[b]
             at_parent = np.asarray(joint.at_parent, dtype=float)
-            if p == FIXED:
+            if joint.type == "free" or joint.path is not None:  # a point of the child that moves on its parent
+                i = new_point(b, joint.at_child)
+            elif p == FIXED:
                 i = new_point(FIXED, at_parent, at_parent)
             else:
                 pi, pj = basic[p]
@@ -292,6 +311,33 @@ class Engine:
                 self.lin_coef, self.lin_const, self.first, self.base, self.q_ext, self.params)
 
     @property
+    def dense_penalty(self):
+        """Eq. 12 by numpy (``fdbench.multibody.general``) for a model with free or path joints."""
+        if getattr(self, "_dense", None) is None:
+            from .general import DensePenalty
+
+            self._dense = DensePenalty(self)
+        return self._dense
+
+    def check_nominal(self, nominal: "Engine | None") -> None:
+        """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque
+        control believes: the same coordinates, and compiled kernels where this engine has them."""
+        if nominal is None:
+            return
+        if nominal.joints != self.joints:
+            raise ValueError(f"the nominal model's joints {nominal.joints} are not the plant's {self.joints}")
+        if self.compiled:
+            nominal.require_compiled("computed-torque control of a plant without them")
+
+    def require_compiled(self, what: str = "the compiled kernels") -> None:
+        """ValueError (one line) if the model has joints the compiled kernels do not take yet."""
+        if not self.compiled:
+            kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
+                            if j.type == "free" or j.path is not None})
+            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot take "
+                             "in this version")
+
+    @property
     def inverse_torques_layout(self) -> tuple:
         """The arrays ``kernels.inverse_torques`` takes after (z, zd, zdd), in order."""
         return (self.joint_parent, self.joint_offset, self.joint_at_parent, self.joint_at_child, self.pt_owner,
@@ -302,6 +348,8 @@ class Engine:
         law: the joint offsets, the penalty layout, then the inverse-dynamics layout of ``nominal``
         (the model computed-torque control believes; None: this one)."""
         believed = self if nominal is None else nominal
+        for engine in (self, believed):
+            engine.require_compiled()
         if believed.joints != self.joints:
             raise ValueError(f"the nominal model's joints {believed.joints} are not the plant's {self.joints}")
         return (self.joint_offset, *self._kernel_layout, *believed.inverse_torques_layout)
@@ -309,25 +357,43 @@ class Engine:
     # ------------------------------------------------------------------ kinematics (numpy)
     def _kinematics(self, z, zd, zdd):
         """Body angles phi, rates w, angular accelerations (shape (n, B)) and body origins' positions,
-        velocities and accelerations (shape (n, B, 2)); the joints' world positions (n, J, 2)."""
-        n, B = z.shape[0], self.n_joints
+        velocities and accelerations (shape (n, B, 2)); the joints' world positions (n, B, 2) and,
+        for a joint with a path, the world direction of its point's motion per radian (n, B, 2) (m/rad;
+        0 without a path). z, zd, zdd: the coordinates (n, J)."""
+        n, B = z.shape[0], self.n_bodies
         phi, w, al = np.zeros((n, B)), np.zeros((n, B)), np.zeros((n, B))
-        o, vo, ao, joint_at = (np.zeros((n, B, 2)) for _ in range(4))
+        o, vo, ao, joint_at, path_dir = (np.zeros((n, B, 2)) for _ in range(5))
         for k, joint in enumerate(self.model.joints):
-            p = self.joint_parent[k]
+            p, c = self.joint_parent[k], self.joint_column[k]
+            at_parent = np.asarray(joint.at_parent, dtype=float)
             if p == FIXED:
-                phi[:, k], w[:, k], al[:, k] = z[:, k] + joint.offset, zd[:, k], zdd[:, k]
-                r, v, a = np.asarray(joint.at_parent, dtype=float), 0.0, 0.0
+                phi[:, k], w[:, k], al[:, k] = z[:, c] + joint.offset, zd[:, c], zdd[:, c]
+                r, v, a = np.broadcast_to(at_parent, (n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+                if joint.type == "free":
+                    r, v, a = r + z[:, c + 1:c + 3], zd[:, c + 1:c + 3], zdd[:, c + 1:c + 3]
+                parent_phi, parent_w = np.zeros(n), np.zeros(n)
             else:
-                phi[:, k] = phi[:, p] + z[:, k] + joint.offset
-                w[:, k], al[:, k] = w[:, p] + zd[:, k], al[:, p] + zdd[:, k]
-                r, v, a = self._body_point(p, joint.at_parent, phi, w, al, o, vo, ao)
+                phi[:, k] = phi[:, p] + z[:, c] + joint.offset
+                w[:, k], al[:, k] = w[:, p] + zd[:, c], al[:, p] + zdd[:, c]
+                r, v, a = self._body_point(p, at_parent, phi, w, al, o, vo, ao)
+                parent_phi, parent_w = phi[:, p], w[:, p]
+            if joint.path is not None:  # the point moves along the path in the parent's frame
+                theta, rate, acc = z[:, c], zd[:, c], zdd[:, c]
+                splines = joint.path.splines()
+                s0, s1, s2 = (np.stack([sp.evaluate(theta, order) for sp in splines], axis=-1) for order in range(3))
+                arm, d1, d2 = (_rotate_each(parent_phi, u) for u in (s0, s1, s2))
+                r = r + arm
+                v = v + parent_w[:, None] * _perp(arm) + d1 * rate[:, None]
+                parent_al = al[:, p] if p != FIXED else np.zeros(n)
+                a = (a + parent_al[:, None] * _perp(arm) - parent_w[:, None] ** 2 * arm
+                     + 2 * parent_w[:, None] * _perp(d1) * rate[:, None] + d2 * rate[:, None] ** 2 + d1 * acc[:, None])
+                path_dir[:, k] = d1
             joint_at[:, k] = r
             arm = _rotate(phi[:, k], np.asarray(joint.at_child, dtype=float))
             o[:, k] = r - arm
             vo[:, k] = v - w[:, k, None] * _perp(arm)
             ao[:, k] = a - al[:, k, None] * _perp(arm) + w[:, k, None] ** 2 * arm
-        return phi, w, al, o, vo, ao, joint_at
+        return phi, w, al, o, vo, ao, joint_at, path_dir
 
     @staticmethod
     def _body_point(b, local, phi, w, al, o, vo, ao):
@@ -339,7 +405,7 @@ class Engine:
     def _free_points(self, z, zd, zdd):
         """p, p', p'' (n, n_p), the body angles, rates, accelerations (n, B) and the kinematics."""
         kin = self._kinematics(z, zd, zdd)
-        phi, w, al, o, vo, ao, _ = kin
+        phi, w, al, o, vo, ao, _, _ = kin
         n = z.shape[0]
         p, pd, pdd = np.zeros((n, self.n_p)), np.zeros((n, self.n_p)), np.zeros((n, self.n_p))
         for pt in range(self.n_points):
@@ -350,16 +416,20 @@ class Engine:
         return p, pd, pdd, kin
 
     def _velocity_transform(self, p, kin) -> np.ndarray:
-        """R_p = dp/dz, shape (n, n_p, J): dr_P/dz_k = R90 (r_P - r_joint_k) for every joint k on the
-        path of P's owner."""
-        joint_at = kin[-1]
+        """R_p = dp/dz, shape (n, n_p, J): for every joint m on the path of P's owner, dr_P/dz = R90
+        (r_P - r_joint_m) for its angle (plus the path's direction for a joint with a path), and the
+        world axes for a free joint's x and y."""
+        joint_at, path_dir = kin[-2], kin[-1]
         R = np.zeros((p.shape[0], self.n_p, self.n_joints))
         for pt in range(self.n_points):
             k = self.pt_index[pt]
             if k == FIXED:
                 continue
             for joint in self.model.path(self.body_names[self.pt_owner[pt]]):
-                R[:, k:k + 2, joint] = _perp(p[:, k:k + 2] - joint_at[:, joint])
+                c = self.joint_column[joint]
+                R[:, k:k + 2, c] = _perp(p[:, k:k + 2] - joint_at[:, joint]) + path_dir[:, joint]
+                if self.model.joints[joint].type == "free":
+                    R[:, k, c + 1] = R[:, k + 1, c + 2] = 1.0
         return R
 
     def _samples(self, *arrays):
@@ -396,6 +466,8 @@ class Engine:
         if y.shape[-1:] != (self.n_state,):
             raise ValueError(f"states must have shape ({self.n_state},) or (n, {self.n_state}), got {y.shape}")
         phi, w = y[..., self.n_p:self.n_q], y[..., self.n_q + self.n_p:]
+        if not self.compiled:
+            return self._coordinates_from_state(y, phi, w)
         z, zd = np.empty(phi.shape), np.empty(w.shape)
         for k, parent in enumerate(self.joint_parent):  # column by column: no gathered copies
             if parent == FIXED:
@@ -405,6 +477,19 @@ class Engine:
                 np.subtract(phi[..., k], phi[..., parent], out=z[..., k])
                 np.subtract(w[..., k], w[..., parent], out=zd[..., k])
         z -= self.joint_offset
+        return z, zd
+
+    def _coordinates_from_state(self, y, phi, w):
+        """(z, zd) of every coordinate (a free joint's x, y from its child's point) from the state y."""
+        z, zd = np.empty(y.shape[:-1] + (self.n_joints,)), np.empty(y.shape[:-1] + (self.n_joints,))
+        for k, (parent, joint) in enumerate(zip(self.joint_parent, self.model.joints)):
+            c = self.joint_column[k]
+            z[..., c] = phi[..., k] - (phi[..., parent] if parent != FIXED else 0.0) - joint.offset
+            zd[..., c] = w[..., k] - (w[..., parent] if parent != FIXED else 0.0)
+            if joint.type == "free":
+                i = self.pt_index[self.body_pts[k, 0]]
+                z[..., c + 1:c + 3] = y[..., i:i + 2] - np.asarray(joint.at_parent, dtype=float)
+                zd[..., c + 1:c + 3] = y[..., self.n_q + i:self.n_q + i + 2]
         return z, zd
 
     def accelerations(self, y, tau) -> np.ndarray:
@@ -418,6 +503,8 @@ class Engine:
         """max |Phi_i| (m^2 and m) of the state y, the angle constraints in the form in force."""
         from .kernels import constraint_violation
 
+        if not self.compiled:
+            return self.dense_penalty.violation(self._vector(y, self.n_state, "the state"))
         return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
     def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
@@ -445,7 +532,7 @@ class Engine:
         shape (2,) (or (n, 2) for z of shape (n, J))."""
         (z,), single = self._samples(z)
         zero = np.zeros_like(z)
-        phi, w, al, o, vo, ao, joint_at = self._kinematics(z, zero, zero)
+        phi, w, al, o, vo, ao, joint_at, _ = self._kinematics(z, zero, zero)
         points = {}
         for b, name in enumerate(self.body_names):
             points[f"{name}.joint"] = joint_at[:, b]
@@ -458,6 +545,8 @@ class Engine:
         from .kernels import inverse_torques
 
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
+        if not self.compiled:  # the same equations by numpy
+            return self.inverse_dynamics(z, zd, zdd)
         out = np.empty(self.n_joints)
         inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
         return out
@@ -482,9 +571,19 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, copy=False, tau_half=tau_half,
                                                        ref_half=ref_half, refd_half=refd_half, refdd_half=refdd_half)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
-        layout = self.simulation_layout(nominal)
         states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
         applied = np.empty((n_steps + 1, self.n_joints))
+        if not self.compiled:  # free or path joints: the same driver by numpy
+            from .general import rk4 as dense_rk4
+
+            self.check_nominal(nominal)
+            code, done, max_viol = dense_rk4(self, y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode,
+                                             gains, nominal, states, rates, applied)
+            for array in (states, rates, applied):
+                array[done + 1:] = np.nan
+            z, zd = self.joints_from_state(states)
+            return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
+        layout = self.simulation_layout(nominal)
         code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
                                    gains, *layout, states, rates, applied)
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
@@ -512,6 +611,15 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(k, tau=tau, ref=ref, refd=refd, refdd=refdd)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, k)
         out, applied = np.empty((k, self.n_state)), np.empty((k, self.n_joints))
+        if not self.compiled:  # free or path joints: by numpy
+            from .general import applied_torque
+
+            self.check_nominal(nominal)
+            for i in range(k):
+                applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal)
+                code, rate = self.dense_penalty.derivative(states[i], applied[i])
+                out[i] = rate if code == OK else np.concatenate([states[i, self.n_q:], np.full(self.n_q, np.nan)])
+            return out, applied
         derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
                     *self.simulation_layout(nominal), out, applied)
         return out, applied
@@ -523,6 +631,7 @@ class Engine:
         2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
         J), eq. 18's samples every ``every``-th step with the desired joint angles angles_ref (rad,
         shape (n_steps // every + 1, J)) and its penalty weight (deg)."""
+        self.require_compiled("the population of open-loop candidates")
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):

@@ -155,13 +155,16 @@ def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: f
     return out
 
 
-def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool = False, **estimate) -> PerJoint:
+def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool = False, kinds=None,
+                          **estimate) -> PerJoint:
     """A recorded motion of ``joints`` from a CSV file with a header: ``t`` (s) and one angle column
     per joint (deg, or rad with ``radians``), names case-insensitive, any order, other columns
     ignored; optional ``<joint>_vel`` and ``<joint>_acc`` (deg/s, deg/s^2, or rad units), the
     derivatives otherwise estimated (``estimate``: options of ``fdbench.motion.SampledMotion``).
     An OpenSim storage file (.mot, .sto: ``fdbench.multibody.osim.read_storage``) gives its own
-    unit by its header's ``inDegrees`` (``radians`` is not used).
+    unit by its header's ``inDegrees`` (``radians`` is not used). ``kinds``: per joint 'angle' or
+    'translation' (``Model.coordinate_kinds``; default all angles): a translation's column is in m
+    (m/s, m/s^2) whatever the angles' unit, as OpenSim writes it.
     Raises files.BadFile naming the file (and the joint) in one line."""
     from ..files import BadFile, read_columns
     from ..motion import SampledMotion, given_rates, rate_column_names
@@ -179,9 +182,10 @@ def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool 
             needed = "a time column and" if is_storage(path) else "columns t,"
             raise BadFile(f"{option}: {path} has no column for joint {joint!r}; a motion file needs {needed} "
                           f"{', '.join(joints)} (angles in {'rad' if radians else 'deg'})")
-    unit = 1.0 if radians else math.pi / 180
+    angle_unit = 1.0 if radians else math.pi / 180
     parts = []
-    for joint, name in zip(joints, names):
+    for joint, name, kind in zip(joints, names, kinds or ("angle",) * len(joints)):
+        unit = 1.0 if kind == "translation" else angle_unit
         vel, acc = given_rates(columns, name, path, option, radians)
         try:
             parts.append(SampledMotion(columns["t"], columns[name] * unit, None if vel is None else vel * unit,
@@ -213,4 +217,4 @@ def joint_motion(name_or_path, model, radians: bool = False, **estimate) -> Join
             raise ValueError(f"--motion: model {model.name!r} declares no motion named {text!r} (it has none); give a "
                              f"CSV file with columns t, {', '.join(model.coordinates)}")
         raise ValueError("--motion: " + unknown_name_message(f"{model.name} motion", text, valid) + " or a CSV file")
-    return read_joint_motion_csv(text, model.coordinates, "--motion", radians, **estimate)
+    return read_joint_motion_csv(text, model.coordinates, "--motion", radians, model.coordinate_kinds, **estimate)

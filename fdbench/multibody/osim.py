@@ -33,10 +33,20 @@ transforms at the default pose; the planar description follows from them:
   a constant load (its x and y; the point moved into the host body's frame).
 * Left out, said in one note: muscles and every other force, markers, wrap objects, contact
   geometry, controllers and probes (the imported model is driven by joint torques).
-* Refused in one line naming the joint or constraint: a joint with two or more free coordinates
-  (3D joints, a planar ``free`` base), a translation that depends on the coordinate (a knee whose
-  tibia follows a spline of the angle), a rotation that is not the coordinate itself, an axis
-  beyond the tilt tolerance or pointing along -z, constraints (closed loops, couplers).
+* A ``CustomJoint`` whose translations are functions of its one coordinate (``SimmSpline``,
+  ``Constant``, ``LinearFunction``, each maybe scaled by a ``MultiplierFunction``: the knee of
+  OpenSim's gait models) becomes a pin joint on a path: at_parent + (x(q), y(q)) in the parent's
+  frame, the same splines (a line is the spline through two of its points; x and y keep their own
+  knots). The path is checked against OpenSim's placement of the child over the coordinate's range
+  (1e-9 m) before it is accepted.
+* A joint on ground with three coordinates, one turning the child about the normal and two moving
+  it along ground's x and y by their values (OpenSim's ``PlanarJoint``, or the ``CustomJoint``
+  pelvis of the gait models), becomes a ``free`` joint with the coordinates (angle, x, y) under
+  OpenSim's names; its translations are held at their defaults in the ``mid_range`` motion.
+* Refused in one line naming the joint or constraint: other joints with two or more free
+  coordinates (3D joints), a translation by another function or another coordinate, a rotation
+  that is not the coordinate itself, an axis beyond the tilt tolerance or pointing along -z,
+  constraints (closed loops, couplers).
 
 ``to_osim`` writes the other way: a description as an OpenSim model file (XML text, no OpenSim
 needed), one ``Body``, ``PinJoint`` and ``CoordinateActuator`` per body and joint, each load a
@@ -203,7 +213,10 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
             continue
         hosts[child] = (child, np.eye(3), np.zeros(3))
         try:
-            pin, tilt = _pin(model, state, joint, free, hosts[parent], max_tilt_deg)
+            if len(free) == 3 and hosts[parent][0] == GROUND:
+                pin, tilt = _free_joint(model, state, joint, free, hosts[parent], max_tilt_deg)
+            else:
+                pin, tilt = _pin(osim, model, state, joint, free, hosts[parent], max_tilt_deg)
         except _Refused as exc:
             refused.append(f"joint {joint.getName()!r} ({joint.getConcreteClassName()}) {exc}")
             continue
@@ -211,8 +224,8 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
         tilts += tilt
     if refused:
         _fail(source, f"cannot be imported: {'; '.join(refused)}; fdbench imports planar trees of pin joints (one "
-                      f"coordinate, a fixed point, the axis within --max-tilt {max_tilt_deg:g} deg of the plane's "
-                      "normal z)")
+                      f"coordinate, the axis within --max-tilt {max_tilt_deg:g} deg of the plane's normal z, the "
+                      "joint's point fixed or on a path of the coordinate) and one free planar joint on ground")
     gravity, gravity_tilt = _gravity(model, source, max_tilt_deg)
     bodies = _merged_bodies(model, hosts, [pin["child"] for pin in kept])
     loads = _constant_loads(osim, model, hosts, {pin["child"] for pin in kept})
@@ -334,11 +347,12 @@ class _Refused(Exception):
     """Why a joint cannot be imported (completed by the joint's name)."""
 
 
-def _pin(model, state, joint, free: list, parent_host, max_tilt_deg: float):
-    """(the description's joint, [(tilt deg, what)]) of a one-coordinate joint about a fixed axis."""
+def _pin(osim, model, state, joint, free: list, parent_host, max_tilt_deg: float):
+    """(the description's joint, [(tilt deg, what)]) of a one-coordinate joint about a fixed axis,
+    its point fixed or on a path of the coordinate."""
     if len(free) > 1:
-        raise _Refused(f"has {len(free)} free coordinates ({', '.join(c.getName() for c in free)}): a 3D joint or "
-                       "a free planar base")
+        raise _Refused(f"has {len(free)} free coordinates ({', '.join(c.getName() for c in free)}): a 3D joint, or "
+                       "a free planar base not on ground")
     coordinate, name = free[0], joint.getName()
     q0 = coordinate.getValue(state)
     samples = []
@@ -347,8 +361,7 @@ def _pin(model, state, joint, free: list, parent_host, max_tilt_deg: float):
         model.realizePosition(state)
         samples.append((coordinate.getValue(state), _between(state, joint)))
     (q1, X1), (q2, X2), (q0, X0) = samples
-    if max(np.linalg.norm(X1[1] - X0[1]), np.linalg.norm(X2[1] - X0[1])) > SAME_POINT:
-        raise _Refused(f"moves its child along a path of coordinate {coordinate.getName()!r}")
+    moves = max(np.linalg.norm(X1[1] - X0[1]), np.linalg.norm(X2[1] - X0[1])) > SAME_POINT
     axis = _rotation_axis(X0[0], X1[0], q1 - q0, coordinate)
     if not np.allclose(_axis_rotation(axis, q2 - q0) @ X0[0], X2[0], atol=SAME_ANGLE):
         raise _Refused(f"turns its child about more than one axis with coordinate {coordinate.getName()!r}")
@@ -367,11 +380,175 @@ def _pin(model, state, joint, free: list, parent_host, max_tilt_deg: float):
     pin = {"name": coordinate.getName(), "type": "pin", "parent": host, "child": _body_name(joint.getChildFrame()),
            "at_parent": _xy(X_hF[0] @ X0[1] + X_hF[1]), "at_child": _xy(X_CM[1]),
            "offset": math.remainder(offset, 2 * math.pi)}
+    if moves:
+        pin["at_parent"], pin["path"] = _path(osim, model, state, joint, coordinate, X_hF)
     low, high = coordinate.getRangeMin(), coordinate.getRangeMax()
     if math.isfinite(low) and math.isfinite(high) and low < high:
         pin["limits"] = [low, high]
-    pin["_default"] = q0
+    pin["_coordinates"] = [(coordinate.getName(), q0, pin.get("limits"))]
     return pin, tilts
+
+
+# ---------------------------------------------------------------------------------------- paths and free joints
+
+PATH_CHECKS = 41  # values of the coordinate at which an imported path is checked against OpenSim's
+PATH_TOLERANCE = 1e-9  # m
+
+
+def _path(osim, model, state, joint, coordinate, X_hF):
+    """(at_parent, path) of a CustomJoint whose translations are functions of its coordinate
+    (SimmSpline, Constant, LinearFunction, each maybe inside a MultiplierFunction): the child's point
+    in the host's frame at the coordinate q is at_parent + path(q). The path is checked against
+    OpenSim's own placement of the child at PATH_CHECKS values over the coordinate's range."""
+    custom = osim.CustomJoint.safeDownCast(joint)
+    name = coordinate.getName()
+    if custom is None:
+        raise _Refused(f"moves its child with coordinate {name!r} and is not a CustomJoint")
+    transform = custom.getSpatialTransform()
+    constant, varying = np.zeros(3), []  # the translation in F: constant + sum of axis * f(q)
+    for i in range(3, 6):
+        axis_of = transform.getTransformAxis(i)
+        names = axis_of.getCoordinateNamesInArray()
+        axis = np.array([axis_of.getAxis().get(k) for k in range(3)])
+        samples = _function_samples(osim, axis_of.getFunction(), f"{axis_of.getName()} of {name!r}")
+        if names.getSize() == 0 or samples[1] is None:
+            constant += axis * (samples[0] if samples[1] is None else _constant_of(osim, axis_of.getFunction()))
+            continue
+        if names.getSize() != 1 or names.get(0) != name:
+            raise _Refused(f"translates its child by a function of coordinates other than {name!r}")
+        varying.append((X_hF[0] @ axis, samples))
+    at_parent = _xy(X_hF[0] @ constant + X_hF[1])
+    path = _planar_path(varying, name)
+    _check_path(model, state, joint, coordinate, X_hF, at_parent, path)
+    return at_parent, path
+
+
+def _function_samples(osim, function, what: str):
+    """(knots, values) of a function of one coordinate as OpenSim's SimmSpline through them, or
+    (value, None) for a constant."""
+    multiplier = osim.MultiplierFunction.safeDownCast(function)
+    scale = 1.0
+    while multiplier is not None:
+        scale *= multiplier.getScale()
+        function = multiplier.getFunction()
+        multiplier = osim.MultiplierFunction.safeDownCast(function)
+    constant = osim.Constant.safeDownCast(function)
+    if constant is not None:
+        return scale * constant.getValue(), None
+    spline = osim.SimmSpline.safeDownCast(function)
+    if spline is not None:
+        knots = [spline.getX(i) for i in range(spline.getSize())]
+        return knots, [scale * spline.getY(i) for i in range(spline.getSize())]
+    linear = osim.LinearFunction.safeDownCast(function)
+    if linear is not None:  # a line is the spline through two of its points
+        slope, intercept = linear.getSlope(), linear.getIntercept()
+        return [-1.0, 1.0], [scale * (intercept - slope), scale * (intercept + slope)]
+    raise _Refused(f"has a {function.getConcreteClassName()} as {what}: fdbench imports paths of SimmSpline, "
+                   "Constant and LinearFunction (in MultiplierFunction)")
+
+
+def _constant_of(osim, function) -> float:
+    """The value of a function that names no coordinate (OpenSim evaluates it at 0)."""
+    return float(function.calcValue(osim.Vector(1, 0.0)))
+
+
+def _planar_path(varying: list, name: str) -> dict:
+    """The description's path {angles, x, y[, y_angles]} (host frame) of the varying translations:
+    (host-frame axis (3,), (knots, values)) each. Two that share their knots add; otherwise each must
+    lie along the host's x or its y."""
+    if not varying:
+        return {"angles": [-1.0, 1.0], "x": [0.0, 0.0], "y": [0.0, 0.0]}
+    by_knots = {}
+    for axis, (knots, values) in varying:
+        total = by_knots.setdefault(tuple(knots), np.zeros((2, len(knots))))
+        total += np.outer(axis[:2], values)
+    if len(by_knots) == 1:
+        (knots, xy), = by_knots.items()
+        return {"angles": list(knots), "x": xy[0].tolist(), "y": xy[1].tolist()}
+    along = {}  # 0: x, 1: y -> (knots, values)
+    for knots, xy in by_knots.items():
+        moving = [k for k in (0, 1) if np.any(xy[k] != 0.0)]
+        if len(moving) != 1 or moving[0] in along:
+            raise _Refused(f"translates its child along a path of {name!r} whose two components have different "
+                           "knots and do not lie along the parent's x and y axes")
+        along[moving[0]] = (list(knots), xy[moving[0]].tolist())
+    x_knots, x_values = along.get(0, (along[1][0], [0.0] * len(along[1][0])))
+    y_knots, y_values = along.get(1, (x_knots, [0.0] * len(x_knots)))
+    path = {"angles": x_knots, "x": x_values, "y": y_values}
+    return path | ({"y_angles": y_knots} if y_knots != x_knots else {})
+
+
+def _check_path(model, state, joint, coordinate, X_hF, at_parent, path) -> None:
+    """The child's point from at_parent + path against OpenSim's at PATH_CHECKS values."""
+    from .spline import fit
+
+    x_of, y_of = fit(path["angles"], path["x"]), fit(path.get("y_angles", path["angles"]), path["y"])
+    low, high = coordinate.getRangeMin(), coordinate.getRangeMax()
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        low, high = -math.pi, math.pi
+    q0 = coordinate.getValue(state)
+    worst = 0.0
+    for q in np.linspace(low, high, PATH_CHECKS):
+        coordinate.setValue(state, float(q), False)
+        model.realizePosition(state)
+        X = _between(state, joint)
+        where = X_hF[0] @ X[1] + X_hF[1]
+        worst = max(worst, abs(where[0] - at_parent[0] - float(x_of.evaluate(q))),
+                    abs(where[1] - at_parent[1] - float(y_of.evaluate(q))))
+    coordinate.setValue(state, q0, False)
+    model.realizePosition(state)
+    if worst > PATH_TOLERANCE:
+        raise _Refused(f"moves its child along a path of {coordinate.getName()!r} that fdbench's spline does not "
+                       f"reproduce (off by {worst:.3g} m)")
+
+
+def _free_joint(model, state, joint, free: list, parent_host, max_tilt_deg: float):
+    """(the description's free joint, [(tilt deg, what)]) of a joint on ground with three coordinates:
+    one turning the child about z, two translating it along the host's x and y by their values."""
+    host, R_hP, p_hP = parent_host
+    X_hF = _compose((R_hP, p_hP), _in_base(joint.getParentFrame()))
+    X_CM = _in_base(joint.getChildFrame())
+    name, defaults = joint.getName(), [c.getValue(state) for c in free]
+    X0 = _between(state, joint)
+    roles = {}
+    for coordinate, q0 in zip(free, defaults):
+        coordinate.setValue(state, q0 + PROBE_STEP, False)
+        model.realizePosition(state)
+        X1 = _between(state, joint)
+        coordinate.setValue(state, q0, False)
+        model.realizePosition(state)
+        turn, moved = _angle_axis(X1[0] @ X0[0].T)[0], X_hF[0] @ (X1[1] - X0[1]) / PROBE_STEP
+        if turn > SAME_ANGLE and np.linalg.norm(X1[1] - X0[1]) <= SAME_POINT:
+            roles.setdefault("angle", []).append((coordinate, q0, X1))
+        elif turn <= SAME_ANGLE and np.allclose(moved, [1.0, 0.0, 0.0], atol=1e-9):
+            roles.setdefault("x", []).append((coordinate, q0, X1))
+        elif turn <= SAME_ANGLE and np.allclose(moved, [0.0, 1.0, 0.0], atol=1e-9):
+            roles.setdefault("y", []).append((coordinate, q0, X1))
+        else:
+            raise _Refused(f"has coordinate {coordinate.getName()!r} that neither turns its child about a fixed point "
+                           "nor moves it along the ground's x or y by its value: not a free planar joint")
+    if any(len(roles.get(role, ())) != 1 for role in ("angle", "x", "y")):
+        raise _Refused("has three coordinates that are not one angle and the translations along x and y")
+    (angle, q_angle, X1), = roles["angle"]
+    axis = _rotation_axis(X0[0], X1[0], PROBE_STEP, angle)
+    R_hC = X_hF[0] @ X0[0] @ X_CM[0].T
+    tilts = [(_off_normal(X_hF[0] @ axis), f"{name}'s axis"), (_off_normal(R_hC[:, 2]), f"{name}'s child frame")]
+    for (tilt, _), what in zip(tilts, ("axis", "child frame")):
+        if tilt > 90 or tilt > max_tilt_deg:
+            raise _Refused(f"has its {what} {tilt:.3g} deg off the plane's normal z")
+    (x, q_x, _), = roles["x"]
+    (y, q_y, _), = roles["y"]
+    origin = X_hF[0] @ X0[1] + X_hF[1] - np.array([q_x, q_y, 0.0])  # the child's point at x = y = 0
+    entry = {"name": name, "type": "free", "coordinates": [angle.getName(), x.getName(), y.getName()],
+             "parent": host, "child": _body_name(joint.getChildFrame()), "at_parent": _xy(origin),
+             "at_child": _xy(X_CM[1]),
+             "offset": math.remainder(math.atan2(R_hC[1, 0], R_hC[0, 0]) - q_angle, 2 * math.pi)}
+    low, high = angle.getRangeMin(), angle.getRangeMax()
+    if math.isfinite(low) and math.isfinite(high) and low < high:
+        entry["limits"] = [low, high]
+    entry["_coordinates"] = [(angle.getName(), q_angle, entry.get("limits")), (x.getName(), q_x, None),
+                             (y.getName(), q_y, None)]
+    return entry, tilts
 
 
 def _rotation_axis(R0, R1, step: float, coordinate) -> np.ndarray:
@@ -490,12 +667,14 @@ def _constants(osim, functions, empty=None):
 
 
 def _mid_range(joints: list) -> dict:
-    """The model's named motion: minimum jerk from the default values to the middle of the ranges."""
+    """The model's named motion: minimum jerk from the default values to the middle of the angles'
+    ranges (a free joint's translations held at their defaults)."""
     start, goal = {}, {}
     for joint in joints:
-        low, high = joint.get("limits", (joint["_default"], joint["_default"]))
-        start[joint["name"]] = min(max(joint.pop("_default"), low), high)
-        goal[joint["name"]] = (low + high) / 2
+        for name, default, limits in joint.pop("_coordinates"):
+            low, high = limits or (default, default)
+            start[name] = min(max(default, low), high)
+            goal[name] = (low + high) / 2
     return {"name": MOTION_NAME, "type": "minimum-jerk", "duration": MOTION_DURATION, "start": start, "goal": goal}
 
 
@@ -620,14 +799,27 @@ OSIM_VERSION = "40000"
 DEFAULT_RANGE = (-math.pi, math.pi)  # rad: a coordinate's range in the file when its joint has no limits
 
 
+def check_exportable(model) -> None:
+    """ModelError (one line) for a model ``to_osim`` cannot write yet: one with free or path joints."""
+    from .description import ModelError
+
+    odd = [j.name for j in model.joints if j.type == "free" or j.path is not None]
+    if odd:
+        raise ModelError(model.name, "", f"joints {', '.join(odd)} are free or on a path: export-osim writes pin "
+                                         "joints only in this version")
+
+
 def to_osim(model) -> str:
     """The description ``model`` as an OpenSim model file (XML text): per body a ``Body`` (mass kg,
     centre of mass (x, y, 0) m, inertia kg m^2 about it, Ixx = Iyy = Izz); per joint a ``PinJoint``
     ``<joint>_joint`` about z whose coordinate is named as the joint (default 0 rad, range its
     limits or one turn), its parent frame at ``at_parent`` turned by the offset, its child frame at
     ``at_child``, and a ``CoordinateActuator`` ``<joint>_actuator`` (optimal force 1 N m); per load
-    a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body)."""
+    a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body).
+    Pin joints only (``check_exportable``)."""
     from .. import __version__
+
+    check_exportable(model)
 
     credits = _text(f"written by fdbench {__version__} export-osim from the model {model.name}"
                     + (f": {model.description}" if model.description else ""), 500)

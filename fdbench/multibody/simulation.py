@@ -143,8 +143,7 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
 def _law(engine: Engine, kp, kd, computed: bool, nominal: Engine | None, gains) -> FeedbackLaw:
     """The feedback law of ``simulate``'s arguments."""
     kp, kd = (np.array(np.broadcast_to(np.asarray(g, dtype=float), (engine.n_joints,))) for g in (kp, kd))
-    if nominal is not None:
-        engine.simulation_layout(nominal)  # ValueError for other joints
+    engine.check_nominal(nominal)  # ValueError for other joints
     return FeedbackLaw(kp, kd, GAINS if gains is not None else COMPUTED if computed else PD, gains, nominal)
 
 

@@ -5,8 +5,10 @@ How they are built (one definition, from the description only):
 
 * Kinematics by the tree's recursion, as symbolic functions of z: a body's frame angle is its
   parent's plus (coordinate + offset); its joint point is its parent's origin plus the parent's
-  rotation of ``at_parent`` (ground: ``at_parent`` itself); its origin is the joint point minus its
-  own rotation of ``at_child``; the centres of mass and the loads' points follow from the origin.
+  rotation of ``at_parent`` (ground: ``at_parent`` itself), plus the joint's path at its angle
+  (OpenSim's spline, piecewise by ``if_else``) for a joint with a path, plus (x, y) for a free
+  joint's translations; its origin is the joint point minus its own rotation of ``at_child``; the
+  centres of mass and the loads' points follow from the origin.
 * Velocities and accelerations by CasADi's forward derivatives (``jtimes``): v = (dr/dz) z',
   a = (dv/dz) z' + (dv/dz') z''; a body's angular velocity and acceleration are sums over its path.
 * Inverse dynamics by the principle of virtual work (Kane's equations): tau = sum_b J_b^T m_b (a_b - g)
@@ -41,25 +43,34 @@ from .description import GROUND, Model
 
 
 def _rotate(ca, angle, local):
-    """R(angle) local (m) as an SX column (2, 1); local: (2,) numbers."""
+    """R(angle) local (m) as an SX column (2, 1); local: (2,) numbers or an SX column."""
     c, s = ca.cos(angle), ca.sin(angle)
     return ca.vertcat(local[0] * c - local[1] * s, local[0] * s + local[1] * c)
 
 
 def _inverse_expression(ca, model: Model, z, zd, zdd):
     """tau (N m), an SX column (J, 1), of the motion z, z', z'' (rad, rad/s, rad/s^2; SX columns (J, 1))."""
-    J = model.n_joints
+    J, B = model.n_joints, len(model.joints)
     body_of = {joint.child: k for k, joint in enumerate(model.joints)}  # body k is the child of joint k
-    angle, rate, spin, origin = [None] * J, [None] * J, [None] * J, [None] * J
+    angle, rate, spin, origin = [None] * B, [None] * B, [None] * B, [None] * B
+    c = 0  # the column of joint k's angle (a free joint's x, y follow it)
     for k, joint in enumerate(model.joints):
+        at_parent = ca.DM(list(joint.at_parent))
+        if joint.path is not None:  # the child's point on its path in the parent's frame
+            from .spline import casadi_value
+
+            at_parent = at_parent + ca.vertcat(*(casadi_value(ca, spline, z[c]) for spline in joint.path.splines()))
         if joint.parent == GROUND:
-            angle[k], rate[k], spin[k] = z[k] + joint.offset, zd[k], zdd[k]
-            at_joint = ca.DM(list(joint.at_parent))
+            angle[k], rate[k], spin[k] = z[c] + joint.offset, zd[c], zdd[c]
+            at_joint = at_parent
+            if joint.type == "free":
+                at_joint = at_joint + ca.vertcat(z[c + 1], z[c + 2])
         else:
             p = body_of[joint.parent]
-            angle[k], rate[k], spin[k] = angle[p] + z[k] + joint.offset, rate[p] + zd[k], spin[p] + zdd[k]
-            at_joint = origin[p] + _rotate(ca, angle[p], joint.at_parent)
+            angle[k], rate[k], spin[k] = angle[p] + z[c] + joint.offset, rate[p] + zd[c], spin[p] + zdd[c]
+            at_joint = origin[p] + _rotate(ca, angle[p], at_parent)
         origin[k] = at_joint - _rotate(ca, angle[k], joint.at_child)
+        c += len(joint.coordinate_names)
 
     def point(k, local):
         return origin[k] + _rotate(ca, angle[k], local)
