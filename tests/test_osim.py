@@ -383,7 +383,7 @@ def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, cas
     elif case == "tilt":
         path, args = ARM26, ("--max-tilt", "3")
     out = tmp_path / "out.toml"
-    line = refused("import-osim", path, "-o", out, *args, contains=(expected,))
+    refused("import-osim", path, "-o", out, *args, contains=(expected,))
     assert not out.exists()
     if case != "tilt":
         refused("inverse", "--model", path, "-o", out, contains=(expected,))

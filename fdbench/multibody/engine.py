@@ -67,7 +67,7 @@ import numpy as np
 
 
 from .description import Model, resolved_end
-from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
+from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OK, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
                       VIOLATION_TOL)
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this

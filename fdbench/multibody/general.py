@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from ..dynamics import CONSTRAINT, NONFINITE, OK, SINGULAR
+from .kernels import CONSTRAINT, NONFINITE, OK, SINGULAR
 from .kernels import ALPHA, COMPUTED, FIXED, GAINS, OMEGA2, SWITCH_COS, TWO_XI_OMEGA, VIOLATION
 
 

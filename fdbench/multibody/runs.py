@@ -113,6 +113,7 @@ def check(spec) -> None:
     engine(spec, nominal(spec)), engine(spec)
     desired, _ = motions(spec)
     if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":
+        engine(spec).require_compiled("--gradient exact (the compiled sensitivities)")
         _check_samples_on_grid(spec, desired)
 
 
