@@ -154,7 +154,7 @@ def test_the_quick_start_comment_figures(workdir):
 def test_every_command_of_the_commands_table_runs_as_written(first_report, workdir):
     rows = [line for line in section("Commands").splitlines() if line.startswith("| `")]
     commands = [re.findall(r"`([^`]+)`", row)[-1] for row in rows]
-    assert len(commands) == 12 and all(c.startswith("fdbench ") for c in commands)
+    assert len(commands) == 13 and all(c.startswith("fdbench ") for c in commands)
     for command in commands:  # in order: inverse writes id.csv, simulate reads it
         sh(command, workdir)
     assert (workdir / "id.csv").read_text().startswith("t,theta,theta_vel,theta_acc,theta_torque")
