@@ -29,9 +29,11 @@ GRAVITY = 9.81  # m/s^2, the built-in models'
 
 def assert_relative(actual, expected, rel, scale=0.0):
     """max |actual - expected| <= rel * max(RMS(expected), scale) (rel alone when both are zero):
-    ``scale`` is the size of the terms ``expected`` was summed from, when they may cancel."""
+    ``scale`` is the size of the terms ``expected`` was summed from, when they may cancel. A scale
+    under 1e-100 (a state drawn near the floating-point floor, whose squares underflow) counts as
+    1e-100: far below any physical torque, and where relative rounding no longer holds."""
     expected = np.asarray(expected)
-    scale = max(float(np.sqrt(np.mean(expected**2))), scale, 1.0 if not expected.any() and not scale else 0.0)
+    scale = max(float(np.sqrt(np.mean(expected**2))), scale, 1.0 if not expected.any() and not scale else 1e-100)
     error = float(np.max(np.abs(np.asarray(actual) - expected)))
     assert error <= rel * scale, f"error {error:.3g} > {rel:g} x {scale:.3g}"
 
