@@ -220,7 +220,7 @@ def _is_per_joint(key: str) -> bool:
 
 
 def joints(rows: list[Row]) -> list[str]:
-    """The joints whose indicators the rows' runs report separately (none for the forearm)."""
+    """The joints whose indicators the rows' runs report separately (none for a one-joint model)."""
     keys = [k for row in rows for k in row.summary if _is_per_joint(k) and k.startswith("rmse_rot_deg_")
             and k.endswith("_median")]
     return list(dict.fromkeys(k[len("rmse_rot_deg_"):-len("_median")] for k in keys))
