@@ -51,5 +51,8 @@ def check_conditions(spec: "RunSpec") -> None:
         from .files import BadFile
 
         raise BadFile(f"--model: {spec.model_name} has changed since this run was specified (or differs on this machine)")
-    with_changes(spec.model_name, spec.model)
-    with_changes(spec.model_name, spec.model + spec.plant)
+    for option, changes in (("--model", spec.model), ("--plant", spec.model + spec.plant)):
+        try:
+            with_changes(spec.model_name, changes)
+        except ValueError as exc:  # a change the model cannot take: name the option that made it
+            raise ValueError(f"{option} {exc}") from None
