@@ -4,7 +4,9 @@ forward simulation -> objective
     f*(p) = RMSE_rot_deg(p) + w_penal (1 - t_end / T)
 
 (eq. 18 for J joints: RMSE_rot_deg over every joint and all samples reached; T the motion's duration,
-1 s in the paper: the penalty is the fraction of the motion not reached). One block of torque
+1 s in the paper: the penalty is the fraction of the motion not reached). A model with translations
+(a free joint's x, y) never pools them with the angles: its tracking term is RMSE_rot_deg over the
+angles plus RMSE_trans_cm over the translations, so 1 cm of pelvis error weighs as 1 deg. One block of torque
 parameters per joint (each joint its own instance of the parameterisation, prepared on that joint's
 inverse-dynamics torque), the blocks concatenated into one parameter vector. Optimisers see one
 objective of scaled parameters x = p / scale and work unchanged; budgets keep their meaning (one
@@ -23,7 +25,7 @@ from .multibody import simulation as sim
 
 class ShootingProblem:
     """Eq. 18 of a shooting problem, whatever the model: a subclass gives ``simulate(p)``,
-    ``rmse_deg(result)`` (the RMSE of rotation over the samples reached, deg), ``objectives(P)``,
+    ``rmse_deg(result)`` (eq. 18's tracking term over the samples reached, deg), ``objectives(P)``,
     ``batched``, ``scale``, ``duration`` and ``penalty_weight``."""
 
     def objective_of(self, result) -> float:
@@ -145,8 +147,11 @@ class TrackingProblem(ShootingProblem):
         return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.engine, self.motion, **how)
 
     def rmse_deg(self, result: sim.Simulation) -> float:
-        """RMSE of the joint angles (deg) over every joint and the samples reached."""
-        return sim.rmse_deg(result, self.inverse.angles)[0]
+        """Eq. 18's tracking term over the samples reached: the RMSE of the angles (deg), plus that of
+        the translations (cm) for a model that has any (units never pooled)."""
+        kinds = self._nominal.model.coordinate_kinds
+        rot, trans, _ = sim.rmse_coordinates(result, self.inverse.angles, kinds)
+        return rot + trans if "translation" in kinds else rot
 
     def objectives(self, P) -> np.ndarray:
         """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array

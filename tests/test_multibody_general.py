@@ -103,7 +103,7 @@ def test_control_runs_on_a_free_base_with_a_knee_path(tmp_path):
     assert result.exit_code == 0, result.output
     out = json.loads(result.stdout)
     assert out["status"] == "success" and out["t_end"] == 0.5
-    assert out["rmse_rot_deg"] < 0.01  # deg (the translations' column in the same number: m times 180/pi)
+    assert out["rmse_rot_deg"] < 0.01 and out["rmse_trans_cm"] < 0.01  # deg over the angles, cm over x and y
 
 
 def test_exact_gradients_on_a_free_base_are_refused_before_any_work(tmp_path):

@@ -131,11 +131,14 @@ class Resampled(JointMotion):
         return self.base(t)
 
 
-def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: float, **estimate) -> PerJoint:
+def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: float, kinds=None,
+                 **estimate) -> PerJoint:
     """``motion``'s joint angles captured with white Gaussian noise of ``sigma_deg`` degrees,
     independent per joint (seeded), and estimated like a recording (``estimate``: options of
-    ``fdbench.motion.SampledMotion``). A recording keeps its own samples; an analytic motion is
-    captured every 1 / capture_hz s. The result reports on ``motion``'s samples."""
+    ``fdbench.motion.SampledMotion``). ``kinds``: per joint 'angle' or 'translation'
+    (``Model.coordinate_kinds``; default all angles): translations are captured without noise (the
+    angles draw the same numbers as without them). A recording keeps its own samples; an analytic
+    motion is captured every 1 / capture_hz s. The result reports on ``motion``'s samples."""
     from ..motion import SampledMotion
 
     recorded = isinstance(motion, PerJoint) and all(isinstance(p, SampledMotion) for p in motion.parts)
@@ -146,7 +149,10 @@ def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: f
     t = (np.array(motion.parts[0]._t) if recorded
          else np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1))
     angles, _, _ = motion(t)
-    measured = angles + np.radians(sigma_deg) * np.random.default_rng(seed).standard_normal(angles.shape)
+    noise = np.random.default_rng(seed).standard_normal(angles.shape)
+    if kinds is not None:
+        noise[:, [kind == "translation" for kind in kinds]] = 0.0
+    measured = angles + np.radians(sigma_deg) * noise
     parts = [SampledMotion(t, measured[:, j], name=joint, samples=motion.samples, absolute=False, **estimate)
              for j, joint in enumerate(motion.joints)]
     out = PerJoint(parts, motion.joints)

@@ -4,9 +4,11 @@ LQR, or a registered controller), optimisation and direct collocation, on the mu
 (``fdbench.multibody``) built from the model's description (a library name or a model file), each
 giving a flat record (``records.RECORD_FIELDS`` plus per-joint indicators) and a trajectory table.
 
-Indicators for J joints: ``rmse_rot_deg`` is the root mean square over all joints and samples of
-the angle error (deg), ``rmse_torque_nm`` likewise of the torque (N m) against the inverse-dynamics
-torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint's.
+Indicators for J joints: ``rmse_rot_deg`` is the root mean square over all angle coordinates and
+samples of the angle error (deg), ``rmse_torque_nm`` likewise of their torques (N m) against the
+inverse-dynamics torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint's.
+Units are never pooled: a model with translations (a free joint's x, y) has ``rmse_trans_cm`` (cm)
+and ``rmse_force_n`` (N) over them, and ``rmse_trans_cm_<x>``, ``rmse_force_n_<x>`` per translation.
 
 Files (CSV with a header, names case-insensitive, any order): a motion has ``t`` (s) and one angle
 column per joint (deg, or rad), with optional ``<joint>_vel`` and ``<joint>_acc``; a torque history
@@ -68,14 +70,15 @@ def _motions(model_name, source, radians, cutoff_hz, smoothing, spline_lambda, s
     from .motions import Resampled, joint_motion, noisy_joints
 
     estimate = dict(cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda)
-    truth = joint_motion(source, description(model_name), radians, **estimate)
+    model = description(model_name)
+    truth = joint_motion(source, model, radians, **estimate)
     if sample_dt is not None:
         truth = Resampled(truth, sample_dt)
     if digest is not None and digest != motion_digest(source):
         raise BadFile(f"--motion: {source} has changed since this run was specified (or differs on this machine)")
     if not noise_deg:
         return truth, truth
-    return noisy_joints(truth, noise_deg, seed, capture_hz, **estimate), truth
+    return noisy_joints(truth, noise_deg, seed, capture_hz, model.coordinate_kinds, **estimate), truth
 
 
 def motions(spec):
@@ -140,8 +143,8 @@ def _simulate(spec, drive, **law):
 # ---------------------------------------------------------------------- records
 def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows), the
-    columns of a motion file (t, <joint>, <joint>_vel, <joint>_acc in s, deg, deg/s, deg/s^2) and
-    <joint>_torque (N m)."""
+    columns of a motion file (t, <joint>, <joint>_vel, <joint>_acc in s, deg, deg/s, deg/s^2; a
+    translation's in m, m/s, m/s^2) and <joint>_torque (N m; N for a translation)."""
     desired, _ = motions(spec)
     names = joints(spec)
     body = engine(spec, nominal(spec))
@@ -158,7 +161,9 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
               "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
               "fdbench_version": __version__}
     header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
-    rows = np.column_stack([inv.t, *np.degrees([inv.angles, inv.velocities, inv.accelerations]), inv.torque])
+    kinds = nominal(spec).coordinate_kinds
+    rows = np.column_stack([inv.t, *(_in_file_units(v, kinds) for v in (inv.angles, inv.velocities, inv.accelerations)),
+                            inv.torque])
     return record, header, rows
 
 
@@ -170,22 +175,41 @@ def _message(result) -> str:
 
 
 def _outcome(spec, record: dict, result, inverse, **more):
-    """The RunOutcome of a finished simulation: indicators over every joint and per joint, the
-    trajectory table."""
+    """The RunOutcome of a finished simulation: indicators over every joint and per joint (angles
+    and translations apart), the trajectory table."""
     from ..experiment import RunOutcome
 
-    names = joints(spec)
+    names, kinds = joints(spec), nominal(spec).coordinate_kinds
     desired = inverse.angles
-    rot, rot_j = sim.rmse_deg(result, desired)
-    trq, trq_j = sim.rmse_torque_nm(result, inverse.torque)
+    rot, trans, per_coordinate = sim.rmse_coordinates(result, desired, kinds)
+    trq, force, per_force = sim.rmse_generalized_forces(result, inverse.torque, kinds)
     record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
                   message=_message(result), max_violation=result.max_violation,
-                  **per_joint("rmse_rot_deg", names, rot_j), **per_joint("rmse_torque_nm", names, trq_j))
+                  **_per_coordinate(("rmse_rot_deg", "rmse_trans_cm"), names, kinds, per_coordinate),
+                  **_per_coordinate(("rmse_torque_nm", "rmse_force_n"), names, kinds, per_force))
+    if "translation" in kinds:
+        record.update(rmse_trans_cm=trans, rmse_force_n=force)
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_acc", "_acc_desired", "_torque",
                                           "_torque_inverse") for j in names]
-    angles = (result.angles, desired, result.zd, inverse.velocities, _accelerations(spec, result), inverse.accelerations)
-    rows = np.column_stack([result.t, *np.degrees(angles), result.torque, inverse.torque])
+    values = (result.angles, desired, result.zd, inverse.velocities, _accelerations(spec, result), inverse.accelerations)
+    rows = np.column_stack([result.t, *(_in_file_units(v, kinds) for v in values), result.torque, inverse.torque])
     return RunOutcome(record, result, inverse, table=(header, rows), **more)
+
+
+def _per_coordinate(prefixes: tuple[str, str], names, kinds, values) -> dict:
+    """Per-coordinate record fields ``<prefix>_<coordinate>``: the first prefix for angles, the
+    second for translations; none for a model of one coordinate (the overall value says it)."""
+    fields = per_joint(prefixes[0], names, values)
+    return {(key.replace(prefixes[0], prefixes[1], 1) if kind == "translation" else key): value
+            for (key, value), kind in zip(fields.items(), kinds)}
+
+
+def _in_file_units(values: np.ndarray, kinds) -> np.ndarray:
+    """Coordinates or their rates (rad or m based, shape (n, J)) in a motion file's units: angles
+    in deg, translations as they are (m, m/s, m/s^2)."""
+    if "translation" not in kinds:
+        return np.degrees(values)
+    return np.where([kind == "translation" for kind in kinds], values, np.degrees(values))
 
 
 def _accelerations(spec, result) -> np.ndarray:

@@ -276,7 +276,8 @@ def feedforward(engine: Engine, motion) -> Feedforward:
 
 def rmse_deg(result: Simulation, desired: np.ndarray) -> tuple[float, np.ndarray]:
     """RMSE (deg) of the joint angles against ``desired`` (rad, shape (n, J)) over the samples
-    reached: over all joints and samples, and per joint (shape (J,))."""
+    reached: over all joints and samples, and per joint (shape (J,)); every coordinate taken as an
+    angle (``rmse_coordinates`` keeps translations apart)."""
     reached = result.reached
     if not reached.any():
         return float("nan"), np.full(result.z.shape[1], np.nan)
@@ -285,12 +286,53 @@ def rmse_deg(result: Simulation, desired: np.ndarray) -> tuple[float, np.ndarray
 
 
 def rmse_torque_nm(result: Simulation, torque: np.ndarray) -> tuple[float, np.ndarray]:
-    """RMSE (N m) of the applied joint torques against ``torque`` (shape (n, J)), overall and per joint."""
+    """RMSE (N m) of the applied joint torques against ``torque`` (shape (n, J)), overall and per
+    joint; every coordinate taken as an angle (``rmse_generalized_forces`` keeps forces apart)."""
     reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
     if not reached.any():
         return float("nan"), np.full(result.torque.shape[1], np.nan)
     error = result.torque[reached] - torque[reached]
     return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+
+
+CM_PER_M = 100.0
+
+
+def _rmse_over(error: np.ndarray, columns: np.ndarray) -> float:
+    """RMSE of ``error`` (shape (m, J)) over its rows and the columns where ``columns`` (bool, (J,))
+    is true; NaN where there are none."""
+    if not columns.any() or not len(error):
+        return float("nan")
+    part = error if columns.all() else error[:, columns]
+    return float(np.sqrt(np.mean(part**2)))
+
+
+def rmse_coordinates(result: Simulation, desired: np.ndarray, kinds) -> tuple[float, float, np.ndarray]:
+    """The coordinates' RMSE against ``desired`` (rad or m, shape (n, J)) over the samples reached,
+    ``kinds`` per coordinate 'angle' or 'translation' (``Model.coordinate_kinds``), units never
+    pooled: (over the angles, deg; over the translations, cm; per coordinate in its unit, shape (J,)).
+    NaN for a kind the model lacks or when no sample was reached."""
+    translation = np.array([kind == "translation" for kind in kinds])
+    reached = result.reached
+    if not reached.any():
+        return float("nan"), float("nan"), np.full(result.z.shape[1], np.nan)
+    error = result.angles[reached] - desired[reached]
+    error = np.where(translation, error * CM_PER_M, np.degrees(error)) if translation.any() else np.degrees(error)
+    return (_rmse_over(error, ~translation), _rmse_over(error, translation),
+            np.sqrt(np.mean(error**2, axis=0)))
+
+
+def rmse_generalized_forces(result: Simulation, reference: np.ndarray, kinds) -> tuple[float, float, np.ndarray]:
+    """The applied generalized forces' RMSE against ``reference`` (shape (n, J)) over the samples
+    reached: (over the angles' torques, N m; over the translations' forces, N; per coordinate,
+    shape (J,)). NaN for a kind the model lacks or when no sample was reached."""
+    translation = np.array([kind == "translation" for kind in kinds])
+    reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
+    if not reached.any():
+        return float("nan"), float("nan"), np.full(result.torque.shape[1], np.nan)
+    error = result.torque[reached] - reference[reached]
+    return (_rmse_over(error, ~translation), _rmse_over(error, translation),
+            np.sqrt(np.mean(error**2, axis=0)))
 
 
 class _Still:
