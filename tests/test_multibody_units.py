@@ -175,3 +175,36 @@ def test_the_split_rmse_is_the_pooled_one_on_angles_and_scales_translations_to_c
     assert np.isnan(rot) if mask.all() else rot == pytest.approx(rms(np.degrees(e[:, ~mask])), rel=1e-12)
     assert np.isnan(trans) if not mask.any() else trans == pytest.approx(100 * rms(e[:, mask]), rel=1e-12)
     assert np.allclose(per, np.sqrt(np.mean(e**2, axis=0)) * np.where(mask, 100.0, np.degrees(1.0)), rtol=1e-12)
+
+
+def test_the_inverse_summary_gives_translations_in_metres_and_their_forces_in_newtons(tmp_path):
+    """``inverse``'s summary names a translation's force in N and its ends in m, against the
+    minimum-jerk closed form; ``torque_rms_nm`` covers the angles' torques only, ``force_rms_n``
+    the translations' forces, each equal to the RMS of the history's own columns."""
+    import csv
+
+    from typer.testing import CliRunner
+
+    from fdbench.cli import app
+    from fdbench.multibody.description import to_toml
+
+    path = tmp_path / "hopper.toml"
+    path.write_text(to_toml(hopper_with_step()))
+    result = CliRunner().invoke(app, ["inverse", "--model", str(path), "--format", "csv", "--quiet"])
+    assert result.exit_code == 0, result.output
+    rows = list(csv.DictReader(result.stdout.splitlines()))
+    record = cli("inverse", "--model", str(path))
+    for j, name in enumerate(("tilt", "tx", "ty", "hip", "knee")):
+        translation = name in TRANSLATIONS
+        ends = np.array(minimum_jerk([0.0, DURATION])[0])[:, j]
+        expected = ends if translation else np.degrees(ends)
+        unit = "m" if translation else "deg"
+        assert (record[f"{name}_start_{unit}"], record[f"{name}_end_{unit}"]) == pytest.approx(tuple(expected), abs=1e-12)
+        column = np.array([float(row[f"{name}_torque"]) for row in rows])
+        key = f"force_rms_n_{name}" if translation else f"torque_rms_nm_{name}"
+        assert record[key] == pytest.approx(np.sqrt(np.mean(column**2)), rel=1e-12)
+        assert f"torque_rms_nm_{name}" not in record if translation else f"force_rms_n_{name}" not in record
+    forces = np.array([[float(row[f"{x}_torque"]) for x in TRANSLATIONS] for row in rows])
+    torques = np.array([[float(row[f"{a}_torque"]) for a in ANGLES] for row in rows])
+    assert record["force_rms_n"] == pytest.approx(np.sqrt(np.mean(forces**2)), rel=1e-12)
+    assert record["torque_rms_nm"] == pytest.approx(np.sqrt(np.mean(torques**2)), rel=1e-12)

@@ -151,17 +151,26 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     began = time.perf_counter()
     inv = sim.inverse_dynamics(None, body, desired)
     runtime = time.perf_counter() - began
-    record = {"command": "inverse", "kinematics": spec.kinematics, **describe(spec),
-              **{f"{k}_{j}": float(v) for k, vals in (("torque_rms_nm", np.sqrt(np.mean(inv.torque**2, axis=0))),
-                                                      ("torque_max_nm", inv.torque.max(axis=0)),
-                                                      ("torque_min_nm", inv.torque.min(axis=0)))
-                 for j, v in zip(names, vals)},
-              **{f"{j}_{end}_deg": float(np.degrees(inv.angles[k, i])) for i, j in enumerate(names)
-                 for end, k in (("start", 0), ("end", -1))},
-              "torque_rms_nm": float(np.sqrt(np.mean(inv.torque**2))), "runtime_s": runtime,
-              "fdbench_version": __version__}
-    header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
     kinds = nominal(spec).coordinate_kinds
+    angle = np.array([kind != "translation" for kind in kinds])
+    start_end = _in_file_units(inv.angles[[0, -1]], kinds)
+
+    def force(metric: str, j: int) -> str:  # a translation's in N, never pooled with N m
+        return metric.replace("torque", "force").replace("_nm", "_n") if kinds[j] == "translation" else metric
+
+    unit = ["m" if kind == "translation" else "deg" for kind in kinds]
+    record = {"command": "inverse", "kinematics": spec.kinematics, **describe(spec),
+              **{f"{force(k, i)}_{j}": float(v)
+                 for k, vals in (("torque_rms_nm", np.sqrt(np.mean(inv.torque**2, axis=0))),
+                                 ("torque_max_nm", inv.torque.max(axis=0)), ("torque_min_nm", inv.torque.min(axis=0)))
+                 for i, (j, v) in enumerate(zip(names, vals))},
+              **{f"{j}_{end}_{unit[i]}": float(start_end[k, i]) for i, j in enumerate(names)
+                 for end, k in (("start", 0), ("end", 1))}}
+    record["torque_rms_nm"] = float(np.sqrt(np.mean(inv.torque[:, angle] ** 2))) if angle.any() else math.nan
+    if not angle.all():
+        record["force_rms_n"] = float(np.sqrt(np.mean(inv.torque[:, ~angle] ** 2)))
+    record.update(runtime_s=runtime, fdbench_version=__version__)
+    header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
     rows = np.column_stack([inv.t, *(_in_file_units(v, kinds) for v in (inv.angles, inv.velocities, inv.accelerations)),
                             inv.torque])
     return record, header, rows
