@@ -17,6 +17,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+from cli_checks import assert_one_line_error
+
 from fdbench.cli import app
 from fdbench.experiment import RunSpec, control_spec, run
 from fdbench.peers import peer_spec
@@ -39,12 +41,7 @@ def invoke(*args, code=0):
 
 def refused(*args, contains=()):
     """The command exits 2 with one line on stderr holding every text of ``contains``."""
-    result = invoke(*args, code=2)
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("fdbench: error: ") and "Traceback" not in result.stderr, result.stderr
-    for text in contains:
-        assert text in lines[0], lines[0]
-    return lines[0]
+    return assert_one_line_error(invoke(*args, code=2), *contains)
 
 
 def angles(outcome) -> np.ndarray:

@@ -6,13 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..models import joints
 from ..records import RunOutcome, base_record
-
-
-def joints(spec) -> tuple:
-    from ..models import joints as model_joints
-
-    return tuple(model_joints(spec.model_name))
 
 
 def osim_texts(spec) -> tuple[str, str]:
@@ -80,7 +75,7 @@ def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_en
     measured on the motion's samples reached, against the reference, as fdbench's runs are:
     (fields, (CSV header, rows) of the trajectory)."""
     inverse, truth, torque_ref, samples = reference(spec)
-    names = joints(spec)
+    names = joints(spec.model_name)
     z, tau = _on_samples(samples, t, angles), _on_samples(samples, t, torque)
     reached = samples <= t_end + 1e-12
     rot = np.degrees(z - truth)[reached]

@@ -33,10 +33,11 @@ def run(spec):
     solve time stand beside the replay's indicators."""
     from ..collocation import CollocationResult
     from .child import call
-    from .common import desired, joints, osim_texts, replay, warm_up
+    from ..models import joints
+    from .common import desired, osim_texts, replay, warm_up
 
     options = dict(spec.method_options)
-    names = joints(spec)
+    names = joints(spec.model_name)
     nominal, _ = osim_texts(spec)  # Moco tracks with the nominal model; the replay simulates the plant
     samples = spec.motions()[0].samples
     z, zd, _ = desired(spec, samples)

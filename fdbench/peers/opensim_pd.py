@@ -35,9 +35,10 @@ def run(spec):
     on the motion's samples against the same reference as fdbench's PD."""
     from ..records import RunOutcome, base_record
     from .child import call
-    from .common import desired, grid, indicators, joints, osim_texts, reference
+    from ..models import joints
+    from .common import desired, grid, indicators, osim_texts, reference
 
-    names = joints(spec)
+    names = joints(spec.model_name)
     kp, kd = gains(spec)
     nominal, plant = osim_texts(spec)
     t = grid(spec)
