@@ -126,7 +126,7 @@ class Engine:
     """The mixed-coordinate penalty formulation of ``model`` with the penalty factor alpha, the
     damping ratio xi and the natural frequency omega (rad/s) of eq. 12."""
 
-    def __init__(self, model: Model, alpha: float = 1e7, xi: float = 1.0, omega: float = 10.0):
+    def __init__(self, model: Model, alpha: float = 1e7, xi: float = 1.0, omega: float = 10.0, loads=None):
         from ..integrate import PENALTY_RANGES
 
         for name, value in (("alpha", alpha), ("xi", xi), ("omega", omega)):
@@ -139,7 +139,12 @@ class Engine:
         self.n_bodies = len(model.joints)
         # per joint: the column of its angle among the coordinates (a free joint's x, y follow it)
         self.joint_column = np.cumsum([0] + [len(j.coordinate_names) for j in model.joints][:-1]).astype(np.int64)
-        self.compiled = not model.has_path_or_free_joints
+        self.loads = loads  # external loads from data (``fdbench.multibody.loads.ExternalLoads``) or None
+        if loads is not None:
+            for load in loads.loads:
+                for name in {load.body, load.force_frame, load.point_frame} - {"ground"}:
+                    model.body(name)  # KeyError for a body the model lacks
+        self.compiled = not model.has_path_or_free_joints and loads is None
         self.params = np.zeros(N_PARAMS)
         self.params[ALPHA], self.params[TWO_XI_OMEGA], self.params[OMEGA2] = alpha, 2 * xi * omega, omega**2
         self.params[SWITCH_COS], self.params[VIOLATION] = SIN_FORM_MIN_COS, VIOLATION_TOL
@@ -334,8 +339,10 @@ class Engine:
         if not self.compiled:
             kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
                             if j.type == "free" or j.path is not None})
-            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot take "
-                             "in this version")
+            if kinds:
+                raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot "
+                                 "take in this version")
+            raise ValueError(f"{what} cannot take external loads (--loads) in this version")
 
     @property
     def inverse_torques_layout(self) -> tuple:
@@ -507,12 +514,19 @@ class Engine:
             return self.dense_penalty.violation(self._vector(y, self.n_state, "the state"))
         return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
-    def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
+    def inverse_dynamics(self, z, zd, zdd, t=None) -> np.ndarray:
         """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
-        rad/s, rad/s^2) of shape (n, J) or (J,); the same shape out."""
+        rad/s, rad/s^2) of shape (n, J) or (J,); the same shape out. With external loads, the times
+        t (s, shape (n,) or a number) they are taken at, and their generalised forces subtracted."""
         (z, zd, zdd), single = self._samples(z, zd, zdd)
         p, _, pdd, kin = self._free_points(z, zd, zdd)
         tau = np.einsum("npj,np->nj", self._velocity_transform(p, kin), pdd @ self.mass - self.q_ext)
+        if self.loads is not None:
+            if t is None:
+                raise ValueError("a model with external loads needs the times of its inverse dynamics")
+            from .loads import generalized_forces
+
+            tau -= generalized_forces(self, self.loads, z, np.broadcast_to(np.asarray(t, dtype=float), (len(z),)))
         return tau[0] if single else tau
 
     def mass_matrix(self, z) -> np.ndarray:
@@ -539,14 +553,14 @@ class Engine:
             points[f"{name}.end"] = self._body_point(b, self._local_end[b], phi, w, al, o, vo, ao)[0]
         return {key: value[0] if single else value for key, value in points.items()}
 
-    def inverse_torques(self, z, zd, zdd) -> np.ndarray:
+    def inverse_torques(self, z, zd, zdd, t=None) -> np.ndarray:
         """Eq. 3 by the compiled kernel (``kernels.inverse_torques``): the joint torques (N m) of one
         minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
         from .kernels import inverse_torques
 
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
         if not self.compiled:  # the same equations by numpy
-            return self.inverse_dynamics(z, zd, zdd)
+            return self.inverse_dynamics(z, zd, zdd, t)
         out = np.empty(self.n_joints)
         inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
         return out
@@ -577,8 +591,9 @@ class Engine:
             from .general import rk4 as dense_rk4
 
             self.check_nominal(nominal)
+            times = np.arange(2 * n_steps + 1) * (0.5 * dt)
             code, done, max_viol = dense_rk4(self, y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode,
-                                             gains, nominal, states, rates, applied)
+                                             gains, nominal, states, rates, applied, times)
             for array in (states, rates, applied):
                 array[done + 1:] = np.nan
             z, zd = self.joints_from_state(states)
@@ -597,11 +612,12 @@ class Engine:
         return self.simulate(self.state_from_joints(z0, zd0), dt, n_steps, tau_half, ref_half, refd_half, zero, kp, kd)
 
     def rates(self, states, tau, ref, refd, refdd, kp, kd, mode=PD, gains=None,
-              nominal: "Engine | None" = None) -> tuple[np.ndarray, np.ndarray]:
+              nominal: "Engine | None" = None, t=None) -> tuple[np.ndarray, np.ndarray]:
         """The state derivatives (k, n_state) and applied joint torques (k, J) (N m) of k states
         (k, n_state) under ``simulate``'s feedback law, row i with row i of tau, ref, refd, refdd
         (each (k, J)) and of gains ((k, J, 2J)): the adaptive integrators' right-hand side. The
-        accelerations are NaN where the points' matrix is singular."""
+        accelerations are NaN where the points' matrix is singular. t: the states' times (s, (k,)),
+        needed with external loads."""
         from .kernels import derivatives
 
         states = np.ascontiguousarray(states, dtype=float)
@@ -615,9 +631,15 @@ class Engine:
             from .general import applied_torque
 
             self.check_nominal(nominal)
+            if self.loads is not None and t is None:
+                raise ValueError("a model with external loads needs the times of its states")
+            times = np.zeros(k) if t is None else np.asarray(t, dtype=float).reshape(k)
+            loads = self.loads.at(times) if self.loads is not None else None
             for i in range(k):
-                applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal)
-                code, rate = self.dense_penalty.derivative(states[i], applied[i])
+                applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal,
+                                            times)
+                code, rate = self.dense_penalty.derivative(states[i], applied[i],
+                                                           None if loads is None else [a[i] for a in loads])
                 out[i] = rate if code == OK else np.concatenate([states[i, self.n_q:], np.full(self.n_q, np.nan)])
             return out, applied
         derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,

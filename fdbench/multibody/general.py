@@ -173,9 +173,10 @@ class DensePenalty:
         return float(np.max(np.abs(self.constraints(q, y[self.n_q:])[0]), initial=0.0))
 
     # ------------------------------------------------------------------ eq. 12
-    def derivative(self, y, torque):
+    def derivative(self, y, torque, loads=None):
         """(status, y') of eq. 12 at the state y (n_state,) under the coordinates' generalised forces
-        torque (J,) (N m; N for a free joint's x and y)."""
+        torque (J,) (N m; N for a free joint's x and y) and the engine's external loads (one row of
+        ``ExternalLoads.at``: force, point (L, 2), moment (L,); None without them)."""
         n_q, n_p = self.n_q, self.n_p
         q, v = y[:n_q], y[n_q:]
         Phi, J, Jdv = self.constraints(q, v)
@@ -188,6 +189,10 @@ class DensePenalty:
                 Q[n_p + parent] -= tau
         for c, k, ki in self.frees:
             Q[ki:ki + 2] += torque[c + 1:c + 3]
+        if loads is not None:
+            from .loads import mixed_forces
+
+            Q += mixed_forces(e, q, *loads)
         A = self.mass + self.alpha * J.T @ J
         rhs = Q - self.alpha * J.T @ (Jdv + self.txo * (J @ v) + self.om2 * Phi)
         if not np.all(np.isfinite(A)):
@@ -200,23 +205,24 @@ class DensePenalty:
         return OK, np.concatenate([v, acc])
 
 
-def applied_torque(engine, state, half, tau, ref, refd, refdd, kp, kd, mode, gains, nominal):
+def applied_torque(engine, state, half, tau, ref, refd, refdd, kp, kd, mode, gains, nominal, times):
     """The applied generalised forces (J,) of ``simulate``'s feedback laws at the state (row ``half``
-    of the half-step arrays; ref without the joint offsets)."""
+    of the half-step arrays, at times[half] s; ref without the joint offsets)."""
     z, zd = engine.joints_from_state(state)
     if mode == GAINS:
         return tau[half] + gains[half] @ np.concatenate([ref[half] - z, refd[half] - zd])
     if mode == COMPUTED:
         v = refdd[half] + kp * (ref[half] - z) + kd * (refd[half] - zd)
-        return (nominal or engine).inverse_dynamics(z, zd, v) + tau[half]
+        return (nominal or engine).inverse_dynamics(z, zd, v, times[half]) + tau[half]
     return tau[half] + kp * (ref[half] - z) + kd * (refd[half] - zd)
 
 
-def rk4(engine, y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, nominal, states, rates, applied):
-    """The compiled ``kernels.rk4`` for a model with free or path joints: classical RK4 over n_steps
-    steps of dt from y0, filling states, rates and applied up to the last step reached. Returns
-    (status, steps_done, max constraint violation)."""
+def rk4(engine, y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, nominal, states, rates, applied, times):
+    """The compiled ``kernels.rk4`` for a model with free or path joints or external loads: classical
+    RK4 over n_steps steps of dt from y0, the half-step grid at ``times`` (s), filling states, rates
+    and applied up to the last step reached. Returns (status, steps_done, max constraint violation)."""
     dense = engine.dense_penalty
+    loads = engine.loads.at(times) if engine.loads is not None else None
     limit = engine.params[VIOLATION]
     y = np.array(y0, dtype=float)
     max_viol = dense.violation(y)
@@ -227,9 +233,9 @@ def rk4(engine, y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, nom
         for stage in range(4):
             h = 0.0 if stage == 0 else (dt if stage == 3 else 0.5 * dt)
             state = y if stage == 0 else y + h * ks[stage - 1]
-            torque = applied_torque(engine, state, j + (stage + 1) // 2, tau, ref, refd, refdd, kp, kd, mode, gains,
-                                    nominal)
-            code, rate = dense.derivative(state, torque)
+            row = j + (stage + 1) // 2
+            torque = applied_torque(engine, state, row, tau, ref, refd, refdd, kp, kd, mode, gains, nominal, times)
+            code, rate = dense.derivative(state, torque, None if loads is None else [a[row] for a in loads])
             if code == OK:
                 ks[stage] = rate
             if stage == 0:
