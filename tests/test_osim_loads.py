@@ -1,0 +1,170 @@
+"""External loads checked against OpenSim: the recorded walk's generalised forces with its ground
+reactions (``fdbench inverse --model subject01.osim --loads subject01_walk_grf.xml``), the pelvis'
+residuals included, against OpenSim's InverseDynamicsSolver on the same model (muscles removed)
+with the same ExternalLoads file, at the same kinematics. OpenSim runs in one child process."""
+
+from __future__ import annotations
+
+import importlib.util
+import io
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from fdbench.cli import app
+
+if importlib.util.find_spec("opensim") is None:
+    pytest.skip("the opensim package is not installed (pip install '.[opensim]')", allow_module_level=True)
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = next((where for where in (folder / "shared" / "data" / "opensim" for folder in (ROOT.parent, ROOT.parent.parent))
+             if (where / "subject01.osim").exists()), ROOT.parent / "shared" / "data" / "opensim")
+pytestmark = pytest.mark.skipif(not (DATA / "subject01_walk_grf.xml").exists(),
+                                reason="the shared data folder is not beside the source folder")
+TRANSLATIONS = ("pelvis_tx", "pelvis_ty")
+runner = CliRunner()
+
+OPENSIM_ID_WITH_LOADS = """
+import json, sys
+import opensim as osim
+osim.Logger.setLevelString("Off")
+request = json.loads(sys.stdin.read())
+answers = []
+for loads in request["loads"]:  # one model per case: with the ExternalLoads file, or none ('')
+    model = osim.Model(request["model"])
+    model.updForceSet().clearAndDestroy()
+    if loads:
+        model.addModelComponent(osim.ExternalLoads(loads, True))
+    state = model.initSystem()
+    found = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
+    index = []
+    for coordinate in found:  # the coordinate's place among the system's speeds
+        coordinate.setSpeedValue(state, 1.0)
+        index.append(next(i for i in range(state.getNU()) if state.getU().get(i) == 1.0))
+        coordinate.setSpeedValue(state, 0.0)
+    solver = osim.InverseDynamicsSolver(model)
+    out = []
+    for t, angles, rates, accelerations in zip(request["t"], request["z"], request["zd"], request["zdd"]):
+        state.setTime(t)
+        udot = osim.Vector(state.getNU(), 0.0)
+        for coordinate, k, angle, rate, acceleration in zip(found, index, angles, rates, accelerations):
+            coordinate.setValue(state, angle, False)
+            coordinate.setSpeedValue(state, rate)
+            udot.set(k, acceleration)
+        model.realizeVelocity(state)
+        tau = solver.solve(state, udot)
+        out.append([tau.get(k) for k in index])
+    answers.append(out)
+print(json.dumps(answers))
+"""
+
+
+def fdbench(*args) -> str:
+    result = runner.invoke(app, [str(a) for a in args])
+    assert result.exit_code == 0, result.stderr
+    return result.stdout
+
+
+def walk_inverse(*extra, motion=None) -> str:
+    return fdbench("inverse", "--model", DATA / "subject01.osim", "--motion", motion or DATA / "subject01_walk_IK.mot",
+                   "--loads", DATA / "subject01_walk_grf.xml", "--quiet", *extra)
+
+
+def coordinates_of(frame: pd.DataFrame) -> list[str]:
+    return [c for c in frame.columns[1:] if not c.endswith(("_vel", "_acc", "_torque"))]
+
+
+def in_si(frame: pd.DataFrame, names, suffix: str) -> np.ndarray:
+    """The columns <name><suffix> (deg-based for angles, m for translations) in rad or m, shape (n, J)."""
+    unit = np.array([1.0 if name in TRANSLATIONS else math.pi / 180 for name in names])
+    return frame[[name + suffix for name in names]].to_numpy() * unit
+
+
+def opensim_forces(frame: pd.DataFrame) -> tuple[np.ndarray, np.ndarray]:
+    """OpenSim's generalised forces (n, J) (N m, N) at the kinematics of an inverse-dynamics CSV,
+    with the walk's loads and without, in one child process."""
+    names = coordinates_of(frame)
+    request = {"model": str(DATA / "subject01.osim"), "loads": [str(DATA / "subject01_walk_grf.xml"), ""],
+               "coordinates": names, "t": frame["t"].tolist(),
+               **{key: in_si(frame, names, suffix).tolist() for key, suffix in (("z", ""), ("zd", "_vel"), ("zdd", "_acc"))}}
+    done = subprocess.run([sys.executable, "-c", OPENSIM_ID_WITH_LOADS], input=json.dumps(request), capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    with_loads, without = json.loads(done.stdout.strip().splitlines()[-1])
+    return np.array(with_loads), np.array(without)
+
+
+@pytest.fixture(scope="module")
+def walk(tmp_path_factory):
+    """fdbench's inverse dynamics of the walk with its loads (the default derivative estimate) as a
+    CSV, its record, and OpenSim's generalised forces at the CSV's kinematics (one child)."""
+    folder = tmp_path_factory.mktemp("walk")
+    csv = folder / "walk.csv"
+    walk_inverse("--format", "csv", "--output", csv)
+    frame = pd.read_csv(csv)
+    record = json.loads(walk_inverse("--format", "json"))
+    with_loads, without = opensim_forces(frame)
+    return {"csv": csv, "frame": frame, "record": record, "opensim": with_loads, "opensim_bare": without}
+
+
+def rms(values) -> np.ndarray:
+    return np.sqrt(np.mean(np.asarray(values) ** 2, axis=0))
+
+
+def test_the_walk_s_generalised_forces_with_its_ground_reactions_are_opensim_s(walk):
+    """Every coordinate, the pelvis' three residuals included, within 1% RMS of OpenSim's (measured:
+    under 1e-4; what is left is the ground reactions' interpolation between the 600 Hz samples at
+    the motion's rounded times)."""
+    frame, theirs = walk["frame"], walk["opensim"]
+    names = coordinates_of(frame)
+    ours = frame[[name + "_torque" for name in names]].to_numpy()
+    relative = rms(ours - theirs) / rms(theirs)
+    assert relative.max() < 1e-3, dict(zip(names, relative))
+    assert rms(theirs)[names.index("ankle_angle_r")] > 40.0  # the loads act: the stance ankle's torques are large
+
+
+def test_the_record_s_residuals_are_opensim_s_pelvis_forces(walk):
+    """residual_fx/fy/mz: the pelvis' generalised forces (FX, FY in N, MZ in N m), as OpenSim's RRA
+    names them; their means and RMS from the record equal those of OpenSim's forces to 0.1%."""
+    names = coordinates_of(walk["frame"])
+    theirs, record = walk["opensim"], walk["record"]
+    fx, fy, mz = (theirs[:, names.index(name)] for name in ("pelvis_tx", "pelvis_ty", "pelvis_tilt"))
+    expected = {"residual_fx_mean_n": fx.mean(), "residual_fy_mean_n": fy.mean(), "residual_mz_mean_nm": mz.mean(),
+                "residual_fx_rms_n": rms(fx), "residual_fy_rms_n": rms(fy), "residual_moment_rms_nm": rms(mz),
+                "residual_force_rms_n": math.sqrt(np.mean(fx**2 + fy**2))}
+    for key, value in expected.items():
+        assert record[key] == pytest.approx(value, rel=1e-3, abs=0.05), key
+
+
+def test_a_csv_with_rates_and_accelerations_is_used_as_given_and_gives_opensim_s_forces(walk):
+    """The CSV read back as the motion (its _vel and _acc columns used as given): the same
+    generalised forces, so again within 1% RMS of OpenSim's at those kinematics."""
+    again = pd.read_csv(io.StringIO(walk_inverse("--format", "csv", motion=walk["csv"])))
+    names = coordinates_of(again)
+    assert np.allclose(again["t"], walk["frame"]["t"], atol=1e-7)
+    for suffix in ("", "_vel", "_acc"):  # the kinematics as given
+        assert np.allclose(in_si(again, names, suffix), in_si(walk["frame"], names, suffix), rtol=1e-9, atol=1e-9)
+    ours = again[[name + "_torque" for name in names]].to_numpy()
+    assert (rms(ours - walk["opensim"]) / rms(walk["opensim"])).max() < 1e-3
+
+
+def test_without_the_loads_the_pelvis_carries_the_body_s_weight_and_opensim_agrees(walk):
+    """The same kinematics without loads: pelvis_ty's mean force is then about the body's weight (72.6
+    kg), far from the run with loads, and OpenSim's without loads agrees with fdbench's."""
+    names = coordinates_of(walk["frame"])
+    csv = walk["csv"]
+    bare = pd.read_csv(io.StringIO(fdbench("inverse", "--model", DATA / "subject01.osim", "--motion", csv, "--quiet",
+                                           "--format", "csv")))
+    ours = bare[[name + "_torque" for name in names]].to_numpy()
+    theirs = walk["opensim_bare"]
+    assert (rms(ours - theirs) / rms(theirs)).max() < 1e-6
+    ty = names.index("pelvis_ty")
+    assert np.mean(ours[:, ty]) == pytest.approx(72.6 * 9.80665, rel=0.05)
+    assert abs(np.mean(walk["opensim"][:, ty])) < 0.1 * np.mean(ours[:, ty])
