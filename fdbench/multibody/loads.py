@@ -65,7 +65,8 @@ class ExternalLoads:
         """(force (k, L, 2), point (k, L, 2), moment (k, L)) at times t (s, shape (k,)), linear
         between samples; ValueError for a time outside the data's span."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        self.check_span(float(t.min(initial=0.0)), float(t.max(initial=0.0)))
+        if t.size:
+            self.check_span(float(t.min()), float(t.max()))
         flat = np.concatenate([self.force.reshape(len(self.t), -1), self.point.reshape(len(self.t), -1),
                                self.moment], axis=1)
         values = np.stack([np.interp(t, self.t, column) for column in flat.T], axis=1)
