@@ -193,6 +193,11 @@ def _root_and_datafile(path: Path, option: str):
     return element, Path(datafile) if Path(datafile).is_absolute() else path.parent / datafile
 
 
+def _data_option(option: str, path: Path) -> str:
+    """How messages about the data file name it: the option and the file that names it."""
+    return f"{option} (the <datafile> of {path.name})"
+
+
 def loads_digest(path, option: str = "--loads") -> str:
     """SHA-256 of an external loads file's content and of its data file's (a run's identity)."""
     import hashlib
@@ -202,7 +207,7 @@ def loads_digest(path, option: str = "--loads") -> str:
     path = Path(path)
     _, data_path = _root_and_datafile(path, option)
     digest = hashlib.sha256(read_input_bytes(path, option))
-    digest.update(b"\0" + read_input_bytes(data_path, option))
+    digest.update(b"\0" + read_input_bytes(data_path, _data_option(option, path)))
     return digest.hexdigest()
 
 
@@ -229,7 +234,7 @@ def read_external_loads(path, model, option: str = "--loads") -> ExternalLoads:
         loads.append(load)
         columns.append(wanted)
     names = [name for wanted in columns for group in wanted.values() for name in group]
-    table, _, _ = read_storage(data_path, option, names)
+    table, _, _ = read_storage(data_path, _data_option(option, path), names)
     for name in names:
         if name.lower() not in table:
             _fail(option, data_path, f"has no column {name!r} (named by {path.name})")
