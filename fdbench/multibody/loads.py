@@ -272,6 +272,8 @@ def _external_force(force, model, option: str, path) -> tuple[ExternalLoad, dict
     force_id, point_id, torque_id = (_text(force, f"{key}_identifier") for key in ("force", "point", "torque"))
     if not force_id:
         _fail(option, path, f"ExternalForce {name!r} has no <force_identifier>")
+    if not point_id:  # as OpenSim: a force without a point acts at the origin of the body it is applied to
+        frames["point"] = body
     wanted = {"force": [force_id + "x", force_id + "y"], "point": [point_id + "x", point_id + "y"] if point_id else [],
               "torque": [torque_id + "z"] if torque_id else []}
     load = ExternalLoad(name, body, *(GROUND if frames[key].lower() == GROUND else frames[key]
