@@ -1,4 +1,4 @@
-"""Inverse dynamics of the recorded walk (../shared/data/opensim: subject01.osim, its IK motion at
+"""Inverse dynamics of the recorded walk (examples/opensim: subject01.osim, its IK motion at
 60 Hz and its ground reactions) by fdbench and by OpenSim's InverseDynamicsTool, each with its own
 derivative estimate at the same cutoff (6 Hz), measured in one run.
 
@@ -37,9 +37,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = next((folder / "shared" / "data" / "opensim" for folder in (ROOT.parent, ROOT.parent.parent)
-             if (folder / "shared" / "data" / "opensim" / "subject01.osim").exists()),
-            ROOT.parent / "shared" / "data" / "opensim")
+PLACES = (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",
+          ROOT.parent.parent / "shared" / "data" / "opensim")  # the walk's files: shipped, or beside the source
+DATA = next((where for where in PLACES if (where / "subject01_walk_grf.xml").exists()), PLACES[0])
 EDGE_S = 0.25  # s: "away from the ends" leaves out this much at each end of the motion
 
 # OpenSim runs in a child process (its bundled CasADi cannot share fdbench's process).

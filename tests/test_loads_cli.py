@@ -19,8 +19,9 @@ from fdbench.files import BadFile
 from fdbench.multibody.description import Frame, find_model, to_toml
 
 ROOT = Path(__file__).resolve().parent.parent
-WALK = next((where for where in (folder / "shared" / "data" / "opensim" for folder in (ROOT.parent, ROOT.parent.parent))
-             if (where / "subject01_walk_grf.xml").exists()), None)
+WALK = next((where for where in (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",
+                                  ROOT.parent.parent / "shared" / "data" / "opensim")
+             if (where / "subject01_walk_grf.xml").exists()), None)  # the walk's files: shipped, or beside the source
 COMMANDS = ("inverse", "control", "simulate")
 COLUMNS = ("f_vx", "f_vy", "f_vz", "f_px", "f_py", "f_pz", "f_tx", "f_ty", "f_tz")
 runner = CliRunner()
@@ -103,7 +104,7 @@ def test_an_unknown_body_is_named_with_the_model_s_bodies_and_frames(tmp_path):
                   "-q").exit_code == 0
 
 
-@pytest.mark.skipif(WALK is None, reason="the shared data folder is not beside the source folder")
+@pytest.mark.skipif(WALK is None, reason="the walk's files are not found")
 @pytest.mark.parametrize("command", COMMANDS)
 def test_the_walk_s_ground_reactions_on_a_model_without_feet_are_refused(tmp_path, command):
     out = tmp_path / "out.json"

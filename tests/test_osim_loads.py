@@ -24,10 +24,11 @@ if importlib.util.find_spec("opensim") is None:
     pytest.skip("the opensim package is not installed (pip install '.[opensim]')", allow_module_level=True)
 
 ROOT = Path(__file__).resolve().parent.parent
-DATA = next((where for where in (folder / "shared" / "data" / "opensim" for folder in (ROOT.parent, ROOT.parent.parent))
-             if (where / "subject01.osim").exists()), ROOT.parent / "shared" / "data" / "opensim")
+PLACES = (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",
+          ROOT.parent.parent / "shared" / "data" / "opensim")  # the walk's files: shipped, or beside the source
+DATA = next((where for where in PLACES if (where / "subject01_walk_grf.xml").exists()), PLACES[0])
 pytestmark = pytest.mark.skipif(not (DATA / "subject01_walk_grf.xml").exists(),
-                                reason="the shared data folder is not beside the source folder")
+                                reason="the walk's files are not found")
 TRANSLATIONS = ("pelvis_tx", "pelvis_ty")
 runner = CliRunner()
 
