@@ -26,7 +26,6 @@ Without the opensim package (or the data) it prints why and exits 0.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import subprocess
@@ -120,11 +119,15 @@ def main(argv=None) -> int:
     parser.add_argument("--data", type=Path, default=DATA, help=f"folder of the walk's files (default {DATA})")
     parser.add_argument("--cutoff", type=float, default=6.0, help="cutoff (Hz) of both estimates (default 6)")
     args = parser.parse_args(argv)
-    if importlib.util.find_spec("opensim") is None:
-        print("skipped: the opensim package is not installed (pip install '.[opensim]')")
+    if not (args.data / "subject01_walk_grf.xml").exists():
+        print(f"skipped: the walk's files are not in {args.data}")
         return 0
-    if not (args.data / "subject01.osim").exists():
-        print(f"skipped: no subject01.osim in {args.data}")
+    from fdbench.peers.child import PeerUnavailable, opensim_version
+
+    try:
+        opensim_version()  # OpenSim where it runs: a child process
+    except PeerUnavailable:
+        print("skipped: the opensim package is not installed (pip install '.[opensim]')")
         return 0
 
     from fdbench.multibody.engine import Engine

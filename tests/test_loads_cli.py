@@ -175,3 +175,22 @@ def test_a_run_whose_loads_changed_since_it_was_specified_is_refused(tmp_path, s
         runs.check(spec)
     (tmp_path / "push.mot").write_text(original)
     runs.check(spec)  # the files as specified again
+
+
+def test_the_walk_s_benchmark_skips_cleanly_without_opensim(tmp_path):
+    """benchmarks/bench_walk_inverse.py where OpenSim cannot be imported: one line saying so, exit 0."""
+    import os
+    import subprocess
+    import sys
+
+    hidden = tmp_path / "hidden"
+    hidden.mkdir()
+    (hidden / "opensim.py").write_text("raise ImportError('No module named opensim')\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(hidden), os.environ.get("PYTHONPATH", ""), str(ROOT)]))
+    args = [sys.executable, str(ROOT / "benchmarks" / "bench_walk_inverse.py")]
+    if WALK is not None:
+        args += ["--data", str(WALK)]
+    done = subprocess.run(args, capture_output=True, text=True, env=env, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.startswith("skipped: ") and len(done.stdout.strip().splitlines()) == 1, done.stdout
+    assert WALK is None or "pip install '.[opensim]'" in done.stdout
