@@ -9,6 +9,7 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -194,3 +195,35 @@ def test_the_walk_s_benchmark_skips_cleanly_without_opensim(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.startswith("skipped: ") and len(done.stdout.strip().splitlines()) == 1, done.stdout
     assert WALK is None or "pip install '.[opensim]'" in done.stdout
+
+
+def test_the_loads_are_read_on_the_recording_s_clock(tmp_path, short_motion):
+    """A motion file whose times start at 0.1 s takes the loads of 0.1 s on: its generalised forces
+    equal those of the whole recording at the same times (loads ramping in time, so a shifted clock
+    would show); before 0.1 s the data may be missing."""
+    import io
+
+    import pandas as pd
+
+    ramp = ["push", "endheader", "\t".join(("time",) + COLUMNS)]
+    ramp += ["\t".join(repr(float(v)) for v in [t, 40 * t, -100 + 300 * t, 0.0, 0.1, 0.5 - t, 0.0, 0.0, 0.0, 5 * t])
+             for t in np.linspace(0.1, 0.2, 11)]
+    whole_ramp = ramp[:3] + ["\t".join(map(repr, [0.0, 0.0, -100.0, 0.0, 0.1, 0.5, 0.0, 0.0, 0.0, 0.0]))] + ramp[3:]
+    late = tmp_path / "late"
+    late.mkdir()
+    late_loads = write(late, data="\n".join(ramp) + "\n")
+    whole_loads = write(tmp_path, data="\n".join(whole_ramp) + "\n")
+    lines = short_motion.read_text().splitlines()
+    (tmp_path / "late.csv").write_text("\n".join(lines[:1] + lines[101:]) + "\n")  # t from 0.1 s
+    runs = {}
+    for key, motion, loads in (("whole", short_motion, whole_loads), ("late", tmp_path / "late.csv", late_loads)):
+        result = invoke("inverse", "--model", "leg3", "--motion", motion, "--loads", loads, "-f", "csv")
+        assert result.exit_code == 0, result.stderr
+        runs[key] = pd.read_csv(io.StringIO(result.stdout))
+    whole = runs["whole"][runs["whole"]["t"] >= 0.1 - 1e-9].reset_index(drop=True)
+    late_run = runs["late"]
+    assert len(late_run) == len(whole) == 101
+    torques = [c for c in whole.columns if c.endswith("_torque")]
+    np.testing.assert_allclose(late_run[torques].to_numpy(), whole[torques].to_numpy(), rtol=1e-9, atol=1e-9)
+    result = invoke("inverse", "--model", "leg3", "--motion", short_motion, "--loads", late_loads)
+    assert_one_line_error(result, "the loads cover 0.1 to 0.2 s", "not all of 0 to 0.2 s")
