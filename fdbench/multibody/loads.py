@@ -7,9 +7,10 @@ sampled at the data's times and interpolated linearly between them. The file is 
 ExternalLoads (``--loads FILE.xml``): per ExternalForce the body it is applied to, the bodies its
 force and point are expressed in, and the column prefixes of its force (``<id>x``, ``<id>y``), point
 and torque in the storage file (.mot, .sto) its ``datafile`` names (a path relative to the XML
-file); as in OpenSim, a force without a point acts at the origin of the body it is applied to. A model is planar (x, y): the force's and point's z and the torque's x and y do no work on
-its coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn)
-is found as the host's named frame (``Model.frames``).
+file); as in OpenSim, a force without a point acts at the origin of the body it is applied to.
+A model is planar (x, y): the force's and point's z and the torque's x and y do no work on its
+coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn) is
+found as the host's named frame (``Model.frames``).
 
 How a load enters the equations: its generalised force on the coordinates z is
 Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F + M ] on m's angle
