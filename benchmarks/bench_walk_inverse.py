@@ -115,7 +115,8 @@ def rms(values, axis=0):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawTextHelpFormatter)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawTextHelpFormatter)
     parser.add_argument("--data", type=Path, default=DATA, help=f"folder of the walk's files (default {DATA})")
     parser.add_argument("--cutoff", type=float, default=6.0, help="cutoff (Hz) of both estimates (default 6)")
     args = parser.parse_args(argv)
@@ -156,8 +157,8 @@ def main(argv=None) -> int:
 
     print(f"fdbench {__import__('fdbench').__version__}: the walk's inverse dynamics, fdbench's estimate against "
           f"OpenSim's InverseDynamicsTool, {len(t)} samples at {rate:.0f} Hz, cutoff {args.cutoff:g} Hz")
-    print(f"filters' -3 dB points: fdbench {args.cutoff:.2f} Hz (corrected), OpenSim "
-          f"{opensim_minus_3db_hz(args.cutoff, rate):.2f} Hz (3rd order twice, uncorrected: -6 dB at {args.cutoff:g} Hz)")
+    print(f"filters' -3 dB points: fdbench {args.cutoff:.2f} Hz (corrected), OpenSim {matched_hz:.2f} Hz "
+          f"(3rd order twice, uncorrected: -6 dB at {args.cutoff:g} Hz)")
     header = (f"{'coordinate':18s} {'unit':4s} {'RMS OpenSim':>11s} {'RMS diff':>9s} {'rel %':>6s} {'inner diff':>10s} "
               f"{'rel %':>6s} {'RMS acc diff':>13s} {'same kin. rel':>13s} {f'rel % {matched_hz:.2f} Hz':>14s}")
     print(header)

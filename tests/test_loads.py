@@ -246,7 +246,8 @@ def test_under_inverse_dynamics_torques_with_loads_the_simulation_keeps_the_moti
     loads = [ExternalLoad(f"l{k}", str(rng.choice(names)), str(rng.choice(names + [GROUND])),
                           str(rng.choice(names + [GROUND]))) for k in range(2)]
     t = np.array([0.0, 0.4, 1.0])
-    force, point, moment = rng.uniform(-40, 40, (3, 2, 2)), rng.uniform(-0.4, 0.4, (3, 2, 2)), rng.uniform(-4, 4, (3, 2))
+    force, point = rng.uniform(-40, 40, (3, 2, 2)), rng.uniform(-0.4, 0.4, (3, 2, 2))
+    moment = rng.uniform(-4, 4, (3, 2))
     data = ExternalLoads(tuple(loads), t, force, point, moment)
     J = Engine(model).n_joints
     z, zd, zdd = rng.uniform(-1.0, 0.15, J), rng.uniform(-2, 2, J), rng.uniform(-10, 10, J)
@@ -305,5 +306,5 @@ def test_a_missing_column_an_unknown_body_and_a_data_file_outside_the_motion_are
     with pytest.raises(BadFile, match=r"no column 'b_py'"):
         read_external_loads(write_loads(tmp_path, columns=COLUMNS[:13] + ("b_pz", "extra")), model)
     with pytest.raises(BadFile, match=r"applied_to_body.*'calf'.*(shank|thigh|foot)"):
-        read_external_loads(write_loads(tmp_path, xml=FORCES.replace("<applied_to_body>shank", "<applied_to_body>calf")),
-                            model)
+        xml = FORCES.replace("<applied_to_body>shank", "<applied_to_body>calf")
+        read_external_loads(write_loads(tmp_path, xml=xml), model)

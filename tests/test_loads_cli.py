@@ -31,7 +31,8 @@ runner = CliRunner()
 def loads_xml(body: str = "shank", point_frame: str = "ground", datafile: str | None = "push.mot") -> str:
     """OpenSim's ExternalLoads with one force on ``body``, its columns f_v*, f_p*, f_t*."""
     data = "" if datafile is None else f"<datafile>{datafile}</datafile>"
-    return ('<?xml version="1.0" encoding="UTF-8" ?>\n<OpenSimDocument Version="30000"><ExternalLoads name="l"><objects>'
+    return ('<?xml version="1.0" encoding="UTF-8" ?>\n'
+            '<OpenSimDocument Version="30000"><ExternalLoads name="l"><objects>'
             f'<ExternalForce name="push"><applied_to_body>{body}</applied_to_body>'
             "<force_expressed_in_body>ground</force_expressed_in_body>"
             f"<point_expressed_in_body>{point_frame}</point_expressed_in_body><force_identifier>f_v</force_identifier>"
@@ -63,8 +64,8 @@ BAD = {  # case: (how the folder is set up -> the --loads argument, words of the
     "not XML": (lambda f: write(f, xml="loads, but no XML <<"), ("--loads", "is not an XML file")),
     "no ExternalLoads": (lambda f: write(f, xml="<OpenSimDocument><Model/></OpenSimDocument>"),
                          ("--loads", "no <ExternalLoads>")),
-    "no ExternalForce": (lambda f: write(f, xml="<ExternalLoads><objects/><datafile>push.mot</datafile></ExternalLoads>"),
-                         ("--loads", "no enabled <ExternalForce>")),
+    "no ExternalForce": (lambda f: write(f, xml="<ExternalLoads><objects/><datafile>push.mot</datafile>"
+                                              "</ExternalLoads>"), ("--loads", "no enabled <ExternalForce>")),
     "no datafile": (lambda f: write(f, xml=loads_xml(datafile=None)), ("--loads", "names no <datafile>")),
     "datafile missing": (lambda f: write(f, xml=loads_xml(datafile="gone.mot")),
                          ("--loads", "<datafile> of push.xml", "gone.mot does not exist")),
@@ -172,7 +173,7 @@ def test_a_run_whose_loads_changed_since_it_was_specified_is_refused(tmp_path, s
     spec = RunSpec(command="control", kinematics=str(short_motion), model_name="leg3", loads=str(loads), inputs=inputs)
     original = (tmp_path / "push.mot").read_text()
     (tmp_path / "push.mot").write_text(storage(value="3.25"))
-    with pytest.raises(BadFile, match=r"--loads: .*push.xml \(or its data file\) has changed since this run was specified"):
+    with pytest.raises(BadFile, match=r"--loads: .*push.xml \(or its data file\) has changed since this run was"):
         runs.check(spec)
     (tmp_path / "push.mot").write_text(original)
     runs.check(spec)  # the files as specified again

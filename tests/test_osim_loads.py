@@ -105,9 +105,10 @@ def opensim_forces(frame: pd.DataFrame, in_frames: Path) -> list[np.ndarray]:
     """OpenSim's generalised forces (n, J) (N m, N) at the kinematics of an inverse-dynamics CSV,
     with the walk's loads, with them in body frames and without loads, in one child process."""
     names = coordinates_of(frame)
-    request = {"model": str(DATA / "subject01.osim"), "loads": [str(DATA / "subject01_walk_grf.xml"), str(in_frames), ""],
-               "coordinates": names, "t": frame["t"].tolist(),
-               **{key: in_si(frame, names, suffix).tolist() for key, suffix in (("z", ""), ("zd", "_vel"), ("zdd", "_acc"))}}
+    request = {"model": str(DATA / "subject01.osim"), "coordinates": names, "t": frame["t"].tolist(),
+               "loads": [str(DATA / "subject01_walk_grf.xml"), str(in_frames), ""],
+               **{key: in_si(frame, names, suffix).tolist()
+                  for key, suffix in (("z", ""), ("zd", "_vel"), ("zdd", "_acc"))}}
     done = subprocess.run([sys.executable, "-c", OPENSIM_ID_WITH_LOADS], input=json.dumps(request), capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
