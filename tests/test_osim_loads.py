@@ -136,8 +136,9 @@ def rms(values) -> np.ndarray:
 
 def test_the_walk_s_generalised_forces_with_its_ground_reactions_are_opensim_s(walk):
     """Every coordinate, the pelvis' three residuals included, within 1% RMS of OpenSim's (measured:
-    under 1e-4; what is left is the ground reactions' interpolation between the 600 Hz samples at
-    the motion's rounded times)."""
+    under 1e-4 relative; what is left is the ground reactions' interpolation: their file rounds its
+    times to 0.1 ms, so the motion's 60 Hz times fall between samples, where OpenSim interpolates by
+    splines and fdbench linearly)."""
     frame, theirs = walk["frame"], walk["opensim"]
     names = coordinates_of(frame)
     ours = frame[[name + "_torque" for name in names]].to_numpy()
