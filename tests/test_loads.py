@@ -301,7 +301,7 @@ def test_loads_need_increasing_times(t, problem):
         ExternalLoads((ExternalLoad("f", "b"),), t, np.zeros((n, 1, 2)), np.zeros((n, 1, 2)), np.zeros((n, 1)))
 
 
-def test_a_missing_column_an_unknown_body_and_a_data_file_outside_the_motion_are_refused_in_one_line(tmp_path):
+def test_a_missing_column_and_an_unknown_body_are_refused_in_one_line(tmp_path):
     model = leg()
     with pytest.raises(BadFile, match=r"no column 'b_py'"):
         read_external_loads(write_loads(tmp_path, columns=COLUMNS[:13] + ("b_pz", "extra")), model)
