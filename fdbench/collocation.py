@@ -1,23 +1,41 @@
 """Direct-collocation tracking of any model (as OpenSim Moco, bioptim and Drake transcribe it), solved by
-IPOPT through CasADi, on the model's minimal equations z'' = M(z)^-1 (tau - h(z, z'))
-(``fdbench.multibody.symbolic``, the limit of the penalty formulation).
+IPOPT through CasADi, with implicit dynamics: the unknowns are the coordinates z (rad; m on a
+translation), their rates z' and accelerations z'' at the transcription's points, and the generalised
+forces are their inverse dynamics tau = ID(z, z', z'') - Q_loads(z, t) (``fdbench.multibody.symbolic``,
+the limit of the penalty formulation; no symbolic M^-1), as Moco's implicit mode does.
 
-The unknowns are the joint angles z (rad), their rates z' (rad/s) and the joint torques tau (N m) at
-the N + 1 nodes t_k = k h, h = T / N (Hermite-Simpson adds the torques at the N interval midpoints),
-2J states and J torques per node. The defect constraints discretise the equation of motion:
+The points are the N + 1 nodes t_k = k h, h = T / N, and for Hermite-Simpson the N interval midpoints
+(2N + 1 points, 3J unknowns each). The defect constraints are linear in the unknowns:
 
-- ``trapezoidal``: x_{k+1} - x_k - h/2 (f_k + f_{k+1}) = 0; the torque is piecewise linear.
-- ``hermite-simpson`` (separated midpoint states written out in compressed form):
-  x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1}),  x_{k+1} - x_k - h/6 (f_k + 4 f_m + f_{k+1}) = 0;
-  the torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
+- ``trapezoidal``: x_{k+1} - x_k - h/2 (f_k + f_{k+1}) = 0 for x = [z, z'], f = [z', z''];
+  the torque is piecewise linear.
+- ``hermite-simpson`` in separated form: x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1}),
+  x_{k+1} - x_k - h/6 (f_k + 4 f_m + f_{k+1}) = 0, and z''_m = (z''_k + z''_{k+1})/2: the
+  acceleration is piecewise linear, as Moco interpolates controls at the midpoints. Without that
+  last constraint z'' = +A at every node and -A/2 at every midpoint leaves z, z' at all points
+  unchanged, and a residual penalty would pay joint torques to zig-zag the base's forces at the
+  points; with it, z is a cubic spline through the points (the forearm's replay error: 4e-5 deg
+  instead of 1.5e-4). The torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
 
-The objective is the integral over the motion's span of the squared joint-angle errors in degrees^2,
-summed over the joints, plus ``regularization`` times the integral of |tau|^2 (N^2 m^2 s), by the
-scheme's own quadrature (trapezoid or Simpson). The initial state is fixed to the desired motion's at
-t = 0; the final state is free; the initial guess is the desired motion and the model's
-inverse-dynamics torques. A motion is anything with ``duration`` (s) and ``motion(t) -> (z, z', z'')``
-(rad, rad/s, rad/s^2), each of shape t.shape + (J,). ``casadi`` is imported only when the
-transcription is built.
+The objective is the integral over the motion's span, by the scheme's quadrature (Simpson or
+trapezoid), of sum_j tracking_j (z_j - z_dj)^2 + effort_j tau_j^2 (``objective_weights``): errors of
+angles in deg and of translations in cm (1 cm counts as 1 deg, as eq. 18 does), ``regularization``
+times the squared torques (N m; N on a translation), and on a floating base (``Model.floating_base``)
+its residuals, the force FX, FY (N) and moment MZ (N m) weighted by ``residual_force_weight`` and
+``residual_moment_weight`` (``residual_weights``: 1e-3 deg^2/N^2 and deg^2/(N m)^2 with external
+loads, the regularization without them). Every term depends on one point's unknowns only, so the
+Hessian of the Lagrangian is block diagonal (3J x 3J per point); the integrand is one SX Function
+mapped over the points of an MX graph, built in a second for the 10-coordinate gait model.
+
+External loads (``multibody.loads.ExternalLoads``) enter symbolically in z: the loads' force, point
+and free moment at each point's time are parameters of the actuation Function, and their generalised
+force J_P(z)^T F + J_phi(z)^T M is that of the body's material point at P in the point's own
+configuration, as the engine applies them (``symbolic.MinimalDynamics.actuation``).
+
+The initial state is fixed to the desired motion's at t = 0; the final state is free; the initial
+guess is the desired motion (z, z', z''). A motion is anything with ``duration`` (s) and
+``motion(t) -> (z, z', z'')`` (rad, rad/s, rad/s^2), each of shape t.shape + (J,). ``casadi`` is
+imported only when the transcription is built.
 """
 
 from __future__ import annotations
@@ -33,7 +51,10 @@ SCHEMES = ("hermite-simpson", "trapezoidal")
 DEFAULT_NODES = 100
 MIN_NODES, MAX_NODES = 2, 10_000
 DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as much as 0.001 deg of error
-DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY: 1 N of residual costs as much as 0.03 deg of error
+# A floating base's residuals with external loads: 1 N (1 N m) of residual costs as much as 0.03 deg of error.
+# On the recorded walk with its ground reactions this halves the force residual's RMS for 0.04 deg of tracking
+# error (README, "A recorded walk"); without loads the residuals carry the body's weight and get the regularization.
+DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY
 DEFAULT_RESIDUAL_MOMENT_WEIGHT = 1e-3  # deg^2 / (N m)^2 on MZ
 DEFAULT_MAX_ITER = 1000
 DEFAULT_MAX_TIME = 60.0  # s of IPOPT CPU time
@@ -50,9 +71,10 @@ CM2 = 100.0**2  # cm^2 per m^2
 
 
 def check_options(nodes: int, scheme: str, regularization: float, max_iter: int = DEFAULT_MAX_ITER,
-                  max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float = DEFAULT_RESIDUAL_FORCE_WEIGHT,
-                  residual_moment_weight: float = DEFAULT_RESIDUAL_MOMENT_WEIGHT) -> None:
-    """Raise ValueError with a one-line message naming the option for anything out of range."""
+                  max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
+                  residual_moment_weight: float | None = None) -> None:
+    """Raise ValueError with a one-line message naming the option for anything out of range (a
+    residual weight may be None: its default)."""
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not MIN_NODES <= nodes <= MAX_NODES:
         raise ValueError(f"--nodes must be an integer in [{MIN_NODES}, {MAX_NODES}], got {nodes}")
     if scheme not in SCHEMES:
@@ -61,6 +83,8 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
         raise ValueError("--scheme: " + unknown_name_message("scheme", scheme, list(SCHEMES)))
     for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
                           ("--residual-moment-weight", residual_moment_weight)):
+        if value is None and option != "--regularization":
+            continue
         if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
             raise ValueError(f"{option} must be a non-negative finite number, got {value}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
@@ -81,12 +105,13 @@ class CollocationResult:
     velocities: np.ndarray  # rad/s
     torque: np.ndarray  # N m
     torque_mid: np.ndarray | None  # N m, at the interval midpoints
-    objective: float  # deg^2 s (+ regularisation)
+    objective: float  # deg^2 s (1 cm counting as 1 deg; + the torque and residual terms)
     ipopt_status: str  # IPOPT's return status, e.g. Solve_Succeeded
     iterations: int
     solve_time_s: float  # wall time of IPOPT's solve (the transcription excluded)
     build_time_s: float  # wall time of the transcription
     accelerations: np.ndarray | None = None  # rad/s^2 (m/s^2 on a translation), the nodes' z''
+    residual_weights: tuple | None = None  # a floating base's (force deg^2/N^2, moment deg^2/(N m)^2)
 
     @property
     def theta(self) -> np.ndarray:
@@ -138,8 +163,17 @@ class CollocationResult:
         return np.asarray(self.torque_function()(t), dtype=float)
 
 
-def objective_weights(model, regularization: float, residual_force_weight: float = DEFAULT_RESIDUAL_FORCE_WEIGHT,
-                      residual_moment_weight: float = DEFAULT_RESIDUAL_MOMENT_WEIGHT):
+def residual_weights(regularization: float, residual_force_weight: float | None, residual_moment_weight: float | None,
+                     loads) -> tuple[float, float]:
+    """The weights of a floating base's residual force (deg^2/N^2) and moment (deg^2/(N m)^2): those
+    given, else the defaults with external loads and the ``regularization`` without them."""
+    force, moment = (DEFAULT_RESIDUAL_FORCE_WEIGHT, DEFAULT_RESIDUAL_MOMENT_WEIGHT) if loads is not None else (
+        regularization, regularization)
+    return (force if residual_force_weight is None else float(residual_force_weight),
+            moment if residual_moment_weight is None else float(residual_moment_weight))
+
+
+def objective_weights(model, regularization: float, residual_force_weight: float, residual_moment_weight: float):
     """(tracking (J,), effort (J,)): the objective's weights of each coordinate's squared error,
     deg^2/rad^2 on an angle and cm^2/m^2 on a translation (1 cm counts as 1 deg, as eq. 18 does),
     and of its squared generalised force: ``regularization`` on every actuated coordinate (deg^2
@@ -290,11 +324,12 @@ def desired_samples(model, motion, t: np.ndarray):
 
 def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
               regularization: float = DEFAULT_REGULARIZATION, max_iter: int = DEFAULT_MAX_ITER,
-              max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float = DEFAULT_RESIDUAL_FORCE_WEIGHT,
-              residual_moment_weight: float = DEFAULT_RESIDUAL_MOMENT_WEIGHT, loads=None) -> CollocationResult:
+              max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
+              residual_moment_weight: float | None = None, loads=None) -> CollocationResult:
     """Transcribe and solve the tracking problem of ``motion`` with ``model`` on ``nodes`` intervals
     over the motion's span: node arrays of shape (N + 1, J) in the model's coordinate order.
-    ``loads``: external loads (``multibody.loads.ExternalLoads`` on the motion's clock) or None.
+    ``loads``: external loads (``multibody.loads.ExternalLoads`` on the motion's clock) or None;
+    the residual weights of a floating base: ``residual_weights`` (None: the default).
     ValueError (one line) for options out of range or a motion of other joints; never raises on a
     solver failure: IPOPT's status says what happened."""
     from .multibody.symbolic import MinimalDynamics, load_parameters
@@ -304,8 +339,11 @@ def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-
     t = point_times(motion.duration, nodes, scheme)
     track = Track(t, *desired_samples(model, motion, t), loads=load_parameters(loads, t))
     actuation = MinimalDynamics(model).actuation(() if loads is None else loads.loads)
-    tracking, effort = objective_weights(model, regularization, residual_force_weight, residual_moment_weight)
-    return transcribe(actuation, track, tracking, effort, scheme, max_iter, max_time, began)
+    weights = residual_weights(regularization, residual_force_weight, residual_moment_weight, loads)
+    tracking, effort = objective_weights(model, regularization, *weights)
+    solution = transcribe(actuation, track, tracking, effort, scheme, max_iter, max_time, began)
+    solution.residual_weights = weights if model.floating_base is not None else None
+    return solution
 
 
 def own_rmse(model, solution: CollocationResult, truth) -> dict:
@@ -321,18 +359,18 @@ def own_rmse(model, solution: CollocationResult, truth) -> dict:
     return fields
 
 
-def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str, model=None) -> dict:
+def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str) -> dict:
     """The fields a collocate run adds to the record of its replay: the options (the residual
-    weights for a model with a floating base), the collocation's own RMSE at its nodes (``own_rmse``),
+    weights used for a model with a floating base), the collocation's own RMSE at its nodes (``own_rmse``),
     IPOPT's status, iterations, the transcription's build time and the solve time (s); status
     'collocation_failed' when IPOPT did not solve the problem."""
     fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],
                   regularization=options["regularization"], **own, ipopt_status=solution.ipopt_status,
                   ipopt_iterations=solution.iterations, build_time_s=solution.build_time_s,
                   solve_time_s=solution.solve_time_s)
-    if model is not None and model.floating_base is not None:
-        fields.update(residual_force_weight=options.get("residual_force_weight", DEFAULT_RESIDUAL_FORCE_WEIGHT),
-                      residual_moment_weight=options.get("residual_moment_weight", DEFAULT_RESIDUAL_MOMENT_WEIGHT))
+    if solution.residual_weights is not None:
+        fields.update(residual_force_weight=solution.residual_weights[0],
+                      residual_moment_weight=solution.residual_weights[1])
     if not solution.success:
         fields.update(status="collocation_failed",
                       message=f"{solution.message}; the replay of its last iterate: {replay_message}")

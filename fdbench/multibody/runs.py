@@ -479,6 +479,6 @@ def _collocate(spec):
     runtime = time.perf_counter() - began
     record = base_record(spec)
     outcome = _outcome(spec, record, result, inverse, extra={"collocation": solution})
-    record.update(runtime_s=runtime, **record_fields(solution, options, own_rmse(nominal(spec), solution, truth),
-                                                     record["message"], nominal(spec)))
+    own = own_rmse(nominal(spec), solution, truth)
+    record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
     return outcome

@@ -1,5 +1,5 @@
 """The minimal-coordinate equations of motion of any model description, written once as CasADi
-expressions: M(z) z'' + h(z, z') = tau for the joint angles z (rad), J of them.
+expressions: M(z) z'' + h(z, z') = tau for the coordinates z (rad; m on a translation), J of them.
 
 How they are built (one definition, from the description only):
 
@@ -14,6 +14,11 @@ How they are built (one definition, from the description only):
 * Inverse dynamics by the principle of virtual work (Kane's equations): tau = sum_b J_b^T m_b (a_b - g)
   + I_b alpha_b (over the joints on b's path) - sum_loads J_L^T F_L, J = dr/dz by CasADi's
   ``jacobian``. Then M = d tau / d z'' (exact) and h = tau(z, z', 0).
+* External loads from data (``loads.ExternalLoads``): their generalised force
+  Q = J_o^T F + J_phi^T ((P - o) x F + M) on a body of origin o and angle phi, with the force F,
+  point P and free moment M of each load as parameters (in the load's frames, turned into ground's
+  symbolically), so that ``actuation`` tau = ID(z, z', z'') - Q(z, p) is the collocation's
+  implicit dynamics.
 * Forward dynamics z'' = M^-1 (tau - h) by a symbolic L D L^T solve (no explicit inverse; M is
   symmetric positive definite for positive masses and inertias, so no pivoting is needed; CasADi's
   own ``solve`` on SX forms the inverse by minors up to 3 x 3).
@@ -24,13 +29,13 @@ How they are built (one definition, from the description only):
   the forward solve is not needed.
 
 The expressions are SX (scalar graphs, fast to evaluate for small J), their common subexpressions
-eliminated (``casadi.cse``), and wrapped in CasADi Functions built once per model
-(``functools.lru_cache`` on the frozen ``Model``). Numeric calls
-take numpy arrays of shape (J,) or (k, J) (one state or k of them, by ``Function.map``) and return
-numpy arrays of the matching shape. The collocation's transcription works on SX matrices of shape
-(k, J), one node per row: ``forward_rows`` maps the forward Function over the rows (the map of an
-SX Function called on SX arguments is expanded into the transcription's graph, as hand-written
-expressions would be). ``casadi`` is imported only when a function here is called.
+eliminated (``casadi.cse``), and wrapped in CasADi Functions, each built on its first use and then
+kept (``functools.lru_cache`` on the frozen ``Model``): a caller pays only for what it needs (the
+collocation needs the inverse dynamics alone; the symbolic solve of M behind ``forward`` and the
+linearisation costs most for many coordinates). ``MinimalDynamics.build`` builds some ahead of a
+timing. Numeric calls take numpy arrays of shape (J,) or (k, J) (one state or k of them, by
+``Function.map``) and return numpy arrays of the matching shape. ``casadi`` is imported only when a
+function here is called.
 """
 
 from __future__ import annotations
