@@ -346,22 +346,32 @@ def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-
     return solution
 
 
-def own_rmse(model, solution: CollocationResult, truth) -> dict:
-    """The collocation's own RMSE at its nodes against the true motion ``truth`` (``truth(t)``
+def own_fields(model, solution: CollocationResult, truth) -> dict:
+    """The collocation's own indicators at its nodes against the true motion ``truth`` (``truth(t)``
     -> (z, ...)), angles and translations apart: ``collocation_rmse_rot_deg`` (deg) and, for a
-    model with translations, ``collocation_rmse_trans_cm`` (cm)."""
+    model with translations, ``collocation_rmse_trans_cm`` (cm); for a floating base the RMS of its
+    residuals at the nodes, ``collocation_residual_force_rms_n`` (|(FX, FY)|, N) and
+    ``collocation_residual_moment_rms_nm`` (MZ, N m), over the whole motion even where the replay
+    stops early."""
     error = solution.angles - np.asarray(truth(solution.t)[0], dtype=float).reshape(solution.angles.shape)
     translation = np.array([kind == "translation" for kind in model.coordinate_kinds])
     fields = {"collocation_rmse_rot_deg": float(np.degrees(np.sqrt(np.mean(error[:, ~translation] ** 2))))
               if (~translation).any() else math.nan}
     if translation.any():
         fields["collocation_rmse_trans_cm"] = float(100 * np.sqrt(np.mean(error[:, translation] ** 2)))
+    base = model.floating_base
+    if base is not None:
+        c = model.coordinates.index(base.coordinate_names[0])
+        moment, fx, fy = solution.torque[:, c:c + 3].T
+        fields.update(collocation_residual_force_rms_n=float(np.sqrt(np.mean(fx**2 + fy**2))),
+                      collocation_residual_moment_rms_nm=float(np.sqrt(np.mean(moment**2))))
     return fields
 
 
 def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str) -> dict:
     """The fields a collocate run adds to the record of its replay: the options (the residual
-    weights used for a model with a floating base), the collocation's own RMSE at its nodes (``own_rmse``),
+    weights used for a model with a floating base), the collocation's own indicators at its nodes
+    (``own_fields``),
     IPOPT's status, iterations, the transcription's build time and the solve time (s); status
     'collocation_failed' when IPOPT did not solve the problem."""
     fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],

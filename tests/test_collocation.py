@@ -319,7 +319,7 @@ def test_a_floating_base_models_collocation_obeys_the_independent_reference(hopp
     the regularization (1e-6 on the base's forces too without loads)."""
     import reference_dynamics as ref
 
-    from fdbench.collocation import own_rmse
+    from fdbench.collocation import own_fields
 
     motion = Sway()
     sol = collocate(hopper, motion, nodes=20)
@@ -332,7 +332,7 @@ def test_a_floating_base_models_collocation_obeys_the_independent_reference(hopp
     h, z, w, a = sol.t[1] - sol.t[0], sol.angles, sol.velocities, sol.accelerations
     np.testing.assert_allclose(w[1:] - w[:-1], h / 2 * (a[:-1] + a[1:]), atol=1e-9)
     np.testing.assert_allclose(z[1:] - z[:-1], h * w[:-1] + h**2 / 6 * (2 * a[:-1] + a[1:]), atol=1e-10)
-    fields = own_rmse(hopper, sol, motion)
+    fields = own_fields(hopper, sol, motion)
     assert fields["collocation_rmse_rot_deg"] < 0.02 and fields["collocation_rmse_trans_cm"] < 0.2
     assert sol.residual_weights == (1e-6, 1e-6)  # without loads: the regularization
 
@@ -379,7 +379,7 @@ def test_a_larger_residual_weight_never_raises_the_residuals(hopper):
     """The loads carry 90% of the hopper's weight: the residuals cannot vanish without tracking error.
     Raising the residual weights lowers the residuals' integrals and raises the tracking error (the
     optimum of a weighted sum moves monotonically along the trade-off)."""
-    from fdbench.collocation import own_rmse
+    from fdbench.collocation import own_fields
 
     loads, motion = hopper_loads(hopper), Sway()
     found = []
@@ -387,10 +387,31 @@ def test_a_larger_residual_weight_never_raises_the_residuals(hopper):
         sol = collocate(hopper, motion, nodes=20, loads=loads, residual_force_weight=weight,
                         residual_moment_weight=weight)
         assert sol.success and sol.residual_weights == (weight, weight), sol.message
-        error = own_rmse(hopper, sol, motion)
+        error = own_fields(hopper, sol, motion)
         found.append((*residual_integrals(hopper, sol), error["collocation_rmse_rot_deg"]
                       + error["collocation_rmse_trans_cm"]))
     forces, moments, errors = np.array(found).T
     assert np.all(np.diff(forces) < 0) and np.all(np.diff(moments) <= 1e-9 * moments[0])
     assert np.all(np.diff(errors) > 0)
     assert forces[-1] < 0.5 * forces[0]  # the weight matters
+
+
+def test_collocate_records_a_floating_bases_units_apart_and_its_residual_weights(hopper, tmp_path):
+    """A model file with a free base and a motion file on the command line: the collocation's own
+    RMSE of angles (deg) and translations (cm) apart, its residuals' RMS, and the residual weights
+    used (the regularization without loads; the option when given)."""
+    model, motion = tmp_path / "hopper.toml", tmp_path / "sway.csv"
+    model.write_text(HOPPER)
+    t = np.linspace(0.0, 0.5, 51)
+    z = Sway()(t)[0]
+    columns = np.column_stack([t, np.degrees(z[:, 0]), z[:, 1], z[:, 2], np.degrees(z[:, 3:])])
+    np.savetxt(motion, columns, delimiter=",", header="t," + ",".join(hopper.coordinates), comments="")
+    base = ["collocate", "--model", model, "--motion", motion, "--nodes", 20, "-f", "json", "--quiet"]
+    record = json.loads(invoke(base).stdout)
+    assert record["ipopt_status"] == "Solve_Succeeded"
+    assert record["collocation_rmse_rot_deg"] < 0.1 and record["collocation_rmse_trans_cm"] < 0.5
+    assert record["residual_force_weight"] == record["residual_moment_weight"] == record["regularization"] == 1e-6
+    assert record["collocation_residual_force_rms_n"] > 0.9 * hopper.total_mass * 9.80665  # the base carries the body
+    weighted = json.loads(invoke(base + ["--residual-force-weight", 0.01]).stdout)
+    assert weighted["residual_force_weight"] == 0.01 and weighted["residual_moment_weight"] == 1e-6
+    assert weighted["spec_hash"] != record["spec_hash"]

@@ -464,7 +464,7 @@ def _collocate(spec):
     the replay's; the collocation's own RMSE at its nodes (against the true motion), IPOPT's status,
     iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
     arrays of shape (N + 1, J))."""
-    from ..collocation import collocate, own_rmse, record_fields
+    from ..collocation import collocate, own_fields, record_fields
     from ..experiment import base_record
 
     options = dict(spec.method_options)
@@ -479,6 +479,6 @@ def _collocate(spec):
     runtime = time.perf_counter() - began
     record = base_record(spec)
     outcome = _outcome(spec, record, result, inverse, extra={"collocation": solution})
-    own = own_rmse(nominal(spec), solution, truth)
+    own = own_fields(nominal(spec), solution, truth)
     record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
     return outcome
