@@ -53,9 +53,9 @@ MIN_NODES, MAX_NODES = 2, 10_000
 DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as much as 0.001 deg of error
 # A floating base's residuals with external loads: 1 N (1 N m) of residual costs as much as 0.03 deg of error.
 # On the recorded walk (subject01, its ground reactions, 100 intervals) the residuals' RMS at the nodes fall from
-# 16 N and 12 N m (weights 1e-5) to 8.6 N and 9.5 N m for 0.04 deg and 0.13 cm of tracking error (1e-2: 6.6 N,
-# 5.8 N m for 0.13 deg, 0.37 cm, twice the solve time). Without loads the residuals carry the body's weight and get
-# the regularization.
+# 21 N and 13 N m (weights 1e-6, the regularization) to 8.6 N and 9.5 N m for 0.04 deg and 0.13 cm of tracking
+# error (1e-2: 6.6 N, 5.8 N m for 0.13 deg, 0.37 cm, twice the solve time). Without loads the residuals carry the
+# body's weight and get the regularization.
 DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY
 DEFAULT_RESIDUAL_MOMENT_WEIGHT = 1e-3  # deg^2 / (N m)^2 on MZ
 DEFAULT_MAX_ITER = 1000
