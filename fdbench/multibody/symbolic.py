@@ -200,7 +200,9 @@ def _build_bias(ca, model):
     return ca.Function("bias", [z, zd], [_mass_matrix_and_bias(model)[1]])
 
 
+@functools.lru_cache(maxsize=64)
 def _forward_expression(ca, model):
+    """z'' = M^-1 (tau - h), an SX expression of ``_equations``' symbols (z, z', tau)."""
     z, zd, zdd, tau, _ = _equations(model)
     M, h = _mass_matrix_and_bias(model)
     return ca.cse(_solve_spd(ca, M, tau - h))
@@ -374,16 +376,6 @@ class MinimalDynamics:
         (``loads.ExternalLoad`` of ``ExternalLoads.loads``) of parameters p (``load_parameters``),
         tau = ID(z, z', z'') - J_P(z)^T F - J_phi(z)^T M, as ``Engine.inverse_dynamics`` with loads."""
         return _actuation(self.model, tuple(loads))
-
-    def load_forces(self, loads, z, t) -> np.ndarray:
-        """The generalised forces (k, J) of ``loads`` (``ExternalLoads``) at states z (k, J) and times
-        t (s, (k,)): N m on angles, N on translations (symbolic, for checks against the engine)."""
-        z = np.atleast_2d(np.asarray(z, dtype=float))
-        zero = np.zeros_like(z)
-        actuation = self.actuation(loads.loads).map(len(z))
-        with_loads = actuation(z.T, zero.T, zero.T, load_parameters(loads, t).T)
-        without = actuation(z.T, zero.T, zero.T, np.zeros((LOAD_PARAMETERS * len(loads.loads), len(z))))
-        return np.array(without - with_loads).T
 
     def riccati_rate(self, z, zd, zdd, p, q, r_inv) -> np.ndarray:
         """The Riccati right-hand side P' flattened row-wise (4 J^2,) about the desired z, z', z''
