@@ -1,23 +1,41 @@
 """Direct-collocation tracking of any model (as OpenSim Moco, bioptim and Drake transcribe it), solved by
-IPOPT through CasADi, on the model's minimal equations z'' = M(z)^-1 (tau - h(z, z'))
-(``fdbench.multibody.symbolic``, the limit of the penalty formulation).
+IPOPT through CasADi, with implicit dynamics: the unknowns are the coordinates z (rad; m on a
+translation), their rates z' and accelerations z'' at the transcription's points, and the generalised
+forces are their inverse dynamics tau = ID(z, z', z'') - Q_loads(z, t) (``fdbench.multibody.symbolic``,
+the limit of the penalty formulation; no symbolic M^-1), as Moco's implicit mode does.
 
-The unknowns are the joint angles z (rad), their rates z' (rad/s) and the joint torques tau (N m) at
-the N + 1 nodes t_k = k h, h = T / N (Hermite-Simpson adds the torques at the N interval midpoints),
-2J states and J torques per node. The defect constraints discretise the equation of motion:
+The points are the N + 1 nodes t_k = k h, h = T / N, and for Hermite-Simpson the N interval midpoints
+(2N + 1 points, 3J unknowns each). The defect constraints are linear in the unknowns:
 
-- ``trapezoidal``: x_{k+1} - x_k - h/2 (f_k + f_{k+1}) = 0; the torque is piecewise linear.
-- ``hermite-simpson`` (separated midpoint states written out in compressed form):
-  x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1}),  x_{k+1} - x_k - h/6 (f_k + 4 f_m + f_{k+1}) = 0;
-  the torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
+- ``trapezoidal``: x_{k+1} - x_k - h/2 (f_k + f_{k+1}) = 0 for x = [z, z'], f = [z', z''];
+  the torque is piecewise linear.
+- ``hermite-simpson`` in separated form: x_m = (x_k + x_{k+1})/2 + h/8 (f_k - f_{k+1}),
+  x_{k+1} - x_k - h/6 (f_k + 4 f_m + f_{k+1}) = 0, and z''_m = (z''_k + z''_{k+1})/2: the
+  acceleration is piecewise linear, as Moco interpolates controls at the midpoints. Without that
+  last constraint z'' = +A at every node and -A/2 at every midpoint leaves z, z' at all points
+  unchanged, and a residual penalty would pay joint torques to zig-zag the base's forces at the
+  points; with it, z is a cubic spline through the points (the forearm's replay error: 4e-5 deg
+  instead of 1.5e-4). The torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
 
-The objective is the integral over the motion's span of the squared joint-angle errors in degrees^2,
-summed over the joints, plus ``regularization`` times the integral of |tau|^2 (N^2 m^2 s), by the
-scheme's own quadrature (trapezoid or Simpson). The initial state is fixed to the desired motion's at
-t = 0; the final state is free; the initial guess is the desired motion and the model's
-inverse-dynamics torques. A motion is anything with ``duration`` (s) and ``motion(t) -> (z, z', z'')``
-(rad, rad/s, rad/s^2), each of shape t.shape + (J,). ``casadi`` is imported only when the
-transcription is built.
+The objective is the integral over the motion's span, by the scheme's quadrature (Simpson or
+trapezoid), of sum_j tracking_j (z_j - z_dj)^2 + effort_j tau_j^2 (``objective_weights``): errors of
+angles in deg and of translations in cm (1 cm counts as 1 deg, as eq. 18 does), ``regularization``
+times the squared torques (N m; N on a translation), and on a floating base (``Model.floating_base``)
+its residuals, the force FX, FY (N) and moment MZ (N m) weighted by ``residual_force_weight`` and
+``residual_moment_weight`` (``residual_weights``: 1e-3 deg^2/N^2 and deg^2/(N m)^2 with external
+loads, the regularization without them). Every term depends on one point's unknowns only, so the
+Hessian of the Lagrangian is block diagonal (3J x 3J per point); the integrand is one SX Function
+mapped over the points of an MX graph, built in a second for the 10-coordinate gait model.
+
+External loads (``multibody.loads.ExternalLoads``) enter symbolically in z: the loads' force, point
+and free moment at each point's time are parameters of the actuation Function, and their generalised
+force J_P(z)^T F + J_phi(z)^T M is that of the body's material point at P in the point's own
+configuration, as the engine applies them (``symbolic.MinimalDynamics.actuation``).
+
+The initial state is fixed to the desired motion's at t = 0; the final state is free; the initial
+guess is the desired motion (z, z', z''). A motion is anything with ``duration`` (s) and
+``motion(t) -> (z, z', z'')`` (rad, rad/s, rad/s^2), each of shape t.shape + (J,). ``casadi`` is
+imported only when the transcription is built.
 """
 
 from __future__ import annotations
@@ -33,6 +51,13 @@ SCHEMES = ("hermite-simpson", "trapezoidal")
 DEFAULT_NODES = 100
 MIN_NODES, MAX_NODES = 2, 10_000
 DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as much as 0.001 deg of error
+# A floating base's residuals with external loads: 1 N (1 N m) of residual costs as much as 0.03 deg of error.
+# On the recorded walk (subject01, its ground reactions, 100 intervals) the residuals' RMS at the nodes fall from
+# 21 N and 13 N m (weights 1e-6, the regularization) to 8.6 N and 9.5 N m for 0.04 deg and 0.13 cm of tracking
+# error (1e-2: 6.6 N, 5.8 N m for 0.13 deg, 0.37 cm, twice the solve time). Without loads the residuals carry the
+# body's weight and get the regularization.
+DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY
+DEFAULT_RESIDUAL_MOMENT_WEIGHT = 1e-3  # deg^2 / (N m)^2 on MZ
 DEFAULT_MAX_ITER = 1000
 DEFAULT_MAX_TIME = 60.0  # s of IPOPT CPU time
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -44,19 +69,26 @@ IPOPT_HINTS = {
     "Restoration_Failed": "try another --nodes or --scheme",
 }
 DEG2 = (180.0 / math.pi) ** 2  # deg^2 per rad^2
+CM2 = 100.0**2  # cm^2 per m^2
 
 
 def check_options(nodes: int, scheme: str, regularization: float, max_iter: int = DEFAULT_MAX_ITER,
-                  max_time: float = DEFAULT_MAX_TIME) -> None:
-    """Raise ValueError with a one-line message naming the option for anything out of range."""
+                  max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
+                  residual_moment_weight: float | None = None) -> None:
+    """Raise ValueError with a one-line message naming the option for anything out of range (a
+    residual weight may be None: its default)."""
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not MIN_NODES <= nodes <= MAX_NODES:
         raise ValueError(f"--nodes must be an integer in [{MIN_NODES}, {MAX_NODES}], got {nodes}")
     if scheme not in SCHEMES:
         from .registry import unknown_name_message
 
         raise ValueError("--scheme: " + unknown_name_message("scheme", scheme, list(SCHEMES)))
-    if not (isinstance(regularization, (int, float)) and math.isfinite(regularization) and regularization >= 0):
-        raise ValueError(f"--regularization must be a non-negative finite number, got {regularization}")
+    for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
+                          ("--residual-moment-weight", residual_moment_weight)):
+        if value is None and option != "--regularization":
+            continue
+        if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            raise ValueError(f"{option} must be a non-negative finite number, got {value}")
     if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
         raise ValueError(f"--max-iter must be an integer >= 1, got {max_iter}")
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
@@ -65,9 +97,10 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
 
 @dataclass
 class CollocationResult:
-    """IPOPT's solution of the transcribed problem. Node arrays have shape (N + 1,) for one joint
-    (the forearm) or (N + 1, J) for J joints (columns in the model's joint order); ``torque_mid``
-    has shape (N,) or (N, J) for Hermite-Simpson and is None for the trapezoidal scheme."""
+    """IPOPT's solution of the transcribed problem. Node arrays have shape (N + 1, J), columns in the
+    model's coordinate order (a peer's may have shape (N + 1,) for one joint); ``torque_mid`` has
+    shape (N, J) for Hermite-Simpson and is None for the trapezoidal scheme. The torques are the
+    inverse dynamics of the states found (external loads included): N m, N on a translation."""
 
     scheme: str
     t: np.ndarray  # node times, s, shape (N + 1,)
@@ -75,11 +108,13 @@ class CollocationResult:
     velocities: np.ndarray  # rad/s
     torque: np.ndarray  # N m
     torque_mid: np.ndarray | None  # N m, at the interval midpoints
-    objective: float  # deg^2 s (+ regularisation)
+    objective: float  # deg^2 s (1 cm counting as 1 deg; + the torque and residual terms)
     ipopt_status: str  # IPOPT's return status, e.g. Solve_Succeeded
     iterations: int
     solve_time_s: float  # wall time of IPOPT's solve (the transcription excluded)
     build_time_s: float  # wall time of the transcription
+    accelerations: np.ndarray | None = None  # rad/s^2 (m/s^2 on a translation), the nodes' z''
+    residual_weights: tuple | None = None  # a floating base's (force deg^2/N^2, moment deg^2/(N m)^2)
 
     @property
     def theta(self) -> np.ndarray:
@@ -131,69 +166,126 @@ class CollocationResult:
         return np.asarray(self.torque_function()(t), dtype=float)
 
 
-def _joint_sum(terms):
-    """The sum over the columns (joints) of an SX matrix of shape (k, J): shape (k, 1)."""
-    total = terms[:, 0]
-    for j in range(1, terms.shape[1]):
-        total = total + terms[:, j]
-    return total
+def residual_weights(regularization: float, residual_force_weight: float | None, residual_moment_weight: float | None,
+                     loads) -> tuple[float, float]:
+    """The weights of a floating base's residual force (deg^2/N^2) and moment (deg^2/(N m)^2): those
+    given, else the defaults with external loads and the ``regularization`` without them."""
+    force, moment = (DEFAULT_RESIDUAL_FORCE_WEIGHT, DEFAULT_RESIDUAL_MOMENT_WEIGHT) if loads is not None else (
+        regularization, regularization)
+    return (force if residual_force_weight is None else float(residual_force_weight),
+            moment if residual_moment_weight is None else float(residual_moment_weight))
 
 
-def transcribe(acceleration, t: np.ndarray, angles_d: np.ndarray, velocities_d: np.ndarray,
-               angles_mid_d: np.ndarray | None, torque_guess: np.ndarray, torque_mid_guess: np.ndarray | None,
-               scheme: str, regularization: float, max_iter: int, max_time: float,
-               began: float | None = None) -> CollocationResult:
-    """Transcribe the tracking problem of a model with J joints on the N + 1 equally spaced nodes
-    ``t`` (s) and solve it with IPOPT.
+def objective_weights(model, regularization: float, residual_force_weight: float, residual_moment_weight: float):
+    """(tracking (J,), effort (J,)): the objective's weights of each coordinate's squared error,
+    deg^2/rad^2 on an angle and cm^2/m^2 on a translation (1 cm counts as 1 deg, as eq. 18 does),
+    and of its squared generalised force: ``regularization`` on every actuated coordinate (deg^2
+    per (N m)^2, or per N^2 on a translation), the residual weights on a floating base's three
+    coordinates (``residual_moment_weight`` on MZ, deg^2/(N m)^2; ``residual_force_weight`` on FX
+    and FY, deg^2/N^2)."""
+    kinds = model.coordinate_kinds
+    tracking = np.array([CM2 if kind == "translation" else DEG2 for kind in kinds])
+    effort = np.full(len(kinds), float(regularization))
+    base = model.floating_base
+    if base is not None:
+        c = model.coordinates.index(base.coordinate_names[0])  # tilt, then x, y
+        effort[c], effort[c + 1:c + 3] = residual_moment_weight, residual_force_weight
+    return tracking, effort
 
-    acceleration(z, w, u): the model's joint accelerations (rad/s^2) as CasADi SX of shape (k, J)
-    from its angles z (rad), velocities w (rad/s) and torques u (N m), each SX of shape (k, J).
-    angles_d (rad), velocities_d (rad/s), torque_guess (N m): the desired motion and the torque
-    of the initial guess at the nodes, shape (N + 1,) for one joint or (N + 1, J); angles_mid_d,
-    torque_mid_guess: the same at the interval midpoints, shape (N,) or (N, J) (Hermite-Simpson;
-    None for trapezoidal). The initial state is fixed to angles_d[0], velocities_d[0]; the guess
-    of the states is the desired motion. The objective is the integral of the squared angle
-    errors in deg^2 summed over the joints plus ``regularization`` times that of |tau|^2.
+
+@dataclass
+class Track:
+    """What the transcription tracks, J coordinates at its points in time order: the nodes t_k = k h
+    and, for Hermite-Simpson, the interval midpoints between them (2N + 1 points; N + 1 for the
+    trapezoidal scheme). t (s), shape (m,); the desired z, z', z'' at the points, shape (m, J) each
+    (rad or m based; z', z'' are the guess); the external loads' parameters at the points, shape
+    (m, P) (``symbolic.load_parameters``; P = 0 without loads)."""
+
+    t: np.ndarray
+    z: np.ndarray
+    zd: np.ndarray
+    zdd: np.ndarray
+    loads: np.ndarray
+
+
+def point_times(duration: float, nodes: int, scheme: str) -> np.ndarray:
+    """The transcription's points (s) over [0, duration]: the N + 1 nodes, with the N interval
+    midpoints between them for Hermite-Simpson (2N + 1 points in time order)."""
+    return np.linspace(0.0, duration, (2 if scheme == "hermite-simpson" else 1) * int(nodes) + 1)
+
+
+def quadrature_weights(points: int, h: float, scheme: str) -> np.ndarray:
+    """The weights (s) of the scheme's quadrature over its points: Simpson's h/6 (1, 4, 2, 4, ..., 4, 1)
+    with the midpoints, the trapezoid's h/2 (1, 2, ..., 2, 1) on the nodes."""
+    if scheme == "hermite-simpson":
+        weights = np.where(np.arange(points) % 2 == 1, 4.0, 2.0)
+        weights[[0, -1]] = 1.0
+        return h / 6 * weights
+    weights = np.full(points, 2.0)
+    weights[[0, -1]] = 1.0
+    return h / 2 * weights
+
+
+def _point_cost(ca, actuation, tracking: np.ndarray, effort: np.ndarray):
+    """The objective's integrand at one point, an SX Function (y, p, z_d) -> scalar of the point's
+    unknowns y = [z, z', z''] (3J,), its load parameters p and desired z_d (J,):
+    sum_j tracking_j (z_j - z_dj)^2 + effort_j tau_j^2, tau = actuation(z, z', z'', p)."""
+    J = len(tracking)
+    y, p, desired = ca.SX.sym("y", 3 * J), ca.SX.sym("p", actuation.size1_in(3)), ca.SX.sym("z_d", J)
+    tau = actuation(y[:J], y[J:2 * J], y[2 * J:], p)
+    value = ca.dot(ca.DM(tracking), (y[:J] - desired) ** 2) + ca.dot(ca.DM(effort), tau**2)
+    return ca.Function("point_cost", [y, p, desired], [value])
+
+
+def _defects(ca, z, w, a, h: float, scheme: str):
+    """The scheme's defect constraints, linear in the points' z, z', z'' (MX (J, m) each, points in
+    time order): Hermite-Simpson in separated form (the midpoint states are unknowns tied to the
+    Hermite interpolant of their interval's nodes), or the trapezoid's."""
+    m = z.shape[1]
+    if scheme == "hermite-simpson":
+        k0, mid, k1 = ca.Slice(0, m - 1, 2), ca.Slice(1, m, 2), ca.Slice(2, m, 2)
+        return ca.vertcat(ca.vec(z[:, k1] - z[:, k0] - h / 6 * (w[:, k0] + 4 * w[:, mid] + w[:, k1])),
+                          ca.vec(w[:, k1] - w[:, k0] - h / 6 * (a[:, k0] + 4 * a[:, mid] + a[:, k1])),
+                          ca.vec(z[:, mid] - (z[:, k0] + z[:, k1]) / 2 - h / 8 * (w[:, k0] - w[:, k1])),
+                          ca.vec(w[:, mid] - (w[:, k0] + w[:, k1]) / 2 - h / 8 * (a[:, k0] - a[:, k1])),
+                          ca.vec(a[:, mid] - (a[:, k0] + a[:, k1]) / 2))
+    k0, k1 = ca.Slice(0, m - 1), ca.Slice(1, m)
+    return ca.vertcat(ca.vec(z[:, k1] - z[:, k0] - h / 2 * (w[:, k0] + w[:, k1])),
+                      ca.vec(w[:, k1] - w[:, k0] - h / 2 * (a[:, k0] + a[:, k1])))
+
+
+def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray, scheme: str, max_iter: int,
+               max_time: float, began: float | None = None) -> CollocationResult:
+    """Transcribe the tracking problem of a model with J coordinates at ``track``'s points with
+    implicit dynamics and solve it with IPOPT.
+
+    actuation: the CasADi Function (z, z', z'', p) -> tau of one point (columns (J, 1), p the
+    point's load parameters), ``MinimalDynamics.actuation``. The unknowns are y = [z, z', z''] at
+    every point, point by point; the defects are linear in them (``_defects``) and tau is
+    ``actuation`` at each point, so that the objective, sum over the points of the quadrature
+    weight times ``_point_cost``, is the only nonlinear part and its Hessian is block diagonal
+    (one 3J x 3J block per point): one mapped SX Function in an MX graph, no symbolic M^-1, no
+    expansion. The initial state is fixed to the desired one; the guess is the desired motion.
     ``began``: the perf_counter time the transcription began (default now).
 
     Never raises on a solver failure: IPOPT's status says what happened."""
     import casadi as ca
 
     began = time.perf_counter() if began is None else began
-    one = np.ndim(angles_d) == 1
-    n, joints = len(t) - 1, 1 if one else np.shape(angles_d)[1]
-    h = float(t[1] - t[0])
+    t = track.t
+    m, J = track.z.shape
     hs = scheme == "hermite-simpson"
+    n = (m - 1) // 2 if hs else m - 1
+    h = float(t[-1] - t[0]) / n
 
-    th, w, u = (ca.SX.sym(name, n + 1, joints) for name in ("angle", "velocity", "tau"))
-    um = ca.SX.sym("tau_mid", n, joints) if hs else None
-    acc = acceleration(th, w, u)
-    lagrange = _joint_sum(DEG2 * (th - angles_d) ** 2) + _joint_sum(regularization * u**2)  # at the nodes
-    k0, k1 = slice(0, n), slice(1, n + 1)
-    if hs:
-        th_m = (th[k0, :] + th[k1, :]) / 2 + h / 8 * (w[k0, :] - w[k1, :])
-        w_m = (w[k0, :] + w[k1, :]) / 2 + h / 8 * (acc[k0, :] - acc[k1, :])
-        acc_m = acceleration(th_m, w_m, um)
-        defects = ca.vertcat(ca.vec(th[k1, :] - th[k0, :] - h / 6 * (w[k0, :] + 4 * w_m + w[k1, :])),
-                             ca.vec(w[k1, :] - w[k0, :] - h / 6 * (acc[k0, :] + 4 * acc_m + acc[k1, :])))
-        lagrange_m = _joint_sum(DEG2 * (th_m - angles_mid_d) ** 2) + _joint_sum(regularization * um**2)
-        objective = h / 6 * (ca.sum1(lagrange[k0]) + 4 * ca.sum1(lagrange_m) + ca.sum1(lagrange[k1]))
-        x = ca.vertcat(ca.vec(th), ca.vec(w), ca.vec(u), ca.vec(um))
-        guess = [angles_d, velocities_d, torque_guess, torque_mid_guess]
-    else:
-        defects = ca.vertcat(ca.vec(th[k1, :] - th[k0, :] - h / 2 * (w[k0, :] + w[k1, :])),
-                             ca.vec(w[k1, :] - w[k0, :] - h / 2 * (acc[k0, :] + acc[k1, :])))
-        objective = h / 2 * (ca.sum1(lagrange[k0]) + ca.sum1(lagrange[k1]))
-        x = ca.vertcat(ca.vec(th), ca.vec(w), ca.vec(u))
-        guess = [angles_d, velocities_d, torque_guess]
-
-    x0 = np.concatenate([np.asarray(g, dtype=float).ravel(order="F") for g in guess])  # ca.vec is column-major
+    y = ca.MX.sym("y", 3 * J, m)
+    cost = _point_cost(ca, actuation, np.asarray(tracking, dtype=float), np.asarray(effort, dtype=float))
+    objective = ca.mtimes(cost.map(m)(y, track.loads.T, track.z.T), ca.DM(quadrature_weights(m, h, scheme)))
+    defects = _defects(ca, y[:J, :], y[J:2 * J, :], y[2 * J:, :], h, scheme)
+    x = ca.vec(y)
+    x0 = np.concatenate([track.z, track.zd, track.zdd], axis=1).ravel()  # point by point
     lbx, ubx = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
-    size = (n + 1) * joints  # one block of node values
-    z0, w0 = (np.atleast_1d(np.asarray(d, dtype=float)[0]) for d in (angles_d, velocities_d))
-    for j in range(joints):  # the initial state is the desired motion's
-        lbx[j * (n + 1)] = ubx[j * (n + 1)] = z0[j]
-        lbx[size + j * (n + 1)] = ubx[size + j * (n + 1)] = w0[j]
+    lbx[:2 * J] = ubx[:2 * J] = x0[:2 * J]  # the initial state is the desired motion's
     options = {
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "verbose": False,
         "ipopt.max_iter": int(max_iter), "ipopt.max_cpu_time": float(max_time), "ipopt.tol": 1e-10,
@@ -204,21 +296,21 @@ def transcribe(acceleration, t: np.ndarray, angles_d: np.ndarray, velocities_d: 
     try:
         solution = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
         stats = solver.stats()
-        z, f = np.asarray(solution["x"], dtype=float).ravel(), float(solution["f"])
+        values, f = np.asarray(solution["x"], dtype=float).ravel(), float(solution["f"])
         status, iterations = str(stats.get("return_status", "unknown")), int(stats.get("iter_count", 0))
     except RuntimeError as exc:  # CasADi reports an error in a callback or in IPOPT itself
-        z, f = np.full(x0.size, np.nan), math.nan
+        values, f = np.full(x0.size, np.nan), math.nan
         status, iterations = "CasADi error: " + " ".join(str(exc).split())[:200], 0
     solved = time.perf_counter()
 
-    def block(k: int, rows: int = n + 1) -> np.ndarray:
-        values = z[k * size : k * size + rows * joints]
-        return values if one else values.reshape(joints, rows).T
-
+    points = values.reshape(m, 3 * J)
+    z, w, a = points[:, :J], points[:, J:2 * J], points[:, 2 * J:]
+    torque = np.array(actuation.map(m)(z.T, w.T, a.T, track.loads.T)).T
+    nodes = slice(0, m, 2 if hs else 1)
     return CollocationResult(
-        scheme=scheme, t=t, angles=block(0), velocities=block(1), torque=block(2),
-        torque_mid=block(3, n) if hs else None, objective=f, ipopt_status=status, iterations=iterations,
-        solve_time_s=solved - built, build_time_s=built - began,
+        scheme=scheme, t=t[nodes], angles=z[nodes], velocities=w[nodes], torque=torque[nodes],
+        torque_mid=torque[1::2] if hs else None, objective=f, ipopt_status=status, iterations=iterations,
+        solve_time_s=solved - built, build_time_s=built - began, accelerations=a[nodes],
     )
 
 
@@ -235,35 +327,63 @@ def desired_samples(model, motion, t: np.ndarray):
 
 def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
               regularization: float = DEFAULT_REGULARIZATION, max_iter: int = DEFAULT_MAX_ITER,
-              max_time: float = DEFAULT_MAX_TIME) -> CollocationResult:
+              max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
+              residual_moment_weight: float | None = None, loads=None) -> CollocationResult:
     """Transcribe and solve the tracking problem of ``motion`` with ``model`` on ``nodes`` intervals
-    over the motion's span: node arrays of shape (N + 1, J) in the model's joint order. ValueError
-    (one line) for options out of range or a motion of other joints; never raises on a solver
-    failure: IPOPT's status says what happened."""
-    from .multibody.symbolic import MinimalDynamics
+    over the motion's span: node arrays of shape (N + 1, J) in the model's coordinate order.
+    ``loads``: external loads (``multibody.loads.ExternalLoads`` on the motion's clock) or None;
+    the residual weights of a floating base: ``residual_weights`` (None: the default).
+    ValueError (one line) for options out of range or a motion of other joints; never raises on a
+    solver failure: IPOPT's status says what happened."""
+    from .multibody.symbolic import MinimalDynamics, load_parameters
 
-    check_options(nodes, scheme, regularization, max_iter, max_time)
+    check_options(nodes, scheme, regularization, max_iter, max_time, residual_force_weight, residual_moment_weight)
     began = time.perf_counter()
-    dynamics = MinimalDynamics(model)
-    n = int(nodes)
-    t = np.linspace(0.0, motion.duration, n + 1)
-    z_d, w_d, a_d = desired_samples(model, motion, t)
-    z_md = um_guess = None
-    if scheme == "hermite-simpson":
-        z_md, w_md, a_md = desired_samples(model, motion, t[:-1] + motion.duration / n / 2)
-        um_guess = dynamics.inverse(z_md, w_md, a_md)
-    return transcribe(dynamics.forward_rows, t, z_d, w_d, z_md, dynamics.inverse(z_d, w_d, a_d), um_guess, scheme,
-                      regularization, max_iter, max_time, began)
+    t = point_times(motion.duration, nodes, scheme)
+    track = Track(t, *desired_samples(model, motion, t), loads=load_parameters(loads, t))
+    actuation = MinimalDynamics(model).actuation(() if loads is None else loads.loads)
+    weights = residual_weights(regularization, residual_force_weight, residual_moment_weight, loads)
+    tracking, effort = objective_weights(model, regularization, *weights)
+    solution = transcribe(actuation, track, tracking, effort, scheme, max_iter, max_time, began)
+    solution.residual_weights = weights if model.floating_base is not None else None
+    return solution
 
 
-def record_fields(solution: CollocationResult, options: dict, own_rmse_deg: float, replay_message: str) -> dict:
-    """The fields a collocate run adds to the record of its replay: the options, the collocation's
-    own RMSE_rot at its nodes (deg), IPOPT's status, iterations and solve time (s); status
+def own_fields(model, solution: CollocationResult, truth) -> dict:
+    """The collocation's own indicators at its nodes against the true motion ``truth`` (``truth(t)``
+    -> (z, ...)), angles and translations apart: ``collocation_rmse_rot_deg`` (deg) and, for a
+    model with translations, ``collocation_rmse_trans_cm`` (cm); for a floating base the RMS of its
+    residuals at the nodes, ``collocation_residual_force_rms_n`` (|(FX, FY)|, N) and
+    ``collocation_residual_moment_rms_nm`` (MZ, N m), over the whole motion even where the replay
+    stops early."""
+    error = solution.angles - np.asarray(truth(solution.t)[0], dtype=float).reshape(solution.angles.shape)
+    translation = np.array([kind == "translation" for kind in model.coordinate_kinds])
+    fields = {"collocation_rmse_rot_deg": float(np.degrees(np.sqrt(np.mean(error[:, ~translation] ** 2))))
+              if (~translation).any() else math.nan}
+    if translation.any():
+        fields["collocation_rmse_trans_cm"] = float(100 * np.sqrt(np.mean(error[:, translation] ** 2)))
+    base = model.floating_base
+    if base is not None:
+        c = model.coordinates.index(base.coordinate_names[0])
+        moment, fx, fy = solution.torque[:, c:c + 3].T
+        fields.update(collocation_residual_force_rms_n=float(np.sqrt(np.mean(fx**2 + fy**2))),
+                      collocation_residual_moment_rms_nm=float(np.sqrt(np.mean(moment**2))))
+    return fields
+
+
+def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str) -> dict:
+    """The fields a collocate run adds to the record of its replay: the options (the residual
+    weights used for a model with a floating base), the collocation's own indicators at its nodes
+    (``own_fields``),
+    IPOPT's status, iterations, the transcription's build time and the solve time (s); status
     'collocation_failed' when IPOPT did not solve the problem."""
     fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],
-                  regularization=options["regularization"], collocation_rmse_rot_deg=own_rmse_deg,
-                  ipopt_status=solution.ipopt_status, ipopt_iterations=solution.iterations,
+                  regularization=options["regularization"], **own, ipopt_status=solution.ipopt_status,
+                  ipopt_iterations=solution.iterations, build_time_s=solution.build_time_s,
                   solve_time_s=solution.solve_time_s)
+    if solution.residual_weights is not None:
+        fields.update(residual_force_weight=solution.residual_weights[0],
+                      residual_moment_weight=solution.residual_weights[1])
     if not solution.success:
         fields.update(status="collocation_failed",
                       message=f"{solution.message}; the replay of its last iterate: {replay_message}")

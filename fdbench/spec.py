@@ -263,14 +263,19 @@ def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **c
 
 
 def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max_iter=None, max_time=None,
-                   **common) -> RunSpec:
-    """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default."""
+                   residual_force_weight=None, residual_moment_weight=None, **common) -> RunSpec:
+    """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default (a
+    residual weight's depends on the loads, so it is left out of the options)."""
     from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION
 
     options = dict(nodes=nodes, scheme=scheme,
                    regularization=DEFAULT_REGULARIZATION if regularization is None else regularization,
                    max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,
                    max_time=DEFAULT_MAX_TIME if max_time is None else max_time)
+    for key, value in (("residual_force_weight", residual_force_weight),
+                       ("residual_moment_weight", residual_moment_weight)):
+        if value is not None:
+            options[key] = value
     return RunSpec(command="collocate", method_options=tuple(sorted(options.items())), **common)
 
 

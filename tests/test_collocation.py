@@ -130,8 +130,9 @@ def test_collocate_command_reports_the_replay_and_ipopt(tmp_path):
 
 
 def test_an_iteration_limit_is_a_status_with_a_message():
-    """Hermite-Simpson on 100 intervals needs two IPOPT iterations: one is not enough."""
-    result = invoke(["collocate", "--max-iter", 1, "-f", "json"])
+    """The arm's Hermite-Simpson problem on 100 intervals needs two IPOPT iterations (its torques are
+    nonlinear in the unknowns): one is not enough."""
+    result = invoke(["collocate", "--model", "arm2", "--max-iter", 1, "-f", "json"])
     assert result.exit_code == 0, result.stderr
     record = json.loads(result.stdout)
     assert record["ipopt_status"] == "Maximum_Iterations_Exceeded" and record["ipopt_iterations"] == 1
@@ -149,6 +150,8 @@ def test_an_iteration_limit_is_a_status_with_a_message():
     (["--max-iter", 0], "--max-iter"),
     (["--max-time", 0], "--max-time"),
     (["--kinematics", "approx"], "--kinematics"),
+    (["--residual-force-weight", -1], "--residual-force-weight"),
+    (["--residual-moment-weight", "inf"], "--residual-moment-weight"),
 ])
 def test_bad_collocate_options_are_one_line_exit_2(args, word, tmp_path):
     out = tmp_path / "torque.csv"
@@ -197,3 +200,218 @@ def test_save_torque_covers_a_recorded_motions_span(tmp_path):
     assert t[0] == 0 and t[-1] == pytest.approx(span) and len(t) == 2 * round(span / 1e-3) + 1 and span > 1
     replay = json.loads(invoke(["simulate", "--motion", motion, "--torque-file", path, "-f", "json"]).stdout)
     assert replay["rmse_rot_deg"] == pytest.approx(record["rmse_rot_deg"], rel=1e-9)
+
+
+# ----------------------------------------------------------------------------- a floating base, loads, residuals
+HOPPER = """
+name = "hopper"
+gravity = [0.0, -9.80665]
+
+[[bodies]]
+name = "pelvis"
+mass = 11.0
+com = [-0.07, 0.0]
+inertia = 0.06
+
+[[bodies]]
+name = "thigh"
+mass = 9.0
+com = [0.0, -0.19]
+inertia = 0.18
+end = [0.0, -0.19]
+
+[[bodies]]
+name = "shank"
+mass = 3.6
+com = [0.0, -0.18]
+inertia = 0.05
+
+[[bodies]]
+name = "torso"
+mass = 33.0
+com = [-0.03, 0.35]
+inertia = 1.6
+
+[[joints]]
+name = "base"
+type = "free"
+parent = "ground"
+child = "pelvis"
+at_parent = [0.0, 0.0]
+at_child = [0.0, 0.0]
+coordinates = ["pelvis_tilt", "pelvis_tx", "pelvis_ty"]
+
+[[joints]]
+name = "hip"
+parent = "pelvis"
+child = "thigh"
+at_parent = [-0.07, -0.07]
+at_child = [0.0, 0.0]
+
+[[joints]]
+name = "knee"
+parent = "thigh"
+child = "shank"
+at_parent = [0.0, 0.0]
+at_child = [0.0, 0.0]
+path = { angles = [-2.0, -1.0, 0.0, 0.5], x = [-0.004, 0.005, -0.004, -0.006], y = [-0.47, -0.455, -0.452, -0.454] }
+
+[[joints]]
+name = "lumbar"
+parent = "pelvis"
+child = "torso"
+at_parent = [-0.10, 0.08]
+at_child = [0.0, 0.0]
+"""
+
+
+class Sway:
+    """Each of the hopper's six coordinates z0 + amplitude sin(2 pi f t + phase) for ``duration`` s
+    (rad; m for pelvis_tx, pelvis_ty), with its exact derivatives."""
+
+    z0 = np.array([0.05, 0.0, 0.95, 0.3, -0.6, 0.1])
+    amplitude = np.array([0.05, 0.2, 0.02, 0.4, 0.5, 0.1])
+    frequency = np.array([1.0, 0.5, 2.0, 1.0, 1.0, 1.5])  # Hz
+    phase = np.array([0.0, 0.0, 1.0, 0.5, 2.0, 0.3])
+
+    def __init__(self, duration=0.5):
+        self.duration = duration
+
+    def __call__(self, t):
+        w = 2 * math.pi * self.frequency
+        arg = w * np.asarray(t, dtype=float)[..., None] + self.phase
+        return (self.z0 + self.amplitude * np.sin(arg), self.amplitude * w * np.cos(arg),
+                -self.amplitude * w**2 * np.sin(arg))
+
+
+@pytest.fixture(scope="module")
+def hopper(tmp_path_factory):
+    from fdbench.models import description
+
+    path = tmp_path_factory.mktemp("hopper") / "hopper.toml"
+    path.write_text(HOPPER)
+    return description(str(path))
+
+
+def hopper_loads(model, duration=0.5, support=0.9):
+    """Two loads on the hopper over [0, duration] s: a ground reaction under the shank (ground's
+    axes, at a point moving forward on the ground) that carries ``support`` of the body's weight, and a
+    push on the torso given in the torso's own frame with a free moment."""
+    from fdbench.multibody.loads import ExternalLoad, ExternalLoads
+
+    t = np.linspace(0.0, duration, 51)
+    weight = support * model.total_mass * 9.80665
+    force = np.stack([np.stack([20 * np.sin(3 * t), weight + 30 * np.cos(5 * t)], axis=1),
+                      np.stack([5 + 0 * t, -8 * t], axis=1)], axis=1)
+    point = np.stack([np.stack([0.1 * t - 0.05, 0 * t], axis=1),
+                      np.stack([0.02 + 0 * t, 0.3 + 0 * t], axis=1)], axis=1)
+    moment = np.stack([2 * np.sin(4 * t), 1 + 0 * t], axis=1)
+    loads = (ExternalLoad("grf", "shank"), ExternalLoad("push", "torso", force_frame="torso", point_frame="torso"))
+    return ExternalLoads(loads, t, force, point, moment, source="test")
+
+
+def test_a_floating_base_models_collocation_obeys_the_independent_reference(hopper):
+    """A six-coordinate model with a free base and a knee on a path (the walk's kinds of joint) is
+    transcribed and solved in seconds; its torques at the nodes are the independent minimal-coordinate
+    reference's inverse dynamics of its states; its states are the exact integrals of a piecewise
+    linear acceleration (what Hermite-Simpson with the midpoint acceleration the nodes' mean
+    imposes); it tracks the motion (angles in deg and translations in cm apart) to the price of
+    the regularization (1e-6 on the base's forces too without loads)."""
+    import reference_dynamics as ref
+
+    from fdbench.collocation import own_fields
+
+    motion = Sway()
+    sol = collocate(hopper, motion, nodes=20)
+    assert sol.success, sol.message
+    assert sol.angles.shape == sol.accelerations.shape == sol.torque.shape == (21, 6)
+    tree = ref.GeneralTree(hopper)
+    expected = tree.inverse_dynamics(sol.angles, sol.velocities, sol.accelerations)
+    scale = np.sqrt(np.mean(expected**2))
+    assert np.max(np.abs(sol.torque - expected)) < 1e-9 * scale
+    h, z, w, a = sol.t[1] - sol.t[0], sol.angles, sol.velocities, sol.accelerations
+    np.testing.assert_allclose(w[1:] - w[:-1], h / 2 * (a[:-1] + a[1:]), atol=1e-9)
+    np.testing.assert_allclose(z[1:] - z[:-1], h * w[:-1] + h**2 / 6 * (2 * a[:-1] + a[1:]), atol=1e-10)
+    fields = own_fields(hopper, sol, motion)
+    assert fields["collocation_rmse_rot_deg"] < 0.02 and fields["collocation_rmse_trans_cm"] < 0.2
+    assert sol.residual_weights == (1e-6, 1e-6)  # without loads: the regularization
+
+
+def test_loads_enter_as_the_engines_inverse_dynamics_with_loads(hopper):
+    """The collocation's actuation under loads (a force and point in ground's axes, another in the
+    torso's frame, free moments) against the engine's inverse dynamics with the same loads (mixed
+    coordinates, numpy): at random states and times, and on the collocation's own nodes."""
+    from fdbench.multibody.symbolic import MinimalDynamics, load_parameters
+
+    loads = hopper_loads(hopper)
+    engine = Engine(hopper, loads=loads)
+    rng = np.random.default_rng(5)
+    z = Sway()(rng.uniform(0, 0.5, 8))[0] + rng.uniform(-0.2, 0.2, (8, 6))
+    zd, zdd, t = rng.uniform(-3, 3, (8, 6)), rng.uniform(-30, 30, (8, 6)), rng.uniform(0, 0.5, 8)
+    actuation = MinimalDynamics(hopper).actuation(loads.loads).map(8)
+    tau = np.array(actuation(z.T, zd.T, zdd.T, load_parameters(loads, t).T)).T
+    expected = engine.inverse_dynamics(z, zd, zdd, t)
+    assert np.max(np.abs(tau - expected)) < 1e-9 * np.sqrt(np.mean(expected**2))
+    free = engine.inverse_dynamics(z, zd, zdd, t) - Engine(hopper).inverse_dynamics(z, zd, zdd)
+    assert np.max(np.abs(free)) > 10  # N, N m: the loads matter here
+
+    sol = collocate(hopper, Sway(), nodes=20, loads=loads)
+    assert sol.success, sol.message
+    on_nodes = engine.inverse_dynamics(sol.angles, sol.velocities, sol.accelerations, sol.t)
+    assert np.max(np.abs(sol.torque - on_nodes)) < 1e-9 * np.sqrt(np.mean(on_nodes**2))
+
+
+def residual_integrals(model, sol) -> tuple[float, float]:
+    """The integrals of FX^2 + FY^2 (N^2 s) and MZ^2 (N^2 m^2 s) by Simpson's rule over the nodes
+    and midpoints (the objective's own quadrature)."""
+    base = model.coordinates.index(model.floating_base.coordinate_names[0])
+    h = sol.t[1] - sol.t[0]
+
+    def integral(columns):
+        node = np.sum(sol.torque[:, columns] ** 2, axis=1)
+        mid = np.sum(sol.torque_mid[:, columns] ** 2, axis=1)
+        return float(h / 6 * (node[:-1].sum() + 4 * mid.sum() + node[1:].sum()))
+
+    return integral([base + 1, base + 2]), integral([base])
+
+
+def test_a_larger_residual_weight_never_raises_the_residuals(hopper):
+    """The loads carry 90% of the hopper's weight: the residuals cannot vanish without tracking error.
+    Raising the residual weights lowers the residuals' integrals and raises the tracking error (the
+    optimum of a weighted sum moves monotonically along the trade-off)."""
+    from fdbench.collocation import own_fields
+
+    loads, motion = hopper_loads(hopper), Sway()
+    found = []
+    for weight in (1e-6, 1e-3, 1e-1):
+        sol = collocate(hopper, motion, nodes=20, loads=loads, residual_force_weight=weight,
+                        residual_moment_weight=weight)
+        assert sol.success and sol.residual_weights == (weight, weight), sol.message
+        error = own_fields(hopper, sol, motion)
+        found.append((*residual_integrals(hopper, sol), error["collocation_rmse_rot_deg"]
+                      + error["collocation_rmse_trans_cm"]))
+    forces, moments, errors = np.array(found).T
+    assert np.all(np.diff(forces) < 0) and np.all(np.diff(moments) <= 1e-9 * moments[0])
+    assert np.all(np.diff(errors) > 0)
+    assert forces[-1] < 0.5 * forces[0]  # the weight matters
+
+
+def test_collocate_records_a_floating_bases_units_apart_and_its_residual_weights(hopper, tmp_path):
+    """A model file with a free base and a motion file on the command line: the collocation's own
+    RMSE of angles (deg) and translations (cm) apart, its residuals' RMS, and the residual weights
+    used (the regularization without loads; the option when given)."""
+    model, motion = tmp_path / "hopper.toml", tmp_path / "sway.csv"
+    model.write_text(HOPPER)
+    t = np.linspace(0.0, 0.5, 51)
+    z = Sway()(t)[0]
+    columns = np.column_stack([t, np.degrees(z[:, 0]), z[:, 1], z[:, 2], np.degrees(z[:, 3:])])
+    np.savetxt(motion, columns, delimiter=",", header="t," + ",".join(hopper.coordinates), comments="")
+    base = ["collocate", "--model", model, "--motion", motion, "--nodes", 20, "-f", "json", "--quiet"]
+    record = json.loads(invoke(base).stdout)
+    assert record["ipopt_status"] == "Solve_Succeeded"
+    assert record["collocation_rmse_rot_deg"] < 0.1 and record["collocation_rmse_trans_cm"] < 0.5
+    assert record["residual_force_weight"] == record["residual_moment_weight"] == record["regularization"] == 1e-6
+    assert record["collocation_residual_force_rms_n"] > 0.9 * hopper.total_mass * 9.80665  # the base carries the body
+    weighted = json.loads(invoke(base + ["--residual-force-weight", 0.01]).stdout)
+    assert weighted["residual_force_weight"] == 0.01 and weighted["residual_moment_weight"] == 1e-6
+    assert weighted["spec_hash"] != record["spec_hash"]

@@ -7,6 +7,7 @@ model description:
 - the arm's M and h against the closed form of Lagrange's equations (the values of arm2.toml);
 - the linearisation against central differences of the forward dynamics;
 - collocation of a minimum-jerk motion on the library's arm2 and leg3: solved, tracked;
+- the Functions built on first use: a collocation never forms the symbolic solve of M;
 - the LQR's gain about a held posture (a long horizon) against scipy's algebraic Riccati gain of a
   linearisation by finite differences of the engine's dynamics.
 """
@@ -159,6 +160,25 @@ def test_collocation_tracks_a_minimum_jerk_motion(name, start, goal):
     torques = MinimalDynamics(model).inverse(*motion(result.t))
     inside = slice(0, 25)  # the free final state lets the last nodes' torques drift from the inverse dynamics
     assert np.max(np.abs(result.torque - torques)[inside]) < 1e-2 * np.max(np.abs(torques))
+
+
+def test_the_collocation_builds_the_inverse_dynamics_alone():
+    """The Functions are built on first use: a collocation (implicit dynamics) never forms the
+    symbolic solve of M behind the forward dynamics and the linearisation, the costly part for many
+    coordinates; asking for the forward dynamics builds it then."""
+    import dataclasses
+
+    from fdbench.collocation import collocate
+    from fdbench.multibody import symbolic
+
+    model = dataclasses.replace(find_model("leg3"), name="leg3_lazy")  # a model no other test has built
+    built = symbolic._forward_expression.cache_info().misses
+    assert collocate(model, MinimumJerk([0.0, -0.2, 0.0], [0.3, -0.5, 0.1]), nodes=10).success
+    assert symbolic._forward_expression.cache_info().misses == built
+    z, zd, zdd = random_states(3, 2, seed=1)
+    dynamics = MinimalDynamics(model)
+    assert_relative(dynamics.forward(z, zd, dynamics.inverse(z, zd, zdd)), zdd, 1e-10, "forward(inverse)")
+    assert symbolic._forward_expression.cache_info().misses == built + 1
 
 
 def test_collocation_refuses_a_motion_of_other_joints_before_any_work():

@@ -178,6 +178,8 @@ def collocate(
     regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
+    residual_force_weight: Annotated[Optional[float], typer.Option("--residual-force-weight", help="A floating base's residual force: weight of the integral of FX^2 + FY^2 beside the squared errors (deg^2, and cm^2 of translations), deg^2/N^2; default 1e-3 with --loads, the --regularization without (the residuals then carry the body's weight).", show_default=False)] = None,
+    residual_moment_weight: Annotated[Optional[float], typer.Option("--residual-moment-weight", help="A floating base's residual moment: weight of the integral of MZ^2, deg^2/(N m)^2; default 1e-3 with --loads, the --regularization without.", show_default=False)] = None,
     save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; another model: t and one column per joint, e.g. t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
     kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
@@ -195,12 +197,13 @@ def collocate(
     quiet: Quiet = False,
     conditions: dict = None,
 ):
-    """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and torque are the unknowns of one sparse problem solved by IPOPT; the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
+    """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and accelerations are the unknowns of one sparse problem solved by IPOPT, the torque their inverse dynamics (external loads of --loads included); the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
     from ..experiment import collocate_spec, run
 
     _check_outputs(fmt, output=output, save_history=save_history, save_torque=save_torque, db=db,
                    inputs=_spec_inputs(conditions, kinematics))
-    spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, **_noise_seed(conditions, seed),
+    spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
+                                     residual_moment_weight, **_noise_seed(conditions, seed),
                                      **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     try:
         import casadi  # noqa: F401

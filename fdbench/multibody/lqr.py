@@ -100,4 +100,4 @@ def warm_up(model: Model | None = None) -> None:
     import scipy.linalg  # noqa: F401
 
     if model is not None:
-        MinimalDynamics(model)
+        MinimalDynamics(model).build("riccati_rate", "linearisation", "inverse")

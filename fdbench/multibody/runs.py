@@ -459,12 +459,12 @@ def _optimize(spec, on_evaluation, on_start):
 
 
 def _collocate(spec):
-    """Direct collocation of the nominal model on the desired motion (``collocation``), then its
-    torque replayed by the plant's forward simulation: the indicators are the replay's; the
-    collocation's own RMSE over every joint at its nodes (against the true motion), IPOPT's status,
+    """Direct collocation of the nominal model on the desired motion under the spec's external loads
+    (``collocation``), then its torque replayed by the plant's forward simulation: the indicators are
+    the replay's; the collocation's own RMSE at its nodes (against the true motion), IPOPT's status,
     iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
     arrays of shape (N + 1, J))."""
-    from ..collocation import collocate, record_fields
+    from ..collocation import collocate, own_fields, record_fields
     from ..experiment import base_record
 
     options = dict(spec.method_options)
@@ -474,11 +474,11 @@ def _collocate(spec):
     desired, truth = motions(spec)
     began = time.perf_counter()
     inverse = reference(spec)
-    solution = collocate(nominal(spec), desired, **options)
+    solution = collocate(nominal(spec), desired, **options, loads=loads(spec))
     result = _simulate(spec, solution.torque_function())
     runtime = time.perf_counter() - began
-    own = float(np.sqrt(np.mean(np.degrees(solution.angles - truth(solution.t)[0]) ** 2)))
     record = base_record(spec)
     outcome = _outcome(spec, record, result, inverse, extra={"collocation": solution})
+    own = own_fields(nominal(spec), solution, truth)
     record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
     return outcome

@@ -1,5 +1,5 @@
 """The minimal-coordinate equations of motion of any model description, written once as CasADi
-expressions: M(z) z'' + h(z, z') = tau for the joint angles z (rad), J of them.
+expressions: M(z) z'' + h(z, z') = tau for the coordinates z (rad; m on a translation), J of them.
 
 How they are built (one definition, from the description only):
 
@@ -14,6 +14,11 @@ How they are built (one definition, from the description only):
 * Inverse dynamics by the principle of virtual work (Kane's equations): tau = sum_b J_b^T m_b (a_b - g)
   + I_b alpha_b (over the joints on b's path) - sum_loads J_L^T F_L, J = dr/dz by CasADi's
   ``jacobian``. Then M = d tau / d z'' (exact) and h = tau(z, z', 0).
+* External loads from data (``loads.ExternalLoads``): their generalised force
+  Q = J_o^T F + J_phi^T ((P - o) x F + M) on a body of origin o and angle phi, with the force F,
+  point P and free moment M of each load as parameters (in the load's frames, turned into ground's
+  symbolically), so that ``actuation`` tau = ID(z, z', z'') - Q(z, p) is the collocation's
+  implicit dynamics.
 * Forward dynamics z'' = M^-1 (tau - h) by a symbolic L D L^T solve (no explicit inverse; M is
   symmetric positive definite for positive masses and inertias, so no pivoting is needed; CasADi's
   own ``solve`` on SX forms the inverse by minors up to 3 x 3).
@@ -24,18 +29,19 @@ How they are built (one definition, from the description only):
   the forward solve is not needed.
 
 The expressions are SX (scalar graphs, fast to evaluate for small J), their common subexpressions
-eliminated (``casadi.cse``), and wrapped in CasADi Functions built once per model
-(``functools.lru_cache`` on the frozen ``Model``). Numeric calls
-take numpy arrays of shape (J,) or (k, J) (one state or k of them, by ``Function.map``) and return
-numpy arrays of the matching shape. The collocation's transcription works on SX matrices of shape
-(k, J), one node per row: ``forward_rows`` maps the forward Function over the rows (the map of an
-SX Function called on SX arguments is expanded into the transcription's graph, as hand-written
-expressions would be). ``casadi`` is imported only when a function here is called.
+eliminated (``casadi.cse``), and wrapped in CasADi Functions, each built on its first use and then
+kept (``functools.lru_cache`` on the frozen ``Model``): a caller pays only for what it needs (the
+collocation needs the inverse dynamics alone; the symbolic solve of M behind ``forward`` and the
+linearisation costs most for many coordinates). ``MinimalDynamics.build`` builds some ahead of a
+timing. Numeric calls take numpy arrays of shape (J,) or (k, J) (one state or k of them, by
+``Function.map``) and return numpy arrays of the matching shape. ``casadi`` is imported only when a
+function here is called.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -48,11 +54,12 @@ def _rotate(ca, angle, local):
     return ca.vertcat(local[0] * c - local[1] * s, local[0] * s + local[1] * c)
 
 
-def _inverse_expression(ca, model: Model, z, zd, zdd):
-    """tau (N m), an SX column (J, 1), of the motion z, z', z'' (rad, rad/s, rad/s^2; SX columns (J, 1))."""
-    J, B = model.n_joints, len(model.joints)
-    body_of = {joint.child: k for k, joint in enumerate(model.joints)}  # body k is the child of joint k
-    angle, rate, spin, origin = [None] * B, [None] * B, [None] * B, [None] * B
+def _poses(ca, model: Model, z):
+    """Each body's frame angle (rad, SX scalar) and origin (m, SX column (2, 1)) as functions of the
+    coordinates z (SX column (J, 1)); body k is the child of joint k."""
+    B = len(model.joints)
+    body_of = {joint.child: k for k, joint in enumerate(model.joints)}
+    angle, origin = [None] * B, [None] * B
     c = 0  # the column of joint k's angle (a free joint's x, y follow it)
     for k, joint in enumerate(model.joints):
         at_parent = ca.DM(list(joint.at_parent))
@@ -61,16 +68,25 @@ def _inverse_expression(ca, model: Model, z, zd, zdd):
 
             at_parent = at_parent + ca.vertcat(*(casadi_value(ca, spline, z[c]) for spline in joint.path.splines()))
         if joint.parent == GROUND:
-            angle[k], rate[k], spin[k] = z[c] + joint.offset, zd[c], zdd[c]
+            angle[k] = z[c] + joint.offset
             at_joint = at_parent
             if joint.type == "free":
                 at_joint = at_joint + ca.vertcat(z[c + 1], z[c + 2])
         else:
             p = body_of[joint.parent]
-            angle[k], rate[k], spin[k] = angle[p] + z[c] + joint.offset, rate[p] + zd[c], spin[p] + zdd[c]
+            angle[k] = angle[p] + z[c] + joint.offset
             at_joint = origin[p] + _rotate(ca, angle[p], at_parent)
         origin[k] = at_joint - _rotate(ca, angle[k], joint.at_child)
         c += len(joint.coordinate_names)
+    return angle, origin
+
+
+def _inverse_expression(ca, model: Model, z, zd, zdd):
+    """tau (N m; N on a translation), an SX column (J, 1), of the motion z, z', z'' (rad, rad/s,
+    rad/s^2; SX columns (J, 1)), the model's own constant loads included."""
+    J = model.n_joints
+    body_of = {joint.child: k for k, joint in enumerate(model.joints)}
+    angle, origin = _poses(ca, model, z)
 
     def point(k, local):
         return origin[k] + _rotate(ca, angle[k], local)
@@ -85,11 +101,50 @@ def _inverse_expression(ca, model: Model, z, zd, zdd):
         body = model.body(joint.child)
         com = point(k, body.com)
         tau += ca.jacobian(com, z).T @ (body.mass * (acceleration(com) - gravity))
-        tau += ca.jacobian(angle[k], z).T * (body.inertia * spin[k])
+        tau += ca.jacobian(angle[k], z).T * (body.inertia * ca.jtimes(angle[k], z, zdd))  # the angle is linear in z
     for load in model.loads:
         at = point(body_of[load.body], load.at)
         tau -= ca.jacobian(at, z).T @ ca.DM(list(load.force))
     return tau
+
+
+LOAD_PARAMETERS = 5  # per external load: force x, y (N), point x, y (m), free moment (N m)
+
+
+def _external_loads_expression(ca, model: Model, loads: tuple, z, p):
+    """The generalised forces Q (SX column (J, 1); N m on angles, N on translations) of external
+    loads (``loads.ExternalLoad``: the body, the frames of force and point) given, per load, by
+    the parameters p[5 l : 5 l + 5] = force (N), point (m), each in the load's frame, and free
+    moment (N m): Q = J_o^T F + J_phi^T ((P - o) x F + M) for the body's origin o and angle phi,
+    i.e. J_P(z)^T F + J_phi^T M with P the body's material point at P (``loads.generalized_forces``)."""
+    from .loads import GROUND as LOADS_GROUND
+
+    body_of = {joint.child: k for k, joint in enumerate(model.joints)}
+    angle, origin = _poses(ca, model, z)
+    Q = ca.SX.zeros(model.n_joints, 1)
+    for l, load in enumerate(loads):
+        force, point, moment = p[5 * l:5 * l + 2], p[5 * l + 2:5 * l + 4], p[5 * l + 4]
+        if load.force_frame != LOADS_GROUND:
+            force = _rotate(ca, angle[body_of[load.force_frame]], force)
+        if load.point_frame != LOADS_GROUND:
+            b = body_of[load.point_frame]
+            point = origin[b] + _rotate(ca, angle[b], point)
+        b = body_of[load.body]
+        arm = point - origin[b]
+        Q += ca.jacobian(origin[b], z).T @ force
+        Q += ca.jacobian(angle[b], z).T * (arm[0] * force[1] - arm[1] * force[0] + moment)
+    return Q
+
+
+def load_parameters(loads, t) -> np.ndarray:
+    """The parameters of ``_external_loads_expression`` at times t (s, shape (k,)): shape (k, 5 L),
+    per load force x, y (N), point x, y (m) in its frames and free moment (N m), interpolated
+    from ``loads`` (``loads.ExternalLoads``); shape (k, 0) when ``loads`` is None."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    if loads is None:
+        return np.zeros((len(t), 0))
+    force, point, moment = loads.at(t)
+    return np.concatenate([force, point, moment[..., None]], axis=2).reshape(len(t), -1)
 
 
 def _solve_spd(ca, M, b):
@@ -111,30 +166,118 @@ def _solve_spd(ca, M, b):
 
 
 @functools.lru_cache(maxsize=64)
-def _functions(model: Model) -> dict:
-    """The model's CasADi Functions (see the module docstring), built once per model."""
+def _equations(model: Model):
+    """The symbols z, z', z'', tau (SX columns (J, 1)) and the inverse dynamics, M and h as SX
+    expressions of them, their common subexpressions eliminated; built once per model."""
     import casadi as ca
 
     J = model.n_joints
     z, zd, zdd, tau = (ca.SX.sym(name, J) for name in ("z", "zd", "zdd", "tau"))
     inverse = ca.cse(_inverse_expression(ca, model, z, zd, zdd))
-    M = ca.cse(ca.jacobian(inverse, zdd))
-    h = ca.cse(ca.substitute(inverse, zdd, ca.SX.zeros(J)))
-    forward = ca.cse(_solve_spd(ca, M, tau - h))
-    # the implicit-function linearisation at (z, z', z'') (see the module docstring)
+    return z, zd, zdd, tau, inverse
+
+
+@functools.lru_cache(maxsize=64)
+def _mass_matrix_and_bias(model: Model):
+    """M = d tau / d z'' (exact) and h = tau(z, z', 0), SX expressions of ``_equations``' symbols."""
+    import casadi as ca
+
+    z, zd, zdd, _, inverse = _equations(model)
+    return ca.cse(ca.jacobian(inverse, zdd)), ca.cse(ca.substitute(inverse, zdd, ca.SX.zeros(model.n_joints)))
+
+
+def _build_inverse(ca, model):
+    z, zd, zdd, _, inverse = _equations(model)
+    return ca.Function("inverse", [z, zd, zdd], [inverse])
+
+
+def _build_mass_matrix(ca, model):
+    return ca.Function("mass_matrix", [_equations(model)[0]], [_mass_matrix_and_bias(model)[0]])
+
+
+def _build_bias(ca, model):
+    z, zd, *_ = _equations(model)
+    return ca.Function("bias", [z, zd], [_mass_matrix_and_bias(model)[1]])
+
+
+@functools.lru_cache(maxsize=64)
+def _forward_expression(ca, model):
+    """z'' = M^-1 (tau - h), an SX expression of ``_equations``' symbols (z, z', tau)."""
+    z, zd, zdd, tau, _ = _equations(model)
+    M, h = _mass_matrix_and_bias(model)
+    return ca.cse(_solve_spd(ca, M, tau - h))
+
+
+def _build_forward(ca, model):
+    z, zd, _, tau, _ = _equations(model)
+    return ca.Function("forward", [z, zd, tau], [_forward_expression(ca, model)])
+
+
+def _build_about_motion(ca, model):
+    """(A, B) at (z, z', z'') by the implicit-function theorem (see the module docstring)."""
+    J = model.n_joints
+    z, zd, zdd, _, inverse = _equations(model)
+    M, _ = _mass_matrix_and_bias(model)
     lower = -_solve_spd(ca, M, ca.jacobian(inverse, ca.vertcat(z, zd)))
     A = ca.cse(ca.vertcat(ca.horzcat(ca.SX.zeros(J, J), ca.SX.eye(J)), lower))
     B = ca.cse(ca.vertcat(ca.SX.zeros(J, J), _solve_spd(ca, M, ca.SX.eye(J))))
-    about_motion = ca.Function("linearisation_about_motion", [z, zd, zdd], [A, B])
-    functions = {
-        "mass_matrix": ca.Function("mass_matrix", [z], [M]),
-        "bias": ca.Function("bias", [z, zd], [h]),
-        "inverse": ca.Function("inverse", [z, zd, zdd], [inverse]),
-        "forward": ca.Function("forward", [z, zd, tau], [forward]),
-        "linearisation": ca.Function("linearisation", [z, zd, tau], list(about_motion(z, zd, forward))),
-    }
-    functions["riccati_rate"] = _riccati_function(ca, J, about_motion)
-    return functions
+    return ca.Function("linearisation_about_motion", [z, zd, zdd], [A, B])
+
+
+def _build_linearisation(ca, model):
+    z, zd, _, tau, _ = _equations(model)
+    about_motion = _function(model, "linearisation_about_motion")
+    return ca.Function("linearisation", [z, zd, tau], list(about_motion(z, zd, _forward_expression(ca, model))))
+
+
+def _build_riccati_rate(ca, model):
+    return _riccati_function(ca, model.n_joints, _function(model, "linearisation_about_motion"))
+
+
+_BUILDERS = {
+    "inverse": _build_inverse, "mass_matrix": _build_mass_matrix, "bias": _build_bias, "forward": _build_forward,
+    "linearisation_about_motion": _build_about_motion, "linearisation": _build_linearisation,
+    "riccati_rate": _build_riccati_rate,
+}
+
+
+@functools.lru_cache(maxsize=256)
+def _function(model: Model, name: str):
+    """The model's CasADi Function ``name`` (a key of ``_BUILDERS``), built on first use."""
+    import casadi as ca
+
+    return _BUILDERS[name](ca, model)
+
+
+@functools.lru_cache(maxsize=64)
+def _actuation(model: Model, loads: tuple):
+    """tau = ID(z, z', z'') - Q(z, p): the generalised forces (N m; N on translations) that move the
+    model along z, z', z'' under the external ``loads`` of parameters p (``load_parameters``)."""
+    import casadi as ca
+
+    z, zd, zdd, _, inverse = _equations(model)
+    p = ca.SX.sym("p", LOAD_PARAMETERS * len(loads))
+    if loads:
+        inverse = inverse - ca.cse(_external_loads_expression(ca, model, loads, z, p))
+    return ca.Function("actuation", [z, zd, zdd, p], [inverse])
+
+
+class _Functions(Mapping):
+    """The model's Functions by name, each built on its first look-up."""
+
+    def __init__(self, model: Model):
+        self.model = model
+
+    def __getitem__(self, name: str):
+        if name not in _BUILDERS:
+            raise KeyError(name)
+        return _function(self.model, name)
+
+    def __iter__(self):
+        return iter(_BUILDERS)
+
+    def __len__(self) -> int:
+        return len(_BUILDERS)
 
 
 def _riccati_function(ca, J: int, about_motion):
@@ -180,7 +323,7 @@ class MinimalDynamics:
     def __init__(self, model: Model):
         self.model = model
         self.n_joints = model.n_joints
-        self.functions = _functions(model)
+        self.functions = _Functions(model)
 
     def _call(self, name: str, *args):
         """The Function ``name`` on one state (J,) or on k states (k, J) (by ``map``)."""
@@ -222,11 +365,17 @@ class MinimalDynamics:
         B (2J, J) (1/(kg m^2)); with a leading axis k for inputs of shape (k, J)."""
         return self._call("linearisation", z, zd, tau)
 
-    def forward_rows(self, z, zd, tau):
-        """z'' as CasADi SX of shape (k, J) from SX z, z', tau of shape (k, J), one state per row
-        (the form ``fdbench.collocation.transcribe`` takes)."""
-        k = z.shape[0]
-        return self.functions["forward"].map(k)(z.T, zd.T, tau.T).T
+    def build(self, *names: str) -> None:
+        """Build the Functions ``names`` now (keys of ``functions``), so that later timings exclude it."""
+        for name in names:
+            self.functions[name]
+
+    def actuation(self, loads: tuple = ()):
+        """The CasADi Function (z, z', z'', p) -> tau (columns (J, 1); p (5 L, 1)): the generalised
+        forces that move the model along z, z', z'' under the external loads ``loads``
+        (``loads.ExternalLoad`` of ``ExternalLoads.loads``) of parameters p (``load_parameters``),
+        tau = ID(z, z', z'') - J_P(z)^T F - J_phi(z)^T M, as ``Engine.inverse_dynamics`` with loads."""
+        return _actuation(self.model, tuple(loads))
 
     def riccati_rate(self, z, zd, zdd, p, q, r_inv) -> np.ndarray:
         """The Riccati right-hand side P' flattened row-wise (4 J^2,) about the desired z, z', z''
