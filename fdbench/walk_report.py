@@ -106,7 +106,7 @@ def _names(rows: list[WalkRow]) -> str:
 
 
 def _order_text(rows: list[WalkRow]) -> str:
-    return " > ".join(f"{row.name} ({number(row.record.get('rmse_rot_deg'))} deg"
+    return ", ".join(f"{row.name} ({number(row.record.get('rmse_rot_deg'))} deg"
                       + ("" if row.reached_end else f", stops at {number(row.record.get('t_end'))} s") + ")"
                       for row in sorted(rows, key=_rank_key))
 
@@ -155,32 +155,50 @@ def _reaching_lines(pairs, walk_duration, forearm_duration, floating_base) -> li
     return out
 
 
+TIE_FACTOR = 1.25  # two methods that both reach the end (or both stop) within this factor of RMSE_rot: a tie
+
+
+def order(a: WalkRow, b: WalkRow) -> int:
+    """-1 when a ranks above b (it reaches the end and b does not, or its RMSE_rot is lower by more
+    than TIE_FACTOR), 1 when below, 0 for a tie."""
+    if a.reached_end != b.reached_end:
+        return -1 if a.reached_end else 1
+    x, y = (row.record.get("rmse_rot_deg") for row in (a, b))
+    x, y = (v if v is not None and math.isfinite(v) else math.inf for v in (x, y))
+    if x == y or (math.isfinite(x) and math.isfinite(y) and max(x, y) <= TIE_FACTOR * min(x, y)):
+        return 0
+    return -1 if x < y else 1
+
+
 def _ranking_lines(pairs) -> list[str]:
     walk_rows, forearm_rows = [w for w, _ in pairs], [f for _, f in pairs]
-    walk_rank, forearm_rank = ranking(walk_rows), ranking(forearm_rows)
-    position_w = {k: i for i, k in enumerate(walk_rank)}
-    position_f = {k: i for i, k in enumerate(forearm_rank)}
-    keys = [w.key for w in walk_rows]
-    names = {w.key: w.name for w in walk_rows}
-    all_pairs = [(a, b) for i, a in enumerate(keys) for b in keys[i + 1:]]
-    swapped = [(a, b) for a, b in all_pairs if (position_w[a] < position_w[b]) != (position_f[a] < position_f[b])]
-    out = [f"- **Ranking** (reaching the end first, then RMSE_rot): forearm {_order_text(forearm_rows)}; "
+    both = [(pairs[i], pairs[k]) for i in range(len(pairs)) for k in range(i + 1, len(pairs))]
+    agree, ties, swapped = [], [], []
+    for (wa, fa), (wb, fb) in both:
+        on_walk, on_forearm = order(wa, wb), order(fa, fb)
+        (ties if 0 in (on_walk, on_forearm) else agree if on_walk == on_forearm else swapped).append(
+            (wa, wb, on_forearm))
+    out = [f"- **Ranking** (reaching the end first, then RMSE_rot; best first): forearm {_order_text(forearm_rows)}; "
            f"walk {_order_text(walk_rows)}."]
-    best_w, best_f = walk_rank[0], forearm_rank[0]
+    names = {w.key: w.name for w in walk_rows}
+    best_w, best_f = ranking(walk_rows)[0], ranking(forearm_rows)[0]
     best = (f"{names[best_w]} is the best on both" if best_w == best_f
             else f"the best is {names[best_f]} on the forearm and {names[best_w]} on the walk")
+    tie_text = (f"; {len(ties)} are within a factor {TIE_FACTOR:g} of each other (or both stop and their RMSE_rot are) "
+                "on at least one model, a tie there" if ties else "")
     if not swapped:
-        out.append(f"- The two rankings agree in every one of the {len(all_pairs)} pairs of methods; {best}.")
+        out.append(f"- Of the {len(both)} pairs of methods, {len(agree)} are ordered alike on both models{tie_text}; "
+                   f"none is ordered the other way; {best}.")
         return out
-    out.append(f"- The rankings agree in {len(all_pairs) - len(swapped)} of {len(all_pairs)} pairs of methods; "
-               f"{best}. Ordered differently: "
-               + "; ".join(_swap_text(names, a, b, position_f) for a, b in swapped) + ".")
+    out.append(f"- Of the {len(both)} pairs of methods, {len(agree)} are ordered alike on both models{tie_text}; "
+               f"{len(swapped)} the other way: " + "; ".join(_swap_text(a, b, on_forearm) for a, b, on_forearm in swapped)
+               + f". {best[0].upper() + best[1:]}.")
     return out
 
 
-def _swap_text(names: dict, a: str, b: str, position_f: dict) -> str:
-    first, second = (a, b) if position_f[a] < position_f[b] else (b, a)
-    return f"{names[first]} above {names[second]} on the forearm, below it on the walk"
+def _swap_text(a: WalkRow, b: WalkRow, on_forearm: int) -> str:
+    first, second = (a, b) if on_forearm < 0 else (b, a)
+    return f"{first.name} above {second.name} on the forearm, below it on the walk"
 
 
 def _open_loop_lines(pairs, floating_base) -> list[str]:

@@ -286,12 +286,18 @@ def test_claim_ranking_follows_the_numbers():
     assert ranking(_rows(FOREARM)) == [COMPUTED_TORQUE, LQR, PD, OPEN_LOOP]
     text = "\n".join(claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0))
     # forearm CT < LQR < PD; walk PD < LQR < CT: all three pairs among them swap, the three with open loop agree
-    assert "agree in 3 of 6 pairs" in text
-    assert "the best is Computed Torque on the forearm and Pd on the walk" in text
+    assert "Of the 6 pairs of methods, 3 are ordered alike on both models; 3 the other way" in text
+    assert "Computed Torque above Pd on the forearm, below it on the walk" in text
+    assert "The best is Computed Torque on the forearm and Pd on the walk" in text
     same = dict(WALK, **{PD: ("success", 2.5, 0.5, 34.0), COMPUTED_TORQUE: ("success", 2.5, 0.01, 33.8),
                          LQR: ("success", 2.5, 0.05, 33.9)})
     text = "\n".join(claim_lines(_rows(same), _rows(FOREARM), 2.5, 1.0))
-    assert "agree in every one of the 6 pairs" in text and "Computed Torque is the best on both" in text
+    assert "6 are ordered alike on both models; none is ordered the other way" in text
+    assert "Computed Torque is the best on both" in text
+    # LQR and PD within a factor 1.25 on the walk: a tie, neither agreeing nor swapped
+    close = dict(WALK, **{PD: ("success", 2.5, 0.025, 34.0)})
+    text = "\n".join(claim_lines(_rows(close), _rows(FOREARM), 2.5, 1.0))
+    assert "1 are within a factor 1.25" in text and "3 are ordered alike" in text and "2 the other way" in text
 
 
 def test_claim_residual_sentence_takes_the_extremes_of_the_methods_that_reach_the_end():
@@ -321,26 +327,43 @@ def test_options_of_the_papers_tables_are_refused_in_one_line_before_any_work(tm
 # ---- the recorded walk, end to end ---------------------------------------------------------------
 
 
+def _first_of_the_walk(folder: Path, seconds: float) -> tuple[Path, Path]:
+    """The recorded walk's first ``seconds`` as a .mot file, and its loads file pointing at the
+    ground reactions' data by an absolute path."""
+    lines = (EXAMPLES / "subject01_walk_IK.mot").read_text().splitlines()
+    end = next(i for i, line in enumerate(lines) if line.strip() == "endheader") + 2  # the column labels too
+    kept = [line for line in lines[end:] if line.strip() and float(line.split()[0]) <= seconds + 1e-9]
+    motion = folder / "walk_start.mot"
+    motion.write_text("\n".join(lines[:end] + kept) + "\n")
+    loads = folder / "grf.xml"
+    loads.write_text((EXAMPLES / "subject01_walk_grf.xml").read_text().replace(
+        "<datafile>subject01_walk_grf.mot", f"<datafile>{EXAMPLES / 'subject01_walk_grf.mot'}"))
+    return motion, loads
+
+
 @pytest.mark.skipif(not (EXAMPLES / "subject01.osim").exists(), reason="the gait model is not in examples/opensim")
 def test_walk_report_end_to_end_on_the_gait_model(tmp_path):
-    """The walk of subject01 with a tiny budget and no collocation: every method on both models, PD
-    tracks every angle within 1 deg and the pelvis within 1 cm, and the residual means of the
-    inverse dynamics are those ``fdbench inverse`` reports."""
+    """The first 0.6 s of subject01's walk with a tiny budget and no collocation: every method on
+    both models; PD tracks every angle within 1 deg and the pelvis within 1 cm; open loop falls;
+    the inverse dynamics' residual means are those of ``fdbench inverse`` on the same files."""
     pytest.importorskip("opensim")
+    motion, loads = _first_of_the_walk(tmp_path, 0.6)
+    common = ["--model", str(EXAMPLES / "subject01.osim"), "--motion", str(motion), "--loads", str(loads), "-q"]
     out = tmp_path / "walk.json"
-    result = CliRunner().invoke(app, ["report", "--model", str(EXAMPLES / "subject01.osim"), "--motion",
-                                      str(EXAMPLES / "subject01_walk_IK.mot"), "--loads",
-                                      str(EXAMPLES / "subject01_walk_grf.xml"), "--db", str(tmp_path / "runs.sqlite"),
-                                      "--budget", "2", "--popsize", "2", "--no-beyond", "--jobs", "2", "-f", "json",
-                                      "--output", str(out), "-q"])
+    runner = CliRunner()
+    result = runner.invoke(app, ["report", *common, "--db", str(tmp_path / "runs.sqlite"), "--budget", "2",
+                                 "--popsize", "2", "--no-beyond", "--jobs", "2", "-f", "json", "--output", str(out)])
     assert result.exit_code == 0, result.output
     report = json.loads(out.read_text())
     walk = {e["key"]: e["record"] for e in report["walk"]}
+    assert list(walk) == [OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, CMAES]
     pd = walk[PD]
-    assert pd["status"] == "success" and pd["t_end"] == pytest.approx(2.5)
+    assert pd["status"] == "success" and pd["t_end"] == pytest.approx(0.6)
     angles = [k for k in pd if k.startswith("rmse_rot_deg_")]
     assert len(angles) == 7 and all(pd[k] < 1.0 for k in angles)
     assert all(pd[f"rmse_trans_cm_pelvis_{axis}"] < 1.0 for axis in ("tx", "ty"))
-    assert walk[OPEN_LOOP]["t_end"] < 2.5  # the walk falls without feedback
-    assert math.isfinite(report["inverse_residuals"]["residual_fx_mean_n"])
-    assert any("floating base" in line for line in report["claim"])
+    assert walk[OPEN_LOOP]["status"] != "success" and walk[OPEN_LOOP]["t_end"] < 0.6  # no feedback: the walk falls
+    assert any("nothing holds the walk's floating base" in line for line in report["claim"])
+    inverse = json.loads(runner.invoke(app, ["inverse", *common, "-f", "json"]).stdout)
+    for name in ("residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm"):
+        assert report["inverse_residuals"][name] == pytest.approx(inverse[name], rel=1e-9)

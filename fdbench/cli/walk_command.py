@@ -109,8 +109,10 @@ def settings_table(plan, spec, jobs: str) -> dict:
     from ..store import git_commit, machine
 
     loads = dict(spec.inputs).get("--loads")
+    conditions = {key: value.replace("Figure 2", "the coordinates figure")
+                  for key, value in condition_settings(spec, [m.spec for m in plan.walk]).items()}
     table = {"model": f"{spec.model_name}: {summary(spec.model_name)}",
-             **condition_settings(spec, plan.all_specs()),
+             **conditions,
              "external loads": f"{spec.loads}" + (f", SHA-256 {loads[:16]} (with its data file)" if loads else "")
              if spec.loads else "none",
              "integrator": spec.integrator + (f" (dt = {spec.dt} s)" if spec.integrator == "rk4" else ""),
