@@ -24,6 +24,7 @@ RRA_MEANS = {"residual_fx_mean_n": -3.8, "residual_fy_mean_n": -2.8, "residual_m
 
 OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS = (
     "open-loop", "pd", "computed-torque", "lqr", "collocation", "cs-cmaes", "cs-bfgs")
+SLOWEST_FIRST = (COLLOCATION, COMPUTED_TORQUE, BFGS, CMAES, LQR, PD, OPEN_LOOP)
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,11 @@ class WalkPlan:
     popsize: int = WALK_POPSIZE
 
     def all_specs(self) -> list:
-        return [m.spec for m in self.walk + self.forearm]
+        """Every run's spec, the slowest first (so that two workers share the work evenly): on the
+        walk collocation, computed torque (inverse dynamics at every stage), LQR, the shooting
+        optimisation, then the others; the forearm's last."""
+        return [m.spec for m in sorted(self.walk, key=lambda m: SLOWEST_FIRST.index(m.key))] + \
+            [m.spec for m in self.forearm]
 
 
 def methods(budget: int, popsize: int, collocation: bool = True, bfgs: bool = False, **common) -> list[WalkMethod]:

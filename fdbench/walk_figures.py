@@ -164,26 +164,31 @@ def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
 
 def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Path) -> None:
     """A panel per method: the recorded walk (grey) and the method's (coloured) at the instants
-    ``times`` (s); ``recorded`` and each of ``simulated`` are ``stick_frames``."""
+    ``times`` (s), drawn side by side as a film strip (instant k moved k spacings to the right);
+    ``recorded`` and each of ``simulated`` are ``stick_frames``."""
     from .figures import _save
 
     plt = _pyplot()
-    fig, axes = plt.subplots(len(simulated), 1, figsize=(11, 2.4 * len(simulated)), sharex=True, squeeze=False)
+    points = np.concatenate([frame.reshape(-1, 2) for frame in recorded])
+    spacing = round(float(np.ptp(points[:, 0])) + 0.4, 1)
+    fig, axes = plt.subplots(len(simulated), 1, figsize=(2.0 + 1.6 * len(times), 2.6 * len(simulated)),
+                             sharex=True, squeeze=False)
     for ax, (key, frames) in zip(axes[:, 0], simulated.items()):
-        for frame in recorded:
-            _draw(ax, frame, color="0.6", linewidth=2.2)
-        for frame in frames:
+        for k, (seen, frame) in enumerate(zip(recorded, frames)):
+            shift = np.array([k * spacing, 0.0])
+            _draw(ax, seen + shift, color="0.6", linewidth=2.2)
             if frame is not None:
-                _draw(ax, frame, color=COLOURS.get(key, "tab:red"), linewidth=1.2)
+                _draw(ax, frame + shift, color=COLOURS.get(key, "tab:red"), linewidth=1.2)
         missing = [f"{t:.2f}" for t, frame in zip(times, frames) if frame is None]
-        ax.set_title(labels.get(key, key) + (f" (not reached: t = {', '.join(missing)} s)" if missing else ""),
+        ax.set_title(labels.get(key, key) + (f" (stopped before t = {', '.join(missing)} s)" if missing else ""),
                      fontsize=9)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
         ax.set_ylabel("y (m)")
-    axes[-1, 0].set_xlabel("x (m)")
+    axes[-1, 0].set_xlabel(f"x (m); the instant k drawn k x {spacing:g} m to the right")
     fig.suptitle("Stick figures at t = " + ", ".join(f"{t:.2f}" for t in times)
                  + " s: recorded (grey) and simulated", fontsize=11)
+    fig.tight_layout()
     _save(fig, path)
     plt.close(fig)
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from . import __version__
-from .walk import OPEN_LOOP, RRA_MEANS, WalkRow
+from .walk import BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, RRA_MEANS, WalkRow
 
 MAIN_COLUMNS = ("method", "status / t_end", "RMSE_rot (deg)", "RMSE_trans (cm)", "RMSE_torque (N m)",
                 "RMSE_force (N)", "residual force RMS (N)", "residual moment RMS (N m)", "runtime (s)")
@@ -87,6 +87,16 @@ def residual_means_table(inverse_fields: dict, rows: list[WalkRow]) -> list[str]
 
 # ---- the claim tested -----------------------------------------------------------------------------
 
+SHORT = {OPEN_LOOP: "open loop", PD: "PD", COMPUTED_TORQUE: "computed torque", LQR: "LQR",
+         COLLOCATION: "collocation", CMAES: "CMA-ES", BFGS: "BFGS"}
+TIE_FACTOR = 1.25  # two methods that both reach the end (or both stop) within this factor of RMSE_rot: a tie
+SAME_RESIDUALS = 0.01  # residual force RMS within 1 % of each other: the same
+
+
+def short(row: WalkRow) -> str:
+    """The method's short name in the claim's sentences."""
+    return SHORT.get(row.key, row.name)
+
 
 def _rank_key(row: WalkRow):
     """Methods that reach the end first, then by RMSE_rot (missing last)."""
@@ -98,64 +108,6 @@ def _rank_key(row: WalkRow):
 def ranking(rows: list[WalkRow]) -> list[str]:
     """The keys of the rows from best to worst: reaching the end first, then RMSE_rot."""
     return [row.key for row in sorted(rows, key=_rank_key)]
-
-
-def _names(rows: list[WalkRow]) -> str:
-    names = [row.name for row in rows]
-    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-
-
-def _order_text(rows: list[WalkRow]) -> str:
-    return ", ".join(f"{row.name} ({number(row.record.get('rmse_rot_deg'))} deg"
-                      + ("" if row.reached_end else f", stops at {number(row.record.get('t_end'))} s") + ")"
-                      for row in sorted(rows, key=_rank_key))
-
-
-def claim_lines(walk: list[WalkRow], forearm: list[WalkRow], walk_duration: float, forearm_duration: float,
-                floating_base: bool = True) -> list[str]:
-    """The paper's claim ("the forearm generates the same problems as more complex models") tested
-    on these runs: where the walk's ranking of the methods (reaching the end, then RMSE_rot) agrees
-    with the forearm's, where not, and why; every sentence from the rows' numbers."""
-    on_forearm = {row.key: row for row in forearm}
-    pairs = [(w, on_forearm[w.key]) for w in walk if w.key in on_forearm]
-    if not pairs:
-        return ["No method ran on both models; nothing to compare."]
-    out = _reaching_lines(pairs, walk_duration, forearm_duration, floating_base)
-    out += _ranking_lines(pairs)
-    out += _open_loop_lines(pairs, floating_base)
-    out += _residual_lines([w for w, _ in pairs], floating_base)
-    out += _cost_lines(pairs)
-    return out
-
-
-def _reaching_lines(pairs, walk_duration, forearm_duration, floating_base) -> list[str]:
-    both = [w for w, f in pairs if w.reached_end and f.reached_end]
-    neither = [(w, f) for w, f in pairs if not w.reached_end and not f.reached_end]
-    walk_only = [(w, f) for w, f in pairs if not w.reached_end and f.reached_end]
-    forearm_only = [(w, f) for w, f in pairs if w.reached_end and not f.reached_end]
-    agree = len(both) + len(neither)
-    out = [f"- **Reaching the end**: {agree} of {len(pairs)} methods behave alike on both models."
-           + (f" {_names(both)} reach the end of both motions." if both else "")]
-    for w, f in neither:
-        out.append(f"- {w.name} stops on both: the forearm at t = {number(f.get('t_end'))} s of {forearm_duration:g} s "
-                   f"({f.get('status')}), the walk at t = {number(w.get('t_end'))} s of {walk_duration:g} s "
-                   f"({w.get('status')}).")
-    for w, f in walk_only:
-        why = ""
-        if w.key == OPEN_LOOP and floating_base:
-            why = (" Without feedback nothing holds the walk's floating base: the pelvis's three coordinates are "
-                   "driven by the inverse-dynamics residuals alone, so the error that open loop accumulates is never "
-                   "corrected and the model falls, whereas the forearm's elbow is pinned to the ground.")
-        out.append(f"- **Disagrees**: {w.name} reaches the end of the forearm's motion ({forearm_duration:g} s) but "
-                   f"stops on the walk at t = {number(w.get('t_end'))} s of {walk_duration:g} s ({w.get('status')})."
-                   + why)
-    for w, f in forearm_only:
-        out.append(f"- **Disagrees**: {w.name} reaches the end of the walk ({walk_duration:g} s) but stops on the "
-                   f"forearm at t = {number(f.get('t_end'))} s of {forearm_duration:g} s ({f.get('status')}).")
-    return out
-
-
-TIE_FACTOR = 1.25  # two methods that both reach the end (or both stop) within this factor of RMSE_rot: a tie
 
 
 def order(a: WalkRow, b: WalkRow) -> int:
@@ -170,91 +122,180 @@ def order(a: WalkRow, b: WalkRow) -> int:
     return -1 if x < y else 1
 
 
+def _names(rows: list[WalkRow]) -> str:
+    names = [short(row) for row in rows]
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def _order_text(rows: list[WalkRow]) -> str:
+    return ", ".join(f"{short(row)} ({number(row.record.get('rmse_rot_deg'))} deg"
+                     + ("" if row.reached_end else f", stops at {number(row.record.get('t_end'))} s") + ")"
+                     for row in sorted(rows, key=_rank_key))
+
+
+def claim_lines(walk: list[WalkRow], forearm: list[WalkRow], walk_duration: float, forearm_duration: float,
+                floating_base: bool = True, inverse_fields: dict | None = None) -> list[str]:
+    """The paper's claim ("the forearm generates the same problems as more complex models") tested
+    on these runs: where the walk's ranking of the methods (reaching the end, then RMSE_rot) agrees
+    with the forearm's, where not, and why; every sentence from the rows' numbers (and the inverse
+    dynamics' residual fields, ``inverse_fields``)."""
+    on_forearm = {row.key: row for row in forearm}
+    pairs = [(w, on_forearm[w.key]) for w in walk if w.key in on_forearm]
+    if not pairs:
+        return ["No method ran on both models; nothing to compare."]
+    out = _reaching_lines(pairs, walk_duration, forearm_duration, floating_base)
+    out += _ranking_lines(pairs)
+    out += _open_loop_lines(pairs)
+    out += _residual_lines([w for w, _ in pairs], floating_base, inverse_fields or {})
+    out += _cost_lines(pairs)
+    return out
+
+
+def _reaching_lines(pairs, walk_duration, forearm_duration, floating_base) -> list[str]:
+    both = [w for w, f in pairs if w.reached_end and f.reached_end]
+    neither = [(w, f) for w, f in pairs if not w.reached_end and not f.reached_end]
+    walk_only = [(w, f) for w, f in pairs if not w.reached_end and f.reached_end]
+    forearm_only = [(w, f) for w, f in pairs if w.reached_end and not f.reached_end]
+    agree = len(both) + len(neither)
+    out = [f"- **Reaching the end**: {agree} of {len(pairs)} methods behave alike on both models."
+           + (f" {_names(both)} reach the end of both motions." if both else "")]
+    for w, f in neither:
+        out.append(f"- {short(w)} stops on both: the forearm at t = {number(f.get('t_end'))} s of {forearm_duration:g} s "
+                   f"({f.get('status')}), the walk at t = {number(w.get('t_end'))} s of {walk_duration:g} s "
+                   f"({w.get('status')}).")
+    for w, f in walk_only:
+        why = ""
+        if w.key == OPEN_LOOP and floating_base:
+            why = (" Without feedback nothing holds the walk's floating base: the pelvis's three coordinates are "
+                   "driven by the inverse-dynamics residuals alone, so the error that open loop accumulates is never "
+                   "corrected and the model falls, whereas the forearm's elbow is pinned to the ground.")
+        out.append(f"- **Disagrees**: {short(w)} reaches the end of the forearm's motion ({forearm_duration:g} s) but "
+                   f"stops on the walk at t = {number(w.get('t_end'))} s of {walk_duration:g} s ({w.get('status')})."
+                   + why + _shooting_start(w))
+    for w, f in forearm_only:
+        out.append(f"- **Disagrees**: {short(w)} reaches the end of the walk ({walk_duration:g} s) but stops on the "
+                   f"forearm at t = {number(f.get('t_end'))} s of {forearm_duration:g} s ({f.get('status')}).")
+    return out
+
+
+def _shooting_start(row: WalkRow) -> str:
+    """For an optimisation that ended worse than its initial guess: says so, with both objectives."""
+    best, initial = row.record.get("best_objective"), row.record.get("initial_objective")
+    if best is None or initial is None or not best > initial:
+        return ""
+    return (f" Its best objective (eq. 18: {number(best)}) is worse than that of its initial guess ({number(initial)}, "
+            f"the inverse-dynamics torques alone): none of the {row.get('evaluations')} candidates it evaluated "
+            "around that guess did better.")
+
+
 def _ranking_lines(pairs) -> list[str]:
     walk_rows, forearm_rows = [w for w, _ in pairs], [f for _, f in pairs]
     both = [(pairs[i], pairs[k]) for i in range(len(pairs)) for k in range(i + 1, len(pairs))]
-    agree, ties, swapped = [], [], []
+    agree, ties, by_end, by_error = [], [], [], []
     for (wa, fa), (wb, fb) in both:
         on_walk, on_forearm = order(wa, wb), order(fa, fb)
-        (ties if 0 in (on_walk, on_forearm) else agree if on_walk == on_forearm else swapped).append(
-            (wa, wb, on_forearm))
+        if 0 in (on_walk, on_forearm):
+            ties.append((wa, wb))
+        elif on_walk == on_forearm:
+            agree.append((wa, wb))
+        elif wa.reached_end != wb.reached_end or fa.reached_end != fb.reached_end:
+            by_end.append((wa, wb))
+        else:
+            by_error.append((wa, wb, on_forearm))
     out = [f"- **Ranking** (reaching the end first, then RMSE_rot; best first): forearm {_order_text(forearm_rows)}; "
            f"walk {_order_text(walk_rows)}."]
-    names = {w.key: w.name for w in walk_rows}
-    best_w, best_f = ranking(walk_rows)[0], ranking(forearm_rows)[0]
-    best = (f"{names[best_w]} is the best on both" if best_w == best_f
-            else f"the best is {names[best_f]} on the forearm and {names[best_w]} on the walk")
-    tie_text = (f"; {len(ties)} are within a factor {TIE_FACTOR:g} of each other (or both stop and their RMSE_rot are) "
-                "on at least one model, a tie there" if ties else "")
-    if not swapped:
-        out.append(f"- Of the {len(both)} pairs of methods, {len(agree)} are ordered alike on both models{tie_text}; "
-                   f"none is ordered the other way; {best}.")
-        return out
-    out.append(f"- Of the {len(both)} pairs of methods, {len(agree)} are ordered alike on both models{tie_text}; "
-               f"{len(swapped)} the other way: " + "; ".join(_swap_text(a, b, on_forearm) for a, b, on_forearm in swapped)
-               + f". {best[0].upper() + best[1:]}.")
+    best_w, best_f = (min(rows, key=_rank_key) for rows in (walk_rows, forearm_rows))
+    best = (f"{short(best_w)} is the best on both" if best_w.key == best_f.key
+            else f"the best is {short(best_f)} on the forearm and {short(best_w)} on the walk")
+    text = f"- Of the {len(both)} pairs of methods, {len(agree)} are ordered alike on both models"
+    if ties:
+        text += (f"; {len(ties)} are a tie on at least one model (both reach the end, or both stop, with RMSE_rot "
+                 f"within a factor {TIE_FACTOR:g})")
+    swapped = len(by_end) + len(by_error)
+    text += f"; {swapped} the other way" if swapped else "; none is ordered the other way"
+    if by_end:
+        text += f" ({len(by_end)} because one of the two reaches the end on one model only, as above"
+        text += (")" if not by_error else f"; {len(by_error)} by RMSE_rot: "
+                 + "; ".join(_swap_text(a, b, on_forearm) for a, b, on_forearm in by_error) + ")")
+    elif by_error:
+        text += ": " + "; ".join(_swap_text(a, b, on_forearm) for a, b, on_forearm in by_error)
+    out.append(text + f". {best[0].upper() + best[1:]}.")
     return out
 
 
 def _swap_text(a: WalkRow, b: WalkRow, on_forearm: int) -> str:
     first, second = (a, b) if on_forearm < 0 else (b, a)
-    return f"{first.name} above {second.name} on the forearm, below it on the walk"
+    return f"{short(first)} above {short(second)} on the forearm, below it on the walk"
 
 
-def _open_loop_lines(pairs, floating_base) -> list[str]:
+def _open_loop_lines(pairs) -> list[str]:
+    """Where open loop ranks on each model, and how far its error is from PD's."""
     found = [(w, f) for w, f in pairs if w.key == OPEN_LOOP]
+    pd = [(w, f) for w, f in pairs if w.key == PD]
     if not found:
         return []
     w, f = found[0]
-    others = [(ww, ff) for ww, ff in pairs if ww.key != OPEN_LOOP]
-    last_w = bool(others) and ranking([ww for ww, _ in pairs])[-1] == OPEN_LOOP
-    last_f = bool(others) and ranking([ff for _, ff in pairs])[-1] == OPEN_LOOP
-    where = ("on both models" if last_w and last_f else "on the forearm only" if last_f
-             else "on the walk only" if last_w else None)
-    if where is None:
-        return [f"- Open loop is not the worst method on either model (forearm RMSE_rot {number(f.get('rmse_rot_deg'))} "
-                f"deg, walk {number(w.get('rmse_rot_deg'))} deg)."]
-    return [f"- **Open loop drifts** {where}: it ranks last there (forearm RMSE_rot {number(f.get('rmse_rot_deg'))} deg"
-            f"{'' if f.reached_end else ' until it stops'}, walk {number(w.get('rmse_rot_deg'))} deg"
-            f"{'' if w.reached_end else ' until it stops'}): the inverse-dynamics torques alone do not reproduce "
-            "the recorded or prescribed motion, as the paper says of the forearm."]
+    rank_w, rank_f = ranking([a for a, _ in pairs]).index(OPEN_LOOP) + 1, ranking([b for _, b in pairs]).index(OPEN_LOOP) + 1
+    text = (f"- **Open loop** ranks {rank_f} of {len(pairs)} on the forearm (RMSE_rot {number(f.get('rmse_rot_deg'))} deg"
+            f"{' over the whole motion' if f.reached_end else ' until it stops'}) and {rank_w} of {len(pairs)} on the "
+            f"walk ({number(w.get('rmse_rot_deg'))} deg{' over the whole walk' if w.reached_end else ' until it falls'})")
+    if pd:
+        ratios = [o.get("rmse_rot_deg") / p.get("rmse_rot_deg") for o, p in zip((f, w), pd[0][::-1])
+                  if o.get("rmse_rot_deg") and p.get("rmse_rot_deg")]
+        if len(ratios) == 2 and min(ratios) > TIE_FACTOR:
+            text += (f": on both models the inverse-dynamics torques alone drift from the motion, {_times(ratios[0])} "
+                     f"(forearm) and {_times(ratios[1])} (walk) PD's error, as the paper says of the forearm")
+        elif len(ratios) == 2:
+            text += f"; its error is {_times(ratios[0])} PD's on the forearm and {_times(ratios[1])} on the walk"
+    return [text + "."]
 
 
-def _residual_lines(walk_rows: list[WalkRow], floating_base: bool) -> list[str]:
+def _residual_lines(walk_rows: list[WalkRow], floating_base: bool, inverse_fields: dict) -> list[str]:
     if not floating_base:
         return []
-    found = [(row.get("residual_force_rms_n"), row) for row in walk_rows if row.reached_end
-             and row.record.get("residual_force_rms_n") is not None and math.isfinite(row.record["residual_force_rms_n"])]
+    found = sorted(((row.get("residual_force_rms_n"), row) for row in walk_rows if row.reached_end
+                    and row.record.get("residual_force_rms_n") is not None
+                    and math.isfinite(row.record["residual_force_rms_n"])), key=lambda x: x[0])
     if not found:
         return ["- **Residuals** exist only on the walk (the forearm has no floating base); no method reached the "
                 "walk's end, so none gives the residuals of a whole walk."]
-    low, high = min(found, key=lambda x: x[0]), max(found, key=lambda x: x[0])
-    spread = (f"from {number(low[0])} N ({low[1].name}) to {number(high[0])} N ({high[1].name})" if low[1] is not high[1]
-              else f"{number(low[0])} N ({low[1].name})")
-    return [f"- **Residuals** exist only on the walk: the forearm has no floating base, so the fourth indicator has "
-            f"no counterpart there. Among the methods that reach the walk's end, the residual force RMS goes {spread}: "
-            "a ranking by dynamic consistency the forearm cannot give."]
+    (low, low_row), (high, high_row) = found[0], found[-1]
+    inverse = inverse_fields.get("residual_force_rms_n")
+    beside = f" (the inverse dynamics' own: {number(inverse)} N)" if inverse is not None else ""
+    text = ("- **Residuals** exist only on the walk: the forearm has no floating base, so the fourth indicator has no "
+            "counterpart there. ")
+    if len(found) == 1:
+        text += (f"{short(low_row)} is the only method that reaches the walk's end: residual force RMS {number(low)} N"
+                 f"{beside}.")
+    elif high <= (1 + SAME_RESIDUALS) * low:
+        text += (f"The {len(found)} methods that reach the walk's end leave the same "
+                 f"residual force RMS to within {100 * SAME_RESIDUALS:g} %: {number(low)} N{beside}; tracking the "
+                 "recorded kinematics this closely keeps the residuals inverse dynamics needs, so on this walk the "
+                 "fourth indicator does not separate them.")
+    else:
+        text += (f"Among the methods that reach the walk's end, the residual force RMS goes from {number(low)} N "
+                 f"({short(low_row)}) to {number(high)} N ({short(high_row)}){beside}.")
+    return [text]
 
 
 def _cost_lines(pairs) -> list[str]:
-    ratios = [w.get("runtime_s") / f.get("runtime_s") for w, f in pairs
-              if w.get("runtime_s") and f.get("runtime_s") and math.isfinite(w.get("runtime_s") / f.get("runtime_s"))]
+    ratios = sorted(w.get("runtime_s") / f.get("runtime_s") for w, f in pairs
+                    if w.get("runtime_s") and f.get("runtime_s") and math.isfinite(w.get("runtime_s") / f.get("runtime_s")))
     out = []
     if ratios:
-        ratios.sort()
         out.append(f"- **Cost**: a walk's run takes {_times(ratios[0])} to {_times(ratios[-1])} the forearm's runtime "
                    f"(median {_times(ratios[len(ratios) // 2])}).")
-    shooting = [(w, f) for w, f in pairs if w.record.get("n_params") and f.record.get("n_params")]
-    for w, f in shooting:
-        out.append(f"- {w.name}: the same budget of {w.get('budget')} simulations is spread over "
-                   f"{w.get('n_params')} spline parameters on the walk against {f.get('n_params')} on the forearm; "
-                   f"it ends at RMSE_rot {number(w.get('rmse_rot_deg'))} deg on the walk, {number(f.get('rmse_rot_deg'))} "
-                   "deg on the forearm.")
+    for w, f in pairs:
+        if w.record.get("n_params") and f.record.get("n_params"):
+            out.append(f"- {short(w)}: the same budget of {w.get('budget')} simulations is spread over "
+                       f"{w.get('n_params')} spline parameters on the walk against {f.get('n_params')} on the forearm; "
+                       f"it ends at RMSE_rot {number(w.get('rmse_rot_deg'))} deg on the walk, "
+                       f"{number(f.get('rmse_rot_deg'))} deg on the forearm.")
     return out
 
 
 def _times(ratio: float) -> str:
-    return f"{ratio:.3g} times"
+    return f"{ratio:,.0f} times" if ratio >= 9.5 else f"{ratio:.2g} times"
 
 
 # ---- the whole report ----------------------------------------------------------------------------
@@ -294,7 +335,7 @@ def markdown(plan, walk: list[WalkRow], forearm: list[WalkRow], inverse, inverse
     out += ["", "## The paper's claim tested", "",
             "The paper offers the forearm as a stand-in that \"generates the same problems as more complex models\". "
             "From the runs above:", ""]
-    out += claim_lines(walk, forearm, duration, forearm_duration, True)
+    out += claim_lines(walk, forearm, duration, forearm_duration, True, inverse_fields)
     out += ["", "## When and where the runs were made", ""] + provenance
     if figures:
         out += ["", "## Figures", ""] + [f"![{name}]({path})" for name, path in figures.items()]

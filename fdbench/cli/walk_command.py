@@ -77,7 +77,7 @@ def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures
 
         return csv_text(list(walk_report.CSV_COLUMNS), walk_report.csv_rows(walk_rows, forearm_rows))
     duration, forearm_duration = float(inverse.t[-1]), walk_report._duration(forearm_rows)
-    claim = walk_report.claim_lines(walk_rows, forearm_rows, duration, forearm_duration)
+    claim = walk_report.claim_lines(walk_rows, forearm_rows, duration, forearm_duration, True, fields)
     if fmt == "json":
         return json.dumps(walk_report.json_report(plan, walk_rows, forearm_rows, fields, settings, claim), indent=2) + "\n"
     links = None
