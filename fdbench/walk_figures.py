@@ -24,20 +24,31 @@ COLOURS = {"open-loop": "tab:gray", "pd": "tab:red", "computed-torque": "tab:blu
            "collocation": "tab:brown", "cs-cmaes": "tab:green", "cs-bfgs": "tab:olive"}
 
 
-def trajectories(rows, runs: dict) -> dict:
+def trajectories(rows, runs: dict, jobs: int = 1) -> dict:
     """{row key: Simulation} of each row's stored run simulated again with its spec (control: the
-    run; shooting: its best parameters replayed); collocation, whose solution is not stored and
-    takes minutes to find again, is left out."""
+    run; shooting: its best parameters replayed), ``jobs`` at once in forked processes; collocation,
+    whose solution is not stored and takes minutes to find again, is left out."""
+    tasks = {}
+    for row in rows:
+        command, params = row.record.get("command"), runs[row.hash].get("params")
+        if command == "control" or (command == "optimize" and params is not None):
+            tasks[row.key] = (row.spec, params if command == "optimize" else None)
+    if jobs <= 1 or len(tasks) <= 1 or not hasattr(os, "fork"):
+        return {key: simulate_again(*task) for key, task in tasks.items()}
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(min(jobs, len(tasks)), mp_context=multiprocessing.get_context("fork")) as pool:
+        futures = {key: pool.submit(simulate_again, *task) for key, task in tasks.items()}
+        return {key: future.result() for key, future in futures.items()}
+
+
+def simulate_again(spec, params=None):
+    """The Simulation of a stored run: a control run carried out again, or an optimisation's best
+    parameters (``params``) replayed."""
     from .experiment import replay, run
 
-    out = {}
-    for row in rows:
-        command = row.record.get("command")
-        if command == "control":
-            out[row.key] = run(row.spec).result
-        elif command == "optimize" and runs[row.hash].get("params") is not None:
-            out[row.key] = replay(row.spec, runs[row.hash]["params"])
-    return out
+    return run(spec).result if params is None else replay(spec, params)
 
 
 def _display(values: np.ndarray, kinds) -> np.ndarray:
@@ -236,15 +247,16 @@ def animation(engine, recorded_z: np.ndarray, simulated_z: np.ndarray, t: np.nda
     plt.close(fig)
 
 
-def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: Path) -> dict:
+def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: Path, jobs: int = 1) -> dict:
     """Write the walk's figures into ``directory`` (created if missing) from the stored runs of
-    ``rows`` (``walk.WalkRow``) re-simulated; return {title: path relative to ``base``}."""
+    ``rows`` (``walk.WalkRow``) re-simulated, ``jobs`` at once; return {title: path relative to
+    ``base``}."""
     from .multibody.runs import engine, nominal
     from .walk import PD, coordinates
 
     directory.mkdir(exist_ok=True)
     names, kinds = coordinates(spec)
-    sims = trajectories(rows, runs)
+    sims = trajectories(rows, runs, jobs)
     labels = {row.key: row.name for row in rows if row.key in sims}
     written = {}
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import importlib.util
 import io
 import json
 import math
@@ -371,11 +372,12 @@ def _first_of_the_walk(folder: Path, seconds: float) -> tuple[Path, Path]:
 
 @pytest.mark.skipif(not (EXAMPLES / "subject01.osim").exists(), reason="the gait model is not in examples/opensim")
 def test_walk_report_end_to_end_on_the_gait_model(tmp_path):
-    """The first 0.6 s of subject01's walk with a tiny budget and no collocation: every method on
-    both models; PD tracks every angle within 1 deg and the pelvis within 1 cm; open loop falls;
-    the inverse dynamics' residual means are those of ``fdbench inverse`` on the same files."""
-    pytest.importorskip("opensim")
-    motion, loads = _first_of_the_walk(tmp_path, 0.6)
+    """The first 0.3 s of subject01's walk with a tiny budget and no collocation: every method on
+    both models; PD tracks every angle within 1 deg and the pelvis within 1 cm; the inverse
+    dynamics' residual means are those of ``fdbench inverse`` on the same files."""
+    if importlib.util.find_spec("opensim") is None:  # not imported here: its CasADi would break LQR's in this process
+        pytest.skip("the opensim package is not installed")
+    motion, loads = _first_of_the_walk(tmp_path, 0.3)
     common = ["--model", str(EXAMPLES / "subject01.osim"), "--motion", str(motion), "--loads", str(loads), "-q"]
     out = tmp_path / "walk.json"
     runner = CliRunner()
@@ -386,12 +388,12 @@ def test_walk_report_end_to_end_on_the_gait_model(tmp_path):
     walk = {e["key"]: e["record"] for e in report["walk"]}
     assert list(walk) == [OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, CMAES]
     pd = walk[PD]
-    assert pd["status"] == "success" and pd["t_end"] == pytest.approx(0.6)
+    assert pd["status"] == "success" and pd["t_end"] == pytest.approx(0.3)
     angles = [k for k in pd if k.startswith("rmse_rot_deg_")]
-    assert len(angles) == 7 and all(pd[k] < 1.0 for k in angles)
+    assert len(angles) == 8 and all(pd[k] < 1.0 for k in angles)  # 10 coordinates, 2 translations
     assert all(pd[f"rmse_trans_cm_pelvis_{axis}"] < 1.0 for axis in ("tx", "ty"))
-    assert walk[OPEN_LOOP]["status"] != "success" and walk[OPEN_LOOP]["t_end"] < 0.6  # no feedback: the walk falls
-    assert any("nothing holds the walk's floating base" in line for line in report["claim"])
+    assert all(walk[key].get("residual_force_rms_n", 0) > 0 for key in walk), {k: (r["status"], r.get("message")) for k, r in walk.items()}
+    assert any(line.startswith("Residuals exist only on the walk") for line in report["claim"])
     inverse = json.loads(runner.invoke(app, ["inverse", *common, "-f", "json"]).stdout)
     for name in ("residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm"):
         assert report["inverse_residuals"][name] == pytest.approx(inverse[name], rel=1e-9)

@@ -60,13 +60,14 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
     walk_rows, forearm_rows = walk.rows(plan.walk, runs, made), walk.rows(plan.forearm, runs, made)
     spec = plan.walk[0].spec
     inverse = spec.reference()
-    text = _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, executor.describe(), figures, output, quiet)
+    text = _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, executor.describe(), figures, output, quiet,
+                 getattr(executor, "jobs", 1))
     _emit(text, output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
 
 
-def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures, output, quiet) -> str:
+def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures, output, quiet, processes=1) -> str:
     from .. import walk, walk_report
     from .common import _say
 
@@ -85,7 +86,7 @@ def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures
         from ..walk_figures import write_walk_figures
 
         links = write_walk_figures(spec, inverse, walk_rows, runs, figures,
-                                   output.parent if output is not None and str(output) != "-" else Path("."))
+                                   output.parent if output is not None and str(output) != "-" else Path("."), processes)
         _say(quiet, f"wrote {len(links)} figures to {figures}")
     names, kinds = walk.coordinates(spec)
     return walk_report.markdown(plan, walk_rows, forearm_rows, inverse, fields, names, kinds, settings,
