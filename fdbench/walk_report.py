@@ -207,10 +207,10 @@ def _ranking_lines(pairs) -> list[str]:
     best_w, best_f = (min(rows, key=_rank_key) for rows in (walk_rows, forearm_rows))
     best = (f"{short(best_w)} is the best on both" if best_w.key == best_f.key
             else f"the best is {short(best_f)} on the forearm and {short(best_w)} on the walk")
-    text = f"- Of the {len(both)} pairs of methods, {len(agree)} are ordered alike on both models"
+    text = f"- Of the {len(both)} pairs of methods, {len(agree)} {_are(len(agree))} ordered alike on both models"
     if ties:
-        text += (f"; {len(ties)} are a tie on at least one model (both reach the end, or both stop, with RMSE_rot "
-                 f"within a factor {TIE_FACTOR:g})")
+        text += (f"; {len(ties)} {_are(len(ties))} a tie on at least one model (both reach the end, or both stop, "
+                 f"with RMSE_rot within a factor {TIE_FACTOR:g})")
     swapped = len(by_end) + len(by_error)
     text += f"; {swapped} the other way" if swapped else "; none is ordered the other way"
     if by_end:
@@ -221,6 +221,10 @@ def _ranking_lines(pairs) -> list[str]:
         text += ": " + "; ".join(_swap_text(a, b, on_forearm) for a, b, on_forearm in by_error)
     out.append(text + f". {best[0].upper() + best[1:]}.")
     return out
+
+
+def _are(count: int) -> str:
+    return "is" if count == 1 else "are"
 
 
 def _swap_text(a: WalkRow, b: WalkRow, on_forearm: int) -> str:

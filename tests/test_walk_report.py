@@ -309,7 +309,7 @@ def test_claim_ranking_follows_the_numbers():
     # PD and LQR within a factor 1.25 on the walk: a tie, neither agreeing nor swapped
     close = dict(WALK, **{PD: ("success", 2.5, 0.025, 34.0)})
     text = "\n".join(claim_lines(_rows(close), _rows(FOREARM), 2.5, 1.0))
-    assert "3 are ordered alike on both models; 1 are a tie" in text and "; 2 the other way" in text
+    assert "3 are ordered alike on both models; 1 is a tie" in text and "; 2 the other way" in text
     # a swap caused by reaching the end is counted apart from those by RMSE_rot
     falls = dict(WALK, **{COMPUTED_TORQUE: ("constraint", 1.0, 0.06, 33.8)})
     text = "\n".join(claim_lines(_rows(falls), _rows(FOREARM), 2.5, 1.0))
