@@ -33,7 +33,7 @@ def report(
     opt: OptSelection = None,
     feedforward: FeedforwardSelection = None,
     control: WithControl = True,
-    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation.")] = True,
+    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation (on a model with a floating base: --no-beyond leaves out its slow collocation row).")] = True,
     all_cells: AllCells = False,
     peers: Annotated[Optional[str], typer.Option("--peers", metavar="opensim,moco", help="Add the section 'Peers': opensim (OpenSim's forward simulation under the same PD law), moco (MocoTrack, its torque replayed by fdbench), comma-separated. Needs pip install 'fdbench\\[opensim]'.", show_default=False)] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
@@ -68,13 +68,25 @@ def report(
 ):
     """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown, CSV or JSON.
 
-    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once."""
+    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested."""
     from ..benchmark import default_cells, make_plan
     from ..store import default_path
 
     db_path = db if db is not None else default_path()
     inputs = _spec_inputs(conditions, kinematics)
     _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=inputs)
+    if _floating_base(conditions):  # a recorded walk: its own comparison (fdbench.walk)
+        from ..walk_figures import FIGURE_FILES as WALK_FIGURES
+        from .walk_command import walk_report
+
+        if figures is not None:
+            _check_figures_dir(figures, output, db_path, inputs, WALK_FIGURES)
+        if jobs is not None and not 1 <= jobs <= MAX_JOBS:
+            raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
+        return walk_report(ctx, conditions=conditions, kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol,
+                           atol=atol, alpha=alpha, xi=xi, omega=omega, budget=budget, popsize=popsize, beyond=beyond,
+                           executor=_backend(backend, jobs, scheduler), db=db, db_path=db_path, rerun=rerun,
+                           figures=figures, fmt=fmt, output=output, quiet=quiet)
     if figures is not None:
         _check_figures_dir(figures, output, db_path, inputs)
     torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, jobs, torque, opt, hidden, knots, terms,
@@ -248,6 +260,16 @@ def study(
         _emit(studies.markdown(sweep, rows, settings, links), output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
+
+
+def _floating_base(conditions: dict) -> bool:
+    """Whether the report's model has a floating base (a free joint on ground)."""
+    from ..walk import has_floating_base
+
+    try:
+        return has_floating_base(conditions["model_name"], conditions.get("model", ()))
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
 
 
 def _study_json(sweep, rows, settings: dict) -> str:

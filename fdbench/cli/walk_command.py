@@ -1,0 +1,130 @@
+"""``fdbench report`` on a model with a floating base (a recorded walk): the walk's comparison
+(``fdbench.walk``) instead of the paper's Tables 2 and 3."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from .. import __version__
+from .app import BadInput
+
+# report options that shape the paper's tables and have no meaning in the walk's report
+NOT_FOR_THE_WALK = {"torque": "--torque", "opt": "--opt", "feedforward": "--feedforward", "all_cells": "--all-cells",
+                    "peers": "--peers", "seeds": "--seeds", "gradient": "--gradient", "hidden": "--hidden",
+                    "knots": "--knots", "terms": "--terms", "sigma0": "--sigma0", "kp": "--kp", "kd": "--kd",
+                    "penalty_weight": "--penalty-weight", "control": "--control/--no-control"}
+
+
+def check_walk_options(ctx) -> None:
+    """Refuse, in one line, the report options given that do not apply to the walk's report."""
+    given = [option for name, option in NOT_FOR_THE_WALK.items() if _given(ctx, name)]
+    if given:
+        raise BadInput(f"{', '.join(given)}: not used by the report of a model with a floating base (one run per "
+                       "method; its options: --budget, --popsize, --no-beyond, --figures, --jobs, --db, --rerun, "
+                       "--format, --output)")
+
+
+def _given(ctx, name: str) -> bool:
+    """Whether the option ``name`` was given (on the command line or by an environment variable)."""
+    return getattr(ctx.get_parameter_source(name), "name", None) in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
+
+
+def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: float, rtol: float, atol: float,
+                alpha: float, xi: float, omega: float, budget: int, popsize, beyond: bool, executor, db, db_path: Path,
+                rerun: bool, figures, fmt: str, output, quiet: bool) -> None:
+    """Carry out the walk's report: check, plan, run (stored and resumed), write."""
+    from .. import walk
+    from .common import _emit, _say, _validated
+    from .options import _common
+    from .sweeps import _run_specs
+
+    check_walk_options(ctx)
+    if not _given(ctx, "budget"):
+        budget = walk.WALK_BUDGET
+    popsize = walk.WALK_POPSIZE if popsize is None else popsize
+    walk_common = _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)
+    forearm_common = _common("paper", integrator, dt, rtol, atol, alpha, xi, omega, None)
+    try:
+        plan = walk.make_plan(walk_common, forearm_common, budget, popsize, collocation=beyond)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+    for spec in plan.all_specs():
+        _validated(spec)
+    runs = _run_specs(plan.all_specs(), db_path, db is None, executor, rerun, quiet)
+    from ..store import open_store
+
+    with open_store(db_path) as store:
+        made = store.provenance(runs)
+    walk_rows, forearm_rows = walk.rows(plan.walk, runs, made), walk.rows(plan.forearm, runs, made)
+    spec = plan.walk[0].spec
+    inverse = spec.reference()
+    text = _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, executor.describe(), figures, output, quiet,
+                 getattr(executor, "jobs", 1))
+    _emit(text, output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
+
+
+def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures, output, quiet, processes=1) -> str:
+    from .. import walk, walk_report
+    from .common import _say
+
+    fields = walk.inverse_residuals(spec, inverse)
+    settings = settings_table(plan, spec, jobs)
+    if fmt == "csv":
+        from ..files import csv_text
+
+        return csv_text(list(walk_report.CSV_COLUMNS), walk_report.csv_rows(walk_rows, forearm_rows))
+    duration, forearm_duration = float(inverse.t[-1]), walk_report._duration(forearm_rows)
+    claim = walk_report.claim_lines(walk_rows, forearm_rows, duration, forearm_duration, True, fields)
+    if fmt == "json":
+        return json.dumps(walk_report.json_report(plan, walk_rows, forearm_rows, fields, settings, claim), indent=2) + "\n"
+    links = None
+    if figures is not None:
+        from ..walk_figures import write_walk_figures
+
+        links = write_walk_figures(spec, inverse, walk_rows, runs, figures,
+                                   output.parent if output is not None and str(output) != "-" else Path("."), processes)
+        _say(quiet, f"wrote {len(links)} figures to {figures}")
+    names, kinds = walk.coordinates(spec)
+    return walk_report.markdown(plan, walk_rows, forearm_rows, inverse, fields, names, kinds, settings,
+                                _provenance(walk_rows + forearm_rows), links)
+
+
+def _provenance(rows) -> list[str]:
+    """When and where the runs were made (the paper report's paragraph, ``report._provenance``)."""
+    from ..report import Row, _provenance
+
+    return _provenance([Row(row.name, "walk", None, {}, None, [row.record], provenance=[row.provenance])
+                        for row in rows if row.provenance], "fdbench report --rerun")
+
+
+def settings_table(plan, spec, jobs: str) -> dict:
+    """The report's settings: the model, motion, loads, estimate, simulation, budgets, versions."""
+    from datetime import datetime, timezone
+
+    from ..models import summary
+    from ..report import condition_settings
+    from ..store import git_commit, machine
+
+    loads = dict(spec.inputs).get("--loads")
+    conditions = {key: value.replace("Figure 2", "the coordinates figure")
+                  for key, value in condition_settings(spec, [m.spec for m in plan.walk]).items()}
+    table = {"model": f"{spec.model_name}: {summary(spec.model_name)}",
+             **conditions,
+             "external loads": f"{spec.loads}" + (f", SHA-256 {loads[:16]} (with its data file)" if loads else "")
+             if spec.loads else "none",
+             "integrator": spec.integrator + (f" (dt = {spec.dt} s)" if spec.integrator == "rk4" else ""),
+             "penalty formulation": f"alpha = {spec.alpha:g}, xi = {spec.xi:g}, omega = {spec.omega:g} rad/s",
+             "shooting": f"CMA-ES, budget {plan.budget} simulations, population {plan.popsize}, seed 0 "
+                         "(the same on the forearm)",
+             "forearm": "the paper's model and motion (eq. 5, as printed), the same methods and settings",
+             "runtime_s": "the method's own wall time per run (set-up and simulations; imports and kernel loading "
+                          "excluded)",
+             "parallel jobs": jobs,
+             "fdbench": __version__ + (f" (commit {git_commit()[:12]})" if git_commit() else ""),
+             "machine": machine(),
+             "date": datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}
+    return table
