@@ -46,6 +46,21 @@ def main_table(rows: list[WalkRow], duration: float) -> list[str]:
     return lines
 
 
+def collocation_own_lines(rows: list[WalkRow]) -> list[str]:
+    """A sentence on the collocation's own solution at its points (the table gives its torque's
+    forward replay), or nothing when no collocation row ran."""
+    for row in rows:
+        own = row.record.get("collocation_rmse_rot_deg")
+        if row.key == COLLOCATION and own is not None:
+            get = row.record.get
+            return ["", f"Collocation's own solution, at its points (the row above is its torque replayed open loop "
+                        f"through fdbench's simulation): RMSE_rot {number(own)} deg, RMSE_trans "
+                        f"{number(get('collocation_rmse_trans_cm'))} cm, residual force RMS "
+                        f"{number(get('collocation_residual_force_rms_n'))} N, moment RMS "
+                        f"{number(get('collocation_residual_moment_rms_nm'))} N m."]
+    return []
+
+
 def coordinate_table(rows: list[WalkRow], names: tuple, kinds: tuple) -> list[str]:
     """RMSE of each coordinate per method: angles in deg, translations in cm (Markdown)."""
     units = ["cm" if kind == "translation" else "deg" for kind in kinds]
@@ -332,6 +347,7 @@ def markdown(plan, walk: list[WalkRow], forearm: list[WalkRow], inverse, inverse
             "the residual force's and moment's RMS on the floating base (the fourth indicator: the smaller, the more "
             "dynamically consistent the tracked walk); all over the samples reached, one run each.", ""]
     out += main_table(walk, duration)
+    out += collocation_own_lines(walk)
     out += ["", "### Error per coordinate", ""] + coordinate_table(walk, names, kinds)
     out += ["", "## The same methods on the forearm", "",
             "The paper's forearm and motion (eq. 5), the same methods, budget and population:", ""]

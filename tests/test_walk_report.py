@@ -403,3 +403,16 @@ def test_walk_report_end_to_end_on_the_gait_model(tmp_path):
     inverse = json.loads(runner.invoke(app, ["inverse", *common, "-f", "json"]).stdout)
     for name in ("residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm"):
         assert report["inverse_residuals"][name] == pytest.approx(inverse[name], rel=1e-9)
+
+
+def test_collocations_own_solution_is_named_beside_its_replay():
+    """The sentence under the main table gives the collocation's own numbers from its record, and
+    is left out without a collocation row."""
+    from fdbench.walk import COLLOCATION, WalkRow
+    from fdbench.walk_report import collocation_own_lines
+
+    record = {"status": "constraint", "t_end": 0.3, "collocation_rmse_rot_deg": 0.0421, "collocation_rmse_trans_cm": 0.128,
+              "collocation_residual_force_rms_n": 8.61, "collocation_residual_moment_rms_nm": 9.52}
+    (text,) = [line for line in collocation_own_lines([WalkRow(COLLOCATION, "collocation", record)]) if line]
+    assert all(f"{value:.3g}" in text for key, value in record.items() if key.startswith("collocation_"))
+    assert collocation_own_lines([WalkRow(PD, "PD", {"status": "success"})]) == []
