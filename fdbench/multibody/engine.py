@@ -311,13 +311,63 @@ class Engine:
                 self.lin_coef, self.lin_const, self.first, self.base, self.q_ext, self.params)
 
     @property
-    def dense_penalty(self):
-        """Eq. 12 by numpy (``fdbench.multibody.general``) for a model with free or path joints."""
+    def dense_layout(self) -> tuple:
+        """The arrays ``kernels_general``'s eq. 12 takes (its dense layout), built once: for a model
+        with free or path joints (any model's numbers, pins only included)."""
         if getattr(self, "_dense", None) is None:
-            from .general import DensePenalty
-
-            self._dense = DensePenalty(self)
+            self._dense = self._build_dense()
         return self._dense
+
+    @property
+    def dense_inverse_layout(self) -> tuple:
+        """The arrays ``kernels_general.inverse_torques`` takes after (z, zd, zdd), in order."""
+        body_int, body_float, _, _, knots, spline_start, *_ = self.dense_layout
+        return (body_int, body_float, knots, spline_start, self.pt_owner, self.pt_local, self.pt_index, self.mass,
+                self.q_ext)
+
+    def dense_simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
+        """The arrays ``kernels_general.rk4`` and ``derivatives`` take after the feedback law: the
+        dense layout, then the inverse layout of ``nominal`` (None: this engine)."""
+        self.check_nominal(nominal)
+        return (*self.dense_layout, *(self if nominal is None else nominal).dense_inverse_layout)
+
+    def _build_dense(self) -> tuple:
+        """The dense layout (``kernels_general``'s module docstring): per body its points, parent,
+        coordinate, kind and geometry; per path its point map and splines' pieces."""
+        from . import kernels_general as kg
+
+        B = self.n_bodies
+        body_int, body_float = np.full((B, kg.N_BODY_INT), FIXED, dtype=np.int64), np.zeros((B, kg.N_BODY_FLOAT))
+        path_body, path_float, pieces, spline_start = [], [], [], [0]
+        for b, joint in enumerate(self.model.joints):
+            p = self.joint_parent[b]
+            body_int[b, [kg.KI, kg.KJ]] = self.pt_index[self.body_pts[b]]
+            body_int[b, kg.PARENT], body_int[b, kg.COLUMN] = p, self.joint_column[b]
+            body_int[b, kg.FREE] = joint.type == "free"
+            body_float[b, [kg.D, kg.BETA]] = self.body_geom[b]
+            body_float[b, [kg.FIXED_X, kg.FIXED_Y]] = self.pt_fixed[self.body_pts[b, 0]]
+            body_float[b, kg.OFFSET] = joint.offset
+            body_float[b, [kg.AT_PARENT_X, kg.AT_PARENT_Y]] = joint.at_parent
+            body_float[b, [kg.AT_CHILD_X, kg.AT_CHILD_Y]] = joint.at_child
+            if joint.path is None:
+                continue
+            body_int[b, kg.PATH] = len(path_body)
+            path_body.append(b)
+            maps = np.zeros(kg.N_PATH_FLOAT)
+            if p != FIXED:  # (c1, c2) = base + L s: the point map is linear in the path's offset s
+                at_child_p = np.asarray(self.model.joints[p].at_child, dtype=float)
+                u = self._local_end[p] - at_child_p
+                maps[[kg.BASE_1, kg.BASE_2]] = _point_map(np.asarray(joint.at_parent, dtype=float) - at_child_p, u)
+                (maps[kg.L_11], maps[kg.L_21]), (maps[kg.L_12], maps[kg.L_22]) = (_point_map((1.0, 0.0), u),
+                                                                                  _point_map((0.0, 1.0), u))
+            path_float.append(maps)
+            for spline in joint.path.splines():
+                pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
+                spline_start.append(spline_start[-1] + len(spline.x))
+        return (body_int, body_float, np.array(path_body, dtype=np.int64),
+                np.array(path_float, dtype=float).reshape(-1, kg.N_PATH_FLOAT),
+                np.concatenate(pieces) if pieces else np.zeros((0, 5)), np.array(spline_start, dtype=np.int64),
+                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params)
 
     def check_nominal(self, nominal: "Engine | None") -> None:
         """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque
@@ -504,7 +554,12 @@ class Engine:
         from .kernels import constraint_violation
 
         if not self.compiled:
-            return self.dense_penalty.violation(self._vector(y, self.n_state, "the state"))
+            from .kernels_general import constraint_residuals, n_rows
+
+            layout = self.dense_layout
+            rows = n_rows(layout[0], layout[2], self.lin_const)
+            return float(constraint_residuals(self._vector(y, self.n_state, "the state"), *layout, np.empty(rows),
+                                              np.empty(rows)))
         return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
     def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
@@ -545,9 +600,12 @@ class Engine:
         from .kernels import inverse_torques
 
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
-        if not self.compiled:  # the same equations by numpy
-            return self.inverse_dynamics(z, zd, zdd)
         out = np.empty(self.n_joints)
+        if not self.compiled:  # free or path joints
+            from . import kernels_general
+
+            kernels_general.inverse_torques(z, zd, zdd, *self.dense_inverse_layout, out)
+            return out
         inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
         return out
 
@@ -573,19 +631,14 @@ class Engine:
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
         states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
         applied = np.empty((n_steps + 1, self.n_joints))
-        if not self.compiled:  # free or path joints: the same driver by numpy
-            from .general import rk4 as dense_rk4
+        if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
+            from .kernels_general import rk4 as dense_rk4
 
-            self.check_nominal(nominal)
-            code, done, max_viol = dense_rk4(self, y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode,
-                                             gains, nominal, states, rates, applied)
-            for array in (states, rates, applied):
-                array[done + 1:] = np.nan
-            z, zd = self.joints_from_state(states)
-            return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
-        layout = self.simulation_layout(nominal)
-        code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
-                                   gains, *layout, states, rates, applied)
+            code, done, max_viol = dense_rk4(y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode, gains,
+                                             *self.dense_simulation_layout(nominal), states, rates, applied)
+        else:
+            code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd,
+                                       mode, gains, *self.simulation_layout(nominal), states, rates, applied)
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
             array[done + 1:] = np.nan
         z, zd = self.joints_from_state(states)
@@ -611,14 +664,11 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(k, tau=tau, ref=ref, refd=refd, refdd=refdd)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, k)
         out, applied = np.empty((k, self.n_state)), np.empty((k, self.n_joints))
-        if not self.compiled:  # free or path joints: by numpy
-            from .general import applied_torque
+        if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
+            from . import kernels_general
 
-            self.check_nominal(nominal)
-            for i in range(k):
-                applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal)
-                code, rate = self.dense_penalty.derivative(states[i], applied[i])
-                out[i] = rate if code == OK else np.concatenate([states[i, self.n_q:], np.full(self.n_q, np.nan)])
+            kernels_general.derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains,
+                                        *self.dense_simulation_layout(nominal), out, applied)
             return out, applied
         derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
                     *self.simulation_layout(nominal), out, applied)
