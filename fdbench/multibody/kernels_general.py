@@ -328,13 +328,13 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
         """The applied generalised forces at the stage's state and grid row ``half`` into torque."""
         coordinates()
         if mode == GAINS:
-            for k in range(J):
-                total = 0.0
+            for k in range(J):  # term by term onto tau: K = [diag kp, diag kd] gives PD's numbers to the bit
+                total = tau[half, k]
                 for j in range(J):
                     total += gains[half, k, j] * (ref[half, j] - z[j])
                 for j in range(J):
                     total += gains[half, k, J + j] * (refd[half, j] - zd[j])
-                torque[k] = tau[half, k] + total
+                torque[k] = total
         elif mode == COMPUTED:
             for k in range(J):
                 v[k] = refdd[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
