@@ -49,8 +49,11 @@ Free and path joints (``fdbench.multibody.description``). A free joint's body ha
 among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
 joint with a path gives its child a joint point of its own, held on the path by two constraints
 that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
-joints' velocity transform; eq. 12 for such models is assembled and solved by numpy
-(``fdbench.multibody.general``), the compiled kernels refusing them (``require_compiled``).
+joints' velocity transform. Eq. 12 for such models runs on compiled dense kernels
+(``fdbench.multibody.kernels_general``: the same driver, feedback laws and status codes, a Cholesky
+factorisation of the whole leading matrix) over the dense layout (``dense_layout``); ``compiled``
+means the banded kernels above, which the sensitivities and the population still need
+(``require_compiled`` refuses such models there).
 
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
