@@ -7,6 +7,7 @@
   constraints (positions and velocities, to rounding), and eq. 12's accelerations there converge to
   the reference's minimal forward dynamics (tests/reference_dynamics.GeneralTree) as 1/alpha;
 - the compiled inverse dynamics equals the engine's numpy one (``Engine.inverse_dynamics``) to 1e-10;
+- the population of open-loop candidates gives eq. 18 of each candidate's own simulation;
 - the feedback laws: ``rates`` applies PD's closed form; GAINS with K = [diag kp, diag kd] is PD
   to the bit;
   computed torque through a nominal model other than the plant follows the reference's minimal
@@ -23,6 +24,7 @@ from hypothesis import strategies as st
 
 import reference_dynamics as ref
 from multibody_strategies import models, models_with_paths_and_free_joints
+from population_checks import restore_threads  # noqa: F401 - a fixture
 from test_multibody_reference import hopper_model
 
 from fdbench.multibody import kernels_general as kg
@@ -201,6 +203,32 @@ def test_computed_torque_through_another_nominal_model_follows_the_reference():
     assert np.abs(matched.z[-1] - result.z[-1]).max() > 1e-3  # the mismatch is felt
     error = np.abs(result.z[-1] - expected)
     assert error[[0, 3, 4]].max() < 1e-5 and error[1:3].max() < 1e-6, error
+
+
+def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulation(restore_threads):
+    """CMA-ES's population of open-loop candidates (``kernels_general.rk4_candidates``) on the
+    hopper: each candidate's number is eq. 18 of its own simulation by ``simulate`` (the angles' RMSE
+    in deg plus the translations' in cm by numpy, the penalty of the part not reached), one
+    candidate thrown off its motion included, and equals the rows one by one to the bit on 1 to 3
+    threads."""
+    from population_checks import assert_objectives_are, assert_population_equals_one_by_one
+
+    from fdbench.multibody.description import MotionSpec
+    from fdbench.multibody.motions import joint_motion
+    from fdbench.problem import TrackingProblem
+
+    model = hopper_model()
+    start = tuple(zip(model.coordinates, (0.0, 0.0, 0.0, 0.2, -0.3)))
+    goal = tuple(zip(model.coordinates, (0.2, 0.1, -0.05, 0.6, -0.8)))
+    model = dataclasses.replace(model, motions=(MotionSpec("step", "minimum-jerk", 0.2, start, goal),))
+    problem = TrackingProblem("cs", Engine(model), joint_motion("step", model), feedforward=True, knots=4)
+    assert problem.batched
+    X = np.random.default_rng(5).normal(0, 0.01, (6, problem.n_params))
+    X[2] *= 1e6  # thrown off: the simulation stops early and eq. 18's penalty counts
+    assert problem.simulate(X[2] * problem.scale).t_end < problem.duration
+    assert problem.simulate(X[0] * problem.scale).t_end == problem.duration
+    assert_objectives_are(problem, X, lambda p: problem.objective_of(problem.simulate(p)))
+    assert_population_equals_one_by_one(problem, X)
 
 
 def test_control_runs_on_a_free_base_with_a_knee_path(tmp_path):

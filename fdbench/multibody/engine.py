@@ -683,8 +683,8 @@ class Engine:
         the start y0 (n_state,), the step dt (s), the candidates' torques tau (N m, shape (lam,
         2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
         J), eq. 18's samples every ``every``-th step with the desired joint angles angles_ref (rad,
-        shape (n_steps // every + 1, J)) and its penalty weight (deg)."""
-        self.require_compiled("the population of open-loop candidates")
+        shape (n_steps // every + 1, J)) and its penalty weight (deg). A model with free or path joints
+        gives those of ``kernels_general.rk4_candidates`` (``population_kernel``)."""
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):
@@ -696,9 +696,22 @@ class Engine:
         samples = (n_steps // every + 1, self.n_joints)
         if np.shape(angles_ref) != samples:
             raise ValueError(f"angles_ref must have shape {samples}, got {np.shape(angles_ref)}")
-        return (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
-                np.ascontiguousarray(tau, dtype=float), ref + self.joint_offset, refd, int(every),
-                np.array(angles_ref, dtype=float), float(penalty_weight), *self.simulation_layout())
+        start = (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
+                 np.ascontiguousarray(tau, dtype=float))
+        rest = (int(every), np.array(angles_ref, dtype=float), float(penalty_weight))
+        if not self.compiled:
+            return (*start, ref, refd, *rest, *self.dense_simulation_layout())
+        return (*start, ref + self.joint_offset, refd, *rest, *self.simulation_layout())
+
+    @property
+    def population_kernel(self):
+        """The kernel of open-loop candidates for ``fdbench.population.Population`` that takes
+        ``population_args``: ``kernels.rk4_candidates``, or ``kernels_general``'s for free or path joints."""
+        if self.compiled:
+            from .kernels import rk4_candidates
+        else:
+            from .kernels_general import rk4_candidates
+        return rk4_candidates
 
     @property
     def population_widths(self) -> tuple:

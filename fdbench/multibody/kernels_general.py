@@ -25,7 +25,8 @@ its angle constraint); each constraint row is kept as its few nonzero entries. C
 control takes the believed model's inverse dynamics (eq. 3) through the joints' velocity
 transform: a pin's lever, a path's direction, a free joint's world axes. The RK4 driver is
 ``kernels._drive``'s, step for step: the same half-step grid, feedback laws, violation check and
-status codes; no sensitivities or population yet.
+status codes; ``rk4_candidates`` runs a population of open-loop candidates with eq. 18 (angles in
+deg plus translations in cm); no sensitivities yet.
 
 Layouts (``Engine.dense_layout``, ``Engine.dense_inverse_layout``), arrays only, so that one
 compilation serves every model:
@@ -47,8 +48,9 @@ import math
 import numpy as np
 
 from ..jit import njit
-from .kernels import (ALPHA, COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, OMEGA2, SINGULAR, SWITCH_COS, TWO_XI_OMEGA,
-                      VIOLATION)
+from ..population import DEGREES_PER_RADIAN
+from .kernels import (ALPHA, COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, OMEGA2, PD, SINGULAR, SWITCH_COS,
+                      TWO_XI_OMEGA, VIOLATION)
 
 # body_int columns: the coordinate indices of the body's points i (-1: fixed) and j, its parent
 # body (-1: ground), its joint's first coordinate, 1 for a free joint, its path (-1: none)
@@ -321,7 +323,8 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
             zd[col] = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
             if body_int[k, FREE] == 1:
                 ki = body_int[k, KI]
-                z[col + 1], z[col + 2] = state[ki] - body_float[k, AT_PARENT_X], state[ki + 1] - body_float[k, AT_PARENT_Y]
+                z[col + 1] = state[ki] - body_float[k, AT_PARENT_X]
+                z[col + 2] = state[ki + 1] - body_float[k, AT_PARENT_Y]
                 zd[col + 1], zd[col + 2] = state[n_q + ki], state[n_q + ki + 1]
 
     def law(half):
@@ -495,3 +498,59 @@ def constraint_residuals(y, body_int, body_float, path_body, path_float, knots, 
                          no_index, np.zeros((0, 0)), np.zeros(0), np.empty((1, n)), np.empty((1, n)),
                          np.empty((1, J)), phi_rows, jv_rows)
     return worst
+
+
+# ---------------------------------------------------------------------- the population (eq. 18)
+CM_PER_M = 100.0
+
+
+@njit(nogil=True)
+def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int, body_float, n_p):
+    """Eq. 18 from a simulation's states (n_steps + 1, n_state), filled up to step ``done``: at the
+    motion's samples (every ``every``-th step; desired coordinates angles_ref (rad, m for a free
+    joint's x and y; shape (samples, J))) over the samples reached, the RMSE of the angles (deg)
+    plus, for a model with free joints, that of their translations (cm), units never pooled; plus
+    penalty_weight times the fraction of the steps not reached. A non-finite RMSE counts as 0."""
+    n_b = body_int.shape[0]
+    count = done // every + 1
+    angles, translations, n_translations = 0.0, 0.0, 0
+    for k in range(count):
+        y = states[k * every]
+        for b in range(n_b):
+            p, col = body_int[b, PARENT], body_int[b, COLUMN]
+            z = y[n_p + b] - (y[n_p + p] if p >= 0 else 0.0) - body_float[b, OFFSET]
+            error = (z - angles_ref[k, col]) * DEGREES_PER_RADIAN
+            angles += error * error
+            if body_int[b, FREE] == 1:
+                n_translations += 2
+                ki = body_int[b, KI]
+                for axis in range(2):
+                    x = y[ki + axis] - body_float[b, AT_PARENT_X + axis]
+                    error = (x - angles_ref[k, col + 1 + axis]) * CM_PER_M
+                    translations += error * error
+    rmse = math.sqrt(angles / (n_b * count))
+    if n_translations > 0:
+        rmse += math.sqrt(translations / n_translations)
+    if not math.isfinite(rmse):
+        rmse = 0.0
+    return rmse + penalty_weight * (1.0 - done / n_steps)
+
+
+@njit(nogil=True)
+def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, body_int,
+                   body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext,
+                   params, n_body_int, n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass,
+                   n_q_ext, states, rates, applied, objective, first_candidate, stride):
+    """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
+    candidates first_candidate, first_candidate + stride, ... of tau (shape (lam, 2 n_steps + 1, J)),
+    for ``fdbench.population.Population``: ``kernels.rk4_candidates`` for the dense layout (ref,
+    refd without the joint offsets). Runs without the GIL."""
+    J = tau.shape[2]
+    zero, no_gains = np.zeros(J), np.zeros((1, J, 2 * J))
+    for c in range(first_candidate, tau.shape[0], stride):
+        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, body_int, body_float,
+                         path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+                         n_body_int, n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext,
+                         states, rates, applied)
+        objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int,
+                                          body_float, mass.shape[0])
