@@ -133,6 +133,7 @@ class SampledMotion(Motion):
         if absolute:
             check_clear_of_singular(theta)
         self.name = name
+        self.start_s = float(t[0])  # the recording's own time of its first sample (s): external loads' clock
         self._t = _read_only(t - t[0])
         self.recorded = _read_only(theta.copy())  # the raw angles (rad) at times self._t, for figures
         self._samples = self._t if samples is None else _read_only(samples)

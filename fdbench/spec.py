@@ -57,6 +57,7 @@ class RunSpec:
     model: tuple = ()  # (key, value) pairs changing the nominal model and the simulated body
     gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
     model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
+    loads: str | None = None  # external loads from data: an OpenSim ExternalLoads file (its content among inputs)
 
     def __post_init__(self):
         if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
@@ -176,6 +177,8 @@ class RunSpec:
             data["kinematics"] = "file"
         if dict(self.inputs).get("--model"):  # so does a model file
             data["model_name"] = "file"
+        if dict(self.inputs).get("--loads"):  # and a loads file (with its data)
+            data["loads"] = "file"
         if data.get("controller") == "pd":  # the paper's PD is the default controller
             data["controller"] = None
         for name, default in OMITTED_AT_DEFAULT.items():
@@ -237,7 +240,7 @@ def with_motion_file(spec: "RunSpec") -> "RunSpec":
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
                       "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
                       "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd",
-                      "model_name": "forearm"}
+                      "model_name": "forearm", "loads": None}
 
 
 PAPER_KP, PAPER_KD = 80.0, 0.3  # N m/rad, N m s/rad: the paper's PD gains for the forearm

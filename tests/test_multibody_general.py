@@ -7,6 +7,8 @@
   constraints (positions and velocities, to rounding), and eq. 12's accelerations there converge to
   the reference's minimal forward dynamics (tests/reference_dynamics.GeneralTree) as 1/alpha;
 - the compiled inverse dynamics equals the engine's numpy one (``Engine.inverse_dynamics``) to 1e-10;
+- external loads (``fdbench.multibody.loads``) in eq. 12 converge to the minimal forward dynamics
+  under their generalised forces;
 - the population of open-loop candidates gives eq. 18 of each candidate's own simulation;
 - the feedback laws: ``rates`` applies PD's closed form; GAINS with K = [diag kp, diag kd] is PD
   to the bit;
@@ -19,6 +21,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -68,7 +71,8 @@ def dense_rates(engine, y, tau, mode=PD, kp=0.0, kd=0.0, ref_z=None):
     ref_z = zero if ref_z is None else ref_z[None]
     kp, kd = np.full(J, kp), np.full(J, kd)
     out, applied = np.empty((1, engine.n_state)), np.empty((1, J))
-    kg.derivatives(y[None], tau[None], ref_z, zero, zero, kp, kd, mode, np.zeros((1, J, 2 * J)),
+    loads = engine.load_values(np.zeros(1))
+    kg.derivatives(y[None], tau[None], ref_z, zero, zero, kp, kd, mode, np.zeros((1, J, 2 * J)), loads, loads,
                    *engine.dense_simulation_layout(), out, applied)
     return out[0], applied[0]
 
@@ -92,7 +96,7 @@ def test_the_dense_kernels_equal_the_banded_kernels_on_pin_joints(model, seed):
     banded_ct, banded_applied = engine.rates(y[None], tau[None], ref_z[None], zero, zero, 30.0, 3.0, COMPUTED)
     np.testing.assert_allclose(applied, banded_applied[0], rtol=1e-12, atol=1e-12 * np.abs(applied).max())
     out = np.empty(engine.n_joints)
-    kg.inverse_torques(z, zd, tau, *engine.dense_inverse_layout, out)
+    kg.inverse_torques(z, zd, tau, engine.load_values(np.zeros(1))[0], *engine.dense_inverse_layout, out)
     expected = engine.inverse_torques(z, zd, tau)
     np.testing.assert_allclose(out, expected, rtol=0, atol=1e-12 * max(1.0, np.abs(expected).max()))
 
@@ -128,6 +132,49 @@ def test_the_compiled_inverse_dynamics_equals_the_numpy_one(model, seed):
         expected = engine.inverse_dynamics(z, zd, zdd)
         np.testing.assert_allclose(engine.inverse_torques(z, zd, zdd), expected, rtol=0,
                                    atol=1e-10 * max(1.0, np.abs(expected).max()))
+
+
+def hopper_loads(seed):
+    """Three loads on the hopper, sampled at 50 times over [-0.1, 1] s: on the shank in ground's
+    axes, on the thigh with its force in the thigh's frame and its point in the shank's, on the
+    pelvis at a point of the thigh."""
+    from fdbench.multibody.loads import ExternalLoad, ExternalLoads
+
+    rng, n = np.random.default_rng(seed), 50
+    loads = (ExternalLoad("a", "shank"), ExternalLoad("b", "thigh", "thigh", "shank"),
+             ExternalLoad("c", "pelvis", "ground", "thigh"))
+    return ExternalLoads(loads, np.linspace(-0.1, 1.0, n), rng.normal(0, 50, (n, 3, 2)), rng.normal(0, 0.2, (n, 3, 2)),
+                         rng.normal(0, 5, (n, 3)))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_external_loads_in_eq_12_converge_to_the_minimal_forward_dynamics(seed):
+    """External loads (force and point in ground's or a body's frame, a free moment) on the hopper:
+    on the constraints, eq. 12's accelerations at a time t converge as 1/alpha to the reference's
+    minimal forward dynamics under tau plus the loads' generalised forces (``loads.generalized_forces``,
+    numpy); the compiled inverse dynamics subtracts the same forces as the numpy one, to 1e-10."""
+    from fdbench.multibody.loads import generalized_forces
+
+    model, loads = hopper_model(), hopper_loads(seed)
+    t = ref.GeneralTree(model)
+    engine = Engine(model, loads=loads)
+    z, zd, tau = random_joint_state(engine, seed)
+    z, zd = 0.3 * z, 0.3 * zd
+    time = 0.37
+    applied = generalized_forces(engine, loads, z[None], np.array([time]))[0]
+    assert np.abs(applied).max() > 1.0
+    expected = t.forward_dynamics(z, zd, tau + applied)
+    errors = []
+    for alpha in (1e6, 1e8):
+        engine = Engine(model, alpha=alpha, loads=loads)
+        y = engine.state_from_joints(z, zd)
+        zero = np.zeros((1, engine.n_joints))
+        rate, _ = engine.rates(y[None], tau[None], zero, zero, zero, 0.0, 0.0, t=np.array([time]))
+        errors.append(np.abs(engine.joints_from_state(rate[0])[1] - expected).max() / np.abs(expected).max())
+    assert errors[1] < 1e-4 and errors[1] < errors[0] / 30, errors
+    expected = engine.inverse_dynamics(z, zd, tau, time)
+    np.testing.assert_allclose(engine.inverse_torques(z, zd, tau, time), expected, rtol=0,
+                               atol=1e-10 * np.abs(expected).max())
 
 
 @settings(max_examples=5, deadline=None)

@@ -131,6 +131,7 @@ CONDITIONS = {
     "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
     "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; any model: a path such as thigh.mass; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
     "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|FILE|KEY=VALUE", help="The model: forearm (Table 1, default), a library model (arm2: shoulder + elbow; leg3: hip, knee, ankle; see 'fdbench models') or your own model file (.toml or .json, see 'fdbench models show FILE'), whose motions are its named ones or a CSV file t,<joint>...; and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's; any model: a path such as thigh.mass or knee.at_parent.x).", show_default=False)),
+    "loads": (Optional[Path], None, typer.Option("--loads", metavar="FILE.xml", help="External loads from data, e.g. a walk's measured ground reactions: OpenSim's ExternalLoads file (the body each force acts on, the frames of its force and point, the columns of its data file, a .mot or .sto), applied at every stage of the simulation and in inverse dynamics; its content and its data file's are part of the run's identity.", show_default=False)),
     "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
 }
 
@@ -203,7 +204,7 @@ def _warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
 
 
 def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
-                model_file) -> dict:
+                loads, model_file) -> dict:
     """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
     names = [item.strip() for item in model or [] if "=" not in item]
     pairs = _model_file(model_file) if model_file is not None else []
@@ -212,7 +213,21 @@ def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_d
     return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
                 sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
                 plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file, **_model_input(name)}, model_name=name)
+                _inputs={"--model-file": model_file, **_model_input(name), **_loads_inputs(loads)}, model_name=name,
+                **({"loads": str(loads)} if loads is not None else {}))
+
+
+def _loads_inputs(loads) -> dict:
+    """{'--loads': the file, '--loads data': its data file}: inputs the outputs must not overwrite."""
+    if loads is None:
+        return {}
+    from ..files import BadFile
+    from ..multibody.loads import data_file
+
+    try:
+        return {"--loads": Path(loads), "--loads data file": data_file(loads)}
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
 
 
 def _model_name(names: list) -> str:
@@ -332,6 +347,14 @@ def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions
 
         try:
             fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--model", model_digest(model)),)))
+        except BadFile as exc:
+            raise BadInput(str(exc)) from None
+    if fields.get("loads") is not None:
+        from ..files import BadFile
+        from ..multibody.loads import loads_digest
+
+        try:
+            fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--loads", loads_digest(fields["loads"])),)))
         except BadFile as exc:
             raise BadInput(str(exc)) from None
     return fields

@@ -17,7 +17,15 @@ class PD(Controller):
     scaled by the joint's inertia I_j / 0.04 kg m^2, I_j the diagonal entry of the nominal mass
     matrix M(z) at the motion's start. Each joint then has the forearm's closed-loop frequency
     sqrt(Kp / I) and damping (as if the joints were uncoupled); the forearm, and a joint of its
-    inertia (the arm's elbow), get 80 and 0.3."""
+    inertia (the arm's elbow), get 80 and 0.3.
+
+    A model with a floating base (a free joint on ground: a walk) gets other defaults: each
+    coordinate's effective inertia I_j = 1 / [M(z)^-1]_jj (what it feels while the others move
+    freely), the paper's frequency sqrt(80 / 0.04) = 44.7 rad/s and critical damping: kp = I_j w^2,
+    kd = 2 I_j w. There M_jj of the base's coordinates holds the whole body (their effective
+    inertia is 1 to 40 % of it), so the scaling above puts the coupled system's fastest mode near
+    580 rad/s, and with ground reactions the paper's light damping (zeta 0.08) lets a recorded walk
+    fall within 2 s."""
 
     name = "pd"
     summary = ("the inverse-dynamics torque plus constant PD feedback per joint (the paper's eqs. 13-14; Drake's "
@@ -30,9 +38,14 @@ class PD(Controller):
     def gains(self, plan: Plan) -> tuple[np.ndarray, np.ndarray]:
         """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,)."""
         z0 = plan.motion(np.zeros(1))[0][0]
-        scale = np.diag(plan.engine.mass_matrix(z0)) / REFERENCE_INERTIA
-        return tuple(np.full(len(scale), gain) if gain is not None else paper * scale
-                     for gain, paper in ((self.kp, PAPER_KP), (self.kd, PAPER_KD)))
+        mass = plan.engine.mass_matrix(z0)
+        if plan.engine.model.floating_base is not None:
+            inertia, omega = 1.0 / np.diag(np.linalg.inv(mass)), np.sqrt(PAPER_KP / REFERENCE_INERTIA)
+            defaults = (inertia * omega**2, 2.0 * inertia * omega)
+        else:
+            defaults = tuple(paper * np.diag(mass) / REFERENCE_INERTIA for paper in (PAPER_KP, PAPER_KD))
+        return tuple(np.full(len(z0), gain) if gain is not None else default
+                     for gain, default in zip((self.kp, self.kd), defaults))
 
     def design(self, plan: Plan) -> Design:
         kp, kd = self.gains(plan)

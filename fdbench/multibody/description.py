@@ -149,6 +149,17 @@ class Load:
 
 
 @dataclass(frozen=True)
+class Frame:
+    """A named frame fixed to ``body``: its origin ``at`` (m) and its x axis at ``angle`` (rad) in
+    the body's frame (e.g. an OpenSim body welded to ``body`` on import), for loads given in it."""
+
+    name: str
+    body: str
+    at: tuple[float, float]
+    angle: float = 0.0
+
+
+@dataclass(frozen=True)
 class MotionSpec:
     """A named motion of a model: every joint from ``start`` to ``goal`` (rad, (joint, angle) pairs
     in the model's coordinate order) in ``duration`` s, from rest to rest, along ``type``
@@ -175,6 +186,18 @@ class Model:
     description: str = ""
     motions: tuple[MotionSpec, ...] = ()
     keys: tuple[tuple[str, str], ...] = ()
+    frames: tuple[Frame, ...] = ()
+
+    def frame(self, name: str) -> tuple[str, tuple[float, float], float]:
+        """(body, origin (m), angle (rad)) of a body's own frame or of a named frame fixed to a body;
+        KeyError for another name."""
+        for body in self.bodies:
+            if body.name == name:
+                return body.name, (0.0, 0.0), 0.0
+        for frame in self.frames:
+            if frame.name == name:
+                return frame.body, frame.at, frame.angle
+        raise KeyError(f"no body or frame {name!r} in model {self.name!r}")
 
     @property
     def coordinates(self) -> tuple[str, ...]:
@@ -196,6 +219,11 @@ class Model:
     def has_path_or_free_joints(self) -> bool:
         """Whether a joint has a path or is free (such models run on the engine's dense kernels)."""
         return any(joint.path is not None or joint.type == "free" for joint in self.joints)
+
+    @property
+    def floating_base(self) -> "Joint | None":
+        """The free joint between ground and a body (the model's floating base), or None."""
+        return next((joint for joint in self.joints if joint.type == "free" and joint.parent == GROUND), None)
 
     def joint_named(self, name: str) -> Joint:
         """The joint called ``name`` (a joint's name, not a free joint's coordinate)."""
@@ -336,12 +364,13 @@ def _parse_json(text: str, source: str):
 # ---------------------------------------------------------------- checking values
 
 TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": True, "joints": True, "loads": False,
-            "motions": False, "keys": False}
+            "motions": False, "keys": False, "frames": False}
 BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
 JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
               "offset": False, "limits": False, "path": False, "coordinates": False}
 PATH_KEYS = {"angles": True, "x": True, "y": True, "y_angles": False}
 LOAD_KEYS = {"body": True, "at": True, "force": True}
+FRAME_KEYS = {"name": True, "body": True, "at": True, "angle": False}
 MOTION_KEYS = {"name": True, "type": False, "duration": True, "start": True, "goal": True}
 MOTION_TYPES = ("minimum-jerk",)
 
@@ -356,7 +385,8 @@ ALLOWED = {
     "child": "a body's name", "at_parent": "[x, y] (m, in the parent's frame)",
     "at_child": "[x, y] (m, in the child's frame)", "offset": "a number (rad)",
     "limits": "[lower, upper] (rad, lower < upper)", "body": "a body's name", "at": "[x, y] (m, in the body's frame)",
-    "force": "[x, y] (N, world axes)", "motions": "a list of tables ([[motions]] in TOML)",
+    "force": "[x, y] (N, world axes)", "frames": "a list of tables ([[frames]] in TOML)",
+    "angle": "a number (rad, the frame's x axis in the body's frame)", "motions": "a list of tables ([[motions]] in TOML)",
     "keys": "a table of short names, each a path of with_changes ([keys] in TOML)",
     "duration": "a positive number (s)", "start": "a table {joint = angle} (rad), every joint",
     "goal": "a table {joint = angle} (rad), every joint",
@@ -478,7 +508,10 @@ def model_from_dict(data, source: str, default_name: str | None = None) -> Model
     motions = tuple(_motion(check, entry, f"motions[{i}]", model.coordinates, model.coordinate_kinds)
                     for i, entry in enumerate(check.entries(data, "motions")))
     _check_motion_names(check, motions)
-    return replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model))
+    named = set()
+    frames = tuple(_frame(check, entry, f"frames[{i}]", model, named)
+                   for i, entry in enumerate(check.entries(data, "frames")))
+    return replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model), frames=frames)
 
 
 def _body(check: _Checker, entry, key: str) -> Body:
@@ -577,6 +610,22 @@ def _load(check: _Checker, entry, key: str) -> Load:
     entry = check.table(entry, key, LOAD_KEYS)
     return Load(body=_reference(check, entry["body"], f"{key}.body"), at=check.pair(entry["at"], f"{key}.at"),
                 force=check.pair(entry["force"], f"{key}.force"))
+
+
+def _frame(check: _Checker, entry, key: str, model: Model, earlier: set) -> Frame:
+    from ..registry import unknown_name_message
+
+    entry = check.table(entry, key, FRAME_KEYS)
+    name = check.name(entry["name"], f"{key}.name")
+    taken = {n.lower() for n in [b.name for b in model.bodies] + [j.name for j in model.joints]}
+    if name.lower() in taken or name.lower() in earlier:
+        check.fail(f"{key}.name", f"{name!r} is already the name of a body, joint or frame; a frame needs its own name")
+    body = _reference(check, entry["body"], f"{key}.body")
+    if body not in [b.name for b in model.bodies]:
+        check.fail(f"{key}.body", unknown_name_message("body", body, [b.name for b in model.bodies]))
+    angle = check.number(entry["angle"], f"{key}.angle") if "angle" in entry else 0.0
+    earlier.add(name.lower())
+    return Frame(name, body, check.pair(entry["at"], f"{key}.at"), angle)
 
 
 def _reference(check: _Checker, value, key: str) -> str:
@@ -784,6 +833,8 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
                             "goal": dict(m.goal)} for m in model.motions]
     if model.keys:
         data["keys"] = dict(model.keys)
+    if model.frames:
+        data["frames"] = [{"name": f.name, "body": f.body, "at": list(f.at), "angle": f.angle} for f in model.frames]
     return data
 
 
@@ -791,7 +842,7 @@ def to_toml(model: Model, explicit_ends: bool = False) -> str:
     """The model as a TOML file that load_model reads back to an equal Model."""
     data = to_dict(model, explicit_ends)
     lines = [f"{key} = {_toml_value(data[key])}" for key in ("name", "description", "gravity") if key in data]
-    for section in ("bodies", "joints", "loads", "motions"):
+    for section in ("bodies", "joints", "loads", "motions", "frames"):
         for entry in data.get(section, []):
             lines += ["", f"[[{section}]]"] + [f"{key} = {_toml_value(value)}" for key, value in entry.items()]
     if "keys" in data:

@@ -129,7 +129,7 @@ class Engine:
     """The mixed-coordinate penalty formulation of ``model`` with the penalty factor alpha, the
     damping ratio xi and the natural frequency omega (rad/s) of eq. 12."""
 
-    def __init__(self, model: Model, alpha: float = 1e7, xi: float = 1.0, omega: float = 10.0):
+    def __init__(self, model: Model, alpha: float = 1e7, xi: float = 1.0, omega: float = 10.0, loads=None):
         from ..integrate import PENALTY_RANGES
 
         for name, value in (("alpha", alpha), ("xi", xi), ("omega", omega)):
@@ -142,7 +142,12 @@ class Engine:
         self.n_bodies = len(model.joints)
         # per joint: the column of its angle among the coordinates (a free joint's x, y follow it)
         self.joint_column = np.cumsum([0] + [len(j.coordinate_names) for j in model.joints][:-1]).astype(np.int64)
-        self.compiled = not model.has_path_or_free_joints
+        self.loads = loads  # external loads from data (``fdbench.multibody.loads.ExternalLoads``) or None
+        if loads is not None:
+            for load in loads.loads:
+                for name in {load.body, load.force_frame, load.point_frame} - {"ground"}:
+                    model.body(name)  # KeyError for a body the model lacks
+        self.compiled = not model.has_path_or_free_joints and loads is None
         self.params = np.zeros(N_PARAMS)
         self.params[ALPHA], self.params[TWO_XI_OMEGA], self.params[OMEGA2] = alpha, 2 * xi * omega, omega**2
         self.params[SWITCH_COS], self.params[VIOLATION] = SIN_FORM_MIN_COS, VIOLATION_TOL
@@ -324,9 +329,21 @@ class Engine:
     @property
     def dense_inverse_layout(self) -> tuple:
         """The arrays ``kernels_general.inverse_torques`` takes after (z, zd, zdd), in order."""
-        body_int, body_float, _, _, knots, spline_start, *_ = self.dense_layout
-        return (body_int, body_float, knots, spline_start, self.pt_owner, self.pt_local, self.pt_index, self.mass,
-                self.q_ext)
+        body_int, body_float, _, _, knots, spline_start, *_, load_int = self.dense_layout
+        return (body_int, body_float, knots, spline_start, load_int, self.pt_owner, self.pt_local, self.pt_index,
+                self.mass, self.q_ext)
+
+    def load_values(self, times) -> np.ndarray:
+        """The external loads' values at the times (s, shape (n,)) as ``kernels_general`` takes them:
+        shape (n, L, N_LOAD), force (N) and point (m) in their frames, free moment (N m); L = 0
+        without loads."""
+        from .kernels_general import N_LOAD
+
+        times = np.asarray(times, dtype=float)
+        if self.loads is None:
+            return np.zeros((len(times), 0, N_LOAD))
+        force, point, moment = self.loads.at(times)
+        return np.ascontiguousarray(np.concatenate([force, point, moment[..., None]], axis=2))
 
     def dense_simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
         """The arrays ``kernels_general.rk4`` and ``derivatives`` take after the feedback law: the
@@ -336,7 +353,8 @@ class Engine:
 
     def _build_dense(self) -> tuple:
         """The dense layout (``kernels_general``'s module docstring): per body its points, parent,
-        coordinate, kind and geometry; per path its point map and splines' pieces."""
+        coordinate, kind and geometry; per path its point map and splines' pieces; per external load
+        its body and frames."""
         from . import kernels_general as kg
 
         B = self.n_bodies
@@ -367,10 +385,14 @@ class Engine:
             for spline in joint.path.splines():
                 pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
                 spline_start.append(spline_start[-1] + len(spline.x))
+        index = {name: b for b, name in enumerate(self.body_names)}
+        load_int = np.array([[index.get(name, FIXED) for name in (load.body, load.force_frame, load.point_frame)]
+                             for load in (self.loads.loads if self.loads is not None else ())],
+                            dtype=np.int64).reshape(-1, kg.N_LOAD_INT)
         return (body_int, body_float, np.array(path_body, dtype=np.int64),
                 np.array(path_float, dtype=float).reshape(-1, kg.N_PATH_FLOAT),
                 np.concatenate(pieces) if pieces else np.zeros((0, 5)), np.array(spline_start, dtype=np.int64),
-                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params)
+                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params, load_int)
 
     def check_nominal(self, nominal: "Engine | None") -> None:
         """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque
@@ -387,8 +409,10 @@ class Engine:
         if not self.compiled:
             kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
                             if j.type == "free" or j.path is not None})
-            raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot take "
-                             "in this version")
+            if kinds:
+                raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot "
+                                 "take in this version")
+            raise ValueError(f"{what} cannot take external loads (--loads) in this version")
 
     @property
     def inverse_torques_layout(self) -> tuple:
@@ -565,12 +589,19 @@ class Engine:
                                               np.empty(rows)))
         return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
-    def inverse_dynamics(self, z, zd, zdd) -> np.ndarray:
+    def inverse_dynamics(self, z, zd, zdd, t=None) -> np.ndarray:
         """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
-        rad/s, rad/s^2) of shape (n, J) or (J,); the same shape out."""
+        rad/s, rad/s^2) of shape (n, J) or (J,); the same shape out. With external loads, the times
+        t (s, shape (n,) or a number) they are taken at, and their generalised forces subtracted."""
         (z, zd, zdd), single = self._samples(z, zd, zdd)
         p, _, pdd, kin = self._free_points(z, zd, zdd)
         tau = np.einsum("npj,np->nj", self._velocity_transform(p, kin), pdd @ self.mass - self.q_ext)
+        if self.loads is not None:
+            if t is None:
+                raise ValueError("a model with external loads needs the times of its inverse dynamics")
+            from .loads import generalized_forces
+
+            tau -= generalized_forces(self, self.loads, z, np.broadcast_to(np.asarray(t, dtype=float), (len(z),)))
         return tau[0] if single else tau
 
     def mass_matrix(self, z) -> np.ndarray:
@@ -597,17 +628,20 @@ class Engine:
             points[f"{name}.end"] = self._body_point(b, self._local_end[b], phi, w, al, o, vo, ao)[0]
         return {key: value[0] if single else value for key, value in points.items()}
 
-    def inverse_torques(self, z, zd, zdd) -> np.ndarray:
+    def inverse_torques(self, z, zd, zdd, t=None) -> np.ndarray:
         """Eq. 3 by the compiled kernel (``kernels.inverse_torques``): the joint torques (N m) of one
         minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
         from .kernels import inverse_torques
 
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
         out = np.empty(self.n_joints)
-        if not self.compiled:  # free or path joints
+        if not self.compiled:  # free or path joints, external loads
             from . import kernels_general
 
-            kernels_general.inverse_torques(z, zd, zdd, *self.dense_inverse_layout, out)
+            if self.loads is not None and t is None:
+                raise ValueError("a model with external loads needs the times of its inverse dynamics")
+            loads = self.load_values(np.zeros(1) if t is None else np.array([float(t)]))[0]
+            kernels_general.inverse_torques(z, zd, zdd, loads, *self.dense_inverse_layout, out)
             return out
         inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
         return out
@@ -637,8 +671,11 @@ class Engine:
         if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
             from .kernels_general import rk4 as dense_rk4
 
+            layout = self.dense_simulation_layout(nominal)
+            times = np.arange(2 * n_steps + 1) * (0.5 * dt)
+            loads = self.load_values(times), (nominal or self).load_values(times)
             code, done, max_viol = dense_rk4(y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode, gains,
-                                             *self.dense_simulation_layout(nominal), states, rates, applied)
+                                             *loads, *layout, states, rates, applied)
         else:
             code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd,
                                        mode, gains, *self.simulation_layout(nominal), states, rates, applied)
@@ -653,11 +690,12 @@ class Engine:
         return self.simulate(self.state_from_joints(z0, zd0), dt, n_steps, tau_half, ref_half, refd_half, zero, kp, kd)
 
     def rates(self, states, tau, ref, refd, refdd, kp, kd, mode=PD, gains=None,
-              nominal: "Engine | None" = None) -> tuple[np.ndarray, np.ndarray]:
+              nominal: "Engine | None" = None, t=None) -> tuple[np.ndarray, np.ndarray]:
         """The state derivatives (k, n_state) and applied joint torques (k, J) (N m) of k states
         (k, n_state) under ``simulate``'s feedback law, row i with row i of tau, ref, refd, refdd
         (each (k, J)) and of gains ((k, J, 2J)): the adaptive integrators' right-hand side. The
-        accelerations are NaN where the points' matrix is singular."""
+        accelerations are NaN where the points' matrix is singular. t: the states' times (s, (k,)),
+        needed with external loads."""
         from .kernels import derivatives
 
         states = np.ascontiguousarray(states, dtype=float)
@@ -670,8 +708,13 @@ class Engine:
         if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
             from . import kernels_general
 
-            kernels_general.derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains,
-                                        *self.dense_simulation_layout(nominal), out, applied)
+            layout = self.dense_simulation_layout(nominal)
+            if (self.loads is not None or (nominal is not None and nominal.loads is not None)) and t is None:
+                raise ValueError("a model with external loads needs the times of its states")
+            times = np.zeros(k) if t is None else np.asarray(t, dtype=float).reshape(k)
+            loads = self.load_values(times), (nominal or self).load_values(times)
+            kernels_general.derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, *loads, *layout, out,
+                                        applied)
             return out, applied
         derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
                     *self.simulation_layout(nominal), out, applied)
@@ -700,7 +743,8 @@ class Engine:
                  np.ascontiguousarray(tau, dtype=float))
         rest = (int(every), np.array(angles_ref, dtype=float), float(penalty_weight))
         if not self.compiled:
-            return (*start, ref, refd, *rest, *self.dense_simulation_layout())
+            loads = self.load_values(np.arange(rows) * (0.5 * float(dt)))
+            return (*start, ref, refd, *rest, loads, *self.dense_simulation_layout())
         return (*start, ref + self.joint_offset, refd, *rest, *self.simulation_layout())
 
     @property

@@ -33,9 +33,14 @@ compilation serves every model:
 
 * the dense layout: body_int (B, N_BODY_INT), body_float (B, N_BODY_FLOAT), path_body (n_paths,),
   path_float (n_paths, N_PATH_FLOAT), knots (n_knots, 5), spline_start (2 n_paths + 1,), lin_idx,
-  lin_coef, lin_const, mass (n_p, n_p), q_ext (n_p,), params;
-* the inverse layout: body_int, body_float, knots, spline_start, pt_owner, pt_local, pt_index,
-  mass, q_ext.
+  lin_coef, lin_const, mass (n_p, n_p), q_ext (n_p,), params, load_int (L, N_LOAD_INT);
+* the inverse layout: body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local,
+  pt_index, mass, q_ext.
+
+External loads from data (``fdbench.multibody.loads``): per load its body and the frames of its
+force and point (load_int), and per run their values on the half-step grid, loads (rows, L,
+N_LOAD): in eq. 12 F on the body's joint point i and (P - r_i) x F + M on its angle; in the inverse
+dynamics their generalised forces J_P^T F (and M on every angle on the body's path) subtracted.
 
 Path m's x spline is spline 2 m, its y spline 2 m + 1: rows spline_start[s] to spline_start[s + 1]
 of knots, each (x, y, b, c, d) of a piece y + b u + c u^2 + d u^3, u = t - x.
@@ -65,6 +70,8 @@ BASE_1, BASE_2, L_11, L_12, L_21, L_22, N_PATH_FLOAT = range(7)
 # the path's world direction per radian (m/rad; 0 without a path)
 (PHI, COS, SIN, RATE, ACC, JOINT_X, JOINT_Y, ORIGIN_X, ORIGIN_Y, ORIGIN_AX, ORIGIN_AY, DIR_X, DIR_Y,
  N_KIN) = range(14)
+LOAD_BODY, FORCE_FRAME, POINT_FRAME, N_LOAD_INT = range(4)  # load_int columns (frames: -1 ground)
+FX, FY, PX, PY, MOMENT, N_LOAD = range(6)  # a load's values: force (N), point (m), free moment (N m)
 MAX_ENTRIES = 8  # nonzero entries of a constraint row (a path's row has up to 7)
 
 
@@ -105,13 +112,14 @@ def _point_of(kin, b, lx, ly):
 
 
 @njit(error_model="numpy", inline="always")
-def _inverse(z, zd, zdd, body_int, body_float, knots, spline_start, pt_owner, pt_local, pt_index, mass, q_ext, kin,
-             points, out):
+def _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local, pt_index, mass,
+             q_ext, kin, points, out):
     """Eq. 3, tau = R^T (M_p p'' - Q_ext), into out (J,) (N m; N for a free joint's x and y) for the
     coordinates z, rates zd and accelerations zdd (J,): the bodies' kinematics from ground out, the
     free points' positions and accelerations, then each point's force projected on every joint on
     its owner's path (a pin's lever R90 (r_P - r_joint) plus a path's direction, a free joint's
-    world axes). kin (B, N_KIN), points (3, n_p): scratch."""
+    world axes), less the external loads' (values loads (L, N_LOAD)). kin (B, N_KIN), points (3, n_p):
+    scratch."""
     n_b = body_int.shape[0]
     for k in range(n_b):
         p, col = body_int[k, PARENT], body_int[k, COLUMN]
@@ -172,24 +180,43 @@ def _inverse(z, zd, zdd, body_int, body_float, knots, spline_start, pt_owner, pt
                 out[col + 1] += fx
                 out[col + 2] += fy
             b = body_int[b, PARENT]
+    for k in range(load_int.shape[0]):  # the loads' generalised forces, subtracted
+        fx, fy, px, py = loads[k, FX], loads[k, FY], loads[k, PX], loads[k, PY]
+        frame = load_int[k, FORCE_FRAME]
+        if frame >= 0:
+            fx, fy = fx * kin[frame, COS] - fy * kin[frame, SIN], fx * kin[frame, SIN] + fy * kin[frame, COS]
+        frame = load_int[k, POINT_FRAME]
+        if frame >= 0:
+            px, py = (kin[frame, ORIGIN_X] + px * kin[frame, COS] - py * kin[frame, SIN],
+                      kin[frame, ORIGIN_Y] + px * kin[frame, SIN] + py * kin[frame, COS])
+        b = load_int[k, LOAD_BODY]
+        while b >= 0:
+            col = body_int[b, COLUMN]
+            out[col] -= ((px - kin[b, JOINT_X]) * fy - (py - kin[b, JOINT_Y]) * fx + kin[b, DIR_X] * fx
+                         + kin[b, DIR_Y] * fy + loads[k, MOMENT])
+            if body_int[b, FREE] == 1:
+                out[col + 1] -= fx
+                out[col + 2] -= fy
+            b = body_int[b, PARENT]
 
 
 @njit(error_model="numpy")
-def inverse_torques(z, zd, zdd, body_int, body_float, knots, spline_start, pt_owner, pt_local, pt_index, mass, q_ext,
-                    out):
+def inverse_torques(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local,
+                    pt_index, mass, q_ext, out):
     """The generalised forces (N m; N for a free joint's x and y) of the minimal motion (z, zd, zdd)
-    (shape (J,)) into out (J,): eq. 3 over the inverse layout (``Engine.dense_inverse_layout``)."""
+    (shape (J,)) under the external loads' values loads (L, N_LOAD) into out (J,): eq. 3 over the
+    inverse layout (``Engine.dense_inverse_layout``)."""
     kin, points = np.empty((body_int.shape[0], N_KIN)), np.empty((3, mass.shape[0]))
-    _inverse(z, zd, zdd, body_int, body_float, knots, spline_start, pt_owner, pt_local, pt_index, mass, q_ext, kin,
-             points, out)
+    _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local, pt_index, mass,
+             q_ext, kin, points, out)
 
 
 # ---------------------------------------------------------------------- the RK4 driver (eq. 12 under a feedback law)
 @njit(error_model="numpy")
-def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, body_int, body_float, path_body,
-           path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, n_body_int,
-           n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied,
-           phi_rows, jv_rows):
+def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
+           path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
+           n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass, n_q_ext,
+           states, rates, applied, phi_rows, jv_rows):
     """``rk4`` whose grid starts at row ``start`` of tau, ref, refd, refdd and gains; with n_steps 0
     it evaluates the state derivative of y0 alone (into rates[0]), with -1 only the constraints of
     y0 (the returned violation). phi_rows, jv_rows (n_rows,):
@@ -341,8 +368,8 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
         elif mode == COMPUTED:
             for k in range(J):
                 v[k] = refdd[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
-            _inverse(z, zd, v, n_body_int, n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass,
-                     n_q_ext, kin, points, torque)
+            _inverse(z, zd, v, n_loads[half], n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner,
+                     n_local, n_index, n_mass, n_q_ext, kin, points, torque)
             for k in range(J):
                 torque[k] += tau[half, k]
         else:
@@ -382,9 +409,9 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
             rhs[r] = total / A[r, r]
         return OK
 
-    def derivative(stage):
-        """y' = [q', q''] of eq. 12 at the stage's state under torque into ks[stage]. Returns OK, or
-        the solve's status (then the accelerations are left unfinished)."""
+    def derivative(stage, half):
+        """y' = [q', q''] of eq. 12 at the stage's state under torque and the loads of grid row half
+        into ks[stage]. Returns OK, or the solve's status (then the accelerations are left unfinished)."""
         for k in range(n_q):
             ks[stage, k] = state[n_q + k]
         for r in range(n_q):
@@ -399,6 +426,24 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
             if body_int[k, FREE] == 1:
                 rhs[body_int[k, KI]] += torque[col + 1]
                 rhs[body_int[k, KI] + 1] += torque[col + 2]
+        for k in range(load_int.shape[0]):  # external loads: F on the body's point i, (P - r_i) x F + M on its angle
+            fx, fy, px, py = loads[half, k, FX], loads[half, k, FY], loads[half, k, PX], loads[half, k, PY]
+            frame = load_int[k, FORCE_FRAME]
+            if frame >= 0:
+                c, s = math.cos(state[n_p + frame]), math.sin(state[n_p + frame])
+                fx, fy = c * fx - s * fy, s * fx + c * fy
+            frame = load_int[k, POINT_FRAME]
+            if frame >= 0:
+                c, s = math.cos(state[n_p + frame]), math.sin(state[n_p + frame])
+                lx, ly = px - body_float[frame, AT_CHILD_X], py - body_float[frame, AT_CHILD_Y]
+                xi, yi, _, _ = point(frame)
+                px, py = xi + (c * lx - s * ly), yi + (s * lx + c * ly)
+            b = load_int[k, LOAD_BODY]
+            xi, yi, _, _ = point(b)
+            if body_int[b, KI] >= 0:
+                rhs[body_int[b, KI]] += fx
+                rhs[body_int[b, KI] + 1] += fy
+            rhs[n_p + b] += (px - xi) * fy - (py - yi) * fx + loads[half, k, MOMENT]
         constraints(True)
         status = solve()
         if status == OK:
@@ -418,7 +463,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
                 for m in range(n):
                     state[m] = y[m] + h * ks[stage - 1, m]
             law(j + (stage + 1) // 2)
-            code = derivative(stage)
+            code = derivative(stage, j + (stage + 1) // 2)
             if stage == 0:
                 for m in range(n):
                     states[i, m] = y[m]
@@ -447,56 +492,60 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, b
 
 
 @njit(error_model="numpy")
-def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, body_int, body_float, path_body, path_float,
-        knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, n_body_int, n_body_float, n_knots,
-        n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied):
+def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float, path_body,
+        path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, n_body_int,
+        n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
+        applied):
     """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the state y0 (n_state,) under the
     feedback law ``mode`` of ``kernels.rk4`` (PD, COMPUTED or GAINS), for the coordinates (J
     of them; a free joint's x and y take forces, N): tau, ref, refd, refdd of shape (2 n_steps + 1,
     J) on the half-step grid (N m, rad, rad/s, rad/s^2; ref WITHOUT the joint offsets), kp, kd (J,),
-    gains (2 n_steps + 1, J, 2J) for GAINS; then the plant's dense layout and the believed model's
-    inverse layout. Fills states, rates (n+1, n_state) and applied (n+1, J) up to the last step
+    gains (2 n_steps + 1, J, 2J) for GAINS; loads, n_loads (2 n_steps + 1, L, N_LOAD): the plant's
+    and the believed model's external loads on the grid; then the plant's dense layout and the
+    believed model's inverse layout. Fills states, rates (n+1, n_state) and applied (n+1, J) up to the last step
     reached. Returns (status, steps_done, max constraint violation)."""
     m = n_rows(body_int, path_body, lin_const)
-    return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, body_int, body_float, path_body,
-                  path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, n_body_int,
-                  n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
-                  applied, np.empty(m), np.empty(m))
+    return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
+                  path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+                  load_int, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
+                  n_mass, n_q_ext, states, rates, applied, np.empty(m), np.empty(m))
 
 
 @njit(error_model="numpy")
-def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, body_int, body_float, path_body, path_float, knots,
-                spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, n_body_int, n_body_float, n_knots,
-                n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext, out, applied):
+def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float, path_body,
+                path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
+                n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
+                n_q_ext, out, applied):
     """The state derivatives (into out, (k, n_state)) and applied generalised forces (into applied,
     (k, J)) of k states (k, n_state) under ``rk4``'s feedback law, row i with row i of tau, ref,
-    refd, refdd (each (k, J)) and of gains; the accelerations are NaN where the solve fails."""
+    refd, refdd (each (k, J)), of gains and of the loads (k, L, N_LOAD); the accelerations are NaN
+    where the solve fails."""
     m, n, J = n_rows(body_int, path_body, lin_const), states.shape[1], tau.shape[1]
     phi_rows, jv_rows = np.empty(m), np.empty(m)
     state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, J))
     for i in range(states.shape[0]):
-        _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, body_int, body_float, path_body,
-               path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, n_body_int,
-               n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext, state, rate, torque,
-               phi_rows, jv_rows)
+        _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
+               path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
+               n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
+               n_q_ext, state, rate, torque, phi_rows, jv_rows)
         out[i] = rate[0]
         applied[i] = torque[0]
 
 
 @njit(error_model="numpy")
 def constraint_residuals(y, body_int, body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef,
-                         lin_const, mass, q_ext, params, phi_rows, jv_rows):
+                         lin_const, mass, q_ext, params, load_int, phi_rows, jv_rows):
     """Phi and J q' of every constraint row (into phi_rows, jv_rows, (n_rows,): distance and angle
     per body, the linear rows, two per path) at the state y (n_state,), the angle constraints in the
     form in force; returns max |Phi| (m^2 and m), the value ``rk4`` checks."""
     n = y.shape[0]
-    rows, J = np.zeros((1, 1)), 1
+    rows, J, no_loads = np.zeros((1, 1)), 1, np.zeros((1, 0, N_LOAD))
     no_owner, no_local, no_index = np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
     _, _, worst = _drive(y, 0.0, -1, 0, rows, rows, rows, rows, rows[0], rows[0], -1, np.zeros((1, J, 2 * J)),
-                         body_int, body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef,
-                         lin_const, mass, q_ext, params, body_int, body_float, knots, spline_start, no_owner, no_local,
-                         no_index, np.zeros((0, 0)), np.zeros(0), np.empty((1, n)), np.empty((1, n)),
-                         np.empty((1, J)), phi_rows, jv_rows)
+                         no_loads, no_loads, body_int, body_float, path_body, path_float, knots, spline_start, lin_idx,
+                         lin_coef, lin_const, mass, q_ext, params, load_int, body_int, body_float, knots, spline_start,
+                         load_int, no_owner, no_local, no_index, np.zeros((0, 0)), np.zeros(0), np.empty((1, n)),
+                         np.empty((1, n)), np.empty((1, J)), phi_rows, jv_rows)
     return worst
 
 
@@ -537,20 +586,21 @@ def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight,
 
 
 @njit(nogil=True)
-def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, body_int,
-                   body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext,
-                   params, n_body_int, n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass,
-                   n_q_ext, states, rates, applied, objective, first_candidate, stride):
+def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, loads, body_int, body_float,
+                   path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+                   load_int, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
+                   n_mass, n_q_ext, states, rates, applied, objective, first_candidate, stride):
     """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
     candidates first_candidate, first_candidate + stride, ... of tau (shape (lam, 2 n_steps + 1, J)),
     for ``fdbench.population.Population``: ``kernels.rk4_candidates`` for the dense layout (ref,
-    refd without the joint offsets). Runs without the GIL."""
+    refd without the joint offsets; loads (2 n_steps + 1, L, N_LOAD) the external loads on the
+    grid). Runs without the GIL."""
     J = tau.shape[2]
     zero, no_gains = np.zeros(J), np.zeros((1, J, 2 * J))
     for c in range(first_candidate, tau.shape[0], stride):
-        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, body_int, body_float,
-                         path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
-                         n_body_int, n_body_float, n_knots, n_spline_start, n_owner, n_local, n_index, n_mass, n_q_ext,
-                         states, rates, applied)
+        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, loads, loads, body_int,
+                         body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass,
+                         q_ext, params, load_int, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int,
+                         n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied)
         objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int,
                                           body_float, mass.shape[0])

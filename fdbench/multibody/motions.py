@@ -98,6 +98,11 @@ class PerJoint(JointMotion):
     def samples(self) -> np.ndarray:
         return self._samples
 
+    @property
+    def start_s(self) -> float:
+        """The recording's own time (s) of the motion's time 0 (0 for an analytic motion)."""
+        return next((p.start_s for p in self.parts if hasattr(p, "start_s")), 0.0)
+
     def __call__(self, t):
         t = np.asarray(t, dtype=float)
         out = [np.zeros(t.shape + (len(self.parts),)) for _ in range(3)]
@@ -122,6 +127,10 @@ class Resampled(JointMotion):
 
         self.base, self.sample_dt, self.name, self.joints = motion, float(sample_dt), motion.name, motion.joints
         self._samples = sample_grid(motion.duration, sample_dt)
+
+    @property
+    def start_s(self) -> float:
+        return self.base.start_s
 
     @property
     def samples(self) -> np.ndarray:

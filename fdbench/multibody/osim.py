@@ -232,7 +232,7 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
     data = {"name": _text(model.getName(), 100) or Path(source).stem,
             "description": _description(model, source, element), "gravity": gravity,
             "bodies": _with_ends(bodies, kept), "joints": kept, "loads": list(loads.values()),
-            "motions": [_mid_range(kept)]}
+            "motions": [_mid_range(kept)], "frames": _welded_frames(hosts, {pin["child"] for pin in kept})}
     description = model_from_dict(data, source, default_name=Path(source).stem)
     notes = [note for note in (_dropped_note(osim, model, set(loads)), _welded_note(welded),
                                _tilt_note(tilts + gravity_tilt)) if note]
@@ -325,6 +325,13 @@ def _welded_host(parent_host, joint, state):
                     _inverse(_in_base(joint.getChildFrame())))
     R_hC, p_hC = _compose((R, p), X_PC)
     return host, R_hC, p_hC
+
+
+def _welded_frames(hosts: dict, kept: set) -> list[dict]:
+    """A description's frame for each body welded into a kept one (its name, host, origin and
+    angle in the host's frame), so that loads given on or in the welded body find it."""
+    return [{"name": name, "body": host, "at": _xy(p), "angle": math.atan2(R[1, 0], R[0, 0])}
+            for name, (host, R, p) in hosts.items() if host in kept and host != name]
 
 
 def _angle_axis(R: np.ndarray) -> tuple[float, np.ndarray]:

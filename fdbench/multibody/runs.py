@@ -47,15 +47,39 @@ def plant(spec):
 
 
 @lru_cache(maxsize=32)
-def _engine(model, alpha: float, xi: float, omega: float):
+def _engine(model, alpha: float, xi: float, omega: float, loads=None):
     from .engine import Engine
 
-    return Engine(model, alpha, xi, omega)
+    return Engine(model, alpha, xi, omega, loads)
 
 
 def engine(spec, model=None):
-    """The engine of ``model`` (default: the plant) with the spec's penalty parameters."""
-    return _engine(plant(spec) if model is None else model, spec.alpha, spec.xi, spec.omega)
+    """The engine of ``model`` (default: the plant) with the spec's penalty parameters and its
+    external loads (``--loads``)."""
+    return _engine(plant(spec) if model is None else model, spec.alpha, spec.xi, spec.omega, loads(spec))
+
+
+def loads(spec):
+    """The spec's external loads (``--loads``) on its motion's clock, or None."""
+    if spec.loads is None:
+        return None
+    desired, truth = motions(spec)
+    return _loads(spec.loads, dict(spec.inputs).get("--loads"), nominal(spec), getattr(truth, "start_s", 0.0),
+                  truth.duration)
+
+
+@lru_cache(maxsize=8)
+def _loads(path: str, digest, model, start_s: float, duration: float):
+    from .loads import loads_digest, read_external_loads
+
+    if digest is not None and digest != loads_digest(path):
+        raise BadFile(f"--loads: {path} (or its data file) has changed since this run was specified")
+    found = read_external_loads(path, model).shifted(start_s)
+    try:
+        found.check_span(0.0, duration)
+    except ValueError as exc:
+        raise BadFile(str(exc)) from None
+    return found
 
 
 def joints(spec) -> tuple:
@@ -104,6 +128,8 @@ def describe(spec) -> dict:
         out["derivatives"] = parts[0].describe().get("derivatives")
     out.update(noise_deg=spec.noise_deg, model=spec.model_name, model_options=options_text(spec.model) or None,
                plant=options_text(spec.plant) or None)
+    if spec.loads is not None:
+        out["loads"] = spec.loads
     return out
 
 
@@ -169,11 +195,35 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     record["torque_rms_nm"] = float(np.sqrt(np.mean(inv.torque[:, angle] ** 2))) if angle.any() else math.nan
     if not angle.all():
         record["force_rms_n"] = float(np.sqrt(np.mean(inv.torque[:, ~angle] ** 2)))
+    record.update(residual_fields(nominal(spec), inv.torque))
     record.update(runtime_s=runtime, fdbench_version=__version__)
     header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
     rows = np.column_stack([inv.t, *(_in_file_units(v, kinds) for v in (inv.angles, inv.velocities, inv.accelerations)),
                             inv.torque])
     return record, header, rows
+
+
+RESIDUAL_FIELDS = ("residual_force_rms_n", "residual_moment_rms_nm", "residual_fx_rms_n", "residual_fy_rms_n",
+                   "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm")
+
+
+def residual_fields(model, forces: np.ndarray) -> dict:
+    """The residuals of a model with a floating base (a free joint on ground): the generalised
+    forces on its three coordinates, as OpenSim's RRA and CMC name them FX, FY (N, ground axes, at
+    the base's joint point) and MZ (N m), from the forces (n, J) on the samples reached. The fourth
+    indicator is their RMS, the force's magnitude and the moment apart (units never pooled); the
+    means are set beside RRA's averages. {} for a model without a floating base."""
+    base = model.floating_base
+    if base is None:
+        return {}
+    c = model.coordinates.index(base.coordinate_names[0])
+    mz, fx, fy = (forces[:, c + i] for i in range(3))
+    if not len(mz):
+        return dict.fromkeys(RESIDUAL_FIELDS, math.nan)
+    rms = lambda v: float(np.sqrt(np.mean(v**2)))  # noqa: E731
+    return {"residual_force_rms_n": float(np.sqrt(np.mean(fx**2 + fy**2))), "residual_moment_rms_nm": rms(mz),
+            "residual_fx_rms_n": rms(fx), "residual_fy_rms_n": rms(fy), "residual_fx_mean_n": float(np.mean(fx)),
+            "residual_fy_mean_n": float(np.mean(fy)), "residual_mz_mean_nm": float(np.mean(mz))}
 
 
 def _message(result) -> str:
@@ -198,6 +248,7 @@ def _outcome(spec, record: dict, result, inverse, **more):
                   **_per_coordinate(("rmse_torque_nm", "rmse_force_n"), names, kinds, per_force))
     if "translation" in kinds:
         record.update(rmse_trans_cm=trans, rmse_force_n=force)
+    record.update(residual_fields(nominal(spec), result.torque[result.reached]))
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_acc", "_acc_desired", "_torque",
                                           "_torque_inverse") for j in names]
     values = (result.angles, desired, result.zd, inverse.velocities, _accelerations(spec, result), inverse.accelerations)
@@ -227,7 +278,7 @@ def _accelerations(spec, result) -> np.ndarray:
     plant = engine(spec)
     zero = np.zeros_like(result.torque)
     with np.errstate(invalid="ignore"):
-        rates, _ = plant.rates(result.states, result.torque, zero, zero, zero, 0.0, 0.0)
+        rates, _ = plant.rates(result.states, result.torque, zero, zero, zero, 0.0, 0.0, t=result.t)
     return plant.joints_from_state(rates)[1]
 
 

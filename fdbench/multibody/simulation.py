@@ -47,7 +47,7 @@ def inverse_dynamics(t, engine: Engine, motion) -> JointInverse:
     """The joint torques of ``motion`` at times t (s) (None: the motion's samples), eq. 3."""
     t = motion.samples if t is None else np.asarray(t, dtype=float)
     z, zd, zdd = motion(t)
-    return JointInverse(t, z, zd, zdd, engine.inverse_dynamics(z, zd, zdd), motion.name, engine.joints)
+    return JointInverse(t, z, zd, zdd, engine.inverse_dynamics(z, zd, zdd, t), motion.name, engine.joints)
 
 
 @dataclass
@@ -173,7 +173,7 @@ def _rates(torque, engine: Engine, motion, law: FeedbackLaw, t: np.ndarray, stat
     (k, n_state) at times t (s, shape (k,)) under the feedback law."""
     ref, refd, refdd = (np.asarray(r, dtype=float).reshape(len(t), engine.n_joints) for r in motion(t))
     return engine.rates(states, _torques(torque, t, engine.n_joints), ref, refd, refdd, law.kp, law.kd, law.mode,
-                        law.gain_matrices(t, engine.n_joints), law.nominal)
+                        law.gain_matrices(t, engine.n_joints), law.nominal, t)
 
 
 def _simulate_adaptive(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, integrator: str,

@@ -1,0 +1,295 @@
+"""External loads from data: measured forces such as a walk's ground reactions, applied to the
+model's bodies at the integrator's stage times and in inverse dynamics.
+
+A load acts on one body: a force (N) at a point (m) and a free moment (N m) about the plane's
+normal z. The force is given in ground's axes or in a body's frame, the point likewise, each
+sampled at the data's times and interpolated linearly between them. The file is OpenSim's
+ExternalLoads (``--loads FILE.xml``): per ExternalForce the body it is applied to, the bodies its
+force and point are expressed in, and the column prefixes of its force (``<id>x``, ``<id>y``), point
+and torque in the storage file (.mot, .sto) its ``datafile`` names (a path relative to the XML
+file). A model is planar (x, y): the force's and point's z and the torque's x and y do no work on
+its coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn)
+is found as the host's named frame (``Model.frames``).
+
+How a load enters the equations: its generalised force on the coordinates z is
+Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F + M ] on m's angle
+(d_m: the direction of a path joint's point per radian) and F on a free joint's x and y, i.e.
+J_P(z)^T F with P taken as the body's material point at that instant (``generalized_forces``).
+In the mixed coordinates of eq. 12 the same load is F on the body's joint point i and the moment
+(P - r_i) x F + M on its angle (``mixed_forces``).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ElementTree
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+GROUND = "ground"
+MAX_LOADS = 100
+
+
+@dataclass(frozen=True)
+class ExternalLoad:
+    """One load: its name, the model body it acts on, and the frames of its force and point
+    ('ground' or a model body)."""
+
+    name: str
+    body: str
+    force_frame: str = GROUND
+    point_frame: str = GROUND
+
+
+class ExternalLoads:
+    """Loads sampled at times t (s, increasing, shape (n,)): force (N) and point (m) in each load's
+    frames, shape (n, L, 2), free moment (N m), shape (n, L). ``source`` names the file."""
+
+    def __init__(self, loads: tuple, t, force, point, moment, source: str = "loads"):
+        self.loads, self.source = tuple(loads), source
+        self.t = np.asarray(t, dtype=float)
+        self.force, self.point = np.asarray(force, dtype=float), np.asarray(point, dtype=float)
+        self.moment = np.asarray(moment, dtype=float)
+        L, n = len(self.loads), len(self.t)
+        if self.force.shape != (n, L, 2) or self.point.shape != (n, L, 2) or self.moment.shape != (n, L):
+            raise ValueError(f"loads: force and point must have shape ({n}, {L}, 2) and moment ({n}, {L})")
+        if n < 2 or not np.all(np.diff(self.t) > 0):
+            raise ValueError(f"{source}: the loads' times must be at least two and increasing")
+        for name, values in (("force", self.force), ("point", self.point), ("moment", self.moment)):
+            if not np.all(np.isfinite(values)):
+                raise ValueError(f"{source}: a load's {name} holds a value that is not a finite number")
+
+    def at(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(force (k, L, 2), point (k, L, 2), moment (k, L)) at times t (s, shape (k,)), linear
+        between samples; ValueError for a time outside the data's span."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        self.check_span(float(t.min(initial=0.0)), float(t.max(initial=0.0)))
+        flat = np.concatenate([self.force.reshape(len(self.t), -1), self.point.reshape(len(self.t), -1),
+                               self.moment], axis=1)
+        values = np.stack([np.interp(t, self.t, column) for column in flat.T], axis=1)
+        L = len(self.loads)
+        return (values[:, :2 * L].reshape(-1, L, 2), values[:, 2 * L:4 * L].reshape(-1, L, 2),
+                values[:, 4 * L:])
+
+    def check_span(self, start: float, end: float) -> None:
+        """ValueError (one line) unless the data cover [start, end] (s)."""
+        slack = 1e-9 * max(1.0, abs(end))
+        if start < self.t[0] - slack or end > self.t[-1] + slack:
+            raise ValueError(f"{self.source}: the loads cover {self.t[0]:g} to {self.t[-1]:g} s of the motion's time, "
+                             f"not all of {start:g} to {end:g} s")
+
+    def shifted(self, t0: float) -> "ExternalLoads":
+        """The loads on a clock starting at t0 (s): the motion's time 0 is the file's t0."""
+        return ExternalLoads(self.loads, self.t - t0, self.force, self.point, self.moment, self.source)
+
+
+# ---------------------------------------------------------------------- generalised forces
+def _rotate(angle, v):
+    """R(angle) v for angles (n,) and vectors v (n, 2)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
+
+
+def _cross(a, b):
+    """z of a x b for vectors (n, 2)."""
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def world_loads(engine, loads: ExternalLoads, phi, origins, t):
+    """Forces and points in ground's axes (each (n, L, 2)) and moments (n, L) at times t (n,), for
+    body angles phi (n, B) (rad) and body frame origins (n, B, 2) (m)."""
+    force, point, moment = loads.at(t)
+    body = {name: b for b, name in enumerate(engine.body_names)}
+    for k, load in enumerate(loads.loads):
+        if load.force_frame != GROUND:
+            force[:, k] = _rotate(phi[:, body[load.force_frame]], force[:, k])
+        if load.point_frame != GROUND:
+            b = body[load.point_frame]
+            point[:, k] = origins[:, b] + _rotate(phi[:, b], point[:, k])
+    return force, point, moment
+
+
+def generalized_forces(engine, loads: ExternalLoads, z, t) -> np.ndarray:
+    """The loads' generalised forces (n, J) on the coordinates z (n, J) at times t (s, (n,)): N m on
+    angles, N on a free joint's x and y."""
+    z = np.atleast_2d(np.asarray(z, dtype=float))
+    zero = np.zeros_like(z)
+    phi, _, _, origins, _, _, joint_at, path_dir = engine._kinematics(z, zero, zero)
+    force, point, moment = world_loads(engine, loads, phi, origins, np.asarray(t, dtype=float).reshape(-1))
+    Q = np.zeros_like(z)
+    for k, load in enumerate(loads.loads):
+        f = force[:, k]
+        for m in engine.model.path(load.body):
+            c = engine.joint_column[m]
+            Q[:, c] += _cross(point[:, k] - joint_at[:, m], f) + np.sum(path_dir[:, m] * f, axis=1) + moment[:, k]
+            if engine.model.joints[m].type == "free":
+                Q[:, c + 1:c + 3] += f
+    return Q
+
+
+def mixed_forces(engine, q, force, point, moment) -> np.ndarray:
+    """The loads' generalised forces in eq. 12's mixed coordinates (n_q,) at the positions q (n_q,)
+    for one row of ``ExternalLoads.at`` (force, point (L, 2), moment (L,)): F on each body's joint
+    point i (nothing where i is fixed) and (P - r_i) x F + M on its angle."""
+    from .kernels import FIXED
+
+    Q = np.zeros(engine.n_q)
+    n_p = engine.n_p
+    body = {name: b for b, name in enumerate(engine.body_names)}
+
+    def joint_point(b):
+        k = engine.pt_index[engine.body_pts[b, 0]]
+        return (engine.pt_fixed[engine.body_pts[b, 0]], FIXED) if k == FIXED else (q[k:k + 2], k)
+
+    def rotate(angle, v):
+        c, s = math.cos(angle), math.sin(angle)
+        return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
+
+    for k, load in enumerate(engine.loads.loads):
+        f, p = force[k], point[k]
+        if load.force_frame != GROUND:
+            f = rotate(q[n_p + body[load.force_frame]], f)
+        if load.point_frame != GROUND:
+            b = body[load.point_frame]
+            r_i, _ = joint_point(b)
+            p = r_i + rotate(q[n_p + b], p - np.asarray(engine.model.joints[b].at_child, dtype=float))
+        b = body[load.body]
+        r_i, index = joint_point(b)
+        if index != FIXED:
+            Q[index:index + 2] += f
+        Q[n_p + b] += (p[0] - r_i[0]) * f[1] - (p[1] - r_i[1]) * f[0] + moment[k]
+    return Q
+
+
+# ---------------------------------------------------------------------- reading OpenSim's ExternalLoads
+def _fail(option: str, path, problem: str):
+    from ..files import BadFile
+
+    raise BadFile(f"{option}: {path}: {problem}")
+
+
+def _text(element, tag: str, default: str = "") -> str:
+    found = element.find(tag)
+    return default if found is None or found.text is None else " ".join(found.text.split())
+
+
+def _root_and_datafile(path: Path, option: str):
+    """(the <ExternalLoads> element, the path of its data file)."""
+    from ..files import read_input_bytes
+
+    try:
+        root = ElementTree.fromstring(read_input_bytes(path, option))
+    except ElementTree.ParseError as exc:
+        _fail(option, path, f"is not an XML file ({exc})")
+    element = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
+    if element is None:
+        _fail(option, path, "has no <ExternalLoads> element (OpenSim's external loads file)")
+    datafile = _text(element, "datafile")
+    if not datafile:
+        _fail(option, path, "names no <datafile> (the storage file of the forces)")
+    return element, Path(datafile) if Path(datafile).is_absolute() else path.parent / datafile
+
+
+def loads_digest(path, option: str = "--loads") -> str:
+    """SHA-256 of an external loads file's content and of its data file's (a run's identity)."""
+    import hashlib
+
+    from ..files import read_input_bytes
+
+    path = Path(path)
+    _, data_path = _root_and_datafile(path, option)
+    digest = hashlib.sha256(read_input_bytes(path, option))
+    digest.update(b"\0" + read_input_bytes(data_path, option))
+    return digest.hexdigest()
+
+
+def data_file(path, option: str = "--loads") -> Path:
+    """The data file an external loads file names (an input the outputs must not overwrite)."""
+    return _root_and_datafile(Path(path), option)[1]
+
+
+def read_external_loads(path, model, option: str = "--loads") -> ExternalLoads:
+    """The loads of an OpenSim ExternalLoads file (XML) and the storage file it names, on ``model``
+    (a ``Model``: bodies and welded frames resolved to its bodies). files.BadFile in one line."""
+    from .osim import read_storage
+
+    path = Path(path)
+    element, data_path = _root_and_datafile(path, option)
+    forces = [f for f in element.iter("ExternalForce") if _text(f, "isDisabled", "false").lower() != "true"]
+    if not forces:
+        _fail(option, path, "has no enabled <ExternalForce>")
+    if len(forces) > MAX_LOADS:
+        _fail(option, path, f"has {len(forces)} forces; at most {MAX_LOADS}")
+    loads, columns = [], []
+    for force in forces:
+        load, wanted = _external_force(force, model, option, path)
+        loads.append(load)
+        columns.append(wanted)
+    names = [name for wanted in columns for group in wanted.values() for name in group]
+    table, _, _ = read_storage(data_path, option, names)
+    for name in names:
+        if name.lower() not in table:
+            _fail(option, data_path, f"has no column {name!r} (named by {path.name})")
+    t = table["t"]
+    n, L = len(t), len(loads)
+    force, point, moment = np.zeros((n, L, 2)), np.zeros((n, L, 2)), np.zeros((n, L))
+    for k, wanted in enumerate(columns):
+        force[:, k] = np.stack([table[c.lower()] for c in wanted["force"]], axis=1)
+        if wanted["point"]:
+            point[:, k] = np.stack([table[c.lower()] for c in wanted["point"]], axis=1)
+        if wanted["torque"]:
+            moment[:, k] = table[wanted["torque"][0].lower()]
+    force, point, loads = _in_model_frames(model, loads, force, point)
+    try:
+        return ExternalLoads(tuple(loads), t, force, point, moment, source=f"{option}: {path}")
+    except ValueError as exc:
+        _fail(option, data_path, str(exc).split(": ", 2)[-1])
+
+
+def _external_force(force, model, option: str, path) -> tuple[ExternalLoad, dict]:
+    """The load of one <ExternalForce> (frames as the file names them) and its columns."""
+    name = force.get("name") or "force"
+    body = _text(force, "applied_to_body")
+    frames = {key: _text(force, f"{key}_expressed_in_body", GROUND) or GROUND for key in ("force", "point")}
+    for what, frame in [("applied_to_body", body)] + [(f"{k}_expressed_in_body", v) for k, v in frames.items()]:
+        if what == "applied_to_body" or frame.lower() != GROUND:
+            try:
+                model.frame(frame)
+            except KeyError:
+                from ..registry import unknown_name_message
+
+                known = [b.name for b in model.bodies] + [f.name for f in model.frames]
+                _fail(option, path, f"ExternalForce {name!r}: {what}: "
+                                    + unknown_name_message("body", frame, known + ([GROUND] if what != "applied_to_body" else [])))
+    force_id, point_id, torque_id = (_text(force, f"{key}_identifier") for key in ("force", "point", "torque"))
+    if not force_id:
+        _fail(option, path, f"ExternalForce {name!r} has no <force_identifier>")
+    wanted = {"force": [force_id + "x", force_id + "y"], "point": [point_id + "x", point_id + "y"] if point_id else [],
+              "torque": [torque_id + "z"] if torque_id else []}
+    load = ExternalLoad(name, body, *(GROUND if frames[key].lower() == GROUND else frames[key]
+                                      for key in ("force", "point")))
+    return load, wanted
+
+
+def _in_model_frames(model, loads: list, force, point):
+    """Loads whose bodies and frames are the model's bodies: a named frame's values turned into its
+    body's frame (force rotated, point moved), the applied body its host."""
+    out = []
+    for k, load in enumerate(loads):
+        frames = []
+        for key, values in (("force", force), ("point", point)):
+            frame = getattr(load, f"{key}_frame")
+            if frame == GROUND:
+                frames.append(GROUND)
+                continue
+            host, at, angle = model.frame(frame)
+            c, s = math.cos(angle), math.sin(angle)
+            v = values[:, k].copy()
+            values[:, k, 0], values[:, k, 1] = c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]
+            if key == "point":
+                values[:, k] += np.asarray(at)
+            frames.append(host)
+        out.append(ExternalLoad(load.name, model.frame(load.body)[0], *frames))
+    return force, point, out
