@@ -49,11 +49,12 @@ Free and path joints (``fdbench.multibody.description``). A free joint's body ha
 among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
 joint with a path gives its child a joint point of its own, held on the path by two constraints
 that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
-joints' velocity transform. Eq. 12 for such models runs on compiled dense kernels
+joints' velocity transform. Eq. 12 for such models, and for any model with external loads from
+data (``fdbench.multibody.loads``), runs on compiled dense kernels
 (``fdbench.multibody.kernels_general``: the same driver, feedback laws and status codes, a Cholesky
-factorisation of the whole leading matrix) over the dense layout (``dense_layout``); ``compiled``
-means the banded kernels above, which the sensitivities and the population still need
-(``require_compiled`` refuses such models there).
+factorisation of the whole leading matrix, a population of open-loop candidates) over the dense
+layout (``dense_layout``); ``compiled`` means the banded kernels above, which the sensitivities
+still need (``require_compiled`` refuses the others there).
 
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
@@ -629,8 +630,9 @@ class Engine:
         return {key: value[0] if single else value for key, value in points.items()}
 
     def inverse_torques(self, z, zd, zdd, t=None) -> np.ndarray:
-        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``): the joint torques (N m) of one
-        minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
+        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``, or ``kernels_general``'s for
+        free or path joints and external loads, taken at the time t s): the joint torques (N m) of
+        one minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
         from .kernels import inverse_torques
 
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
