@@ -7,9 +7,10 @@ sampled at the data's times and interpolated linearly between them. The file is 
 ExternalLoads (``--loads FILE.xml``): per ExternalForce the body it is applied to, the bodies its
 force and point are expressed in, and the column prefixes of its force (``<id>x``, ``<id>y``), point
 and torque in the storage file (.mot, .sto) its ``datafile`` names (a path relative to the XML
-file). A model is planar (x, y): the force's and point's z and the torque's x and y do no work on
-its coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn)
-is found as the host's named frame (``Model.frames``).
+file); as in OpenSim, a force without a point acts at the origin of the body it is applied to.
+A model is planar (x, y): the force's and point's z and the torque's x and y do no work on its
+coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn) is
+found as the host's named frame (``Model.frames``).
 
 How a load enters the equations: its generalised force on the coordinates z is
 Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F + M ] on m's angle
@@ -65,7 +66,8 @@ class ExternalLoads:
         """(force (k, L, 2), point (k, L, 2), moment (k, L)) at times t (s, shape (k,)), linear
         between samples; ValueError for a time outside the data's span."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        self.check_span(float(t.min(initial=0.0)), float(t.max(initial=0.0)))
+        if t.size:
+            self.check_span(float(t.min()), float(t.max()))
         flat = np.concatenate([self.force.reshape(len(self.t), -1), self.point.reshape(len(self.t), -1),
                                self.moment], axis=1)
         values = np.stack([np.interp(t, self.t, column) for column in flat.T], axis=1)
@@ -192,6 +194,11 @@ def _root_and_datafile(path: Path, option: str):
     return element, Path(datafile) if Path(datafile).is_absolute() else path.parent / datafile
 
 
+def _data_option(option: str, path: Path) -> str:
+    """How messages about the data file name it: the option and the file that names it."""
+    return f"{option} (the <datafile> of {path.name})"
+
+
 def loads_digest(path, option: str = "--loads") -> str:
     """SHA-256 of an external loads file's content and of its data file's (a run's identity)."""
     import hashlib
@@ -201,7 +208,7 @@ def loads_digest(path, option: str = "--loads") -> str:
     path = Path(path)
     _, data_path = _root_and_datafile(path, option)
     digest = hashlib.sha256(read_input_bytes(path, option))
-    digest.update(b"\0" + read_input_bytes(data_path, option))
+    digest.update(b"\0" + read_input_bytes(data_path, _data_option(option, path)))
     return digest.hexdigest()
 
 
@@ -228,7 +235,7 @@ def read_external_loads(path, model, option: str = "--loads") -> ExternalLoads:
         loads.append(load)
         columns.append(wanted)
     names = [name for wanted in columns for group in wanted.values() for name in group]
-    table, _, _ = read_storage(data_path, option, names)
+    table, _, _ = read_storage(data_path, _data_option(option, path), names)
     for name in names:
         if name.lower() not in table:
             _fail(option, data_path, f"has no column {name!r} (named by {path.name})")
@@ -266,6 +273,8 @@ def _external_force(force, model, option: str, path) -> tuple[ExternalLoad, dict
     force_id, point_id, torque_id = (_text(force, f"{key}_identifier") for key in ("force", "point", "torque"))
     if not force_id:
         _fail(option, path, f"ExternalForce {name!r} has no <force_identifier>")
+    if not point_id:  # as OpenSim: a force without a point acts at the origin of the body it is applied to
+        frames["point"] = body
     wanted = {"force": [force_id + "x", force_id + "y"], "point": [point_id + "x", point_id + "y"] if point_id else [],
               "torque": [torque_id + "z"] if torque_id else []}
     load = ExternalLoad(name, body, *(GROUND if frames[key].lower() == GROUND else frames[key]
