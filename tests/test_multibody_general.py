@@ -117,8 +117,9 @@ def test_on_the_constraints_eq_12_converges_to_the_minimal_forward_dynamics(mode
         zdd = engine.joints_from_state(rate[0])[1]  # [q', q''] read as a state: its second half gives z''
         errors.append(np.abs(zdd - expected).max() / max(1.0, np.abs(expected).max()))
         rounding = 1e-14 * np.linalg.cond(leading_matrix(engine, y))
-    # the penalty's error shrinks as 1/alpha, down to the solve's rounding
-    assert errors[1] < 1e-2 and (errors[1] < errors[0] / 30 or errors[1] < rounding), (errors, rounding)
+    # the penalty's error shrinks as 1/alpha, down to the solve's rounding (its size at 1e7 depends on
+    # the model: a 6 cm body of inertia 1 kg m^2 on a path leaves 2 %)
+    assert errors[1] < errors[0] / 30 or errors[1] < rounding, (errors, rounding)
 
 
 @settings(max_examples=20, deadline=None)
