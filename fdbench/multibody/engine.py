@@ -330,7 +330,7 @@ class Engine:
     @property
     def dense_inverse_layout(self) -> tuple:
         """The arrays ``kernels_general.inverse_torques`` takes after (z, zd, zdd), in order."""
-        body_int, body_float, _, _, knots, spline_start, *_, load_int = self.dense_layout
+        body_int, body_float, _, _, knots, spline_start, *_, load_int, _ = self.dense_layout
         return (body_int, body_float, knots, spline_start, load_int, self.pt_owner, self.pt_local, self.pt_index,
                 self.mass, self.q_ext)
 
@@ -390,10 +390,34 @@ class Engine:
         load_int = np.array([[index.get(name, FIXED) for name in (load.body, load.force_frame, load.point_frame)]
                              for load in (self.loads.loads if self.loads is not None else ())],
                             dtype=np.int64).reshape(-1, kg.N_LOAD_INT)
-        return (body_int, body_float, np.array(path_body, dtype=np.int64),
-                np.array(path_float, dtype=float).reshape(-1, kg.N_PATH_FLOAT),
+        path_body = np.array(path_body, dtype=np.int64)
+        return (body_int, body_float, path_body, np.array(path_float, dtype=float).reshape(-1, kg.N_PATH_FLOAT),
                 np.concatenate(pieces) if pieces else np.zeros((0, 5)), np.array(spline_start, dtype=np.int64),
-                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params, load_int)
+                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params, load_int,
+                self._dense_envelope(body_int, path_body))
+
+    def _dense_envelope(self, body_int, path_body) -> np.ndarray:
+        """first[r]: the first column of row r inside the envelope of eq. 12's dense leading matrix
+        (n_q, n_q): the entries of the points' mass matrix and, for every constraint row, those of
+        its columns (both of a point's coordinates, whichever angle form is in force)."""
+        from . import kernels_general as kg
+
+        n_p = self.n_p
+        coupled = np.eye(self.n_q, dtype=bool)
+        coupled[:n_p, :n_p] |= self.mass != 0.0
+
+        def points(*indices):
+            return [k + axis for k in indices if k != FIXED for axis in range(2)]
+
+        rows = [points(ki, kj) + [n_p + b] for b, (ki, kj) in enumerate(body_int[:, [kg.KI, kg.KJ]])]
+        rows += [[k for k in row if k != FIXED] for row in self.lin_idx]
+        for k in path_body:
+            p = body_int[k, kg.PARENT]
+            rows.append(points(body_int[k, kg.KI]) + [n_p + k] + ([] if p == FIXED else (
+                points(body_int[p, kg.KI], body_int[p, kg.KJ]) + [n_p + p])))
+        for row in rows:
+            coupled[np.ix_(row, row)] = True
+        return np.array([np.flatnonzero(coupled[r, :r + 1])[0] for r in range(self.n_q)], dtype=np.int64)
 
     def check_nominal(self, nominal: "Engine | None") -> None:
         """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque

@@ -20,8 +20,9 @@ Everything else is the engine's: the distance and angle constraints of every bod
 sin or cos form chosen from the state, ``params[SWITCH_COS]``), the extra points' linear
 constraints, the points' mass matrix and Q_ext. Eq. 12, (M + alpha J^T J) q'' = Q - alpha J^T (J'
 q' + 2 xi omega Phi' + omega^2 Phi), is solved by a Cholesky factorisation of the whole (points
-and angles) leading matrix, positive definite for positive masses and inertias (every angle has
-its angle constraint); each constraint row is kept as its few nonzero entries. Computed-torque
+and angles) leading matrix inside its envelope, positive definite for positive masses and
+inertias (every angle has its angle constraint); each constraint row is kept as its few nonzero
+entries. Computed-torque
 control takes the believed model's inverse dynamics (eq. 3) through the joints' velocity
 transform: a pin's lever, a path's direction, a free joint's world axes. The RK4 driver is
 ``kernels._drive``'s, step for step: the same half-step grid, feedback laws, violation check and
@@ -33,7 +34,9 @@ compilation serves every model:
 
 * the dense layout: body_int (B, N_BODY_INT), body_float (B, N_BODY_FLOAT), path_body (n_paths,),
   path_float (n_paths, N_PATH_FLOAT), knots (n_knots, 5), spline_start (2 n_paths + 1,), lin_idx,
-  lin_coef, lin_const, mass (n_p, n_p), q_ext (n_p,), params, load_int (L, N_LOAD_INT);
+  lin_coef, lin_const, mass (n_p, n_p), q_ext (n_p,), params, load_int (L, N_LOAD_INT), first
+  (n_q,): the first column of each row of the leading matrix's envelope (its lower triangle, the
+  entries any state can fill: the mass matrix's and those of every constraint row's columns);
 * the inverse layout: body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local,
   pt_index, mass, q_ext.
 
@@ -215,8 +218,8 @@ def inverse_torques(z, zd, zdd, loads, body_int, body_float, knots, spline_start
 @njit(error_model="numpy")
 def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
            path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
-           n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass, n_q_ext,
-           states, rates, applied, phi_rows, jv_rows):
+           first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
+           n_q_ext, states, rates, applied, phi_rows, jv_rows):
     """``rk4`` whose grid starts at row ``start`` of tau, ref, refd, refdd and gains; with n_steps 0
     it evaluates the state derivative of y0 alone (into rates[0]), with -1 only the constraints of
     y0 (the returned violation). phi_rows, jv_rows (n_rows,):
@@ -377,36 +380,36 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, l
                 torque[k] = tau[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
 
     def solve():
-        """Solve A x = rhs in place (x into rhs) by the Cholesky factor of A's lower triangle (into
-        it). Returns OK, NONFINITE for a matrix that is not finite, SINGULAR for one that is not
-        positive definite."""
+        """Solve A x = rhs in place (x into rhs) by the Cholesky factor L of A's lower triangle (into
+        it), row by row inside the envelope first[r] <= c <= r (which L keeps). Returns OK,
+        NONFINITE for a matrix that is not finite, SINGULAR for one that is not positive definite."""
         for r in range(n_q):
-            for c in range(r + 1):
+            for c in range(first[r], r + 1):
                 if not math.isfinite(A[r, c]):
                     return NONFINITE
-        for c in range(n_q):
-            diag = A[c, c]
-            for k in range(c):
-                diag -= A[c, k] * A[c, k]
+        for r in range(n_q):
+            fr = first[r]
+            for c in range(fr, r):
+                total = A[r, c]
+                for k in range(max(fr, first[c]), c):
+                    total -= A[r, k] * A[c, k]
+                A[r, c] = total / A[c, c]
+            diag = A[r, r]
+            for k in range(fr, r):
+                diag -= A[r, k] * A[r, k]
             if not diag > 0.0:
                 return SINGULAR
-            diag = math.sqrt(diag)
-            A[c, c] = diag
-            for r in range(c + 1, n_q):
-                total = A[r, c]
-                for k in range(c):
-                    total -= A[r, k] * A[c, k]
-                A[r, c] = total / diag
+            A[r, r] = math.sqrt(diag)
         for r in range(n_q):  # L w = rhs
             total = rhs[r]
-            for k in range(r):
+            for k in range(first[r], r):
                 total -= A[r, k] * rhs[k]
             rhs[r] = total / A[r, r]
-        for r in range(n_q - 1, -1, -1):  # L^T x = w
-            total = rhs[r]
-            for k in range(r + 1, n_q):
-                total -= A[k, r] * rhs[k]
-            rhs[r] = total / A[r, r]
+        for r in range(n_q - 1, -1, -1):  # L^T x = w, column by column
+            x = rhs[r] / A[r, r]
+            rhs[r] = x
+            for k in range(first[r], r):
+                rhs[k] -= A[r, k] * x
         return OK
 
     def derivative(stage, half):
@@ -415,7 +418,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, l
         for k in range(n_q):
             ks[stage, k] = state[n_q + k]
         for r in range(n_q):
-            for c in range(r + 1):
+            for c in range(first[r], r + 1):
                 A[r, c] = mass[r, c] if r < n_p else 0.0
             rhs[r] = q_ext[r] if r < n_p else 0.0
         for k in range(n_b):  # generalised forces: a joint's torque on its child's and parent's angles
@@ -493,7 +496,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, l
 
 @njit(error_model="numpy")
 def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float, path_body,
-        path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, n_body_int,
+        path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, first, n_body_int,
         n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
         applied):
     """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the state y0 (n_state,) under the
@@ -507,13 +510,13 @@ def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_lo
     m = n_rows(body_int, path_body, lin_const)
     return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
                   path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
-                  load_int, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
-                  n_mass, n_q_ext, states, rates, applied, np.empty(m), np.empty(m))
+                  load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+                  n_index, n_mass, n_q_ext, states, rates, applied, np.empty(m), np.empty(m))
 
 
 @njit(error_model="numpy")
 def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float, path_body,
-                path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
+                path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, first,
                 n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
                 n_q_ext, out, applied):
     """The state derivatives (into out, (k, n_state)) and applied generalised forces (into applied,
@@ -525,16 +528,16 @@ def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loa
     state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, J))
     for i in range(states.shape[0]):
         _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
-               path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
-               n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
-               n_q_ext, state, rate, torque, phi_rows, jv_rows)
+               path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+               load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+               n_index, n_mass, n_q_ext, state, rate, torque, phi_rows, jv_rows)
         out[i] = rate[0]
         applied[i] = torque[0]
 
 
 @njit(error_model="numpy")
 def constraint_residuals(y, body_int, body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef,
-                         lin_const, mass, q_ext, params, load_int, phi_rows, jv_rows):
+                         lin_const, mass, q_ext, params, load_int, first, phi_rows, jv_rows):
     """Phi and J q' of every constraint row (into phi_rows, jv_rows, (n_rows,): distance and angle
     per body, the linear rows, two per path) at the state y (n_state,), the angle constraints in the
     form in force; returns max |Phi| (m^2 and m), the value ``rk4`` checks."""
@@ -543,9 +546,9 @@ def constraint_residuals(y, body_int, body_float, path_body, path_float, knots, 
     no_owner, no_local, no_index = np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
     _, _, worst = _drive(y, 0.0, -1, 0, rows, rows, rows, rows, rows[0], rows[0], -1, np.zeros((1, J, 2 * J)),
                          no_loads, no_loads, body_int, body_float, path_body, path_float, knots, spline_start, lin_idx,
-                         lin_coef, lin_const, mass, q_ext, params, load_int, body_int, body_float, knots, spline_start,
-                         load_int, no_owner, no_local, no_index, np.zeros((0, 0)), np.zeros(0), np.empty((1, n)),
-                         np.empty((1, n)), np.empty((1, J)), phi_rows, jv_rows)
+                         lin_coef, lin_const, mass, q_ext, params, load_int, first, body_int, body_float, knots,
+                         spline_start, load_int, no_owner, no_local, no_index, np.zeros((0, 0)), np.zeros(0),
+                         np.empty((1, n)), np.empty((1, n)), np.empty((1, J)), phi_rows, jv_rows)
     return worst
 
 
@@ -588,8 +591,8 @@ def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight,
 @njit(nogil=True)
 def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, loads, body_int, body_float,
                    path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
-                   load_int, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
-                   n_mass, n_q_ext, states, rates, applied, objective, first_candidate, stride):
+                   load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+                   n_index, n_mass, n_q_ext, states, rates, applied, objective, first_candidate, stride):
     """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
     candidates first_candidate, first_candidate + stride, ... of tau (shape (lam, 2 n_steps + 1, J)),
     for ``fdbench.population.Population``: ``kernels.rk4_candidates`` for the dense layout (ref,
@@ -600,7 +603,7 @@ def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_w
     for c in range(first_candidate, tau.shape[0], stride):
         _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, loads, loads, body_int,
                          body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass,
-                         q_ext, params, load_int, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int,
+                         q_ext, params, load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int,
                          n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied)
         objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int,
                                           body_float, mass.shape[0])
