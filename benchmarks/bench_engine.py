@@ -15,6 +15,12 @@ computed torque (the inverse dynamics at every stage) and a gain matrix; and the
 (forearm, arm2, leg3) under PD by the kernel alone, with their ratio to the forearm's step on the
 paper motion.
 
+Last, OpenSim's gait model (examples/opensim/subject01.osim: 10 coordinates, a free pelvis, the
+knees on paths; imported through OpenSim, so only where it is installed) on its recorded walk
+(subject01_walk_IK.mot, 2.5 s, dt 1 ms) under PD (kp 300, kd 30) plus the feedforward and under
+computed torque (kp 400 1/s^2, kd 40 1/s), by ``Engine.simulate`` (the dense kernels of
+``multibody.kernels_general``), per step and against the forearm's step.
+
 Run: python benchmarks/bench_engine.py
 """
 
@@ -122,6 +128,29 @@ def library_kernel(name: str):
                                   *engine.simulation_layout(), states, rates, applied)
 
 
+def gait_simulation(mode: int):
+    """subject01 on its walk under PD plus feedforward or computed torque: (steps, call), or None
+    without OpenSim."""
+    from pathlib import Path
+
+    from fdbench.multibody.description import load_model
+    from fdbench.multibody.motions import joint_motion
+
+    folder = Path(__file__).resolve().parent.parent / "examples" / "opensim"
+    try:
+        model = load_model(folder / "subject01.osim")
+    except Exception as exc:  # noqa: BLE001 - no OpenSim: the gait model is not measured
+        print(f"subject01: not measured ({' '.join(str(exc).split())[:100]})")
+        return None
+    engine = mb.Engine(model)
+    grid = half_step_grid(engine, joint_motion(folder / "subject01_walk_IK.mot", model))
+    computed = mode == kernels.COMPUTED
+    tau = np.zeros_like(grid.tau) if computed else grid.tau
+    kp, kd = (400.0, 40.0) if computed else (300.0, 30.0)
+    return grid.n, lambda: engine.simulate(grid.y0, grid.dt, grid.n, tau, grid.ref, grid.refd, grid.refdd, kp, kd,
+                                           mode)
+
+
 def main():
     print(f"fdbench {fdbench.__version__}, {platform.python_implementation()} {platform.python_version()}, "
           f"{platform.machine()}")
@@ -160,6 +189,16 @@ def main():
         assert (code, done) == (kernels.OK, n), f"{name}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         print(f"library {name:8s} (PD): {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
+    for name, mode in (("PD", kernels.PD), ("computed torque", kernels.COMPUTED)):
+        gait = gait_simulation(mode)
+        if gait is None:
+            break
+        n, fn = gait
+        result = fn()
+        assert (result.status, result.steps_done) == (kernels.OK, n), f"subject01 {name}: status {result.status}"
+        per_step = best_of(fn, 3, 1) / n
+        print(f"subject01 walk, {name:15s}: {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm "
+              f"({per_step * n:.3f} s for the walk's {n} steps)")
 
 
 if __name__ == "__main__":

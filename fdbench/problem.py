@@ -88,8 +88,7 @@ class TrackingProblem(ShootingProblem):
         self._ff_half = (np.array(sim.inverse_dynamics(self._half, self._nominal, motion).torque) if feedforward
                          else np.zeros((2 * n + 1, n_joints)))
         self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), motion.samples)
-                       if self.integrator == "rk4" and engine.compiled else 0)  # the population kernel is RK4's
-        # (free and path joints: candidates one by one through the engine's numpy eq. 12)
+                       if self.integrator == "rk4" else 0)  # the population kernel is RK4's
         self._population, self._jacobians = None, None
         self._n_steps = n
         if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
@@ -164,9 +163,8 @@ class TrackingProblem(ShootingProblem):
             return np.array([self.objective(p) for p in P])
         if self._population is None:
             from .population import Population
-            from .multibody.kernels import rk4_candidates
 
-            self._population = Population(rk4_candidates, self._n_steps, self.engine.population_widths)
+            self._population = Population(self.engine.population_kernel, self._n_steps, self.engine.population_widths)
         tau = self.torques_on_grid_batch(P)
         args = self.engine.population_args(*self._kernel_start, tau, *self._kernel_rest)
         return self._population(len(P), args)

@@ -245,7 +245,7 @@ def hopper_model():
 
 
 def test_free_base_and_knee_path_pd_simulation_matches_the_reference():
-    """The engine's RK4 of eq. 12 (numpy for these joints, dt 1 ms) under PD with feedforward and a
+    """The engine's RK4 of eq. 12 (the dense kernels for these joints, dt 1 ms) under PD with feedforward and a
     3 Hz disturbance against the reference's DOP853 of the minimal equations, over 0.3 s: within
     1e-4 deg (angles) and 1e-6 m (the pelvis's x, y) at alpha 1e9, and the penalty's departure
     shrinks as 1/alpha (between 30x and 300x larger at alpha 1e7)."""

@@ -217,7 +217,7 @@ class Model:
 
     @property
     def has_path_or_free_joints(self) -> bool:
-        """Whether a joint has a path or is free (what the compiled kernels do not take yet)."""
+        """Whether a joint has a path or is free (such models run on the engine's dense kernels)."""
         return any(joint.path is not None or joint.type == "free" for joint in self.joints)
 
     @property

@@ -49,8 +49,12 @@ Free and path joints (``fdbench.multibody.description``). A free joint's body ha
 among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
 joint with a path gives its child a joint point of its own, held on the path by two constraints
 that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
-joints' velocity transform; eq. 12 for such models is assembled and solved by numpy
-(``fdbench.multibody.general``), the compiled kernels refusing them (``require_compiled``).
+joints' velocity transform. Eq. 12 for such models, and for any model with external loads from
+data (``fdbench.multibody.loads``), runs on compiled dense kernels
+(``fdbench.multibody.kernels_general``: the same driver, feedback laws and status codes, a Cholesky
+factorisation of the whole leading matrix, a population of open-loop candidates) over the dense
+layout (``dense_layout``); ``compiled`` means the banded kernels above, which the sensitivities
+still need (``require_compiled`` refuses the others there).
 
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
@@ -316,13 +320,104 @@ class Engine:
                 self.lin_coef, self.lin_const, self.first, self.base, self.q_ext, self.params)
 
     @property
-    def dense_penalty(self):
-        """Eq. 12 by numpy (``fdbench.multibody.general``) for a model with free or path joints."""
+    def dense_layout(self) -> tuple:
+        """The arrays ``kernels_general``'s eq. 12 takes (its dense layout), built once: for a model
+        with free or path joints (any model's numbers, pins only included)."""
         if getattr(self, "_dense", None) is None:
-            from .general import DensePenalty
-
-            self._dense = DensePenalty(self)
+            self._dense = self._build_dense()
         return self._dense
+
+    @property
+    def dense_inverse_layout(self) -> tuple:
+        """The arrays ``kernels_general.inverse_torques`` takes after (z, zd, zdd), in order."""
+        body_int, body_float, _, _, knots, spline_start, *_, load_int, _ = self.dense_layout
+        return (body_int, body_float, knots, spline_start, load_int, self.pt_owner, self.pt_local, self.pt_index,
+                self.mass, self.q_ext)
+
+    def load_values(self, times) -> np.ndarray:
+        """The external loads' values at the times (s, shape (n,)) as ``kernels_general`` takes them:
+        shape (n, L, N_LOAD), force (N) and point (m) in their frames, free moment (N m); L = 0
+        without loads."""
+        from .kernels_general import N_LOAD
+
+        times = np.asarray(times, dtype=float)
+        if self.loads is None:
+            return np.zeros((len(times), 0, N_LOAD))
+        force, point, moment = self.loads.at(times)
+        return np.ascontiguousarray(np.concatenate([force, point, moment[..., None]], axis=2))
+
+    def dense_simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
+        """The arrays ``kernels_general.rk4`` and ``derivatives`` take after the feedback law: the
+        dense layout, then the inverse layout of ``nominal`` (None: this engine)."""
+        self.check_nominal(nominal)
+        return (*self.dense_layout, *(self if nominal is None else nominal).dense_inverse_layout)
+
+    def _build_dense(self) -> tuple:
+        """The dense layout (``kernels_general``'s module docstring): per body its points, parent,
+        coordinate, kind and geometry; per path its point map and splines' pieces; per external load
+        its body and frames."""
+        from . import kernels_general as kg
+
+        B = self.n_bodies
+        body_int, body_float = np.full((B, kg.N_BODY_INT), FIXED, dtype=np.int64), np.zeros((B, kg.N_BODY_FLOAT))
+        path_body, path_float, pieces, spline_start = [], [], [], [0]
+        for b, joint in enumerate(self.model.joints):
+            p = self.joint_parent[b]
+            body_int[b, [kg.KI, kg.KJ]] = self.pt_index[self.body_pts[b]]
+            body_int[b, kg.PARENT], body_int[b, kg.COLUMN] = p, self.joint_column[b]
+            body_int[b, kg.FREE] = joint.type == "free"
+            body_float[b, [kg.D, kg.BETA]] = self.body_geom[b]
+            body_float[b, [kg.FIXED_X, kg.FIXED_Y]] = self.pt_fixed[self.body_pts[b, 0]]
+            body_float[b, kg.OFFSET] = joint.offset
+            body_float[b, [kg.AT_PARENT_X, kg.AT_PARENT_Y]] = joint.at_parent
+            body_float[b, [kg.AT_CHILD_X, kg.AT_CHILD_Y]] = joint.at_child
+            if joint.path is None:
+                continue
+            body_int[b, kg.PATH] = len(path_body)
+            path_body.append(b)
+            maps = np.zeros(kg.N_PATH_FLOAT)
+            if p != FIXED:  # (c1, c2) = base + L s: the point map is linear in the path's offset s
+                at_child_p = np.asarray(self.model.joints[p].at_child, dtype=float)
+                u = self._local_end[p] - at_child_p
+                maps[[kg.BASE_1, kg.BASE_2]] = _point_map(np.asarray(joint.at_parent, dtype=float) - at_child_p, u)
+                (maps[kg.L_11], maps[kg.L_21]), (maps[kg.L_12], maps[kg.L_22]) = (_point_map((1.0, 0.0), u),
+                                                                                  _point_map((0.0, 1.0), u))
+            path_float.append(maps)
+            for spline in joint.path.splines():
+                pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
+                spline_start.append(spline_start[-1] + len(spline.x))
+        index = {name: b for b, name in enumerate(self.body_names)}
+        load_int = np.array([[index.get(name, FIXED) for name in (load.body, load.force_frame, load.point_frame)]
+                             for load in (self.loads.loads if self.loads is not None else ())],
+                            dtype=np.int64).reshape(-1, kg.N_LOAD_INT)
+        path_body = np.array(path_body, dtype=np.int64)
+        return (body_int, body_float, path_body, np.array(path_float, dtype=float).reshape(-1, kg.N_PATH_FLOAT),
+                np.concatenate(pieces) if pieces else np.zeros((0, 5)), np.array(spline_start, dtype=np.int64),
+                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params, load_int,
+                self._dense_envelope(body_int, path_body))
+
+    def _dense_envelope(self, body_int, path_body) -> np.ndarray:
+        """first[r]: the first column of row r inside the envelope of eq. 12's dense leading matrix
+        (n_q, n_q): the entries of the points' mass matrix and, for every constraint row, those of
+        its columns (both of a point's coordinates, whichever angle form is in force)."""
+        from . import kernels_general as kg
+
+        n_p = self.n_p
+        coupled = np.eye(self.n_q, dtype=bool)
+        coupled[:n_p, :n_p] |= self.mass != 0.0
+
+        def points(*indices):
+            return [k + axis for k in indices if k != FIXED for axis in range(2)]
+
+        rows = [points(ki, kj) + [n_p + b] for b, (ki, kj) in enumerate(body_int[:, [kg.KI, kg.KJ]])]
+        rows += [[k for k in row if k != FIXED] for row in self.lin_idx]
+        for k in path_body:
+            p = body_int[k, kg.PARENT]
+            rows.append(points(body_int[k, kg.KI]) + [n_p + k] + ([] if p == FIXED else (
+                points(body_int[p, kg.KI], body_int[p, kg.KJ]) + [n_p + p])))
+        for row in rows:
+            coupled[np.ix_(row, row)] = True
+        return np.array([np.flatnonzero(coupled[r, :r + 1])[0] for r in range(self.n_q)], dtype=np.int64)
 
     def check_nominal(self, nominal: "Engine | None") -> None:
         """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque
@@ -511,7 +606,12 @@ class Engine:
         from .kernels import constraint_violation
 
         if not self.compiled:
-            return self.dense_penalty.violation(self._vector(y, self.n_state, "the state"))
+            from .kernels_general import constraint_residuals, n_rows
+
+            layout = self.dense_layout
+            rows = n_rows(layout[0], layout[2], self.lin_const)
+            return float(constraint_residuals(self._vector(y, self.n_state, "the state"), *layout, np.empty(rows),
+                                              np.empty(rows)))
         return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
 
     def inverse_dynamics(self, z, zd, zdd, t=None) -> np.ndarray:
@@ -554,14 +654,21 @@ class Engine:
         return {key: value[0] if single else value for key, value in points.items()}
 
     def inverse_torques(self, z, zd, zdd, t=None) -> np.ndarray:
-        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``): the joint torques (N m) of one
-        minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
+        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``, or ``kernels_general``'s for
+        free or path joints and external loads, taken at the time t s): the joint torques (N m) of
+        one minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
         from .kernels import inverse_torques
 
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
-        if not self.compiled:  # the same equations by numpy
-            return self.inverse_dynamics(z, zd, zdd, t)
         out = np.empty(self.n_joints)
+        if not self.compiled:  # free or path joints, external loads
+            from . import kernels_general
+
+            if self.loads is not None and t is None:
+                raise ValueError("a model with external loads needs the times of its inverse dynamics")
+            loads = self.load_values(np.zeros(1) if t is None else np.array([float(t)]))[0]
+            kernels_general.inverse_torques(z, zd, zdd, loads, *self.dense_inverse_layout, out)
+            return out
         inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
         return out
 
@@ -587,20 +694,17 @@ class Engine:
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
         states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
         applied = np.empty((n_steps + 1, self.n_joints))
-        if not self.compiled:  # free or path joints: the same driver by numpy
-            from .general import rk4 as dense_rk4
+        if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
+            from .kernels_general import rk4 as dense_rk4
 
-            self.check_nominal(nominal)
+            layout = self.dense_simulation_layout(nominal)
             times = np.arange(2 * n_steps + 1) * (0.5 * dt)
-            code, done, max_viol = dense_rk4(self, y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode,
-                                             gains, nominal, states, rates, applied, times)
-            for array in (states, rates, applied):
-                array[done + 1:] = np.nan
-            z, zd = self.joints_from_state(states)
-            return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
-        layout = self.simulation_layout(nominal)
-        code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd, mode,
-                                   gains, *layout, states, rates, applied)
+            loads = self.load_values(times), (nominal or self).load_values(times)
+            code, done, max_viol = dense_rk4(y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode, gains,
+                                             *loads, *layout, states, rates, applied)
+        else:
+            code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd,
+                                       mode, gains, *self.simulation_layout(nominal), states, rates, applied)
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
             array[done + 1:] = np.nan
         z, zd = self.joints_from_state(states)
@@ -627,20 +731,16 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(k, tau=tau, ref=ref, refd=refd, refdd=refdd)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, k)
         out, applied = np.empty((k, self.n_state)), np.empty((k, self.n_joints))
-        if not self.compiled:  # free or path joints: by numpy
-            from .general import applied_torque
+        if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
+            from . import kernels_general
 
-            self.check_nominal(nominal)
-            if self.loads is not None and t is None:
+            layout = self.dense_simulation_layout(nominal)
+            if (self.loads is not None or (nominal is not None and nominal.loads is not None)) and t is None:
                 raise ValueError("a model with external loads needs the times of its states")
             times = np.zeros(k) if t is None else np.asarray(t, dtype=float).reshape(k)
-            loads = self.loads.at(times) if self.loads is not None else None
-            for i in range(k):
-                applied[i] = applied_torque(self, states[i], i, tau, ref, refd, refdd, kp, kd, mode, gains, nominal,
-                                            times)
-                code, rate = self.dense_penalty.derivative(states[i], applied[i],
-                                                           None if loads is None else [a[i] for a in loads])
-                out[i] = rate if code == OK else np.concatenate([states[i, self.n_q:], np.full(self.n_q, np.nan)])
+            loads = self.load_values(times), (nominal or self).load_values(times)
+            kernels_general.derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, *loads, *layout, out,
+                                        applied)
             return out, applied
         derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
                     *self.simulation_layout(nominal), out, applied)
@@ -652,8 +752,8 @@ class Engine:
         the start y0 (n_state,), the step dt (s), the candidates' torques tau (N m, shape (lam,
         2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
         J), eq. 18's samples every ``every``-th step with the desired joint angles angles_ref (rad,
-        shape (n_steps // every + 1, J)) and its penalty weight (deg)."""
-        self.require_compiled("the population of open-loop candidates")
+        shape (n_steps // every + 1, J)) and its penalty weight (deg). A model with free or path joints
+        gives those of ``kernels_general.rk4_candidates`` (``population_kernel``)."""
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):
@@ -665,9 +765,23 @@ class Engine:
         samples = (n_steps // every + 1, self.n_joints)
         if np.shape(angles_ref) != samples:
             raise ValueError(f"angles_ref must have shape {samples}, got {np.shape(angles_ref)}")
-        return (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
-                np.ascontiguousarray(tau, dtype=float), ref + self.joint_offset, refd, int(every),
-                np.array(angles_ref, dtype=float), float(penalty_weight), *self.simulation_layout())
+        start = (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
+                 np.ascontiguousarray(tau, dtype=float))
+        rest = (int(every), np.array(angles_ref, dtype=float), float(penalty_weight))
+        if not self.compiled:
+            loads = self.load_values(np.arange(rows) * (0.5 * float(dt)))
+            return (*start, ref, refd, *rest, loads, *self.dense_simulation_layout())
+        return (*start, ref + self.joint_offset, refd, *rest, *self.simulation_layout())
+
+    @property
+    def population_kernel(self):
+        """The kernel of open-loop candidates for ``fdbench.population.Population`` that takes
+        ``population_args``: ``kernels.rk4_candidates``, or ``kernels_general``'s for free or path joints."""
+        if self.compiled:
+            from .kernels import rk4_candidates
+        else:
+            from .kernels_general import rk4_candidates
+        return rk4_candidates
 
     @property
     def population_widths(self) -> tuple:

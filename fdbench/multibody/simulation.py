@@ -349,22 +349,25 @@ class _Still:
 
 
 def warm_up(adaptive: bool = False) -> None:
-    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population) on a small
-    library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
+    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population; the banded ones
+    and the dense ones of free and path joints and loads) on a small library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
     integrators, so that later timings exclude it."""
     from ..population import Population
     from .description import find_model
-    from .kernels import rk4_candidates
+    from .loads import ExternalLoad, ExternalLoads
 
-    engine = Engine(find_model("forearm"))
-    motion = _Still(engine.joints)
-    simulate(None, engine, motion, dt=0.05)
-    engine.inverse_torques(np.zeros(1), np.zeros(1), np.zeros(1))
-    y0, rows = engine.state_from_joints(np.zeros(1), np.zeros(1)), np.zeros((5, 1))
-    Population(rk4_candidates, 2, engine.population_widths)(
-        2, engine.population_args(y0, 0.05, 2, np.zeros((2, 5, 1)), rows, rows, 1, np.zeros((3, 1)), 1.0))
-    if adaptive:
-        import scipy.integrate  # noqa: F401
-        import scipy.optimize  # noqa: F401
+    model = find_model("forearm")
+    zero_load = ExternalLoads((ExternalLoad("none", model.joints[0].child),), [0.0, 1.0], np.zeros((2, 1, 2)),
+                              np.zeros((2, 1, 2)), np.zeros((2, 1)))
+    for engine in (Engine(model), Engine(model, loads=zero_load)):  # the banded kernels, then the dense ones
+        motion = _Still(engine.joints)
+        simulate(None, engine, motion, dt=0.05)
+        engine.inverse_torques(np.zeros(1), np.zeros(1), np.zeros(1), 0.0)
+        y0, rows = engine.state_from_joints(np.zeros(1), np.zeros(1)), np.zeros((5, 1))
+        Population(engine.population_kernel, 2, engine.population_widths)(
+            2, engine.population_args(y0, 0.05, 2, np.zeros((2, 5, 1)), rows, rows, 1, np.zeros((3, 1)), 1.0))
+        if adaptive:
+            import scipy.integrate  # noqa: F401
+            import scipy.optimize  # noqa: F401
 
-        _rates(None, engine, motion, _law(engine, 0.0, 0.0, False, None, None), np.zeros(1), y0[None])
+            _rates(None, engine, motion, _law(engine, 0.0, 0.0, False, None, None), np.zeros(1), y0[None])

@@ -1,0 +1,611 @@
+"""Compiled eq. 12 for models with free joints and joint paths: the engine's mixed coordinates
+(``fdbench.multibody.engine``) with two more kinds of joint, assembled and solved densely.
+
+What the two joints add to the engine's formulation:
+
+* A free joint's body has its joint point i among the free points with no constraint to ground;
+  its coordinates are the body's angle (minus the offset) and point i's x and y (minus
+  ``at_parent``), and the generalised forces of x and y (N) act on point i's coordinates.
+* A joint with a path makes the child's point i a free point tied to its parent by two
+  constraints, r_i - r_pi - G(theta) e_p = 0 with e_p = r_pj - r_pi (the parent's basic points),
+  G = c1 I + c2 R90 and (c1, c2) the parent-frame point at_parent + path(theta) in the parent's
+  basic-point frame (``engine._point_map``; linear in the path's offset s: (c1, c2) = base + L s);
+  on ground, r_i - at_parent - path(theta) = 0. theta = phi_child - phi_parent - offset, so these
+  constraints hold the angles too: their Jacobian has -G' e_p on the child's angle and +G' e_p on
+  the parent's, and their velocity term is -2 G' theta' e_p' - G'' theta'^2 e_p. The joint's
+  torque acts on the angles as a pin's does. The path's splines (``fdbench.multibody.spline``) are
+  evaluated here from a table of their pieces.
+
+Everything else is the engine's: the distance and angle constraints of every body (the angle's
+sin or cos form chosen from the state, ``params[SWITCH_COS]``), the extra points' linear
+constraints, the points' mass matrix and Q_ext. Eq. 12, (M + alpha J^T J) q'' = Q - alpha J^T (J'
+q' + 2 xi omega Phi' + omega^2 Phi), is solved by a Cholesky factorisation of the whole (points
+and angles) leading matrix inside its envelope, positive definite for positive masses and
+inertias (every angle has its angle constraint); each constraint row is kept as its few nonzero
+entries. Computed-torque control takes the believed model's inverse dynamics (eq. 3) through the
+joints' velocity transform: a pin's lever, a path's direction, a free joint's world axes. The RK4
+driver is ``kernels._drive``'s, step for step: the same half-step grid, feedback laws, violation
+check and status codes; ``rk4_candidates`` runs a population of open-loop candidates with eq. 18
+(angles in deg plus translations in cm); no sensitivities yet.
+
+Speed (``python benchmarks/bench_engine.py``): about 17 us per RK4 step for OpenSim's gait model
+(10 coordinates, n_q 32), against about 1.1 ms for the same equations by numpy before.
+
+Layouts (``Engine.dense_layout``, ``Engine.dense_inverse_layout``), arrays only, so that one
+compilation serves every model:
+
+* the dense layout: body_int (B, N_BODY_INT), body_float (B, N_BODY_FLOAT), path_body (n_paths,),
+  path_float (n_paths, N_PATH_FLOAT), knots (n_knots, 5), spline_start (2 n_paths + 1,), lin_idx,
+  lin_coef, lin_const, mass (n_p, n_p), q_ext (n_p,), params, load_int (L, N_LOAD_INT), first
+  (n_q,): the first column of each row of the leading matrix's envelope (its lower triangle, the
+  entries any state can fill: the mass matrix's and those of every constraint row's columns);
+* the inverse layout: body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local,
+  pt_index, mass, q_ext.
+
+External loads from data (``fdbench.multibody.loads``): per load its body and the frames of its
+force and point (load_int), and per run their values on the half-step grid, loads (rows, L,
+N_LOAD): in eq. 12 F on the body's joint point i and (P - r_i) x F + M on its angle; in the inverse
+dynamics their generalised forces J_P^T F (and M on every angle on the body's path) subtracted.
+
+Path m's x spline is spline 2 m, its y spline 2 m + 1: rows spline_start[s] to spline_start[s + 1]
+of knots, each (x, y, b, c, d) of a piece y + b u + c u^2 + d u^3, u = t - x.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..jit import njit
+from ..population import DEGREES_PER_RADIAN
+from .kernels import (ALPHA, COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, OMEGA2, PD, SINGULAR, SWITCH_COS,
+                      TWO_XI_OMEGA, VIOLATION)
+
+# body_int columns: the coordinate indices of the body's points i (-1: fixed) and j, its parent
+# body (-1: ground), its joint's first coordinate, 1 for a free joint, its path (-1: none)
+KI, KJ, PARENT, COLUMN, FREE, PATH, N_BODY_INT = range(7)
+# body_float columns: d (m), beta (rad), point i where fixed (m), the joint's offset (rad),
+# at_parent (m), at_child (m)
+D, BETA, FIXED_X, FIXED_Y, OFFSET, AT_PARENT_X, AT_PARENT_Y, AT_CHILD_X, AT_CHILD_Y, N_BODY_FLOAT = range(10)
+# path_float columns: (c1, c2) = base + L s of the path's point in its parent's basic-point frame
+BASE_1, BASE_2, L_11, L_12, L_21, L_22, N_PATH_FLOAT = range(7)
+# columns of the inverse dynamics' per-body scratch: angle (rad), cos, sin, rate (rad/s), angular
+# acceleration (rad/s^2), the joint point (m), the frame origin (m) and its acceleration (m/s^2),
+# the path's world direction per radian (m/rad; 0 without a path)
+(PHI, COS, SIN, RATE, ACC, JOINT_X, JOINT_Y, ORIGIN_X, ORIGIN_Y, ORIGIN_AX, ORIGIN_AY, DIR_X, DIR_Y,
+ N_KIN) = range(14)
+LOAD_BODY, FORCE_FRAME, POINT_FRAME, N_LOAD_INT = range(4)  # load_int columns (frames: -1 ground)
+FX, FY, PX, PY, MOMENT, N_LOAD = range(6)  # a load's values: force (N), point (m), free moment (N m)
+MAX_ENTRIES = 8  # nonzero entries of a constraint row (a path's row has up to 7)
+
+
+@njit
+def n_rows(body_int, path_body, lin_const):
+    """The number of constraint rows: distance and angle per body, the linear rows, two per path."""
+    return 2 * body_int.shape[0] + lin_const.shape[0] + 2 * path_body.shape[0]
+
+
+@njit(error_model="numpy", inline="always")
+def _spline_at(knots, first, last, t):
+    """(value, first, second derivative) at t of the spline in rows first .. last - 1 of knots:
+    ``spline.Spline.at``'s formulas (its end lines outside the knots)."""
+    if t < knots[first, 0]:
+        return knots[first, 1] + (t - knots[first, 0]) * knots[first, 2], knots[first, 2], 0.0
+    if t > knots[last - 1, 0]:
+        return knots[last - 1, 1] + (t - knots[last - 1, 0]) * knots[last - 1, 2], knots[last - 1, 2], 0.0
+    low, high = first, last - 1  # the last knot <= t, at most the last piece's start
+    while high - low > 1:
+        middle = (low + high) // 2
+        if knots[middle, 0] <= t:
+            low = middle
+        else:
+            high = middle
+    u = t - knots[low, 0]
+    y, b, c, d = knots[low, 1], knots[low, 2], knots[low, 3], knots[low, 4]
+    return y + u * (b + u * (c + u * d)), b + u * (2.0 * c + 3.0 * u * d), 2.0 * c + 6.0 * u * d
+
+
+@njit(error_model="numpy", inline="always")
+def _point_of(kin, b, lx, ly):
+    """Position (m) and acceleration (m/s^2) of the point (lx, ly) (m, body frame) of body b."""
+    c, s = kin[b, COS], kin[b, SIN]
+    arm_x, arm_y = lx * c - ly * s, lx * s + ly * c
+    al, w2 = kin[b, ACC], kin[b, RATE] * kin[b, RATE]
+    return (kin[b, ORIGIN_X] + arm_x, kin[b, ORIGIN_Y] + arm_y, kin[b, ORIGIN_AX] - al * arm_y - w2 * arm_x,
+            kin[b, ORIGIN_AY] + al * arm_x - w2 * arm_y)
+
+
+@njit(error_model="numpy", inline="always")
+def _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local, pt_index, mass,
+             q_ext, kin, points, out):
+    """Eq. 3, tau = R^T (M_p p'' - Q_ext), into out (J,) (N m; N for a free joint's x and y) for the
+    coordinates z, rates zd and accelerations zdd (J,): the bodies' kinematics from ground out, the
+    free points' positions and accelerations, then each point's force projected on every joint on
+    its owner's path (a pin's lever R90 (r_P - r_joint) plus a path's direction, a free joint's
+    world axes), less the external loads' (values loads (L, N_LOAD)). kin (B, N_KIN), points (3, n_p):
+    scratch."""
+    n_b = body_int.shape[0]
+    for k in range(n_b):
+        p, col = body_int[k, PARENT], body_int[k, COLUMN]
+        if p < 0:
+            phi, w, al = z[col] + body_float[k, OFFSET], zd[col], zdd[col]
+            rx, ry, ax, ay = body_float[k, AT_PARENT_X], body_float[k, AT_PARENT_Y], 0.0, 0.0
+            if body_int[k, FREE] == 1:
+                rx, ry, ax, ay = rx + z[col + 1], ry + z[col + 2], zdd[col + 1], zdd[col + 2]
+            pc, ps, pw, pal = 1.0, 0.0, 0.0, 0.0
+        else:
+            phi, w, al = kin[p, PHI] + z[col] + body_float[k, OFFSET], kin[p, RATE] + zd[col], kin[p, ACC] + zdd[col]
+            rx, ry, ax, ay = _point_of(kin, p, body_float[k, AT_PARENT_X], body_float[k, AT_PARENT_Y])
+            pc, ps, pw, pal = kin[p, COS], kin[p, SIN], kin[p, RATE], kin[p, ACC]
+        kin[k, DIR_X], kin[k, DIR_Y] = 0.0, 0.0
+        m = body_int[k, PATH]
+        if m >= 0:  # the point moves along the path in the parent's frame
+            theta, rate, acc = z[col], zd[col], zdd[col]
+            sx0, sx1, sx2 = _spline_at(knots, spline_start[2 * m], spline_start[2 * m + 1], theta)
+            sy0, sy1, sy2 = _spline_at(knots, spline_start[2 * m + 1], spline_start[2 * m + 2], theta)
+            arm_x, arm_y = sx0 * pc - sy0 * ps, sx0 * ps + sy0 * pc
+            d1x, d1y = sx1 * pc - sy1 * ps, sx1 * ps + sy1 * pc
+            d2x, d2y = sx2 * pc - sy2 * ps, sx2 * ps + sy2 * pc
+            rx, ry = rx + arm_x, ry + arm_y
+            ax = ax - pal * arm_y - pw * pw * arm_x - 2 * pw * d1y * rate + d2x * rate * rate + d1x * acc
+            ay = ay + pal * arm_x - pw * pw * arm_y + 2 * pw * d1x * rate + d2y * rate * rate + d1y * acc
+            kin[k, DIR_X], kin[k, DIR_Y] = d1x, d1y
+        c, s = math.cos(phi), math.sin(phi)
+        arm_x = body_float[k, AT_CHILD_X] * c - body_float[k, AT_CHILD_Y] * s
+        arm_y = body_float[k, AT_CHILD_X] * s + body_float[k, AT_CHILD_Y] * c
+        kin[k, PHI], kin[k, COS], kin[k, SIN], kin[k, RATE], kin[k, ACC] = phi, c, s, w, al
+        kin[k, JOINT_X], kin[k, JOINT_Y] = rx, ry
+        kin[k, ORIGIN_X], kin[k, ORIGIN_Y] = rx - arm_x, ry - arm_y
+        kin[k, ORIGIN_AX], kin[k, ORIGIN_AY] = ax + al * arm_y + w * w * arm_x, ay - al * arm_x + w * w * arm_y
+    for pt in range(pt_index.shape[0]):  # positions (row 0) and accelerations (row 1) of the free points
+        i = pt_index[pt]
+        if i >= 0:
+            points[0, i], points[0, i + 1], points[1, i], points[1, i + 1] = _point_of(
+                kin, pt_owner[pt], pt_local[pt, 0], pt_local[pt, 1])
+    n_p = mass.shape[0]
+    for r in range(n_p):  # row 2: M_p p'' - Q_ext
+        total = 0.0
+        for c in range(n_p):
+            total += mass[r, c] * points[1, c]
+        points[2, r] = total - q_ext[r]
+    for j in range(out.shape[0]):
+        out[j] = 0.0
+    for pt in range(pt_index.shape[0]):
+        i = pt_index[pt]
+        if i < 0:
+            continue
+        fx, fy = points[2, i], points[2, i + 1]
+        b = pt_owner[pt]
+        while b >= 0:
+            col = body_int[b, COLUMN]
+            lever_x, lever_y = points[0, i] - kin[b, JOINT_X], points[0, i + 1] - kin[b, JOINT_Y]
+            out[col] += lever_x * fy - lever_y * fx + kin[b, DIR_X] * fx + kin[b, DIR_Y] * fy
+            if body_int[b, FREE] == 1:
+                out[col + 1] += fx
+                out[col + 2] += fy
+            b = body_int[b, PARENT]
+    for k in range(load_int.shape[0]):  # the loads' generalised forces, subtracted
+        fx, fy, px, py = loads[k, FX], loads[k, FY], loads[k, PX], loads[k, PY]
+        frame = load_int[k, FORCE_FRAME]
+        if frame >= 0:
+            fx, fy = fx * kin[frame, COS] - fy * kin[frame, SIN], fx * kin[frame, SIN] + fy * kin[frame, COS]
+        frame = load_int[k, POINT_FRAME]
+        if frame >= 0:
+            px, py = (kin[frame, ORIGIN_X] + px * kin[frame, COS] - py * kin[frame, SIN],
+                      kin[frame, ORIGIN_Y] + px * kin[frame, SIN] + py * kin[frame, COS])
+        b = load_int[k, LOAD_BODY]
+        while b >= 0:
+            col = body_int[b, COLUMN]
+            out[col] -= ((px - kin[b, JOINT_X]) * fy - (py - kin[b, JOINT_Y]) * fx + kin[b, DIR_X] * fx
+                         + kin[b, DIR_Y] * fy + loads[k, MOMENT])
+            if body_int[b, FREE] == 1:
+                out[col + 1] -= fx
+                out[col + 2] -= fy
+            b = body_int[b, PARENT]
+
+
+@njit(error_model="numpy")
+def inverse_torques(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local,
+                    pt_index, mass, q_ext, out):
+    """The generalised forces (N m; N for a free joint's x and y) of the minimal motion (z, zd, zdd)
+    (shape (J,)) under the external loads' values loads (L, N_LOAD) into out (J,): eq. 3 over the
+    inverse layout (``Engine.dense_inverse_layout``)."""
+    kin, points = np.empty((body_int.shape[0], N_KIN)), np.empty((3, mass.shape[0]))
+    _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local, pt_index, mass,
+             q_ext, kin, points, out)
+
+
+# ---------------------------------------------------------------------- the RK4 driver (eq. 12 under a feedback law)
+@njit(error_model="numpy")
+def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
+           path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
+           first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
+           n_q_ext, states, rates, applied, phi_rows, jv_rows):
+    """``rk4`` whose grid starts at row ``start`` of tau, ref, refd, refdd and gains; with n_steps 0
+    it evaluates the state derivative of y0 alone (into rates[0]), with -1 only the constraints of
+    y0 (the returned violation). phi_rows, jv_rows (n_rows,):
+    after the call, Phi and J q' of every constraint row at the last state checked or stage run.
+
+    The stage code is closures over this function's arrays (numba inlines them without reference
+    counting), as in ``kernels._drive``."""
+    n_b, n_p = body_int.shape[0], mass.shape[0]
+    n_q = n_p + n_b
+    n = 2 * n_q
+    J = tau.shape[1]
+    alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
+    y, state, ks = np.empty(n), np.empty(n), np.empty((4, n))
+    A, rhs = np.empty((n_q, n_q)), np.empty(n_q)
+    torque, z, zd, v = np.empty(J), np.empty(J), np.empty(J), np.empty(J)
+    idx, val = np.empty(MAX_ENTRIES, dtype=np.int64), np.empty(MAX_ENTRIES)
+    kin, points = np.empty((n_b, N_KIN)), np.empty((3, n_mass.shape[0]))
+    for m in range(n):
+        y[m] = y0[m]
+
+    def point(b):
+        """x, y, x', y' of body b's point i in the stage's state (fixed: its position, zero velocity)."""
+        k = body_int[b, KI]
+        if k < 0:
+            return body_float[b, FIXED_X], body_float[b, FIXED_Y], 0.0, 0.0
+        return state[k], state[k + 1], state[n_q + k], state[n_q + k + 1]
+
+    def row(r, phi, jdv, count, assemble):
+        """Constraint row r of value phi and velocity term J' q' jdv, its count nonzero entries in
+        idx, val: Phi and J q' into phi_rows, jv_rows; with assemble, its alpha J^T J into A's lower
+        triangle and -alpha J^T (J' q' + 2 xi omega J q' + omega^2 Phi) into rhs. Returns |phi|."""
+        jv = 0.0
+        for e in range(count):
+            jv += val[e] * state[n_q + idx[e]]
+        phi_rows[r], jv_rows[r] = phi, jv
+        if assemble:
+            cc = alpha * (jdv + txo * jv + om2 * phi)
+            for e in range(count):
+                rhs[idx[e]] -= val[e] * cc
+                for f in range(count):
+                    if idx[e] >= idx[f]:
+                        A[idx[e], idx[f]] += alpha * val[e] * val[f]
+        return abs(phi)
+
+    def constraints(assemble):
+        """Every constraint row at the stage's state (``row``): the bodies' distance and angle rows
+        (the form in force), the linear rows, two rows per path. Returns max |Phi| (m^2 and m)."""
+        worst, r = 0.0, 0
+        for b in range(n_b):
+            ki, kj = body_int[b, KI], body_int[b, KJ]
+            xi, yi, vxi, vyi = point(b)
+            ex, ey, evx, evy = state[kj] - xi, state[kj + 1] - yi, state[n_q + kj] - vxi, state[n_q + kj + 1] - vyi
+            d = body_float[b, D]
+            idx[0], val[0], idx[1], val[1] = kj, 2 * ex, kj + 1, 2 * ey
+            if ki >= 0:
+                idx[2], val[2], idx[3], val[3] = ki, -2 * ex, ki + 1, -2 * ey
+            worst = max(worst, row(r, ex * ex + ey * ey - d * d, 2 * (evx * evx + evy * evy), 4 if ki >= 0 else 2,
+                                   assemble))
+            psi, w = state[n_p + b] + body_float[b, BETA], state[n_q + n_p + b]
+            s, c = math.sin(psi), math.cos(psi)
+            if abs(c) >= switch:  # the sin form, (y_j - y_i) - d sin(psi)
+                axis, phi, pivot, jdv = 1, ey - d * s, -d * c, d * s * w * w
+            else:  # the cos form, (x_j - x_i) - d cos(psi)
+                axis, phi, pivot, jdv = 0, ex - d * c, d * s, d * c * w * w
+            idx[0], val[0], idx[1], val[1] = kj + axis, 1.0, n_p + b, pivot
+            if ki >= 0:
+                idx[2], val[2] = ki + axis, -1.0
+            worst = max(worst, row(r + 1, phi, jdv, 3 if ki >= 0 else 2, assemble))
+            r += 2
+        for lr in range(lin_const.shape[0]):
+            total, count = 0.0, 0
+            for e in range(lin_idx.shape[1]):
+                if lin_idx[lr, e] >= 0:
+                    total += lin_coef[lr, e] * state[lin_idx[lr, e]]
+                    idx[count], val[count] = lin_idx[lr, e], lin_coef[lr, e]
+                    count += 1
+            worst = max(worst, row(r, total + lin_const[lr], 0.0, count, assemble))
+            r += 1
+        for m in range(path_body.shape[0]):
+            k = path_body[m]
+            p, ki = body_int[k, PARENT], body_int[k, KI]
+            theta = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0) - body_float[k, OFFSET]
+            rate = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
+            sx0, sx1, sx2 = _spline_at(knots, spline_start[2 * m], spline_start[2 * m + 1], theta)
+            sy0, sy1, sy2 = _spline_at(knots, spline_start[2 * m + 1], spline_start[2 * m + 2], theta)
+            if p < 0:  # on ground: r_i - at_parent - s(theta)
+                idx[0], val[0], idx[1], val[1] = ki, 1.0, n_p + k, -sx1
+                worst = max(worst, row(r, state[ki] - body_float[k, AT_PARENT_X] - sx0, -sx2 * rate * rate, 2,
+                                       assemble))
+                idx[0], val[0], idx[1], val[1] = ki + 1, 1.0, n_p + k, -sy1
+                worst = max(worst, row(r + 1, state[ki + 1] - body_float[k, AT_PARENT_Y] - sy0, -sy2 * rate * rate,
+                                       2, assemble))
+                r += 2
+                continue
+            pi, pj = body_int[p, KI], body_int[p, KJ]
+            xpi, ypi, vxpi, vypi = point(p)
+            ex, ey = state[pj] - xpi, state[pj + 1] - ypi
+            evx, evy = state[n_q + pj] - vxpi, state[n_q + pj + 1] - vypi
+            f = path_float[m]
+            c0a, c0b = f[BASE_1] + (f[L_11] * sx0 + f[L_12] * sy0), f[BASE_2] + (f[L_21] * sx0 + f[L_22] * sy0)
+            c1a, c1b = f[L_11] * sx1 + f[L_12] * sy1, f[L_21] * sx1 + f[L_22] * sy1
+            c2a, c2b = f[L_11] * sx2 + f[L_12] * sy2, f[L_21] * sx2 + f[L_22] * sy2
+            # G(c, x) = c_a x + c_b R90 x; the angle columns -G(c1, e_p) on the child, + on the parent
+            tx, ty = -(c1a * ex - c1b * ey), -(c1a * ey + c1b * ex)
+            jx = -2 * (c1a * evx - c1b * evy) * rate - (c2a * ex - c2b * ey) * rate * rate
+            jy = -2 * (c1a * evy + c1b * evx) * rate - (c2a * ey + c2b * ex) * rate * rate
+            for axis in range(2):
+                if axis == 0:
+                    phi, t, jdv = state[ki] - xpi - (c0a * ex - c0b * ey), tx, jx
+                    gj0, gj1 = c0a, -c0b  # row 0 of G's matrix [[c0a, -c0b], [c0b, c0a]]
+                else:
+                    phi, t, jdv = state[ki + 1] - ypi - (c0a * ey + c0b * ex), ty, jy
+                    gj0, gj1 = c0b, c0a
+                idx[0], val[0] = ki + axis, 1.0
+                idx[1], val[1], idx[2], val[2] = pj, -gj0, pj + 1, -gj1
+                idx[3], val[3], idx[4], val[4] = n_p + k, t, n_p + p, -t
+                count = 5
+                if pi >= 0:
+                    idx[5], val[5] = pi, gj0 - (1.0 if axis == 0 else 0.0)
+                    idx[6], val[6] = pi + 1, gj1 - (1.0 if axis == 1 else 0.0)
+                    count = 7
+                worst = max(worst, row(r + axis, phi, jdv, count, assemble))
+            r += 2
+        return worst
+
+    def coordinates():
+        """The coordinates z and rates zd (J,) of the stage's state."""
+        for k in range(n_b):
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            z[col] = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0) - body_float[k, OFFSET]
+            zd[col] = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
+            if body_int[k, FREE] == 1:
+                ki = body_int[k, KI]
+                z[col + 1] = state[ki] - body_float[k, AT_PARENT_X]
+                z[col + 2] = state[ki + 1] - body_float[k, AT_PARENT_Y]
+                zd[col + 1], zd[col + 2] = state[n_q + ki], state[n_q + ki + 1]
+
+    def law(half):
+        """The applied generalised forces at the stage's state and grid row ``half`` into torque."""
+        coordinates()
+        if mode == GAINS:
+            for k in range(J):  # term by term onto tau: K = [diag kp, diag kd] gives PD's numbers to the bit
+                total = tau[half, k]
+                for j in range(J):
+                    total += gains[half, k, j] * (ref[half, j] - z[j])
+                for j in range(J):
+                    total += gains[half, k, J + j] * (refd[half, j] - zd[j])
+                torque[k] = total
+        elif mode == COMPUTED:
+            for k in range(J):
+                v[k] = refdd[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
+            _inverse(z, zd, v, n_loads[half], n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner,
+                     n_local, n_index, n_mass, n_q_ext, kin, points, torque)
+            for k in range(J):
+                torque[k] += tau[half, k]
+        else:
+            for k in range(J):
+                torque[k] = tau[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
+
+    def solve():
+        """Solve A x = rhs in place (x into rhs) by the Cholesky factor L of A's lower triangle (into
+        it), row by row inside the envelope first[r] <= c <= r (which L keeps). Returns OK,
+        NONFINITE for a matrix that is not finite, SINGULAR for one that is not positive definite."""
+        for r in range(n_q):
+            for c in range(first[r], r + 1):
+                if not math.isfinite(A[r, c]):
+                    return NONFINITE
+        for r in range(n_q):
+            fr = first[r]
+            for c in range(fr, r):
+                total = A[r, c]
+                for k in range(max(fr, first[c]), c):
+                    total -= A[r, k] * A[c, k]
+                A[r, c] = total / A[c, c]
+            diag = A[r, r]
+            for k in range(fr, r):
+                diag -= A[r, k] * A[r, k]
+            if not diag > 0.0:
+                return SINGULAR
+            A[r, r] = math.sqrt(diag)
+        for r in range(n_q):  # L w = rhs
+            total = rhs[r]
+            for k in range(first[r], r):
+                total -= A[r, k] * rhs[k]
+            rhs[r] = total / A[r, r]
+        for r in range(n_q - 1, -1, -1):  # L^T x = w, column by column
+            x = rhs[r] / A[r, r]
+            rhs[r] = x
+            for k in range(first[r], r):
+                rhs[k] -= A[r, k] * x
+        return OK
+
+    def derivative(stage, half):
+        """y' = [q', q''] of eq. 12 at the stage's state under torque and the loads of grid row half
+        into ks[stage]. Returns OK, or the solve's status (then the accelerations are left unfinished)."""
+        for k in range(n_q):
+            ks[stage, k] = state[n_q + k]
+        for r in range(n_q):
+            for c in range(first[r], r + 1):
+                A[r, c] = mass[r, c] if r < n_p else 0.0
+            rhs[r] = q_ext[r] if r < n_p else 0.0
+        for k in range(n_b):  # generalised forces: a joint's torque on its child's and parent's angles
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            rhs[n_p + k] += torque[col]
+            if p >= 0:
+                rhs[n_p + p] -= torque[col]
+            if body_int[k, FREE] == 1:
+                rhs[body_int[k, KI]] += torque[col + 1]
+                rhs[body_int[k, KI] + 1] += torque[col + 2]
+        for k in range(load_int.shape[0]):  # external loads: F on the body's point i, (P - r_i) x F + M on its angle
+            fx, fy, px, py = loads[half, k, FX], loads[half, k, FY], loads[half, k, PX], loads[half, k, PY]
+            frame = load_int[k, FORCE_FRAME]
+            if frame >= 0:
+                c, s = math.cos(state[n_p + frame]), math.sin(state[n_p + frame])
+                fx, fy = c * fx - s * fy, s * fx + c * fy
+            frame = load_int[k, POINT_FRAME]
+            if frame >= 0:
+                c, s = math.cos(state[n_p + frame]), math.sin(state[n_p + frame])
+                lx, ly = px - body_float[frame, AT_CHILD_X], py - body_float[frame, AT_CHILD_Y]
+                xi, yi, _, _ = point(frame)
+                px, py = xi + (c * lx - s * ly), yi + (s * lx + c * ly)
+            b = load_int[k, LOAD_BODY]
+            xi, yi, _, _ = point(b)
+            if body_int[b, KI] >= 0:
+                rhs[body_int[b, KI]] += fx
+                rhs[body_int[b, KI] + 1] += fy
+            rhs[n_p + b] += (px - xi) * fy - (py - yi) * fx + loads[half, k, MOMENT]
+        constraints(True)
+        status = solve()
+        if status == OK:
+            for r in range(n_q):
+                ks[stage, n_q + r] = rhs[r]
+        return status
+
+    for m in range(n):
+        state[m] = y[m]
+    max_viol = constraints(False)
+    code = OK
+    for i in range(n_steps + 1):
+        j = start + 2 * i
+        for stage in range(4):  # k1 at y, k2 and k3 at the half step, k4 at the full step
+            if stage > 0:
+                h = dt if stage == 3 else 0.5 * dt
+                for m in range(n):
+                    state[m] = y[m] + h * ks[stage - 1, m]
+            law(j + (stage + 1) // 2)
+            code = derivative(stage, j + (stage + 1) // 2)
+            if stage == 0:
+                for m in range(n):
+                    states[i, m] = y[m]
+                    rates[i, m] = ks[0, m] if (code == OK or m < n_q) else np.nan
+                for m in range(J):
+                    applied[i, m] = torque[m]
+            if code != OK or i == n_steps:
+                break
+        if code != OK:
+            return code, i, max_viol
+        if i == n_steps:
+            break
+        finite = True
+        for m in range(n):
+            state[m] = y[m] + dt / 6.0 * (ks[0, m] + 2.0 * ks[1, m] + 2.0 * ks[2, m] + ks[3, m])
+            finite = finite and math.isfinite(state[m])
+        if not finite:
+            return NONFINITE, i, max_viol
+        viol = constraints(False)
+        if viol > params[VIOLATION]:
+            return CONSTRAINT, i, max(max_viol, viol)
+        max_viol = max(max_viol, viol)
+        for m in range(n):
+            y[m] = state[m]
+    return OK, n_steps, max_viol
+
+
+@njit(error_model="numpy")
+def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float, path_body,
+        path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, first, n_body_int,
+        n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
+        applied):
+    """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the state y0 (n_state,) under the
+    feedback law ``mode`` of ``kernels.rk4`` (PD, COMPUTED or GAINS), for the coordinates (J
+    of them; a free joint's x and y take forces, N): tau, ref, refd, refdd of shape (2 n_steps + 1,
+    J) on the half-step grid (N m, rad, rad/s, rad/s^2; ref WITHOUT the joint offsets), kp, kd (J,),
+    gains (2 n_steps + 1, J, 2J) for GAINS; loads, n_loads (2 n_steps + 1, L, N_LOAD): the plant's
+    and the believed model's external loads on the grid; then the plant's dense layout and the
+    believed model's inverse layout. Fills states, rates (n+1, n_state) and applied (n+1, J) up to the last step
+    reached. Returns (status, steps_done, max constraint violation)."""
+    m = n_rows(body_int, path_body, lin_const)
+    return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
+                  path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+                  load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+                  n_index, n_mass, n_q_ext, states, rates, applied, np.empty(m), np.empty(m))
+
+
+@njit(error_model="numpy")
+def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float, path_body,
+                path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, first,
+                n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index, n_mass,
+                n_q_ext, out, applied):
+    """The state derivatives (into out, (k, n_state)) and applied generalised forces (into applied,
+    (k, J)) of k states (k, n_state) under ``rk4``'s feedback law, row i with row i of tau, ref,
+    refd, refdd (each (k, J)), of gains and of the loads (k, L, N_LOAD); the accelerations are NaN
+    where the solve fails."""
+    m, n, J = n_rows(body_int, path_body, lin_const), states.shape[1], tau.shape[1]
+    phi_rows, jv_rows = np.empty(m), np.empty(m)
+    state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, J))
+    for i in range(states.shape[0]):
+        _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, loads, n_loads, body_int, body_float,
+               path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+               load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+               n_index, n_mass, n_q_ext, state, rate, torque, phi_rows, jv_rows)
+        out[i] = rate[0]
+        applied[i] = torque[0]
+
+
+@njit(error_model="numpy")
+def constraint_residuals(y, body_int, body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef,
+                         lin_const, mass, q_ext, params, load_int, first, phi_rows, jv_rows):
+    """Phi and J q' of every constraint row (into phi_rows, jv_rows, (n_rows,): distance and angle
+    per body, the linear rows, two per path) at the state y (n_state,), the angle constraints in the
+    form in force; returns max |Phi| (m^2 and m), the value ``rk4`` checks."""
+    n = y.shape[0]
+    rows, J, no_loads = np.zeros((1, 1)), 1, np.zeros((1, 0, N_LOAD))
+    no_owner, no_local, no_index = np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+    _, _, worst = _drive(y, 0.0, -1, 0, rows, rows, rows, rows, rows[0], rows[0], -1, np.zeros((1, J, 2 * J)),
+                         no_loads, no_loads, body_int, body_float, path_body, path_float, knots, spline_start, lin_idx,
+                         lin_coef, lin_const, mass, q_ext, params, load_int, first, body_int, body_float, knots,
+                         spline_start, load_int, no_owner, no_local, no_index, np.zeros((0, 0)), np.zeros(0),
+                         np.empty((1, n)), np.empty((1, n)), np.empty((1, J)), phi_rows, jv_rows)
+    return worst
+
+
+# ---------------------------------------------------------------------- the population (eq. 18)
+CM_PER_M = 100.0
+
+
+@njit(nogil=True)
+def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int, body_float, n_p):
+    """Eq. 18 from a simulation's states (n_steps + 1, n_state), filled up to step ``done``: at the
+    motion's samples (every ``every``-th step; desired coordinates angles_ref (rad, m for a free
+    joint's x and y; shape (samples, J))) over the samples reached, the RMSE of the angles (deg)
+    plus, for a model with free joints, that of their translations (cm), units never pooled; plus
+    penalty_weight times the fraction of the steps not reached. A non-finite RMSE counts as 0."""
+    n_b = body_int.shape[0]
+    count = done // every + 1
+    angles, translations, n_translations = 0.0, 0.0, 0
+    for k in range(count):
+        y = states[k * every]
+        for b in range(n_b):
+            p, col = body_int[b, PARENT], body_int[b, COLUMN]
+            z = y[n_p + b] - (y[n_p + p] if p >= 0 else 0.0) - body_float[b, OFFSET]
+            error = (z - angles_ref[k, col]) * DEGREES_PER_RADIAN
+            angles += error * error
+            if body_int[b, FREE] == 1:
+                n_translations += 2
+                ki = body_int[b, KI]
+                for axis in range(2):
+                    x = y[ki + axis] - body_float[b, AT_PARENT_X + axis]
+                    error = (x - angles_ref[k, col + 1 + axis]) * CM_PER_M
+                    translations += error * error
+    rmse = math.sqrt(angles / (n_b * count))
+    if n_translations > 0:
+        rmse += math.sqrt(translations / n_translations)
+    if not math.isfinite(rmse):
+        rmse = 0.0
+    return rmse + penalty_weight * (1.0 - done / n_steps)
+
+
+@njit(nogil=True)
+def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, loads, body_int, body_float,
+                   path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+                   load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+                   n_index, n_mass, n_q_ext, states, rates, applied, objective, first_candidate, stride):
+    """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
+    candidates first_candidate, first_candidate + stride, ... of tau (shape (lam, 2 n_steps + 1, J)),
+    for ``fdbench.population.Population``: ``kernels.rk4_candidates`` for the dense layout (ref,
+    refd without the joint offsets; loads (2 n_steps + 1, L, N_LOAD) the external loads on the
+    grid). Runs without the GIL."""
+    J = tau.shape[2]
+    zero, no_gains = np.zeros(J), np.zeros((1, J, 2 * J))
+    for c in range(first_candidate, tau.shape[0], stride):
+        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, loads, loads, body_int,
+                         body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass,
+                         q_ext, params, load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int,
+                         n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied)
+        objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int,
+                                          body_float, mass.shape[0])
