@@ -17,7 +17,7 @@ Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F +
 (d_m: the direction of a path joint's point per radian) and F on a free joint's x and y, i.e.
 J_P(z)^T F with P taken as the body's material point at that instant (``generalized_forces``).
 In the mixed coordinates of eq. 12 the same load is F on the body's joint point i and the moment
-(P - r_i) x F + M on its angle (``mixed_forces``).
+(P - r_i) x F + M on its angle (``fdbench.multibody.kernels_general``).
 """
 
 from __future__ import annotations
@@ -128,40 +128,6 @@ def generalized_forces(engine, loads: ExternalLoads, z, t) -> np.ndarray:
             Q[:, c] += _cross(point[:, k] - joint_at[:, m], f) + np.sum(path_dir[:, m] * f, axis=1) + moment[:, k]
             if engine.model.joints[m].type == "free":
                 Q[:, c + 1:c + 3] += f
-    return Q
-
-
-def mixed_forces(engine, q, force, point, moment) -> np.ndarray:
-    """The loads' generalised forces in eq. 12's mixed coordinates (n_q,) at the positions q (n_q,)
-    for one row of ``ExternalLoads.at`` (force, point (L, 2), moment (L,)): F on each body's joint
-    point i (nothing where i is fixed) and (P - r_i) x F + M on its angle."""
-    from .kernels import FIXED
-
-    Q = np.zeros(engine.n_q)
-    n_p = engine.n_p
-    body = {name: b for b, name in enumerate(engine.body_names)}
-
-    def joint_point(b):
-        k = engine.pt_index[engine.body_pts[b, 0]]
-        return (engine.pt_fixed[engine.body_pts[b, 0]], FIXED) if k == FIXED else (q[k:k + 2], k)
-
-    def rotate(angle, v):
-        c, s = math.cos(angle), math.sin(angle)
-        return np.array([c * v[0] - s * v[1], s * v[0] + c * v[1]])
-
-    for k, load in enumerate(engine.loads.loads):
-        f, p = force[k], point[k]
-        if load.force_frame != GROUND:
-            f = rotate(q[n_p + body[load.force_frame]], f)
-        if load.point_frame != GROUND:
-            b = body[load.point_frame]
-            r_i, _ = joint_point(b)
-            p = r_i + rotate(q[n_p + b], p - np.asarray(engine.model.joints[b].at_child, dtype=float))
-        b = body[load.body]
-        r_i, index = joint_point(b)
-        if index != FIXED:
-            Q[index:index + 2] += f
-        Q[n_p + b] += (p[0] - r_i[0]) * f[1] - (p[1] - r_i[1]) * f[0] + moment[k]
     return Q
 
 
