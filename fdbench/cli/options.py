@@ -225,7 +225,7 @@ def _loads_inputs(loads) -> dict:
     from ..multibody.loads import data_file
 
     try:
-        return {"--loads": Path(loads), "--loads data file": data_file(loads)}
+        return {"--loads": Path(loads), "--loads (its data file)": data_file(loads)}
     except BadFile as exc:
         raise BadInput(str(exc)) from None
 

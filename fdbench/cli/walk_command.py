@@ -41,8 +41,6 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
     from .sweeps import _run_specs
 
     check_walk_options(ctx)
-    if not _given(ctx, "budget"):
-        budget = walk.WALK_BUDGET
     popsize = walk.WALK_POPSIZE if popsize is None else popsize
     walk_common = _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)
     forearm_common = _common("paper", integrator, dt, rtol, atol, alpha, xi, omega, None)
