@@ -218,3 +218,26 @@ def test_every_controller_reports_the_contract_keys(name):
     record = json.loads(result.stdout)
     assert record["controller"] == name and record["status"] == "success"
     assert record["rmse_rot_deg"] < 0.01 and record["runtime_s"] > 0
+
+
+def test_pd_defaults_on_a_floating_base_are_critically_damped_on_each_coordinates_effective_inertia():
+    """On a model with a floating base PD's default gains are kp = I_j w^2 and kd = 2 I_j w, with
+    I_j = 1 / [M^-1]_jj of the independent reference's mass matrix at the motion's start and w the
+    paper's sqrt(80 / 0.04) rad/s; given gains stay as given."""
+    import reference_dynamics as ref
+    from test_multibody_reference import hopper_model
+
+    from fdbench.controllers.base import Plan
+    from fdbench.controllers.pd import PD
+    from fdbench.multibody.engine import Engine
+    from fdbench.multibody.motions import PerJoint
+
+    model = hopper_model()
+    start = np.array([0.1, 0.02, -0.01, 0.3, -0.5])
+    motion = PerJoint(list(start), model.coordinates)
+    kp, kd = PD().gains(Plan(Engine(model), model, motion))
+    inertia = 1.0 / np.diag(np.linalg.inv(ref.GeneralTree(model).mass_matrix(start)))
+    omega = np.sqrt(80.0 / 0.04)
+    np.testing.assert_allclose(kp, inertia * omega**2, rtol=1e-9)
+    np.testing.assert_allclose(kd, 2 * inertia * omega, rtol=1e-9)
+    assert np.all(PD(kp=50.0, kd=2.0).gains(Plan(Engine(model), model, motion))[0] == 50.0)
