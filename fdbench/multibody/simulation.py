@@ -348,9 +348,10 @@ class _Still:
         return zero, zero, zero
 
 
-def warm_up(adaptive: bool = False) -> None:
-    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population; the banded ones
-    and the dense ones of free and path joints and loads) on a small library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
+def warm_up(adaptive: bool = False, dense: bool = False) -> None:
+    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population: the banded
+    ones, and with ``dense`` also the dense ones of free and path joints and loads) on a small
+    library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
     integrators, so that later timings exclude it."""
     from ..population import Population
     from .description import find_model
@@ -359,7 +360,8 @@ def warm_up(adaptive: bool = False) -> None:
     model = find_model("forearm")
     zero_load = ExternalLoads((ExternalLoad("none", model.joints[0].child),), [0.0, 1.0], np.zeros((2, 1, 2)),
                               np.zeros((2, 1, 2)), np.zeros((2, 1)))
-    for engine in (Engine(model), Engine(model, loads=zero_load)):  # the banded kernels, then the dense ones
+    engines = (Engine(model), Engine(model, loads=zero_load)) if dense else (Engine(model),)
+    for engine in engines:  # the banded kernels, then the dense ones
         motion = _Still(engine.joints)
         simulate(None, engine, motion, dt=0.05)
         engine.inverse_torques(np.zeros(1), np.zeros(1), np.zeros(1), 0.0)
