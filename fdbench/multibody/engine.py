@@ -71,7 +71,7 @@ import numpy as np
 
 
 from .description import Model, resolved_end
-from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OK, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
+from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
                       VIOLATION_TOL)
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
@@ -345,6 +345,13 @@ class Engine:
             return np.zeros((len(times), 0, N_LOAD))
         force, point, moment = self.loads.at(times)
         return np.ascontiguousarray(np.concatenate([force, point, moment[..., None]], axis=2))
+
+    def _load_values_for(self, times, nominal: "Engine | None") -> tuple:
+        """``load_values`` of the plant and of the model computed torque believes, interpolated once
+        when both carry the same loads."""
+        own = self.load_values(times)
+        believed = own if nominal is None or nominal.loads is self.loads else nominal.load_values(times)
+        return own, believed
 
     def dense_simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
         """The arrays ``kernels_general.rk4`` and ``derivatives`` take after the feedback law: the
@@ -699,7 +706,7 @@ class Engine:
 
             layout = self.dense_simulation_layout(nominal)
             times = np.arange(2 * n_steps + 1) * (0.5 * dt)
-            loads = self.load_values(times), (nominal or self).load_values(times)
+            loads = self._load_values_for(times, nominal)
             code, done, max_viol = dense_rk4(y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode, gains,
                                              *loads, *layout, states, rates, applied)
         else:
@@ -738,7 +745,7 @@ class Engine:
             if (self.loads is not None or (nominal is not None and nominal.loads is not None)) and t is None:
                 raise ValueError("a model with external loads needs the times of its states")
             times = np.zeros(k) if t is None else np.asarray(t, dtype=float).reshape(k)
-            loads = self.load_values(times), (nominal or self).load_values(times)
+            loads = self._load_values_for(times, nominal)
             kernels_general.derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, *loads, *layout, out,
                                         applied)
             return out, applied

@@ -59,8 +59,10 @@ import numpy as np
 
 from ..jit import njit
 from ..population import DEGREES_PER_RADIAN
-from .kernels import (ALPHA, COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, OMEGA2, PD, SINGULAR, SWITCH_COS,
-                      TWO_XI_OMEGA, VIOLATION)
+from .kernels import (ACC, ALPHA, COMPUTED, CONSTRAINT, COS, GAINS, JOINT_X, JOINT_Y, NONFINITE, OK, OMEGA2,
+                      ORIGIN_AX, ORIGIN_AY, ORIGIN_X, ORIGIN_Y, PD, PHI, RATE, SIN, SINGULAR, SWITCH_COS, TWO_XI_OMEGA,
+                      VIOLATION, _body_point)
+from .kernels import N_KIN as N_KIN_BANDED
 
 # body_int columns: the coordinate indices of the body's points i (-1: fixed) and j, its parent
 # body (-1: ground), its joint's first coordinate, 1 for a free joint, its path (-1: none)
@@ -70,11 +72,9 @@ KI, KJ, PARENT, COLUMN, FREE, PATH, N_BODY_INT = range(7)
 D, BETA, FIXED_X, FIXED_Y, OFFSET, AT_PARENT_X, AT_PARENT_Y, AT_CHILD_X, AT_CHILD_Y, N_BODY_FLOAT = range(10)
 # path_float columns: (c1, c2) = base + L s of the path's point in its parent's basic-point frame
 BASE_1, BASE_2, L_11, L_12, L_21, L_22, N_PATH_FLOAT = range(7)
-# columns of the inverse dynamics' per-body scratch: angle (rad), cos, sin, rate (rad/s), angular
-# acceleration (rad/s^2), the joint point (m), the frame origin (m) and its acceleration (m/s^2),
-# the path's world direction per radian (m/rad; 0 without a path)
-(PHI, COS, SIN, RATE, ACC, JOINT_X, JOINT_Y, ORIGIN_X, ORIGIN_Y, ORIGIN_AX, ORIGIN_AY, DIR_X, DIR_Y,
- N_KIN) = range(14)
+# columns of the inverse dynamics' per-body scratch: the banded kernels' (``kernels.PHI`` ...
+# ``ORIGIN_AY``), then the path's world direction per radian (m/rad; 0 without a path)
+DIR_X, DIR_Y, N_KIN = N_KIN_BANDED, N_KIN_BANDED + 1, N_KIN_BANDED + 2
 LOAD_BODY, FORCE_FRAME, POINT_FRAME, N_LOAD_INT = range(4)  # load_int columns (frames: -1 ground)
 FX, FY, PX, PY, MOMENT, N_LOAD = range(6)  # a load's values: force (N), point (m), free moment (N m)
 MAX_ENTRIES = 8  # nonzero entries of a constraint row (a path's row has up to 7)
@@ -107,16 +107,6 @@ def _spline_at(knots, first, last, t):
 
 
 @njit(error_model="numpy", inline="always")
-def _point_of(kin, b, lx, ly):
-    """Position (m) and acceleration (m/s^2) of the point (lx, ly) (m, body frame) of body b."""
-    c, s = kin[b, COS], kin[b, SIN]
-    arm_x, arm_y = lx * c - ly * s, lx * s + ly * c
-    al, w2 = kin[b, ACC], kin[b, RATE] * kin[b, RATE]
-    return (kin[b, ORIGIN_X] + arm_x, kin[b, ORIGIN_Y] + arm_y, kin[b, ORIGIN_AX] - al * arm_y - w2 * arm_x,
-            kin[b, ORIGIN_AY] + al * arm_x - w2 * arm_y)
-
-
-@njit(error_model="numpy", inline="always")
 def _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_int, pt_owner, pt_local, pt_index, mass,
              q_ext, kin, points, out):
     """Eq. 3, tau = R^T (M_p p'' - Q_ext), into out (J,) (N m; N for a free joint's x and y) for the
@@ -136,7 +126,7 @@ def _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_
             pc, ps, pw, pal = 1.0, 0.0, 0.0, 0.0
         else:
             phi, w, al = kin[p, PHI] + z[col] + body_float[k, OFFSET], kin[p, RATE] + zd[col], kin[p, ACC] + zdd[col]
-            rx, ry, ax, ay = _point_of(kin, p, body_float[k, AT_PARENT_X], body_float[k, AT_PARENT_Y])
+            rx, ry, ax, ay = _body_point(kin, p, body_float[k, AT_PARENT_X], body_float[k, AT_PARENT_Y])
             pc, ps, pw, pal = kin[p, COS], kin[p, SIN], kin[p, RATE], kin[p, ACC]
         kin[k, DIR_X], kin[k, DIR_Y] = 0.0, 0.0
         m = body_int[k, PATH]
@@ -161,7 +151,7 @@ def _inverse(z, zd, zdd, loads, body_int, body_float, knots, spline_start, load_
     for pt in range(pt_index.shape[0]):  # positions (row 0) and accelerations (row 1) of the free points
         i = pt_index[pt]
         if i >= 0:
-            points[0, i], points[0, i + 1], points[1, i], points[1, i + 1] = _point_of(
+            points[0, i], points[0, i + 1], points[1, i], points[1, i + 1] = _body_point(
                 kin, pt_owner[pt], pt_local[pt, 0], pt_local[pt, 1])
     n_p = mass.shape[0]
     for r in range(n_p):  # row 2: M_p p'' - Q_ext
