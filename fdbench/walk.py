@@ -18,7 +18,8 @@ from .experiment import RunSpec, collocate_spec, control_spec, optimize_spec
 # walk, a population evaluated in one compiled call), in generations of 8
 WALK_BUDGET = 200
 WALK_POPSIZE = 8
-# OpenSim RRA's average residuals for this trial (FX, FY in N, MZ in N m), after RRA adjusted the
+# OpenSim RRA's average residuals for OpenSim's example walk, subject01 (FX, FY in N, MZ in N m),
+# shown beside any walk's as a reference point, after RRA adjusted the
 # model's masses and the kinematics, which fdbench does not do
 RRA_MEANS = {"residual_fx_mean_n": -3.8, "residual_fy_mean_n": -2.8, "residual_mz_mean_nm": -3.4}
 

@@ -87,7 +87,7 @@ def forearm_table(rows: list[WalkRow], duration: float) -> list[str]:
 
 def residual_means_table(inverse_fields: dict, rows: list[WalkRow]) -> list[str]:
     """The mean residuals FX, FY, MZ of the inverse dynamics and of each method that reached the
-    end, beside OpenSim RRA's published averages for this trial (Markdown)."""
+    end, beside OpenSim RRA's published averages for OpenSim's example walk (subject01) (Markdown)."""
     lines = ["| | " + " | ".join(label for _, label in RESIDUAL_MEANS) + " |", "|---|---:|---:|---:|",
              "| fdbench inverse dynamics (the model as imported, the recorded kinematics) | "
              + " | ".join(number(inverse_fields.get(name)) for name, _ in RESIDUAL_MEANS) + " |"]
@@ -95,7 +95,7 @@ def residual_means_table(inverse_fields: dict, rows: list[WalkRow]) -> list[str]
         if row.reached_end and row.key != OPEN_LOOP:
             lines.append(f"| {row.name} | " + " | ".join(number(row.record.get(name)) for name, _ in RESIDUAL_MEANS)
                          + " |")
-    lines.append("| OpenSim RRA, published for this trial (after its mass and kinematics adjustment) | "
+    lines.append("| OpenSim RRA, published for OpenSim's example walk subject01 (after its mass and kinematics adjustment) | "
                  + " | ".join(number(RRA_MEANS[name]) for name, _ in RESIDUAL_MEANS) + " |")
     return lines
 
@@ -335,7 +335,8 @@ def markdown(plan, walk: list[WalkRow], forearm: list[WalkRow], inverse, inverse
             "The inverse dynamics of the recording (its derivatives estimated as the settings say) with the measured "
             "loads leaves residual forces and a moment on the floating base: what the recorded kinematics, the model "
             "and the loads do not agree on. Their means over the walk, beside OpenSim RRA's published averages for "
-            "this trial; RRA's come after it adjusted the model's masses and the kinematics to shrink them, which "
+            "OpenSim's example walk (subject01, the trial in examples/opensim: a reference point for another "
+            "recording, not its own); RRA's come after it adjusted the model's masses and the kinematics to shrink them, which "
             "fdbench does not do, so larger means here are expected:", ""]
     out += residual_means_table(inverse_fields, walk)
     out += ["", "## Methods", ""] + [f"- **{m.name}**: {m.description}." for m in plan.walk]
