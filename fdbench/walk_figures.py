@@ -1,15 +1,18 @@
 """Figures of the walk's report (``fdbench.walk``) as PNG files and a GIF (matplotlib, Agg): every
 coordinate against the recording, the floating base's residuals over the gait cycle, a stick figure
 of the recorded and the simulated walk at a few instants, and an animation of the recorded walk
-and the best method's.
+and every method's. A run that stopped early shows its last pose reached, marked with its t_end;
+collocation shows its own solution (the collocated nodes) beside its torque's replay.
 
 Each figure is drawn from its data, computed by a function of its own (``coordinate_curves``,
-``residual_curves``, ``stick_frames``) from the stored runs re-simulated with their specs, so that
-the data can be checked apart from the pixels."""
+``residual_curves``, ``stick_frames``, ``stopped_poses``, ``animation_frames``) from the stored
+runs re-simulated with their specs (collocation solved again), so that the data can be checked
+apart from the pixels."""
 
 from __future__ import annotations
 
 import os
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,33 +25,44 @@ RECORDED = {"color": "black", "linewidth": 1.0, "linestyle": "none", "marker": "
 DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.4}
 COLOURS = {"open-loop": "tab:gray", "pd": "tab:red", "computed-torque": "tab:blue", "lqr": "tab:purple",
            "collocation": "tab:brown", "cs-cmaes": "tab:green", "cs-bfgs": "tab:olive"}
+OWN_SOLUTION = "collocation (own solution)"  # the key and label of the collocated trajectory in the figures' data
+OWN_STYLE = {"color": "tab:brown", "linestyle": (0, (1, 1.5)), "linewidth": 1.6, "marker": "o", "markersize": 1.8}
+STOPPED_STYLE = {"linestyle": (0, (3, 1.5)), "linewidth": 1.4}  # the last pose of a run that stopped early
 
 
-def trajectories(rows, runs: dict, jobs: int = 1) -> dict:
-    """{row key: Simulation} of each row's stored run simulated again with its spec (control: the
-    run; shooting: its best parameters replayed), ``jobs`` at once in forked processes; collocation,
-    whose solution is not stored and takes minutes to find again, is left out."""
+def trajectories(rows, runs: dict, jobs: int = 1) -> tuple[dict, dict]:
+    """({row key: Simulation}, {row key: CollocationResult}) of the rows' stored runs simulated again
+    with their specs (control: the run; shooting: its best parameters replayed; collocation: solved
+    again, deterministically, giving its replay and its own solution at its nodes), ``jobs`` at once
+    in forked processes."""
     tasks = {}
     for row in rows:
         command, params = row.record.get("command"), runs[row.hash].get("params")
-        if command == "control" or (command == "optimize" and params is not None):
+        if command in ("control", "collocate") or (command == "optimize" and params is not None):
             tasks[row.key] = (row.spec, params if command == "optimize" else None)
     if jobs <= 1 or len(tasks) <= 1 or not hasattr(os, "fork"):
-        return {key: simulate_again(*task) for key, task in tasks.items()}
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+        found = {key: simulate_again(*task) for key, task in tasks.items()}
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(min(jobs, len(tasks)), mp_context=multiprocessing.get_context("fork")) as pool:
-        futures = {key: pool.submit(simulate_again, *task) for key, task in tasks.items()}
-        return {key: future.result() for key, future in futures.items()}
+        with ProcessPoolExecutor(min(jobs, len(tasks)), mp_context=multiprocessing.get_context("fork")) as pool:
+            futures = {key: pool.submit(simulate_again, *task) for key, task in tasks.items()}
+            found = {key: future.result() for key, future in futures.items()}
+    return ({key: sim for key, (sim, _) in found.items()},
+            {key: own for key, (_, own) in found.items() if own is not None})
 
 
-def simulate_again(spec, params=None):
-    """The Simulation of a stored run: a control run carried out again, or an optimisation's best
-    parameters (``params``) replayed."""
+def simulate_again(spec, params=None) -> tuple:
+    """(Simulation, CollocationResult or None) of a stored run: a control run carried out again, an
+    optimisation's best parameters (``params``) replayed, or a collocation solved again (its
+    torque's replay and its own solution)."""
     from .experiment import replay, run
 
-    return run(spec).result if params is None else replay(spec, params)
+    if params is not None:
+        return replay(spec, params), None
+    outcome = run(spec)
+    return outcome.result, outcome.extra.get("collocation")
 
 
 def _display(values: np.ndarray, kinds) -> np.ndarray:
@@ -64,22 +78,27 @@ def recording(spec) -> tuple | None:
     return recorded_samples(spec.motions()[0])
 
 
-def coordinate_curves(inverse, recorded: tuple | None, sims: dict, kinds) -> dict:
+def coordinate_curves(inverse, recorded: tuple | None, sims: dict, kinds, own=None) -> dict:
     """The data of the coordinates figure, in deg (angles) and m (translations): {'recorded': (t,
-    values (n, J)), 'desired': (t, values), <row key>: (t, values)}; a simulation's values are NaN
-    after it stopped."""
+    values (n, J)), 'desired': (t, values), <row key>: (t, values), OWN_SOLUTION: (node times,
+    values (N + 1, J))}; a simulation's values are NaN after it stopped; ``own``: collocation's
+    ``CollocationResult`` (its nodes' angles), or None."""
     out = {"desired": (inverse.t, _display(inverse.angles, kinds))}
     if recorded is not None:
         out["recorded"] = (recorded[0], _display(recorded[1], kinds))
     for key, result in sims.items():
         out[key] = (result.t, _display(result.z, kinds))
+    if own is not None:
+        out[OWN_SOLUTION] = (own.t, _display(own.angles, kinds))
     return out
 
 
-def residual_curves(model, inverse, sims: dict) -> dict:
+def residual_curves(model, inverse, sims: dict, own=None) -> dict:
     """The floating base's residuals over the motion: {'FX'|'FY' (N)|'MZ' (N m): {'inverse
-    dynamics': (t, values), <row key>: (t, values)}} (a simulation's: its applied generalised
-    forces on the base's coordinates, NaN after it stopped); {} without a floating base."""
+    dynamics': (t, values), <row key>: (t, values), OWN_SOLUTION: (node times, values)}} (a
+    simulation's: its applied generalised forces on the base's coordinates, NaN after it stopped;
+    ``own``, collocation's ``CollocationResult`` or None: its generalised forces at its nodes); {}
+    without a floating base."""
     base = model.floating_base
     if base is None:
         return {}
@@ -89,6 +108,8 @@ def residual_curves(model, inverse, sims: dict) -> dict:
         curves = {"inverse dynamics": (inverse.t, inverse.torque[:, c + offset])}
         for key, result in sims.items():
             curves[key] = (result.t, result.torque[:, c + offset])
+        if own is not None:
+            curves[OWN_SOLUTION] = (own.t, own.torque[:, c + offset])
         out[name] = curves
     return out
 
@@ -112,6 +133,61 @@ def stick_frames(engine, z: np.ndarray, indices) -> list:
     return frames
 
 
+@dataclass(frozen=True)
+class StoppedPose:
+    """Where a simulation that stopped before the motion's end left the model: its t_end (s) and
+    status code ('constraint', ...), the last sample it reached (index, time t in s) and the stick
+    figures (B, 2, 2), m, of the simulation and of the tracked motion at that sample."""
+
+    t_end: float
+    status: str
+    index: int
+    t: float
+    frame: np.ndarray
+    tracked: np.ndarray
+
+    @property
+    def label(self) -> str:
+        return f"fell at {self.t_end:.3f} s ({self.status})"
+
+
+def last_reached(result) -> int | None:
+    """The index of the last sample (every coordinate finite) of a simulation that stopped before
+    the motion's end; None for one that reached the end or no sample at all."""
+    if result.success:
+        return None
+    reached = np.flatnonzero(np.all(np.isfinite(result.z), axis=1))
+    return int(reached[-1]) if len(reached) else None
+
+
+def stopped_poses(engine, tracked_z: np.ndarray, sims: dict) -> dict:
+    """{row key: StoppedPose} of the simulations of ``sims`` that stopped early, with the tracked
+    motion's pose at the same sample (``tracked_z``: rad or m, shape (n, J), on the simulations'
+    samples)."""
+    out = {}
+    for key, result in sims.items():
+        i = last_reached(result)
+        if i is not None:
+            (frame,), (tracked,) = stick_frames(engine, result.z, [i]), stick_frames(engine, tracked_z, [i])
+            out[key] = StoppedPose(float(result.t_end), result.status.code, i, float(result.t[i]), frame, tracked)
+    return out
+
+
+def animation_frames(engine, tracked_z: np.ndarray, sims: dict, t: np.ndarray) -> tuple:
+    """The animation's data, ``ANIMATION_FPS`` frames per second of motion time: (indices of the
+    samples t (s) shown, the tracked motion's stick figures there, {row key: stick figures, the
+    last pose reached held after a simulation stopped}, {row key: whether each frame is held})."""
+    step = max(1, int(round(1.0 / (ANIMATION_FPS * float(np.median(np.diff(t)))))))
+    indices = np.arange(0, len(t), step)
+    stops = stopped_poses(engine, tracked_z, sims)
+    frames, held = {}, {}
+    for key, result in sims.items():
+        drawn = stick_frames(engine, result.z, indices)
+        held[key] = [frame is None and key in stops for frame in drawn]
+        frames[key] = [stops[key].frame if hold else frame for frame, hold in zip(drawn, held[key])]
+    return indices, stick_frames(engine, tracked_z, indices), frames, held
+
+
 # ---- drawing -------------------------------------------------------------------------------------
 
 
@@ -123,7 +199,8 @@ def _pyplot():
 
 def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> None:
     """A panel per coordinate against time (s): the recorded samples, the filtered motion every
-    method tracks (dashed) and each method's simulation."""
+    method tracks (dashed), each method's simulation and collocation's own solution (dotted, at its
+    nodes)."""
     from .figures import _save
 
     plt = _pyplot()
@@ -138,6 +215,8 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
         for key, label in labels.items():
             if key in curves:
                 ax.plot(curves[key][0], curves[key][1][:, j], label=label, color=COLOURS.get(key), linewidth=1.1)
+        if OWN_SOLUTION in curves:
+            ax.plot(curves[OWN_SOLUTION][0], curves[OWN_SOLUTION][1][:, j], label=OWN_SOLUTION, **OWN_STYLE)
         ax.set_title(name, fontsize=9)
         ax.set_ylabel("m" if kind == "translation" else "deg", fontsize=8)
         ax.grid(alpha=0.3)
@@ -154,14 +233,15 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
 
 def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
     """FX, FY (N) and MZ (N m) of the floating base against time (s) over the gait cycle: the
-    inverse dynamics' and each method's."""
+    inverse dynamics', each method's and collocation's own solution's (dotted, at its nodes)."""
     from .figures import _save
 
     plt = _pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     for ax, (name, unit) in zip(axes, (("FX", "N"), ("FY", "N"), ("MZ", "N m"))):
         for key, (t, values) in curves[name].items():
-            style = DESIRED if key == "inverse dynamics" else {"color": COLOURS.get(key), "linewidth": 1.1}
+            style = (DESIRED if key == "inverse dynamics" else OWN_STYLE if key == OWN_SOLUTION
+                     else {"color": COLOURS.get(key), "linewidth": 1.1})
             ax.plot(t, values, label=labels.get(key, key), **style)
         ax.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)
         ax.set_ylabel(f"{name} ({unit})")
@@ -173,32 +253,45 @@ def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Path) -> None:
+def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Path, stops: dict | None = None) -> None:
     """A panel per method: the recorded walk (grey) and the method's (coloured) at the instants
     ``times`` (s), drawn side by side as a film strip (instant k moved k spacings to the right);
-    ``recorded`` and each of ``simulated`` are ``stick_frames``."""
+    ``recorded`` and each of ``simulated`` are ``stick_frames``. A method that stopped early
+    (``stops``: {row key: StoppedPose}) has its last pose reached (dashed) one more spacing to the
+    right, beside the tracked motion's at that sample, marked with its t_end."""
     from .figures import _save
 
     plt = _pyplot()
+    stops = stops or {}
     points = np.concatenate([frame.reshape(-1, 2) for frame in recorded])
     spacing = round(float(np.ptp(points[:, 0])) + 0.4, 1)
-    fig, axes = plt.subplots(len(simulated), 1, figsize=(2.0 + 1.6 * len(times), 2.6 * len(simulated)),
+    slots = len(times) + (1 if stops else 0)
+    fig, axes = plt.subplots(len(simulated), 1, figsize=(2.0 + 1.6 * slots, 2.6 * len(simulated)),
                              sharex=True, squeeze=False)
     for ax, (key, frames) in zip(axes[:, 0], simulated.items()):
+        colour = COLOURS.get(key, "tab:red")
         for k, (seen, frame) in enumerate(zip(recorded, frames)):
             shift = np.array([k * spacing, 0.0])
             _draw(ax, seen + shift, color="0.6", linewidth=2.2)
             if frame is not None:
-                _draw(ax, frame + shift, color=COLOURS.get(key, "tab:red"), linewidth=1.2)
-        missing = [f"{t:.2f}" for t, frame in zip(times, frames) if frame is None]
-        ax.set_title(labels.get(key, key) + (f" (stopped before t = {', '.join(missing)} s)" if missing else ""),
-                     fontsize=9)
+                _draw(ax, frame + shift, color=colour, linewidth=1.2)
+        title = labels.get(key, key)
+        if key in stops:
+            stop, shift = stops[key], np.array([len(times) * spacing, 0.0])
+            _draw(ax, stop.tracked + shift, color="0.6", linewidth=2.2)
+            _draw(ax, stop.frame + shift, color=colour, **STOPPED_STYLE)
+            top = float(max(stop.frame[:, :, 1].max(), stop.tracked[:, :, 1].max()))
+            ax.annotate(f"{stop.label}:\nlast pose, t = {stop.t:.3f} s", (len(times) * spacing, top + 0.05),
+                        ha="center", va="bottom", fontsize=7, color=colour)
+            title += f" ({stop.label}; its last pose on the right)"
+        ax.set_title(title, fontsize=9)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
         ax.set_ylabel("y (m)")
     axes[-1, 0].set_xlabel(f"x (m); the instant k drawn k x {spacing:g} m to the right")
     fig.suptitle("Stick figures at t = " + ", ".join(f"{t:.2f}" for t in times)
-                 + " s: recorded (grey) and simulated", fontsize=11)
+                 + " s: recorded (grey) and simulated" + (", then the last pose of a run that fell" if stops else ""),
+                 fontsize=11)
     fig.tight_layout()
     _save(fig, path)
     plt.close(fig)
@@ -208,9 +301,10 @@ def _draw(ax, frame: np.ndarray, **style) -> list:
     return [ax.plot(segment[:, 0], segment[:, 1], solid_capstyle="round", **style)[0] for segment in frame]
 
 
-def animation(engine, recorded_z: np.ndarray, simulated_z: np.ndarray, t: np.ndarray, label: str, path: Path) -> None:
-    """A GIF of the recorded walk (grey) and ``label``'s (red), ``ANIMATION_FPS`` frames per second
-    of motion time (coordinates of shape (n, J) on the samples t)."""
+def animation(data: tuple, labels: dict, t: np.ndarray, stops: dict, path: Path) -> None:
+    """A GIF with a panel per method: the tracked walk (grey) and the method's (coloured), its last
+    pose held (dashed) after it stopped; ``data`` is ``animation_frames``'s, on the samples t (s);
+    ``stops``: {row key: StoppedPose}."""
     import tempfile
 
     from matplotlib.animation import FuncAnimation, PillowWriter
@@ -218,31 +312,41 @@ def animation(engine, recorded_z: np.ndarray, simulated_z: np.ndarray, t: np.nda
     from .files import write_atomic
 
     plt = _pyplot()
-    step = max(1, int(round(1.0 / (ANIMATION_FPS * float(np.median(np.diff(t)))))))
-    indices = np.arange(0, len(t), step)
-    recorded, simulated = stick_frames(engine, recorded_z, indices), stick_frames(engine, simulated_z, indices)
-    every = np.concatenate([f.reshape(-1, 2) for f in recorded + simulated if f is not None])
-    fig, ax = plt.subplots(figsize=(9, 3.2))
-    ax.set_xlim(every[:, 0].min() - 0.2, every[:, 0].max() + 0.2)
-    ax.set_ylim(every[:, 1].min() - 0.1, every[:, 1].max() + 0.1)
-    ax.set_aspect("equal")
-    ax.grid(alpha=0.3)
+    indices, recorded, simulated, held = data
+    every = np.concatenate([f.reshape(-1, 2) for frames in [recorded, *simulated.values()] for f in frames
+                            if f is not None])
+    width = float(np.ptp(every[:, 0])) + 0.4
+    height = float(np.ptp(every[:, 1])) + 0.2
+    fig, axes = plt.subplots(len(simulated), 1, figsize=(9, max(1.2, 9 * height / width + 0.5) * len(simulated)),
+                             squeeze=False)
+    for ax in axes[:, 0]:
+        ax.set_xlim(every[:, 0].min() - 0.2, every[:, 0].max() + 0.2)
+        ax.set_ylim(every[:, 1].min() - 0.1, every[:, 1].max() + 0.1)
+        ax.set_aspect("equal")
+        ax.grid(alpha=0.3)
+        ax.tick_params(labelsize=6)
     drawn = []
 
     def frame(k):
         for line in drawn:
             line.remove()
         drawn.clear()
-        drawn.extend(_draw(ax, recorded[k], color="0.6", linewidth=2.2))
-        if simulated[k] is not None:
-            drawn.extend(_draw(ax, simulated[k], color="tab:red", linewidth=1.2))
-        ax.set_title(f"recorded (grey) and {label} (red), t = {t[indices[k]]:.2f} s", fontsize=9)
+        for ax, key in zip(axes[:, 0], simulated):
+            drawn.extend(_draw(ax, recorded[k], color="0.6", linewidth=2.2))
+            pose, colour = simulated[key][k], COLOURS.get(key, "tab:red")
+            if pose is not None:
+                style = STOPPED_STYLE if held[key][k] else {"linewidth": 1.2}
+                drawn.extend(_draw(ax, pose, color=colour, **style))
+            note = f", {stops[key].label}: its last pose held" if held[key][k] else ""
+            ax.set_title(f"{labels.get(key, key)}{note}", fontsize=8)
+        fig.suptitle(f"recorded (grey) and each method's walk, t = {t[indices[k]]:.2f} s", fontsize=9)
         return drawn
 
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     movie = FuncAnimation(fig, frame, frames=len(indices), blit=False)
     with tempfile.TemporaryDirectory() as folder:
         temporary = Path(folder) / "walk.gif"
-        movie.save(temporary, writer=PillowWriter(fps=ANIMATION_FPS), dpi=70)
+        movie.save(temporary, writer=PillowWriter(fps=ANIMATION_FPS), dpi=60)
         write_atomic(path, temporary.read_bytes(), "--figures")
     plt.close(fig)
 
@@ -252,32 +356,35 @@ def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: P
     ``rows`` (``walk.WalkRow``) re-simulated, ``jobs`` at once; return {title: path relative to
     ``base``}."""
     from .multibody.runs import engine, nominal
-    from .walk import PD, coordinates
+    from .walk import COLLOCATION, coordinates
 
     directory.mkdir(exist_ok=True)
     names, kinds = coordinates(spec)
-    sims = trajectories(rows, runs, jobs)
+    sims, solutions = trajectories(rows, runs, jobs)
+    own = solutions.get(COLLOCATION)
     labels = {row.key: row.name for row in rows if row.key in sims}
     written = {}
 
     def link(title, name):
         written[title] = os.path.relpath(directory / name, base)
 
-    coordinates_figure(coordinate_curves(inverse, recording(spec), sims, kinds), names, kinds, labels,
+    coordinates_figure(coordinate_curves(inverse, recording(spec), sims, kinds, own), names, kinds, labels,
                        directory / FIGURE_FILES[0])
     link("Every coordinate against the recording", FIGURE_FILES[0])
-    residuals = residual_curves(nominal(spec), inverse, sims)
+    residuals = residual_curves(nominal(spec), inverse, sims, own)
     if residuals:
         residuals_figure(residuals, labels, directory / FIGURE_FILES[1])
         link("Residuals over the gait cycle", FIGURE_FILES[1])
     plant = engine(spec)
     indices = instants(inverse.t)
     recorded = stick_frames(plant, inverse.angles, indices)
+    stops = stopped_poses(plant, inverse.angles, sims)
     stick_figure(recorded, {key: stick_frames(plant, sims[key].z, indices) for key in labels}, inverse.t[indices],
-                 labels, directory / FIGURE_FILES[2])
+                 labels, directory / FIGURE_FILES[2], stops)
     link("Stick figures of the recorded and the simulated walk", FIGURE_FILES[2])
-    shown = PD if PD in sims else next(iter(sims), None)
-    if shown is not None:
-        animation(plant, inverse.angles, sims[shown].z, inverse.t, labels[shown], directory / FIGURE_FILES[3])
-        link(f"Animation: the recorded walk and {labels[shown]}", FIGURE_FILES[3])
+    if sims:
+        shown = {key: sims[key] for key in labels}
+        animation(animation_frames(plant, inverse.angles, shown, inverse.t), labels, inverse.t, stops,
+                  directory / FIGURE_FILES[3])
+        link("Animation: the recorded walk and every method's", FIGURE_FILES[3])
     return written
