@@ -182,16 +182,22 @@ def test_figures_are_written_and_linked(hop):
     assert (figs / "walk_animation.gif").read_bytes()[:6] in (b"GIF87a", b"GIF89a")
 
 
-def _spec(hop, **more):
-    from fdbench.experiment import control_spec
+def _common(hop) -> dict:
+    """The RunSpec fields of the small model's motion and loads."""
     from fdbench.multibody.loads import loads_digest
     from fdbench.spec import model_digest, motion_digest
 
     files = hop["files"]
     inputs = (("--loads", loads_digest(files["loads"])), ("--model", model_digest(files["model"])),
               ("--motion", motion_digest(files["motion"])))
-    return control_spec(kinematics=str(files["motion"]), model_name=str(files["model"]), loads=str(files["loads"]),
-                        inputs=inputs, **more)
+    return dict(kinematics=str(files["motion"]), model_name=str(files["model"]), loads=str(files["loads"]),
+                inputs=inputs)
+
+
+def _spec(hop, **more):
+    from fdbench.experiment import control_spec
+
+    return control_spec(**_common(hop), **more)
 
 
 def test_recorded_curves_are_the_motion_files_columns(hop):
@@ -235,6 +241,89 @@ def test_stick_figure_points_are_the_engines_point_positions(hop):
     fallen = inverse.angles.copy()
     fallen[indices[-1]:] = np.nan
     assert stick_frames(plant, fallen, indices)[-1] is None
+
+
+def _fallen(result, last: int):
+    """The simulation ``result`` as if it had stopped on a constraint violation just after the
+    sample ``last``: NaN on every later sample, as a simulation that stops leaves them."""
+    from fdbench.integrate import Status
+
+    z, torque = result.z.copy(), result.torque.copy()
+    z[last + 1:], torque[last + 1:] = np.nan, np.nan
+    t_end = float(result.t[last] + 0.4 * (result.t[last + 1] - result.t[last]))
+    return dataclasses.replace(result, z=z, torque=torque, t_end=t_end, status=Status.CONSTRAINT)
+
+
+def test_a_fallen_runs_last_pose_is_shown_marked_and_held(hop):
+    """A run that stopped early: the stick figure's last pose is ``Engine.point_positions`` at the
+    last sample it reached, beside the tracked motion's there, marked with its t_end; the animation
+    shows its poses until then and holds that last pose after; a run that reached the end has none."""
+    from fdbench.experiment import run
+    from fdbench.multibody.runs import engine
+    from fdbench.walk_figures import ANIMATION_FPS, animation_frames, stopped_poses
+
+    spec = _spec(hop)
+    plant, inverse, result = engine(spec), spec.reference(), run(spec).result
+    assert result.success
+    last = 13  # t = 0.13 s of the 0.01 s samples
+    fallen = _fallen(result, last)
+    stops = stopped_poses(plant, inverse.angles, {PD: result, OPEN_LOOP: fallen})
+    assert list(stops) == [OPEN_LOOP]
+    stop = stops[OPEN_LOOP]
+    assert (stop.index, stop.t, stop.status) == (last, pytest.approx(0.13), "constraint")
+    assert stop.label == f"fell at {fallen.t_end:.3f} s (constraint)" == "fell at 0.134 s (constraint)"
+    reached, tracked = plant.point_positions(result.z[last]), plant.point_positions(inverse.angles[last])
+    for b, body in enumerate(("pelvis", "thigh", "shank")):
+        for end, point in enumerate(("joint", "end")):
+            np.testing.assert_array_equal(stop.frame[b, end], reached[f"{body}.{point}"])
+            np.testing.assert_array_equal(stop.tracked[b, end], tracked[f"{body}.{point}"])
+    indices, recorded, frames, held = animation_frames(plant, inverse.angles, {PD: result, OPEN_LOOP: fallen}, inverse.t)
+    assert np.diff(inverse.t[indices]) == pytest.approx(np.full(len(indices) - 1, 1 / ANIMATION_FPS))
+    assert held[PD] == [False] * len(indices)
+    assert held[OPEN_LOOP] == [i > last for i in indices] and any(held[OPEN_LOOP])
+    for k, i in enumerate(indices):
+        shown = plant.point_positions(result.z[min(i, last)])
+        np.testing.assert_array_equal(frames[OPEN_LOOP][k][2], [shown["shank.joint"], shown["shank.end"]])
+        np.testing.assert_array_equal(frames[PD][k][2], [plant.point_positions(result.z[i])[f"shank.{p}"]
+                                                         for p in ("joint", "end")])
+        np.testing.assert_array_equal(recorded[k][1], [plant.point_positions(inverse.angles[i])[f"thigh.{p}"]
+                                                       for p in ("joint", "end")])
+
+
+def test_collocations_own_solution_is_drawn_at_its_nodes(hop, tmp_path):
+    """The collocation row gives its replay (a Simulation on the motion's samples) and its own
+    solution: the coordinates figure's 'collocation (own solution)' curve is the angles (deg) and
+    translations (m) at the nodes of ``collocation.collocate`` called directly on the same model,
+    motion and loads; the residuals figure's, the generalised forces on the base there; both
+    figures are written with it."""
+    from fdbench.collocation import collocate
+    from fdbench.experiment import collocate_spec
+    from fdbench.multibody.runs import loads, motions, nominal
+    from fdbench.walk import COLLOCATION, coordinates
+    from fdbench.walk_figures import (OWN_SOLUTION, coordinate_curves, coordinates_figure, recording,
+                                      residual_curves, residuals_figure, trajectories)
+
+    spec = collocate_spec(10, "hermite-simpson", **_common(hop))
+    row = WalkRow(COLLOCATION, "collocation + replay", {"command": "collocate"}, spec, spec.hash())
+    sims, own = trajectories([row], {spec.hash(): {"params": None}})
+    assert list(sims) == list(own) == [COLLOCATION]
+    inverse = spec.reference()
+    np.testing.assert_array_equal(sims[COLLOCATION].t, inverse.t)
+    direct = collocate(nominal(spec), motions(spec)[0], 10, "hermite-simpson", loads=loads(spec))
+    assert direct.t.shape == (11,)  # the nodes of 10 intervals
+    _, kinds = coordinates(spec)
+    curves = coordinate_curves(inverse, recording(spec), sims, kinds, own[COLLOCATION])
+    t, values = curves[OWN_SOLUTION]
+    np.testing.assert_allclose(t, direct.t, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(values[:, [1, 2]], direct.angles[:, [1, 2]], rtol=1e-6, atol=1e-9)  # tx, ty in m
+    np.testing.assert_allclose(values[:, [0, 3, 4]], np.degrees(direct.angles[:, [0, 3, 4]]), rtol=1e-6, atol=1e-7)
+    residuals = residual_curves(nominal(spec), inverse, sims, own[COLLOCATION])
+    for name, column in (("FX", 1), ("FY", 2), ("MZ", 0)):
+        np.testing.assert_allclose(residuals[name][OWN_SOLUTION][1], direct.torque[:, column], rtol=1e-6, atol=1e-6)
+    labels = {COLLOCATION: row.name}
+    coordinates_figure(curves, COORDINATES, kinds, labels, tmp_path / "c.png")
+    residuals_figure(residuals, labels, tmp_path / "r.png")
+    assert (tmp_path / "c.png").stat().st_size > 1000 and (tmp_path / "r.png").stat().st_size > 1000
 
 
 def test_residual_curves_are_the_base_coordinates_generalised_forces(hop):
