@@ -21,9 +21,12 @@ import numpy as np
 FIGURE_FILES = ("walk_coordinates.png", "walk_residuals.png", "walk_stick_figure.png", "walk_animation.gif")
 STICK_INSTANTS = 6  # stick figures per method, evenly spread over the motion
 ANIMATION_FPS = 20
+ANIMATION_PANEL_HEIGHT = 1.9  # in: a panel per method, as wide as the walk's extent needs, at most ...
+ANIMATION_WIDTH = 10.0  # in: ... this wide in all
+ANIMATION_DPI = 70
 RECORDED = {"color": "black", "linewidth": 1.0, "linestyle": "none", "marker": ".", "markersize": 2.5}
 DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.4}
-COLOURS = {"open-loop": "tab:gray", "pd": "tab:red", "computed-torque": "tab:blue", "lqr": "tab:purple",
+COLOURS = {"open-loop": "tab:orange", "pd": "tab:red", "computed-torque": "tab:blue", "lqr": "tab:purple",
            "collocation": "tab:brown", "cs-cmaes": "tab:green", "cs-bfgs": "tab:olive"}
 OWN_SOLUTION = "collocation (own solution)"  # the key and label of the collocated trajectory in the figures' data
 OWN_STYLE = {"color": "tab:brown", "linestyle": (0, (1, 1.5)), "linewidth": 1.6, "marker": "o", "markersize": 1.8}
@@ -280,10 +283,7 @@ def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Pat
             stop, shift = stops[key], np.array([len(times) * spacing, 0.0])
             _draw(ax, stop.tracked + shift, color="0.6", linewidth=2.2)
             _draw(ax, stop.frame + shift, color=colour, **STOPPED_STYLE)
-            top = float(max(stop.frame[:, :, 1].max(), stop.tracked[:, :, 1].max()))
-            ax.annotate(f"{stop.label}:\nlast pose, t = {stop.t:.3f} s", (len(times) * spacing, top + 0.05),
-                        ha="center", va="bottom", fontsize=7, color=colour)
-            title += f" ({stop.label}; its last pose on the right)"
+            title += f" ({stop.label}; on the right its last pose reached, t = {stop.t:.3f} s, dashed)"
         ax.set_title(title, fontsize=9)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
@@ -304,51 +304,64 @@ def _draw(ax, frame: np.ndarray, **style) -> list:
 def animation(data: tuple, labels: dict, t: np.ndarray, stops: dict, path: Path) -> None:
     """A GIF with a panel per method: the tracked walk (grey) and the method's (coloured), its last
     pose held (dashed) after it stopped; ``data`` is ``animation_frames``'s, on the samples t (s);
-    ``stops``: {row key: StoppedPose}."""
-    import tempfile
+    ``stops``: {row key: StoppedPose}. The axes are drawn once; each frame draws only its poses and
+    texts over them (blitting), so a frame costs a few milliseconds."""
+    import io
 
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from PIL import Image
 
     from .files import write_atomic
 
     plt = _pyplot()
     indices, recorded, simulated, held = data
+    fig, axes = _animation_axes(plt, recorded, simulated)
+    fig.canvas.draw()
+    background = fig.canvas.copy_from_bbox(fig.bbox)
+    images = []
+    for k in range(len(indices)):
+        fig.canvas.restore_region(background)
+        artists = [fig.text(0.5, 0.995, f"recorded (grey) and each method's walk, t = {t[indices[k]]:.2f} s",
+                            ha="center", va="top", fontsize=9)]
+        for ax, key in zip(axes.flat, simulated):
+            artists += _draw(ax, recorded[k], color="0.6", linewidth=2.2)
+            pose, colour = simulated[key][k], COLOURS.get(key, "tab:red")
+            if pose is not None:
+                artists += _draw(ax, pose, color=colour, **(STOPPED_STYLE if held[key][k] else {"linewidth": 1.2}))
+            note = f"fell at {stops[key].t_end:.3f} s: last pose held" if held[key][k] else ""
+            artists.append(ax.text(0.5, 1.02, f"{labels.get(key, key)}\n{note}", transform=ax.transAxes, ha="center",
+                                   va="bottom", fontsize=7))
+        for artist in artists:
+            fig.draw_artist(artist)
+        images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()))
+        for artist in artists:
+            artist.remove()
+    plt.close(fig)
+    buffer = io.BytesIO()
+    images[0].save(buffer, format="GIF", save_all=True, append_images=images[1:], loop=0,
+                   duration=round(1000 / ANIMATION_FPS))
+    write_atomic(path, buffer.getvalue(), "--figures")
+
+
+def _animation_axes(plt, recorded: list, simulated: dict) -> tuple:
+    """The animation's figure and its panels (one per method, in rows of as many as fit
+    ``ANIMATION_WIDTH``), every panel spanning every pose of ``recorded`` and ``simulated``."""
     every = np.concatenate([f.reshape(-1, 2) for frames in [recorded, *simulated.values()] for f in frames
                             if f is not None])
-    width = float(np.ptp(every[:, 0])) + 0.4
-    height = float(np.ptp(every[:, 1])) + 0.2
-    fig, axes = plt.subplots(len(simulated), 1, figsize=(9, max(1.2, 9 * height / width + 0.5) * len(simulated)),
-                             squeeze=False)
-    for ax in axes[:, 0]:
+    panel = ANIMATION_PANEL_HEIGHT * float(np.clip((np.ptp(every[:, 0]) + 0.4) / (np.ptp(every[:, 1]) + 0.2), 1, 5))
+    columns = int(np.clip(ANIMATION_WIDTH // panel, 1, min(3, len(simulated))))
+    rows = -(-len(simulated) // columns)
+    fig, axes = plt.subplots(rows, columns, figsize=(columns * panel + 0.4, rows * (ANIMATION_PANEL_HEIGHT + 0.5) + 0.3),
+                             squeeze=False, dpi=ANIMATION_DPI)
+    for ax in axes.flat[len(simulated):]:
+        ax.set_visible(False)
+    for ax in axes.flat[:len(simulated)]:
         ax.set_xlim(every[:, 0].min() - 0.2, every[:, 0].max() + 0.2)
         ax.set_ylim(every[:, 1].min() - 0.1, every[:, 1].max() + 0.1)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=6)
-    drawn = []
-
-    def frame(k):
-        for line in drawn:
-            line.remove()
-        drawn.clear()
-        for ax, key in zip(axes[:, 0], simulated):
-            drawn.extend(_draw(ax, recorded[k], color="0.6", linewidth=2.2))
-            pose, colour = simulated[key][k], COLOURS.get(key, "tab:red")
-            if pose is not None:
-                style = STOPPED_STYLE if held[key][k] else {"linewidth": 1.2}
-                drawn.extend(_draw(ax, pose, color=colour, **style))
-            note = f", {stops[key].label}: its last pose held" if held[key][k] else ""
-            ax.set_title(f"{labels.get(key, key)}{note}", fontsize=8)
-        fig.suptitle(f"recorded (grey) and each method's walk, t = {t[indices[k]]:.2f} s", fontsize=9)
-        return drawn
-
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
-    movie = FuncAnimation(fig, frame, frames=len(indices), blit=False)
-    with tempfile.TemporaryDirectory() as folder:
-        temporary = Path(folder) / "walk.gif"
-        movie.save(temporary, writer=PillowWriter(fps=ANIMATION_FPS), dpi=60)
-        write_atomic(path, temporary.read_bytes(), "--figures")
-    plt.close(fig)
+    fig.tight_layout(rect=(0, 0, 1, 0.93), h_pad=2.5)
+    return fig, axes
 
 
 def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: Path, jobs: int = 1) -> dict:
@@ -384,7 +397,16 @@ def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: P
     link("Stick figures of the recorded and the simulated walk", FIGURE_FILES[2])
     if sims:
         shown = {key: sims[key] for key in labels}
-        animation(animation_frames(plant, inverse.angles, shown, inverse.t), labels, inverse.t, stops,
+        animation(animation_frames(plant, inverse.angles, shown, inverse.t), _short_labels(labels), inverse.t, stops,
                   directory / FIGURE_FILES[3])
         link("Animation: the recorded walk and every method's", FIGURE_FILES[3])
     return written
+
+
+def _short_labels(labels: dict) -> dict:
+    """The methods' short names (``walk_report.SHORT``) for the animation's narrow panels."""
+    from .walk import COLLOCATION
+    from .walk_report import SHORT
+
+    return {key: "collocation's torque replayed" if key == COLLOCATION else SHORT.get(key, label)
+            for key, label in labels.items()}
