@@ -292,7 +292,7 @@ def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Pat
     fig.suptitle("Stick figures at t = " + ", ".join(f"{t:.2f}" for t in times)
                  + " s: recorded (grey) and simulated" + (", then the last pose of a run that fell" if stops else ""),
                  fontsize=11)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
     _save(fig, path)
     plt.close(fig)
 
