@@ -174,7 +174,6 @@ class TrackingProblem(ShootingProblem):
         RK4 with the motion's samples on its grid and a parameterisation that gives d tau / d p."""
         if self.integrator != "rk4":
             raise ValueError(f"--gradient exact needs --integrator rk4, got {self.integrator}")
-        self.engine.require_compiled("--gradient exact (the compiled sensitivities)")
         if not self.batched:
             raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
         if self._jacobians is None:
@@ -194,33 +193,52 @@ class TrackingProblem(ShootingProblem):
 
     def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
         """Eq. 18 and its exact gradient with respect to p, shape (n_params,), from one RK4
-        simulation with forward sensitivities (``sensitivity.rk4_sensitivity``). The value equals
+        simulation with forward sensitivities (``sensitivity.rk4_sensitivity``, or
+        ``rk4_sensitivity_dense`` for free or path joints and external loads). The value equals
         ``objective(p)`` to the last bit (the same states and kernel). Over the m samples reached,
-        with e the joint angle errors (deg, m x J), d RMSE / d p = sum e (180 / pi) dz / dp / (m J RMSE);
-        the penalty term is piecewise constant in p (t_end moves by whole steps), so a failing
-        simulation's gradient is the RMSE's over the samples reached (zero where the RMSE is zero)."""
-        from .multibody.kernels import tracking_objective
-        from .multibody.sensitivity import rk4_sensitivity
-
+        eq. 18's tracking term is the RMSE of the angles (deg) plus, for a model with translations,
+        that of the translations (cm); for each, with e its errors (m x J_kind, in its unit u per
+        rad or m), d RMSE / d p = sum e u dz / dp / (m J_kind RMSE). The penalty term is piecewise
+        constant in p (t_end moves by whole steps), so a failing simulation's gradient is the
+        RMSE's over the samples reached (zero where an RMSE is zero)."""
         p = np.asarray(p, dtype=float)
         G, joint = self.torque_jacobian(p)
-        y0, dt, n, tau, ref, refd, every, angles_ref, weight, *layout = self.engine.population_args(
+        engine = self.engine
+        y0, dt, n, tau, ref, refd, every, angles_ref, weight, *layout = engine.population_args(
             *self._kernel_start, self.torques_on_grid(p)[None], *self._kernel_rest)
-        states, rates = np.empty((n + 1, self.engine.n_state)), np.empty((n + 1, self.engine.n_state))
-        dz = np.empty((n // every + 1, self.engine.n_joints, len(p)))
-        _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates,
-                                  np.empty((n + 1, self.engine.n_joints)), dz)
-        value = tracking_objective(states, done, every, angles_ref, n, weight, self.engine.joint_offset,
-                                   self.engine.joint_parent, self.engine.n_p)
+        states, rates = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state))
+        applied, dz = np.empty((n + 1, engine.n_joints)), np.empty((n // every + 1, engine.n_joints, len(p)))
+        if engine.compiled:
+            from .multibody.kernels import tracking_objective
+            from .multibody.sensitivity import rk4_sensitivity
+
+            _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates, applied,
+                                      dz)
+            value = tracking_objective(states, done, every, angles_ref, n, weight, engine.joint_offset,
+                                       engine.joint_parent, engine.n_p)
+        else:
+            from .multibody.kernels_general import tracking_objective
+            from .multibody.sensitivity import rk4_sensitivity_dense
+
+            loads, *layout = layout
+            _, done = rk4_sensitivity_dense(y0, dt, n, tau[0], ref, refd, G, joint, every, loads, *layout, states,
+                                            rates, applied, dz)
+            value = tracking_objective(states, done, every, angles_ref, n, weight, layout[0], layout[1], engine.n_p)
         m = done // every + 1
-        error = np.degrees(self.engine.joints_from_state(states[: done + 1 : every])[0] - angles_ref[:m])
-        rmse = float(np.sqrt(np.mean(error**2)))
+        error = engine.joints_from_state(states[: done + 1 : every])[0] - angles_ref[:m]
         gradient = np.zeros(len(p))
-        if math.isfinite(rmse) and rmse > 0:
+        translation = np.array([kind == "translation" for kind in engine.model.coordinate_kinds])
+        for columns, unit in ((~translation, np.degrees(1.0)), (translation, sim.CM_PER_M)):
+            if not columns.any():
+                continue
+            scaled = unit * error[:, columns]
+            rmse = float(np.sqrt(np.mean(scaled**2)))
+            if not (math.isfinite(rmse) and rmse > 0):
+                continue
             with np.errstate(all="ignore"):
-                gradient = np.degrees(np.einsum("kj,kjq->q", error, dz[:m])) / (error.size * rmse)
-            if not np.all(np.isfinite(gradient)):
-                gradient = np.zeros(len(p))
+                part = unit * np.einsum("kj,kjq->q", scaled, dz[:m][:, columns]) / (scaled.size * rmse)
+            if np.all(np.isfinite(part)):
+                gradient += part
         return float(value), gradient
 
     def value_and_gradient_scaled(self, x) -> tuple[float, np.ndarray]:

@@ -105,11 +105,26 @@ def bfgs_note(budget: int, **common) -> str | None:
     return None
 
 
+def on_samples(common: dict) -> dict:
+    """``common`` (RunSpec fields) with an RK4 step lowered, where needed, to put the motion's
+    samples on its grid (``simulation.dt_on_samples``: a 60 Hz recording at 1 ms runs at 1/1020 s),
+    so that the shooting methods read eq. 18 from the kernel's states and BFGS has exact gradients."""
+    from .multibody.runs import motions
+    from .multibody.simulation import dt_on_samples
+
+    if common.get("integrator", "rk4") != "rk4":
+        return common
+    samples = motions(control_spec(**common))[0].samples
+    return {**common, "dt": dt_on_samples(common.get("dt", RunSpec.dt), samples)}
+
+
 def make_plan(walk_common: dict, forearm_common: dict, budget: int = WALK_BUDGET, popsize: int = WALK_POPSIZE,
               collocation: bool = True) -> WalkPlan:
     """The report's runs: the methods on the walk (``walk_common``: RunSpec fields of the model,
-    motion, loads and simulation settings) and on the forearm (``forearm_common``: the paper's
-    motion and model), with the same budget and population."""
+    motion, loads and simulation settings; its RK4 step fitted to the recording by ``on_samples``)
+    and on the forearm (``forearm_common``: the paper's motion and model), with the same budget and
+    population."""
+    walk_common = on_samples(walk_common)
     note = bfgs_note(budget, **walk_common)
     walk = methods(budget, popsize, collocation, bfgs=note is None, **walk_common)
     forearm = methods(budget, popsize, collocation, bfgs=note is None, **forearm_common)

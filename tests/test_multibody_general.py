@@ -301,22 +301,3 @@ def test_control_runs_on_a_free_base_with_a_knee_path(tmp_path):
     out = json.loads(result.stdout)
     assert out["status"] == "success" and out["t_end"] == 0.5
     assert out["rmse_rot_deg"] < 0.01 and out["rmse_trans_cm"] < 0.01  # deg over the angles, cm over x and y
-
-
-def test_exact_gradients_on_a_free_base_are_refused_before_any_work(tmp_path):
-    """The compiled sensitivities do not take free or path joints yet: ``optimize --gradient exact``
-    on such a model is refused in one line naming the joints, exit code 2, and writes nothing."""
-    from typer.testing import CliRunner
-
-    from fdbench.cli import app
-    from fdbench.multibody.description import MotionSpec, to_toml
-
-    model = hopper_model()
-    rest = tuple((name, 0.0) for name in model.coordinates)
-    path = tmp_path / "hopper.toml"
-    path.write_text(to_toml(dataclasses.replace(model, motions=(MotionSpec("still", "minimum-jerk", 0.2, rest, rest),))))
-    out = tmp_path / "out.json"
-    result = CliRunner().invoke(app, ["optimize", "--model", str(path), "--gradient", "exact", "--budget", "3",
-                                      "--output", str(out)])
-    assert result.exit_code == 2 and not out.exists()
-    assert len(result.stderr.strip().splitlines()) == 1 and "free" in result.stderr and "--gradient exact" in result.stderr

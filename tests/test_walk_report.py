@@ -15,7 +15,6 @@ import dataclasses
 import importlib.util
 import io
 import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -144,8 +143,8 @@ def test_open_loop_is_pd_with_zero_gains_and_residuals_only_on_the_free_base(hop
     assert report["rra_published_means"] == {"residual_fx_mean_n": -3.8, "residual_fy_mean_n": -2.8,
                                              "residual_mz_mean_nm": -3.4}
     assert set(report["inverse_residuals"]) >= {"residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm"}
-    if report["bfgs"] is not None:  # exact gradients: not for a free joint in this version, said in one line
-        assert "free" in report["bfgs"] and "BFGS" in report["bfgs"] and BFGS not in walk
+    assert report["bfgs"] is None  # exact gradients on a free base, its step fitted to the recording's samples
+    assert walk[BFGS]["gradient"] == "exact" and walk[BFGS]["optimizer"] == "bfgs" and walk[BFGS]["feedforward"]
 
 
 def test_markdown_tables_carry_every_method_and_coordinate(hop):

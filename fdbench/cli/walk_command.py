@@ -114,7 +114,7 @@ def settings_table(plan, spec, jobs: str) -> dict:
              **conditions,
              "external loads": f"{spec.loads}" + (f", SHA-256 {loads[:16]} (with its data file)" if loads else "")
              if spec.loads else "none",
-             "integrator": spec.integrator + (f" (dt = {spec.dt} s)" if spec.integrator == "rk4" else ""),
+             "integrator": spec.integrator + (f" (dt = {spec.dt:.6g} s)" if spec.integrator == "rk4" else ""),
              "penalty formulation": f"alpha = {spec.alpha:g}, xi = {spec.xi:g}, omega = {spec.omega:g} rad/s",
              "shooting": f"CMA-ES, budget {plan.budget} simulations, population {plan.popsize}, seed 0 "
                          "(the same on the forearm)",

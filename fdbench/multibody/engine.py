@@ -52,9 +52,8 @@ that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both
 joints' velocity transform. Eq. 12 for such models, and for any model with external loads from
 data (``fdbench.multibody.loads``), runs on compiled dense kernels
 (``fdbench.multibody.kernels_general``: the same driver, feedback laws and status codes, a Cholesky
-factorisation of the whole leading matrix, a population of open-loop candidates) over the dense
-layout (``dense_layout``); ``compiled`` means the banded kernels above, which the sensitivities
-still need (``require_compiled`` refuses the others there).
+factorisation of the whole leading matrix, a population of open-loop candidates, forward
+sensitivities) over the dense layout (``dense_layout``); ``compiled`` means the banded kernels above.
 
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint

@@ -142,7 +142,6 @@ def check(spec) -> None:
     engine(spec, nominal(spec)), engine(spec)
     desired, _ = motions(spec)
     if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":
-        engine(spec).require_compiled("--gradient exact (the compiled sensitivities)")
         _check_samples_on_grid(spec, desired)
 
 
@@ -153,7 +152,10 @@ def _check_samples_on_grid(spec, motion) -> None:
 
     n = steps(spec.dt, motion.duration)
     if not sim.samples_on_grid(np.linspace(0.0, motion.duration, n + 1), motion.samples):
-        raise ValueError("--gradient exact needs motion samples on the RK4 grid (uniform, every k steps)")
+        fitted = sim.dt_on_samples(spec.dt, motion.samples)
+        hint = f"; --dt {fitted!r} puts them on it" if fitted != spec.dt else ""
+        raise ValueError(f"--gradient exact needs the motion's samples on the RK4 grid (uniform, every k steps of "
+                         f"--dt {spec.dt!r}){hint}")
 
 
 def integration(spec) -> dict:

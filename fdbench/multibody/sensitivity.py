@@ -15,6 +15,15 @@ The states are those of the open-loop ``kernels.rk4`` to the last bit: the RK4 d
 solution and multipliers the stage has just computed, so the value and the gradient belong to one
 simulation. The kernels take the engine's layout arrays only, so numba compiles and caches them
 once for every model.
+
+Models with free or path joints or external loads (the dense kernels, ``kernels_general``):
+``rk4_sensitivity_dense``. There eq. 12 is A(q) x = b(y, tau) over points and angles together, and
+each stage's f_y is formed as a matrix, [0 I; A^-1 D] with D = d(b - A x)/dy at the stage's x:
+every constraint row contributes through its Hessian and third derivative on its few entries
+(dJ = H dq, d(J' q') = T(q', q', dq) + 2 (H q') . dq'), the loads through the frames their force
+and point turn and move with; D is solved with the stage's own Cholesky factor and applied to all
+P directions at once (a matrix product), about 4 n_state^2 P flops per stage. The two derivations
+agree on pin joints to 1e-9 (``tests/test_sensitivity_dense.py``).
 """
 
 from __future__ import annotations
@@ -22,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..jit import njit
+from . import kernels_general
 from .kernels import N_AUX, PD, _drive
 
 
@@ -51,6 +61,28 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_joint, every, offs
                            lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent, n_at_child,
                            n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied, np.zeros((n_p, n_p)),
                            np.zeros(n_p), np.zeros((n_b, N_AUX)), G, torque_sign, every, dz)
+    return code, done
+
+
+@njit(error_model="numpy")
+def rk4_sensitivity_dense(y0, dt, n_steps, tau, ref, refd, G, param_col, every, loads, body_int, body_float, path_body,
+                          path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int,
+                          first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
+                          n_index, n_mass, n_q_ext, states, rates, applied, dz):
+    """``rk4_sensitivity`` for the dense layout (``kernels_general``: free and path joints, external
+    loads): open-loop RK4 (``kernels_general.rk4`` in PD mode with zero gains, as its
+    ``rk4_candidates`` runs it) under the loads' values loads (2 n_steps + 1, L, N_LOAD), and the
+    sensitivities dz (n_steps // every + 1, J, P) of the coordinates (rad; m for a free joint's x
+    and y, per parameter unit), parameter q moving coordinate param_col[q]'s generalised force by
+    G[:, q] (N m or N per unit). ref, refd without the joint offsets. Returns (status, steps_done)."""
+    J = tau.shape[1]
+    zero = np.zeros(J)
+    m = kernels_general.n_rows(body_int, path_body, lin_const)
+    code, done, _ = kernels_general._drive(
+        y0, dt, n_steps, 0, tau, ref, refd, ref, zero, zero, PD, np.zeros((1, J, 2 * J)), loads, loads, body_int,
+        body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
+        load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
+        n_mass, n_q_ext, states, rates, applied, np.empty(m), np.empty(m), G, param_col, every, dz)
     return code, done
 
 

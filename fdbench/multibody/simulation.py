@@ -16,6 +16,7 @@ beyond its tolerance, or an adaptive solver's failure.
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -214,10 +215,28 @@ def _simulate_adaptive(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.
 
 def samples_on_grid(grid, ts) -> int:
     """The number of steps between samples when the samples ts (s) lie on the integrator grid
-    (s), one every so many steps from the first step to the last; 0 when they do not."""
+    (s), one every so many steps from the first step to the last, to 1e-4 of a step (a recording's
+    times are rounded: a .mot's 60 Hz samples to 1e-8 s); 0 when they do not."""
     every = (len(grid) - 1) // max(len(ts) - 1, 1)
-    on_grid = every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=1e-12)
+    tolerance = 1e-4 * (grid[-1] - grid[0]) / max(len(grid) - 1, 1)
+    on_grid = every * (len(ts) - 1) == len(grid) - 1 and np.allclose(grid[::every], ts, rtol=0, atol=tolerance)
     return every if on_grid else 0
+
+
+def dt_on_samples(dt: float, ts) -> float:
+    """The largest RK4 step (s) not above dt that puts the uniform samples ts (s) on its grid (their
+    interval divided by a whole number of steps), so that eq. 18 and its exact gradient read the
+    kernel's own states; dt itself where the samples are not uniform or already on its grid."""
+    ts = np.asarray(ts, dtype=float)
+    if len(ts) < 2:
+        return float(dt)
+    interval = (ts[-1] - ts[0]) / (len(ts) - 1)
+    if not (interval > 0 and np.allclose(np.diff(ts), interval, rtol=0, atol=1e-4 * interval)):
+        return float(dt)
+    n = steps(dt, ts[-1] - ts[0])
+    if samples_on_grid(np.linspace(ts[0], ts[-1], n + 1), ts):
+        return float(dt)
+    return float(interval / math.ceil(interval / dt - 1e-9))
 
 
 def _on_samples(grid, states, rates, applied, done, ts):
