@@ -58,6 +58,7 @@ class RunSpec:
     gradient: str = "fd"  # optimize with bfgs/lbfgsb: "fd" finite differences (the paper's), "exact" sensitivities
     model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
     loads: str | None = None  # external loads from data: an OpenSim ExternalLoads file (its content among inputs)
+    residual_weight: float | None = None  # optimize on a floating base: eq. 18's residual term, deg per N (N m)
 
     def __post_init__(self):
         if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
@@ -121,6 +122,9 @@ class RunSpec:
                 raise ValueError(f"--budget must be an integer in [1, {MAX_BUDGET}], got {self.budget}")
             if not (math.isfinite(self.penalty_weight) and self.penalty_weight >= 0):
                 raise ValueError(f"--penalty-weight must be a non-negative finite number, got {self.penalty_weight}")
+            if self.residual_weight is not None and not (math.isfinite(self.residual_weight)
+                                                         and self.residual_weight >= 0):
+                raise ValueError(f"--residual-weight must be a non-negative finite number, got {self.residual_weight}")
             from .optimizers import OPTIMIZERS
             from .torques import TORQUES
 
@@ -193,7 +197,7 @@ class RunSpec:
 
 
 FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight", "cutoff_hz",
-                "spline_lambda", "sample_dt", "noise_deg", "capture_hz")
+                "spline_lambda", "sample_dt", "noise_deg", "capture_hz", "residual_weight")
 MAX_NOISE_DEG = 45.0
 MAX_CAPTURE_HZ = 100_000.0
 
@@ -240,7 +244,7 @@ def with_motion_file(spec: "RunSpec") -> "RunSpec":
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
                       "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
                       "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd",
-                      "model_name": "forearm", "loads": None}
+                      "model_name": "forearm", "loads": None, "residual_weight": None}
 
 
 PAPER_KP, PAPER_KD = 80.0, 0.3  # N m/rad, N m s/rad: the paper's PD gains for the forearm

@@ -107,9 +107,9 @@ def test_the_sensitivities_on_a_free_base_with_a_knee_path_and_loads_are_the_der
     assert fine < 1e-5 and fine < coarse / 3, (coarse, fine)
 
 
-def _hopper_problem(feedforward=True):
+def _hopper_problem(feedforward=True, residual_weight=0.05):
     """The hopper tracking a minimum-jerk motion that moves every coordinate (the pelvis's x and y in
-    m), under the loads, with cubic splines per coordinate."""
+    m), under the loads, with cubic splines per coordinate and eq. 18's residual term."""
     from fdbench.multibody.description import MotionSpec
     from fdbench.multibody.motions import MinimumJerk
     from fdbench.problem import TrackingProblem
@@ -119,7 +119,7 @@ def _hopper_problem(feedforward=True):
     end = tuple((name, 0.05 if name in ("tx", "ty") else 0.2) for name in model.coordinates)
     motion = MinimumJerk(MotionSpec("move", "minimum-jerk", 0.2, start, end), model.coordinates)
     engine = Engine(model, alpha=1e4, loads=hopper_loads(1))
-    return TrackingProblem("cs", engine, motion, feedforward)
+    return TrackingProblem("cs", engine, motion, feedforward, residual_weight=residual_weight)
 
 
 def test_eq_18_and_its_exact_gradient_on_a_free_base_are_those_of_the_simulation():
@@ -133,6 +133,20 @@ def test_eq_18_and_its_exact_gradient_on_a_free_base_are_those_of_the_simulation
     errors = [np.max(np.abs(g - fd)) / np.max(np.abs(fd))  # the better of two steps, as on pin joints
               for fd in (richardson(problem.objective_scaled, x, h) for h in (1e-3, 1e-4))]
     assert min(errors) < 2e-6, errors
+
+
+def test_the_residual_term_is_the_weighted_rms_of_the_base_forces():
+    """Eq. 18 with the residual term minus eq. 18 without it is the weight times the RMS of the base's
+    force (FX, FY, N) plus that of its moment (MZ, N m), the torque history read from the torque
+    function at the half-step times (another evaluation of the splines than the grid's)."""
+    with_term, without = _hopper_problem(residual_weight=0.05), _hopper_problem(residual_weight=0.0)
+    p = with_term.p0 + 0.3 * np.random.default_rng(4).standard_normal(with_term.n_params)
+    tau = with_term.torque_function(p)(with_term._half)
+    c = hopper_model().coordinates.index("tilt")  # the free joint's angle, then its x and y
+    force = np.sqrt(np.mean(tau[:, c + 1] ** 2 + tau[:, c + 2] ** 2))
+    moment = np.sqrt(np.mean(tau[:, c] ** 2))
+    assert force > 1.0 and moment > 0.1
+    assert with_term.objective(p) - without.objective(p) == pytest.approx(0.05 * (force + moment), rel=1e-9)
 
 
 def test_optimize_with_exact_gradients_on_a_free_base_runs_and_improves(tmp_path):

@@ -260,6 +260,7 @@ def optimize(
     gradient: Gradient = "fd",
     threads: Threads = None,
     penalty_weight: PenaltyWeight = 1.0,
+    residual_weight: Annotated[Optional[float], typer.Option("--residual-weight", help="On a floating base: eq. 18's residual term, deg per N of the base's residual force RMS (FX, FY) and per N m of its moment's (MZ), over the torque history; default 0.01 with --loads, 0 without (the residuals then carry the body's weight).", show_default=False)] = None,
     kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
     dt: Dt = 1e-3,
@@ -303,7 +304,7 @@ def optimize(
         raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
     spec = _validated(optimize_spec(
         torque, opt, feedforward, seed, budget, torque_options=torque_options, optimizer_options=optimizer_options,
-        penalty_weight=penalty_weight, gradient=gradient,
+        penalty_weight=penalty_weight, gradient=gradient, **_residual(residual_weight),
         **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions),
     ))
     _check_store(db)
@@ -328,3 +329,11 @@ def optimize(
 
         write_atomic(save_params, params_json(spec, outcome), "--save-params")
     _finish(outcome.record, fmt, output, "fdbench optimize", quiet)
+
+
+def _residual(weight) -> dict:
+    """The spec field of ``--residual-weight`` (left out when not given, so the default follows the loads)."""
+    if weight is None:
+        return {}
+    _check_finite(residual_weight=weight)
+    return {"residual_weight": weight}

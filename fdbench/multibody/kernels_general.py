@@ -488,15 +488,14 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, l
             s, c = math.sin(psi), math.cos(psi)
             if abs(c) >= switch:  # the sin form, (y_j - y_i) - d sin(psi)
                 axis, phi, pivot, jdv = 1, ey - d * s, -d * c, d * s * w * w
-                curvature, twist = d * s, d * c * w * w  # d^2 Phi / d psi^2, d^3 Phi / d psi^3 w^2
             else:  # the cos form, (x_j - x_i) - d cos(psi)
                 axis, phi, pivot, jdv = 0, ex - d * c, d * s, d * c * w * w
-                curvature, twist = d * c, -d * s * w * w
             idx[0], val[0], idx[1], val[1] = kj + axis, 1.0, n_p + b, pivot
             if ki >= 0:
                 idx[2], val[2] = ki + axis, -1.0
-            if dz is not None and task == ASSEMBLE:
-                row_hess[r + 1, 1, 1], row_third[r + 1, 1] = curvature, twist
+            if dz is not None and task == ASSEMBLE:  # d2 Phi / d psi2 and d3 Phi / d psi3 w^2 of the form
+                row_hess[r + 1, 1, 1] = d * s if axis == 1 else d * c
+                row_third[r + 1, 1] = d * c * w * w if axis == 1 else -d * s * w * w
             worst = max(worst, row(r + 1, phi, jdv, 3 if ki >= 0 else 2, task))
             r += 2
         for lr in range(lin_const.shape[0]):

@@ -140,6 +140,9 @@ def check(spec) -> None:
 
     check_settings(spec.integrator, spec.dt, spec.rtol, spec.atol, spec.alpha, spec.xi, spec.omega)
     engine(spec, nominal(spec)), engine(spec)
+    if spec.residual_weight is not None and engine(spec).model.floating_base is None:
+        raise ValueError(f"--residual-weight needs a model with a floating base (a free joint on ground); "
+                         f"{engine(spec).model.name!r} has none")
     desired, _ = motions(spec)
     if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":
         _check_samples_on_grid(spec, desired)
@@ -381,7 +384,15 @@ def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, 
     from ..problem import TrackingProblem
 
     return TrackingProblem(torque, engine(spec), motions(spec)[0], feedforward, penalty_weight,
-                                nominal=engine(spec, nominal(spec)), **integration(spec), **options)
+                           nominal=engine(spec, nominal(spec)), residual_weight=residual_weight(spec),
+                           **integration(spec), **options)
+
+
+def residual_weight(spec) -> float:
+    """The weight of an optimisation's residual term in eq. 18 (``problem.residual_weight``)."""
+    from ..problem import residual_weight as weight
+
+    return weight(spec.residual_weight, engine(spec).model, loads(spec))
 
 
 def _saved_torque(spec, path):
@@ -454,6 +465,7 @@ def _optimize(spec, on_evaluation, on_start):
     record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
                   evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
                   n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
+                  **({"residual_weight": problem.residual_weight} if problem.base_column is not None else {}),
                   torque_options=options_text(sorted(options.items())),
                   optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
