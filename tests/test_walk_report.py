@@ -23,7 +23,8 @@ from typer.testing import CliRunner
 
 from cli_checks import assert_one_line_error
 from fdbench.cli import app
-from fdbench.walk import BFGS, CMAES, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, WalkRow
+from fdbench.problem import DEFAULT_RESIDUAL_WEIGHT
+from fdbench.walk import BFGS, CMAES, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, WALK_PENALTY, WalkRow
 from fdbench.walk_report import claim_lines, ranking
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "opensim"
@@ -145,6 +146,10 @@ def test_open_loop_is_pd_with_zero_gains_and_residuals_only_on_the_free_base(hop
     assert set(report["inverse_residuals"]) >= {"residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm"}
     assert report["bfgs"] is None  # exact gradients on a free base, its step fitted to the recording's samples
     assert walk[BFGS]["gradient"] == "exact" and walk[BFGS]["optimizer"] == "bfgs" and walk[BFGS]["feedforward"]
+    # eq. 18 on the walk: a fall penalised by WALK_PENALTY, the residuals weighted (loads given); the paper's on the forearm
+    for key in (CMAES, BFGS):
+        assert walk[key]["penalty_weight"] == WALK_PENALTY and walk[key]["residual_weight"] == DEFAULT_RESIDUAL_WEIGHT
+        assert forearm[key]["penalty_weight"] == 1.0 and "residual_weight" not in forearm[key]
 
 
 def test_markdown_tables_carry_every_method_and_coordinate(hop):
