@@ -9,6 +9,12 @@ in the same run, interleaved, REPEATS rounds of CALLS calls each after a warm-up
 the minimum over the rounds. Then an optimisation on the forearm: cs + bfgs, no feedforward,
 budget 200, with the finite-difference and with the exact gradient.
 
+Last, OpenSim's gait model on its recorded walk with its ground reactions (the dense kernels'
+sensitivities: a free pelvis, knees on paths, external loads; only where OpenSim is installed),
+cs per coordinate with feedforward (260 parameters) at the RK4 step fitted to the recording
+(1/1020 s): one plain evaluation against one value-and-gradient pass at the start, where the open
+loop falls at 0.44 s, and their cost per step reached.
+
 Run: python benchmarks/bench_gradient.py
 """
 
@@ -59,6 +65,30 @@ def per_call(problem) -> tuple[float, float]:
     return min(plain), min(exact)
 
 
+def walk_problem():
+    """(problem, steps reached) of the walk's CS + feedforward shooting problem, or None without OpenSim."""
+    from pathlib import Path
+
+    from fdbench.multibody.description import load_model
+    from fdbench.multibody.loads import read_external_loads
+    from fdbench.multibody.motions import joint_motion
+    from fdbench.multibody.simulation import dt_on_samples
+
+    folder = Path(__file__).resolve().parent.parent / "examples" / "opensim"
+    try:
+        model = load_model(folder / "subject01.osim")
+    except Exception as exc:  # noqa: BLE001 - no OpenSim: the gait model is not measured
+        print(f"subject01: not measured ({' '.join(str(exc).split())[:100]})")
+        return None
+    motion = joint_motion(folder / "subject01_walk_IK.mot", model)
+    loads = read_external_loads(folder / "subject01_walk_grf.xml", model).shifted(motion.start_s)
+    knots = int(round(motion.duration / 0.1)) + 1  # a knot every 0.1 s, as the walk report's
+    problem = TrackingProblem("cs", Engine(model, loads=loads), motion, True, dt=dt_on_samples(1e-3, motion.samples),
+                              knots=knots)
+    result = problem.simulate(problem.p0)
+    return problem, int(round(result.t_end / problem.dt))
+
+
 def main() -> None:
     print(f"{platform.processor() or platform.machine()}, python {platform.python_version()}")
     print(f"{'model':<9}{'torque':<8}{'ff':<6}{'P':>4}{'objective ms':>14}{'value+grad ms':>15}{'ratio':>8}"
@@ -76,6 +106,14 @@ def main() -> None:
         record = run(optimize_spec("cs", "bfgs", budget=200, gradient=gradient)).record
         print(f"  --gradient {gradient:<6} rmse_rot_deg {record['rmse_rot_deg']:.4f}  evaluations {record['evaluations']:>3}"
               f"  runtime_s {record['runtime_s']:.3f}  ({record['stop_reason']})")
+    walk = walk_problem()
+    if walk is not None:
+        problem, reached = walk
+        p, e = per_call(problem)
+        print(f"\nsubject01 walk, cs + ff, {problem.n_params} parameters, {reached} steps reached of "
+              f"{int(round(problem.duration / problem.dt))}: objective {1e3 * p:.1f} ms, value+grad {1e3 * e:.1f} ms "
+              f"(ratio {e / p:.1f}; {1e6 * e / reached:.0f} us per step against {1e6 * p / reached:.1f}); finite "
+              f"differences would take {(problem.n_params + 1) * p / e:.0f} times the exact gradient's time")
 
 
 if __name__ == "__main__":
