@@ -71,6 +71,7 @@ def methods(budget: int, popsize: int, collocation: bool = True, bfgs: bool = Fa
     from .beyond import COLLOCATION_SUMMARY
     from .collocation import DEFAULT_NODES
     from .controllers import CONTROLLERS
+    from .problem import DEFAULT_RESIDUAL_WEIGHT
 
     out = [
         WalkMethod(OPEN_LOOP, "Open loop (inverse-dynamics torques)",
@@ -88,8 +89,8 @@ def methods(budget: int, popsize: int, collocation: bool = True, bfgs: bool = Fa
     out.append(WalkMethod(CMAES, f"CS + CMA-ES + ff (budget {budget})",
                           "a cubic spline per coordinate (a knot every 0.1 s) added to the inverse-dynamics torques, "
                           f"tuned by CMA-ES (population {popsize}, seed 0) on eq. 18 (a fall penalised by "
-                          f"{penalty_weight:g} deg; on a floating base with loads, the residuals' RMS by 0.01 deg "
-                          "per N and per N m)",
+                          f"{penalty_weight:g} deg; on a floating base with loads, the residuals' RMS by "
+                          f"{DEFAULT_RESIDUAL_WEIGHT:g} deg per N and per N m)",
                           _shooting("cmaes", budget, {"popsize": popsize}, penalty_weight=penalty_weight,
                                     **common)))
     if bfgs:
