@@ -36,7 +36,7 @@ from fdbench.multibody import engine as mb
 from fdbench.multibody import kernels
 from fdbench.multibody.description import GROUND, Body, Joint, Model
 from bench_speed_limit import c_loop_ms
-from kernel_call import half_step_grid, model_and_motion, rk4_call
+from kernel_call import gait_walk, half_step_grid, model_and_motion, rk4_call
 from timing import best_of
 
 REPEAT, NUMBER = 5, 10
@@ -131,19 +131,12 @@ def library_kernel(name: str):
 def gait_simulation(mode: int):
     """subject01 on its walk under PD plus feedforward or computed torque: (steps, call), or None
     without OpenSim."""
-    from pathlib import Path
-
-    from fdbench.multibody.description import load_model
-    from fdbench.multibody.motions import joint_motion
-
-    folder = Path(__file__).resolve().parent.parent / "examples" / "opensim"
-    try:
-        model = load_model(folder / "subject01.osim")
-    except Exception as exc:  # noqa: BLE001 - no OpenSim: the gait model is not measured
-        print(f"subject01: not measured ({' '.join(str(exc).split())[:100]})")
+    walk = gait_walk()
+    if walk is None:
         return None
+    model, motion, _ = walk
     engine = mb.Engine(model)
-    grid = half_step_grid(engine, joint_motion(folder / "subject01_walk_IK.mot", model))
+    grid = half_step_grid(engine, motion)
     computed = mode == kernels.COMPUTED
     tau = np.zeros_like(grid.tau) if computed else grid.tau
     kp, kd = (400.0, 40.0) if computed else (300.0, 30.0)

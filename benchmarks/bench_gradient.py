@@ -30,7 +30,7 @@ from fdbench.multibody import description as d
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk
 from fdbench.problem import TrackingProblem
-from kernel_call import model_and_motion
+from kernel_call import gait_walk, model_and_motion
 from timing import best_of
 
 CALLS = 10
@@ -67,20 +67,13 @@ def per_call(problem) -> tuple[float, float]:
 
 def walk_problem():
     """(problem, steps reached) of the walk's CS + feedforward shooting problem, or None without OpenSim."""
-    from pathlib import Path
-
-    from fdbench.multibody.description import load_model
     from fdbench.multibody.loads import read_external_loads
-    from fdbench.multibody.motions import joint_motion
     from fdbench.multibody.simulation import dt_on_samples
 
-    folder = Path(__file__).resolve().parent.parent / "examples" / "opensim"
-    try:
-        model = load_model(folder / "subject01.osim")
-    except Exception as exc:  # noqa: BLE001 - no OpenSim: the gait model is not measured
-        print(f"subject01: not measured ({' '.join(str(exc).split())[:100]})")
+    walk = gait_walk()
+    if walk is None:
         return None
-    motion = joint_motion(folder / "subject01_walk_IK.mot", model)
+    model, motion, folder = walk
     loads = read_external_loads(folder / "subject01_walk_grf.xml", model).shifted(motion.start_s)
     knots = int(round(motion.duration / 0.1)) + 1  # a knot every 0.1 s, as the walk report's
     problem = TrackingProblem("cs", Engine(model, loads=loads), motion, True, dt=dt_on_samples(1e-3, motion.samples),

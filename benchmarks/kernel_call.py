@@ -34,6 +34,23 @@ def model_and_motion(name: str):
     return Engine(model), joint_motion(default_motion(name), model)
 
 
+def gait_walk():
+    """(model, motion, folder) of OpenSim's gait model (examples/opensim/subject01.osim) on its
+    recorded walk, or None (with a line saying why) where OpenSim is not installed."""
+    from pathlib import Path
+
+    from fdbench.multibody.description import load_model
+    from fdbench.multibody.motions import joint_motion
+
+    folder = Path(__file__).resolve().parent.parent / "examples" / "opensim"
+    try:
+        model = load_model(folder / "subject01.osim")
+    except Exception as exc:  # noqa: BLE001 - no OpenSim: the gait model is not measured
+        print(f"subject01: not measured ({' '.join(str(exc).split())[:100]})")
+        return None
+    return model, joint_motion(folder / "subject01_walk_IK.mot", model), folder
+
+
 def half_step_grid(engine, motion, dt: float = 1e-3) -> HalfStepGrid:
     """The motion and its inverse-dynamics torques on the half-step grid of steps of about dt (s)."""
     from fdbench.integrate import steps
