@@ -6,6 +6,9 @@ any, the machine and a timestamp. Every write is one transaction, so a process k
 moment leaves every stored run intact; WAL journaling and a busy timeout let several processes
 write to one database. Only an empty file or a new name becomes a database: any other file
 without fdbench's metadata (another program's SQLite database included) is refused and never written.
+A database another local user could have planted or can change is refused before SQLite opens it
+(see :func:`check_path`); a new database is built beside its name and linked into place whole, so a
+creation that fails (a full disk) leaves nothing behind.
 A run replaced by ``--rerun`` is kept, with its id, in ``superseded_runs``: an id cited by a
 report always names a stored run.
 """
@@ -16,7 +19,9 @@ import json
 import os
 import platform
 import sqlite3
+import stat
 import subprocess
+import tempfile
 import time
 from contextlib import contextmanager
 from datetime import datetime, timezone
@@ -28,6 +33,7 @@ SCHEMA_NAME = "fdbench-results"
 SCHEMA_VERSION = "1"
 SUPERSEDED = "superseded_runs"  # runs replaced by a rerun, kept with their ids
 OPEN_PATIENCE_S = 10.0  # how long opening waits for a lock held by another program
+COMPANIONS = ("-wal", "-shm", "-journal")  # the files SQLite keeps beside a database
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS fdbench_meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -59,6 +65,27 @@ class StoreError(Exception):
     """The database cannot be used; the message says which file and why."""
 
 
+class DamagedRow(StoreError):
+    """A stored run whose JSON cannot be read; the message names the column and why."""
+
+
+def parse_stored(text, column: str, kinds: tuple = (dict,)):
+    """The value of a stored JSON column, of one of the types ``kinds`` (None allowed where
+    ``type(None)`` is among them); DamagedRow (one line) for text that is not JSON, is nested too
+    deeply, or holds another type."""
+    if text is None and type(None) in kinds:
+        return None
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise DamagedRow(f"{column} is nested too deeply") from None
+    except (TypeError, ValueError) as exc:
+        raise DamagedRow(f"{column} is not JSON ({str(exc).split(':')[0]})") from None
+    if not isinstance(value, kinds):
+        raise DamagedRow(f"{column} holds {type(value).__name__}, not {' or '.join(k.__name__ for k in kinds)}")
+    return value
+
+
 def default_path() -> Path:
     return Path(os.environ.get("FDBENCH_DB") or DEFAULT_DB)
 
@@ -75,11 +102,13 @@ def open_store(path=None):
 def check_path(path) -> Path:
     """Refuse, without touching anything, a name that cannot be or become a results database: an
     empty name, ``:memory:``, a directory, a device or a pipe, a missing folder; for a new name, a
-    folder that cannot be written. Raises StoreError."""
+    folder that cannot be written; and (see :func:`check_trusted`) a database another local user
+    could have planted or can change. Raises StoreError."""
     if str(path) in ("", ":memory:"):
         raise StoreError(f"{str(path) or 'an empty name'} is not a file: the results database must be a file "
                          "that keeps the runs")
     path = Path(path)
+    target = resolve(path)
     if path.is_dir():
         raise StoreError(f"{path} is a directory, not a results database")
     if not path.parent.is_dir():
@@ -88,13 +117,145 @@ def check_path(path) -> Path:
         raise StoreError(f"{path} is not a regular file (a device or a pipe cannot hold results)")
     if not path.exists() and not os.access(path.parent, os.W_OK):
         raise StoreError(f"directory {path.parent} is not writable; the results database cannot be created there")
+    check_trusted(target)
     return path
+
+
+def _lstat(path: Path) -> os.stat_result | None:
+    try:
+        return os.lstat(path)
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise StoreError(f"cannot inspect {path}: {exc.strerror or exc}") from None
+
+
+def resolve(path: Path) -> Path:
+    """The file SQLite opens for the name ``path`` (a symbolic link followed; its ``-wal``,
+    ``-shm`` and ``-journal`` lie beside that file). StoreError for a link to nothing (fdbench
+    makes a new database only under the name it is given, never where a link points) and for a
+    link the kernel's ``fs.protected_symlinks`` would not follow: one owned by another user, in
+    a sticky world-writable folder (/tmp) that is not theirs."""
+    st = _lstat(path)
+    if st is None or not stat.S_ISLNK(st.st_mode):
+        return path
+    if not os.path.exists(path):
+        raise StoreError(f"{path} is a symbolic link to {os.readlink(path)}, which does not exist; fdbench makes a "
+                         "new results database only under the name it is given, not where a link points")
+    folder = os.stat(path.parent)
+    shared = folder.st_mode & stat.S_ISVTX and folder.st_mode & stat.S_IWOTH
+    if shared and st.st_uid != os.geteuid() and st.st_uid != folder.st_uid:
+        raise StoreError(f"{path} is a symbolic link made by another user (uid {st.st_uid}) in the shared folder "
+                         f"{path.parent}; fdbench does not follow it (as the kernel's protected_symlinks does not)")
+    return Path(os.path.realpath(path))
+
+
+def companions(target: Path) -> list[tuple[Path, os.stat_result]]:
+    """The ``-wal``, ``-shm`` and ``-journal`` files present beside the database file ``target``,
+    with their lstat. StoreError for one that is a symbolic link or not a regular file: SQLite
+    would write through it (and then delete the link), so it is refused before SQLite opens."""
+    found = []
+    for suffix in COMPANIONS:
+        file = Path(f"{target}{suffix}")
+        st = _lstat(file)
+        if st is None:
+            continue
+        if stat.S_ISLNK(st.st_mode):
+            raise StoreError(f"{file} is a symbolic link (to {os.readlink(file)}), not SQLite's own {suffix} file: "
+                             "SQLite would write through it; remove it (fdbench never makes one)")
+        if not stat.S_ISREG(st.st_mode):
+            raise StoreError(f"{file} is not a regular file, not SQLite's own {suffix} file; remove it")
+        found.append((file, st))
+    return found
+
+
+def foreign(file: Path, st: os.stat_result) -> str | None:
+    """Why another local user could have planted or can change ``file``: owned by another user,
+    or writable by every user; None if neither."""
+    if st.st_uid != os.geteuid():
+        return f"{file} belongs to another user (uid {st.st_uid})"
+    if st.st_mode & stat.S_IWOTH:
+        return f"{file} is writable by every user (mode {stat.S_IMODE(st.st_mode):o})"
+    return None
+
+
+def check_trusted(target: Path) -> None:
+    """Refuse a database file (``target``, as resolved) or one of its companions that another
+    local user could have planted or can change: fdbench writes runs only into a database that
+    is the user's own (its ``runs`` commands may read any database they can read)."""
+    files = companions(target)
+    st = _lstat(target)
+    for file, file_st in ([(target, st)] if st is not None else []) + files:
+        reason = foreign(file, file_st)
+        if reason:
+            raise StoreError(f"{reason}: another user could have planted it or could change its runs; fdbench writes "
+                             "only to a database of its own user that no other user can write: use another --db")
+
+
+def _create_new(path: Path) -> None:
+    """Make a new, empty results database at ``path`` (its tables, WAL journaling): built in a
+    temporary file beside it and linked into place whole, so that other processes see no file
+    or a whole database, and a creation that fails (a full disk) leaves nothing behind. If
+    another process made ``path`` meanwhile, its database is kept."""
+    fd, name = tempfile.mkstemp(prefix=".fdbench-", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    temporary = Path(name)
+    db = None
+    try:
+        from .files import _umask
+
+        os.chmod(temporary, 0o666 & ~_umask())  # as SQLite would create it
+        db = sqlite3.connect(temporary, isolation_level=None)
+        db.executescript("BEGIN IMMEDIATE;" + _SCHEMA)
+        db.execute("INSERT INTO fdbench_meta VALUES ('schema', ?), ('version', ?)", (SCHEMA_NAME, SCHEMA_VERSION))
+        db.execute("COMMIT")
+        db.execute("PRAGMA journal_mode = WAL")  # kept in the file: every later connection uses it
+        db.close()
+        db = None
+        try:
+            os.link(temporary, path)  # never replaces a database made meanwhile
+        except FileExistsError:
+            pass
+        except OSError:  # a file system without hard links
+            if not path.exists():
+                os.rename(temporary, path)
+    except (sqlite3.Error, OSError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else exc
+        raise StoreError(f"cannot create the results database {path}: {reason}; nothing was left behind") from None
+    finally:
+        if db is not None:
+            db.close()
+        for leftover in [temporary] + [Path(f"{temporary}{suffix}") for suffix in COMPANIONS]:
+            try:
+                os.unlink(leftover)
+            except FileNotFoundError:
+                pass
+
+
+def _remove_empty_companions(target: Path, before: set) -> None:
+    """After a failed initialisation of the empty file ``target``: remove the companions it made
+    (those not in ``before``), provided the database and its journal still hold nothing, so that
+    a later open does not meet a half-made ``-shm`` ("disk I/O error")."""
+    made = [Path(f"{target}{suffix}") for suffix in COMPANIONS if Path(f"{target}{suffix}") not in before]
+    try:
+        if os.path.getsize(target) > 0 or any(f.exists() and f.stat().st_size > 0 for f in made if f.name[-4:] != "-shm"):
+            return
+    except OSError:
+        return
+    for file in made:
+        try:
+            os.unlink(file)
+        except OSError:
+            pass
 
 
 class Store:
     def __init__(self, path):
         self.path = check_path(path)
-        if self.path.exists() and self.path.stat().st_size > 0:
+        if not self.path.exists():
+            _create_new(self.path)
+            check_trusted(resolve(self.path))  # the database made by another process meanwhile, if any
+        elif self.path.stat().st_size > 0:
             _check_header(self.path)
         self.db = None
         try:
@@ -118,8 +279,15 @@ class Store:
             elif pages > 0:  # only an empty file or a new name becomes a results database
                 raise StoreError(f"{self.path} is an SQLite database of something else ({_contents(objects)}); "
                                  "it was left untouched")
-            else:
-                self._create()
+            else:  # an empty file of the user's own: made a database in place
+                target = resolve(self.path)
+                before = {file for file, _ in companions(target)}
+                try:
+                    self._create()
+                except BaseException:
+                    self.close()
+                    _remove_empty_companions(target, before)
+                    raise
         except sqlite3.DatabaseError as exc:
             self.close()
             raise StoreError(f"{self.path} cannot be used as a results database ({exc}); it was left untouched") from None
@@ -205,12 +373,20 @@ class Store:
 
     def get(self, spec_hash: str) -> dict | None:
         """The stored run with this settings hash, or None."""
-        rows = self._query("SELECT record_json, history_json, params_json FROM runs WHERE spec_hash = ?", (spec_hash,))
-        row = rows[0] if rows else None
-        if row is None:
-            return None
-        return {"record": json.loads(row[0]), "history": json.loads(row[1]),
-                "params": json.loads(row[2]) if row[2] else None}
+        rows = self._query("SELECT id, record_json, history_json, params_json FROM runs WHERE spec_hash = ?",
+                           (spec_hash,))
+        return self._run(rows[0]) if rows else None
+
+    def _run(self, row) -> dict:
+        """{id, record, history, params} of a row (id, record_json, history_json, params_json);
+        StoreError naming the database and the row for a damaged one."""
+        try:
+            return {"id": row[0], "record": parse_stored(row[1], "record_json"),
+                    "history": parse_stored(row[2], "history_json", (list,)),
+                    "params": parse_stored(row[3] or None, "params_json", (list, type(None)))}
+        except DamagedRow as exc:
+            raise StoreError(f"{self.path}: stored run id {row[0]} is damaged ({exc}); it was left untouched: "
+                             "--rerun replaces it, or use another --db") from None
 
     def hashes(self) -> set[str]:
         return {row[0] for row in self._query("SELECT spec_hash FROM runs")}
@@ -219,7 +395,8 @@ class Store:
         return self._query("SELECT COUNT(*) FROM runs")[0][0]
 
     def records(self) -> list[dict]:
-        return [json.loads(row[0]) for row in self._query("SELECT record_json FROM runs ORDER BY id")]
+        return [self._run((row[0], row[1], "[]", None))["record"]
+                for row in self._query("SELECT id, record_json FROM runs ORDER BY id")]
 
     def ids(self, hashes) -> dict[str, int]:
         """{spec hash: row id} of the runs stored now under ``hashes``."""
@@ -229,9 +406,7 @@ class Store:
     def runs_by_id(self, ids) -> dict[int, dict]:
         """{row id: {id, record, history, params}} of these rows, whether current or replaced
         since by a rerun (see :meth:`put`): an id once read stays readable."""
-        return {row[0]: {"id": row[0], "record": json.loads(row[1]), "history": json.loads(row[2]),
-                         "params": json.loads(row[3]) if row[3] else None}
-                for row in self._rows_by_id("id, record_json, history_json, params_json", ids)}
+        return {row[0]: self._run(row) for row in self._rows_by_id("id, record_json, history_json, params_json", ids)}
 
     def provenance(self, runs) -> dict:
         """{spec hash: {id, created_at, machine, jobs, git_commit, fdbench_version}}: when, where

@@ -4,6 +4,11 @@ list, show, export and compare.
 The database is opened read-only (an SQLite ``mode=ro`` URI): nothing is created, no journal
 mode is switched, nothing is written. SQLite itself may leave the ``-wal`` and ``-shm``
 companions of a WAL database behind, as any reader of one does; the next writer removes them.
+A database that is not the user's own (another user's, one in a folder the user cannot write,
+or one that others can write) is read as ``immutable``: SQLite then writes nothing at all, not
+even its shared index, and creates no file; changes another user's writer has not yet moved from
+its ``-wal`` into the database are not seen (a warning says so). A stored run whose JSON is
+damaged is skipped with a warning naming the database and its id.
 """
 
 from __future__ import annotations
@@ -11,11 +16,14 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import sqlite3
+import sys
 from pathlib import Path
 from urllib.parse import quote
 
-from .store import OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, StoreError, _check_header
+from .store import (OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, DamagedRow, StoreError, _check_header,
+                    companions, foreign, parse_stored, resolve)
 
 # the columns of ``fdbench runs list``, in order
 LIST_COLUMNS = ("id", "created_at", "command", "model", "method", "seed", "rmse_rot_deg", "rmse_torque_nm",
@@ -48,6 +56,8 @@ def open_read_only(path) -> sqlite3.Connection:
     path = Path(path)
     if str(path) in ("", ":memory:"):
         raise StoreError(f"{str(path) or 'an empty name'} is not a results database file")
+    if os.path.islink(path) and not path.exists():
+        raise StoreError(f"no results database at {path} (a symbolic link to {os.readlink(path)}, which does not exist)")
     if not path.exists():
         raise StoreError(f"no results database at {path}")
     if path.is_dir():
@@ -57,7 +67,8 @@ def open_read_only(path) -> sqlite3.Connection:
     if path.stat().st_size == 0:
         raise StoreError(f"{path} is empty: no runs are stored there")
     _check_header(path)
-    uri = f"file:{quote(str(path.resolve()))}?mode=ro"
+    target = resolve(path)
+    uri = f"file:{quote(str(target.resolve()))}?mode=ro" + ("" if _own(target) else "&immutable=1")
     try:
         db = sqlite3.connect(uri, uri=True, timeout=OPEN_PATIENCE_S, isolation_level=None)
     except sqlite3.Error as exc:
@@ -79,6 +90,35 @@ def open_read_only(path) -> sqlite3.Connection:
     return db
 
 
+def _own(target: Path) -> bool:
+    """Whether the database file ``target`` and its companions are the user's own, in a folder the
+    user can write: then SQLite reads it as usual (sharing its ``-wal`` and ``-shm`` with a writer
+    at work). Otherwise it is to be read as immutable, with a warning if its ``-wal`` holds
+    changes that are then not seen. StoreError for a companion that is a link (SQLite would write
+    through it)."""
+    files = companions(target)
+    if all(foreign(file, st) is None for file, st in [(target, os.stat(target))] + files) and \
+            os.access(target.parent, os.W_OK):
+        return True
+    wal = [file for file, st in files if str(file).endswith("-wal") and st.st_size > 0]
+    if wal:
+        warn(f"{target} is not your own database: it is read without writing anything, and the changes its "
+             f"writer has not yet moved from {wal[0].name} into it are not shown")
+    return False
+
+
+_WARNED: set = set()
+
+
+def warn(message: str) -> None:
+    """One line on stderr (once per process): something read was not used, and why."""
+    if message in _WARNED:
+        return
+    _WARNED.add(message)
+    sys.stderr.write(f"fdbench: warning: {' '.join(message.split())}\n")
+    sys.stderr.flush()
+
+
 def _check_fdbench(db: sqlite3.Connection, path: Path) -> None:
     tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     if "fdbench_meta" not in tables or "runs" not in tables:
@@ -95,10 +135,11 @@ def _check_fdbench(db: sqlite3.Connection, path: Path) -> None:
 # ---- reading --------------------------------------------------------------------------------
 
 
-def read_runs(path, superseded: bool = False) -> list[dict]:
+def read_runs(path, superseded: bool = False, damaged: dict | None = None) -> list[dict]:
     """Every stored run of the database at ``path``, oldest first: its id, settings hash,
     command, seed, settings (``spec``), record, when, where and by what it was made. With
-    ``superseded``, the runs replaced by a ``--rerun`` follow (``run["superseded"]`` True)."""
+    ``superseded``, the runs replaced by a ``--rerun`` follow (``run["superseded"]`` True).
+    A damaged run is skipped: put in ``damaged`` ({id: why}) if given, else named in a warning."""
     from .store import SUPERSEDED
 
     db = open_read_only(path)
@@ -113,13 +154,24 @@ def read_runs(path, superseded: bool = False) -> list[dict]:
         raise StoreError(f"cannot read the results database {path}: {exc}") from None
     finally:
         db.close()
-    return [dict(_run(dict(zip(_COLUMNS, row))), superseded=table != "runs") for table, row in rows]
+    runs = []
+    for table, row in rows:
+        try:
+            runs.append(dict(_run(dict(zip(_COLUMNS, row))), superseded=table != "runs"))
+        except DamagedRow as exc:
+            if damaged is not None:
+                damaged[row[0]] = str(exc)
+            else:
+                where = "" if table == "runs" else f" (in {table})"
+                warn(f"{path}: stored run id {row[0]}{where} is damaged ({exc}); skipped")
+    return runs
 
 
 def _run(row: dict) -> dict:
-    spec = json.loads(row.pop("spec_json"))
-    record = json.loads(row.pop("record_json"))
-    versions = json.loads(row.pop("versions_json") or "null")
+    """A stored run from its row; DamagedRow if a JSON column cannot be read."""
+    spec = parse_stored(row.pop("spec_json"), "spec_json")
+    record = parse_stored(row.pop("record_json"), "record_json")
+    versions = parse_stored(row.pop("versions_json"), "versions_json", (dict, type(None)))
     run = dict(row, spec=spec, record=record, versions=versions)
     run["status"] = row["status"] if row["status"] is not None else record.get("status")
     run["model"] = spec.get("model_name") or "forearm"
@@ -140,7 +192,11 @@ def read_run_data(path, run_id: int, superseded: bool = False) -> tuple[list, li
         raise StoreError(f"cannot read the results database {path}: {exc}") from None
     finally:
         db.close()
-    return json.loads(row[0]), json.loads(row[1]) if row[1] else None
+    try:
+        return parse_stored(row[0], "history_json", (list,)), parse_stored(row[1] or None, "params_json",
+                                                                           (list, type(None)))
+    except DamagedRow as exc:
+        raise StoreError(f"{path}: stored run id {run_id} is damaged ({exc})") from None
 
 
 def method_label(spec: dict) -> str:
