@@ -84,6 +84,9 @@ class FdbenchGroup(TyperGroup):
                 code = _error(f"--db: {exc}", 2)
             elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
                 code = _error(str(exc), 2)
+            elif _output_full(exc):  # help or version text into '> /dev/full': as any full output
+                _closed_stdout()
+                code = _error(f"standard output: cannot write: {exc.strerror}", 2)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:
@@ -194,17 +197,23 @@ def write_stdout(text: str) -> None:
         stream.write(text)
         stream.flush()
         return
-    stream.flush()
-    data = memoryview(text.encode(stream.encoding or "utf-8", stream.errors or "strict"))
-    while data:
-        written = binary.write(data)
-        if written is None:  # a non-blocking stdout that is full: wait until it can take more
-            import select
+    try:
+        stream.flush()
+        data = memoryview(text.encode(stream.encoding or "utf-8", stream.errors or "strict"))
+        while data:
+            written = binary.write(data)
+            if written is None:  # a non-blocking stdout that is full: wait until it can take more
+                import select
 
-            select.select([], [binary.fileno()], [])
-            continue
-        data = data[written:]
-    binary.flush()
+                select.select([], [binary.fileno()], [])
+                continue
+            data = data[written:]
+        binary.flush()
+    except BrokenPipeError:
+        raise
+    except OSError as exc:  # '> /dev/full', a full disk: as for '-o FILE', bad output, exit 2
+        _closed_stdout()  # what is left in the buffer is dropped, not written again at exit
+        raise BadInput(f"standard output: cannot write the results: {exc.strerror or exc}") from None
 
 
 def _flush_stdout(code: int) -> int:
@@ -217,8 +226,18 @@ def _flush_stdout(code: int) -> int:
     except (BrokenPipeError, ValueError):  # ValueError: stdout closed by the command itself
         return _closed_stdout()
     except OSError as exc:  # a full disk under '> file': the results are not all there
-        return _error(f"cannot write the results to standard output: {exc.strerror or exc}", 1)
+        _closed_stdout()
+        return _error(f"standard output: cannot write the results: {exc.strerror or exc}", 2)
     return code
+
+
+def _output_full(exc: BaseException) -> bool:
+    """An OSError of a full output (no space, quota, file size limit) with no file named: what
+    click's own writes to standard output (help, version) raise."""
+    import errno
+
+    return (isinstance(exc, OSError) and exc.filename is None
+            and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG))
 
 
 def _closed_stdout() -> int:
@@ -256,7 +275,7 @@ app = typer.Typer(
 
 def _version(value: bool):
     if value:
-        typer.echo(f"fdbench {__version__}")
+        write_stdout(f"fdbench {__version__}\n")
         raise typer.Exit()
 
 
