@@ -122,8 +122,21 @@ def test_list_csv_carries_the_stored_indicators(unchanged):
 
 def test_the_table_shows_every_run_and_its_method(unchanged):
     a, _ = unchanged
-    text = invoke("runs", "list", "--db", a).stdout
+    text = invoke("runs", "list", "--db", a, env={"COLUMNS": "200"}).stdout
     assert "4 runs" in text and "cs + bfgs" in text and "lqr" in text
+
+
+def test_a_table_into_a_pipe_keeps_to_80_columns_where_it_can_and_never_cuts_a_number(unchanged):
+    """Off a terminal (CliRunner's stdout is not one) and without COLUMNS, a table wraps its words to
+    about 80 columns (157 to 206 before); every indicator stored still shows whole, as the CSV has it."""
+    a, _ = unchanged
+    text = invoke("runs", "list", "--db", a, env={"COLUMNS": None}).stdout
+    assert max(len(line) for line in text.splitlines()) <= 110, text  # 11 columns: their longest words need 103
+    words = set(text.split())
+    for row in csv.DictReader(io.StringIO(invoke("runs", "list", "--db", a, "-f", "csv").stdout)):
+        for name in ("rmse_rot_deg", "rmse_torque_nm", "runtime_s"):
+            assert f"{float(row[name]):.4g}" in words, (name, row[name], text)
+    assert "--------" not in text and "…" not in text  # nothing cut short
 
 
 @pytest.mark.parametrize("option, value, present", [

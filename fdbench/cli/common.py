@@ -68,6 +68,22 @@ def _console(stderr: bool = True):
     return Console(stderr=stderr, highlight=False)
 
 
+def _text_console():
+    """A console that renders results into text (``capture``) and never writes standard output:
+    as wide as the terminal, with its colours, when stdout is one; otherwise plain text of
+    $COLUMNS (default 80) columns, as a script reading a pipe or a file expects."""
+    import io
+    import os
+
+    from rich.console import Console
+
+    if sys.stdout is not None and sys.stdout.isatty():
+        return _console(stderr=False)
+    columns = os.environ.get("COLUMNS", "")
+    width = int(columns) if columns.isdigit() and int(columns) > 0 else 80
+    return Console(file=io.StringIO(), width=width, color_system=None, highlight=False)
+
+
 def _say(quiet: bool, text: str) -> None:
     if not quiet:
         _console().print(text, soft_wrap=True)
@@ -95,7 +111,7 @@ def _render(record: dict, fmt: str, title: str) -> str:
         if value is None or value == "":
             continue
         table.add_row(key, _format_value(value))
-    console = _console(stderr=False)
+    console = _text_console()
     with console.capture() as capture:
         console.print(table)
     return capture.get()

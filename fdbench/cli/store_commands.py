@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from .app import BadInput, SubcommandGroup, app
-from .common import _check_outputs, _console, _emit, _render
+from .common import _check_outputs, _emit, _render
 from .options import Output
 
 
@@ -50,12 +50,12 @@ def _database(db: Optional[Path]) -> tuple[Path, str]:
     return (db, "--db") if db is not None else (default_path(), "--db (default)")
 
 
-def _read(path: Path, label: str, superseded: bool = False) -> list[dict]:
+def _read(path: Path, label: str, superseded: bool = False, damaged: dict | None = None) -> list[dict]:
     from ..store import StoreError
     from ..store_queries import read_runs
 
     try:
-        return read_runs(path, superseded)
+        return read_runs(path, superseded, damaged)
     except StoreError as exc:
         hint = "; name one with --db or $FDBENCH_DB" if label == "--db (default)" and not path.exists() else ""
         raise BadInput(f"{label}: {exc}{hint}") from None
@@ -90,26 +90,59 @@ def _cell(column: str, value) -> str:
 
 
 def _table(title: str, rows: list[dict], columns, headings=HEADINGS) -> str:
+    """A person's table of ``rows`` as text, as wide as the terminal (off a terminal: $COLUMNS or
+    80 columns): its words wrap within their columns (one longer than LONG_WORD is folded); a
+    number is never cut, so a table that cannot fit is as wide as its numbers need."""
     from rich import box
     from rich.table import Table
 
-    table = Table(title=title, show_header=True, box=box.SIMPLE_HEAD)
-    for column in columns:
-        table.add_column(headings.get(column, column), no_wrap=column != "conditions")
-    for row in rows:
-        table.add_row(*(_cell(c, row.get(c)) for c in columns))
-    return _printed(table)
+    from .common import _text_console
 
-
-def _printed(table) -> str:
-    """A rich table as text, as wide as its values need (a number is never folded)."""
-    console = _console(stderr=False)
-    width = console.width
-    console.width = 10_000  # measured without a bound
-    console.width = max(width, console.measure(table).maximum)
+    titles = [headings.get(c, c) for c in columns]
+    cells = [[_cell(c, row.get(c)) for c in columns] for row in rows]
+    texts = [[title] + [row[i] for row in cells] for i, title in enumerate(titles)]
+    widest = [max(len(text) for text in column) for column in texts]
+    numbers = [all(_is_number(text) for text in column[1:]) for column in texts]
+    narrowest = [max(len(word) for j, text in enumerate(column) for word in
+                     ([text] if numbers[i] and j else text.split() or [""])) for i, column in enumerate(texts)]
+    narrowest = [n if numbers[i] else min(n, LONG_WORD) for i, n in enumerate(narrowest)]
+    table = Table(title=title, show_header=True, box=box.SIMPLE_HEAD, pad_edge=False)
+    for heading in titles:
+        table.add_column(heading, overflow="fold")  # a word longer than LONG_WORD (a path) is folded
+    for row in cells:
+        table.add_row(*row)
+    console = _text_console()
+    target, console.width = console.width, 10_000  # measured without a bound
+    room = target - (console.measure(table).maximum - sum(widest))  # less padding and rules
+    for column, width in zip(table.columns, _fit(widest, narrowest, room)):
+        column.width = width
+    console.width = max(target, console.measure(table).maximum)
     with console.capture() as capture:
         console.print(table)
     return capture.get()
+
+
+LONG_WORD = 24  # characters: a longer word (a file path) may be folded to fit a table
+
+
+def _fit(widest: list, narrowest: list, room: int) -> list:
+    """Column widths (characters) from ``widest`` down to no less than ``narrowest``, the widest
+    column narrowed first, until they sum to ``room`` or can be narrowed no more."""
+    widths = list(widest)
+    while sum(widths) > room:
+        shrinkable = [k for k in range(len(widths)) if widths[k] > narrowest[k]]
+        if not shrinkable:
+            break
+        widths[max(shrinkable, key=lambda k: widths[k])] -= 1
+    return widths
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return text == ""
+    return True
 
 
 def _csv(rows: list[dict], columns) -> str:
@@ -159,7 +192,10 @@ def show_run(
 
     path, label = _database(db)
     _check_outputs(fmt, SHOW_FORMATS, db=path, output=output)
-    runs = _read(path, label, superseded=True)  # an id a report cites may have been replaced since
+    damaged = {}
+    runs = _read(path, label, superseded=True, damaged=damaged)  # an id a report cites may have been replaced since
+    if run.strip() in {str(key) for key in damaged}:
+        raise BadInput(f"ID: stored run id {run.strip()} of {path} is damaged ({damaged[int(run.strip())]})")
     try:
         found = find_run(runs, run.strip())
         history, params = read_run_data(path, found["id"], found["superseded"])
