@@ -49,13 +49,49 @@ def _in_place(path: Path, st: os.stat_result | None) -> bool:
     return special or not stat.S_ISREG(st.st_mode) or st.st_nlink > 1
 
 
+def _shared(folder: Path) -> os.stat_result | None:
+    """The stat of ``folder`` if it is sticky and writable by every user (/tmp), else None."""
+    try:
+        st = os.stat(folder)
+    except OSError:
+        return None
+    return st if st.st_mode & stat.S_ISVTX and st.st_mode & stat.S_IWOTH else None
+
+
+def check_shared_folder(path: Path, option: str) -> None:
+    """Refuse what the kernel's ``fs.protected_symlinks`` and ``fs.protected_regular`` refuse in a
+    sticky folder writable by every user (/tmp), which the atomic writer's resolve-and-rename would
+    otherwise get past: following a symbolic link another user made there, and replacing a file
+    another user owns there (the folder's owner excepted, as for the kernel)."""
+    try:
+        link = os.lstat(path)
+    except OSError:
+        return
+    if stat.S_ISLNK(link.st_mode):
+        folder = _shared(path.parent)
+        if folder is not None and link.st_uid not in (os.geteuid(), folder.st_uid):
+            raise BadFile(f"{option}: {path} is a symbolic link made by another user (uid {link.st_uid}) in the "
+                          f"shared folder {path.parent}; fdbench does not follow it (as the kernel's protected_symlinks "
+                          "does not): choose another name")
+    target = Path(os.path.realpath(path))
+    st = _stat(target, option)
+    folder = _shared(target.parent)
+    if st is not None and stat.S_ISREG(st.st_mode) and folder is not None \
+            and st.st_uid not in (os.geteuid(), folder.st_uid):
+        raise BadFile(f"{option}: {target} belongs to another user (uid {st.st_uid}) in the shared folder "
+                      f"{target.parent}; fdbench does not write over it (as the kernel's protected_regular does not): "
+                      "choose another name")
+
+
 def check_writable(path: str | os.PathLike, option: str) -> Path:
     """Fail early, before any work, if ``path`` cannot be written as an output: a directory, a
     socket, a missing folder, a read-only, append-only or immutable file (even for root: the user
-    protected it), an unwritable folder."""
+    protected it), an unwritable folder, and in a shared folder (/tmp) a link or a file of another
+    user (see check_shared_folder)."""
     path = Path(path)
     if str(path) in ("", "."):
         raise BadFile(f"{option}: an empty file name")
+    check_shared_folder(path, option)
     st = _stat(path, option)
     if st is not None and stat.S_ISDIR(st.st_mode):
         raise BadFile(f"{option}: {path} is a directory")
@@ -128,12 +164,13 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--ou
 
     A regular file (or a new name) is replaced atomically by a rename, keeping its permission bits
     (and owner, where allowed): a reader sees the old file or the whole new one. A symlink is
-    written through (its target is replaced, the link stays). Devices, FIFOs, ``/dev/stdout``,
+    written through (its target is replaced, the link stays), except one another user made in a
+    shared folder such as /tmp (refused, see check_shared_folder). Devices, FIFOs, ``/dev/stdout``,
     files with other hard links and files of an append-only folder are opened and written in
     place. A write that fails raises BadFile naming ``option``; the temporary file is removed on
     every exit but SIGKILL (Ctrl-C and SIGTERM wait for the write to end), and the next write
     into that folder removes what a killed writer left behind."""
-    path = check_writable(path, option)
+    path = check_writable(path, option)  # checked again: a link may have been planted since the first check
     payload = data.encode() if isinstance(data, str) else bytes(data)
     try:
         st = _stat(path)
@@ -210,6 +247,28 @@ def _remove_stale_temporaries(folder: Path) -> None:
                 os.unlink(entry.path)
         except OSError:
             pass
+
+
+@contextmanager
+def new_folder(directory: str | os.PathLike):
+    """Within the block, ``directory`` exists; if the block fails and the folder was created here,
+    it is removed again with what the block wrote into it (a full disk leaves no empty ``figs/``).
+    A folder that existed is kept as it is."""
+    import shutil
+
+    directory = Path(directory)
+    created = not os.path.lexists(directory)
+    if created:
+        try:
+            directory.mkdir()
+        except OSError as exc:
+            raise BadFile(f"--figures: cannot create {directory}: {exc.strerror or exc}") from None
+    try:
+        yield directory
+    except BaseException:
+        if created:
+            shutil.rmtree(directory, ignore_errors=True)
+        raise
 
 
 def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:

@@ -50,9 +50,10 @@ class BadQuery(ValueError):
 # ---- opening --------------------------------------------------------------------------------
 
 
-def open_read_only(path) -> sqlite3.Connection:
+def open_read_only(path, say_unseen: bool = True) -> sqlite3.Connection:
     """A read-only connection to the fdbench results database at ``path``; StoreError with one
-    line for a missing file, a directory, a device, or a file that is not an fdbench database."""
+    line for a missing file, a directory, a device, or a file that is not an fdbench database.
+    ``say_unseen``: warn if changes in another user's ``-wal`` are not seen (see ``_own``)."""
     path = Path(path)
     if str(path) in ("", ":memory:"):
         raise StoreError(f"{str(path) or 'an empty name'} is not a results database file")
@@ -68,7 +69,7 @@ def open_read_only(path) -> sqlite3.Connection:
         raise StoreError(f"{path} is empty: no runs are stored there")
     _check_header(path)
     target = resolve(path)
-    uri = f"file:{quote(str(target.resolve()))}?mode=ro" + ("" if _own(target) else "&immutable=1")
+    uri = f"file:{quote(str(target.resolve()))}?mode=ro" + ("" if _own(target, say_unseen) else "&immutable=1")
     try:
         db = sqlite3.connect(uri, uri=True, timeout=OPEN_PATIENCE_S, isolation_level=None)
     except sqlite3.Error as exc:
@@ -90,7 +91,7 @@ def open_read_only(path) -> sqlite3.Connection:
     return db
 
 
-def _own(target: Path) -> bool:
+def _own(target: Path, say_unseen: bool = True) -> bool:
     """Whether the database file ``target`` and its companions are the user's own, in a folder the
     user can write: then SQLite reads it as usual (sharing its ``-wal`` and ``-shm`` with a writer
     at work). Otherwise it is to be read as immutable, with a warning if its ``-wal`` holds
@@ -101,20 +102,14 @@ def _own(target: Path) -> bool:
             os.access(target.parent, os.W_OK):
         return True
     wal = [file for file, st in files if str(file).endswith("-wal") and st.st_size > 0]
-    if wal:
+    if wal and say_unseen:
         warn(f"{target} is not your own database: it is read without writing anything, and the changes its "
              f"writer has not yet moved from {wal[0].name} into it are not shown")
     return False
 
 
-_WARNED: set = set()
-
-
 def warn(message: str) -> None:
-    """One line on stderr (once per process): something read was not used, and why."""
-    if message in _WARNED:
-        return
-    _WARNED.add(message)
+    """One line on stderr: something read was not used, and why."""
     sys.stderr.write(f"fdbench: warning: {' '.join(message.split())}\n")
     sys.stderr.flush()
 
@@ -184,7 +179,7 @@ def read_run_data(path, run_id: int, superseded: bool = False) -> tuple[list, li
     stored run ``run_id`` (None for a run without parameters), from the superseded runs if asked."""
     from .store import SUPERSEDED
 
-    db = open_read_only(path)
+    db = open_read_only(path, say_unseen=False)  # said when its runs were read
     try:
         table = SUPERSEDED if superseded else "runs"
         row = db.execute(f"SELECT history_json, params_json FROM {table} WHERE id = ?", (run_id,)).fetchone()
@@ -201,12 +196,15 @@ def read_run_data(path, run_id: int, superseded: bool = False) -> tuple[list, li
 
 def method_label(spec: dict) -> str:
     """A run's method in a few words: 'cs + bfgs + ff' (torque + optimiser, with feedforward),
-    the controller ('pd', 'lqr'), 'collocation', the peer ('opensim', 'moco'), or the command."""
+    the controller ('pd', 'lqr'; 'open loop' for PD with Kp = Kd = 0), 'collocation', the peer ('opensim', 'moco'), or the command."""
     command = spec.get("command")
     if command == "optimize":
         return f"{spec.get('torque')} + {spec.get('optimizer')}" + (" + ff" if spec.get("feedforward") else "")
     if command == "control":
-        return spec.get("controller") or "pd"
+        controller = spec.get("controller") or "pd"
+        if controller == "pd" and spec.get("kp") == 0 and spec.get("kd") == 0:
+            return "open loop"  # the walk's: the feedforward alone, as PD with no gains
+        return controller
     if command == "collocate":
         return "collocation"
     if command == "peer":  # its name among its options: 'opensim', 'moco'

@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from .app import BadInput, SubcommandGroup, app
-from .common import _check_outputs, _emit, _render
+from .common import _check_outputs, _emit, _render, _say
 from .options import Output
 
 
@@ -145,6 +145,12 @@ def _is_number(text: str) -> bool:
     return True
 
 
+def _wrote(output: Optional[Path], what: str) -> None:
+    """One line on stderr once an output file is written, as every command says."""
+    if output is not None and str(output) != "-":
+        _say(False, f"wrote {output} ({what})")
+
+
 def _csv(rows: list[dict], columns) -> str:
     from ..files import csv_text
 
@@ -177,6 +183,7 @@ def list_runs(
     else:
         text = _table(f"{len(rows)} runs in {path}", rows, LIST_COLUMNS)
     _emit(text, output)
+    _wrote(output, f"{len(rows)} runs")
 
 
 @runs_app.command("show")
@@ -204,10 +211,8 @@ def show_run(
     except StoreError as exc:
         raise BadInput(f"{label}: {exc}") from None
     shown = show(found, history, params)
-    if fmt == "json":
-        _emit(json.dumps(shown, indent=2) + "\n", output)
-        return
-    _emit(_show_text(shown), output)
+    _emit(json.dumps(shown, indent=2) + "\n" if fmt == "json" else _show_text(shown), output)
+    _wrote(output, f"run {shown['id']}")
 
 
 def _show_text(shown: dict) -> str:
@@ -254,6 +259,7 @@ def export_runs(
         _emit(json.dumps(rows, indent=2) + "\n", output)
     else:
         _emit(_csv(rows, list(dict.fromkeys(k for row in rows for k in row))), output)
+    _wrote(output, f"{len(rows)} runs")
 
 
 def _check_parquet(output: Optional[Path]) -> None:
@@ -320,6 +326,7 @@ def compare_runs(
     else:
         _emit(_table(f"A = {database_a}, B = {database_b}", [_side_by_side(row) for row in rows],
                      ("method", "conditions", "found", "runs", *INDICATOR_HEADINGS.values())), output)
+    _wrote(output, f"{len(rows)} cells")
 
 
 INDICATOR_HEADINGS = {"rmse_rot_deg": "RMSE rot (deg): A -> B", "rmse_torque_nm": "RMSE torque (N m): A -> B",

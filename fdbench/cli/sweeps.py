@@ -252,7 +252,10 @@ def study(
     else:
         links = None
         if figures is not None:
-            written = studies.write_figures(sweep, rows, figures)
+            from ..files import new_folder
+
+            with new_folder(figures):  # removed again if a figure cannot be written
+                written = studies.write_figures(sweep, rows, figures)
             base = output.parent if output is not None else Path(".")
             links = {title: os.path.relpath(path, base) for title, path in written.items()}
             _say(quiet, f"wrote {len(written)} figures to {figures}")
@@ -444,7 +447,11 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
     if figures is not None:
         from ..figures import write_report_figures
 
-        links = write_report_figures(plan, runs, rows, inverse, figures, output.parent if output is not None else Path("."))
+        from ..files import new_folder
+
+        with new_folder(figures):  # removed again if a figure cannot be written
+            links = write_report_figures(plan, runs, rows, inverse, figures,
+                                         output.parent if output is not None else Path("."))
         _say(quiet, f"wrote {len(links)} figures to {figures}")
     section = beyond_markdown(extra_rows, methods) if methods else None
     if peer_rows:

@@ -81,10 +81,13 @@ def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures
         return json.dumps(walk_report.json_report(plan, walk_rows, forearm_rows, fields, settings, claim), indent=2) + "\n"
     links = None
     if figures is not None:
+        from ..files import new_folder
         from ..walk_figures import write_walk_figures
 
-        links = write_walk_figures(spec, inverse, walk_rows, runs, figures,
-                                   output.parent if output is not None and str(output) != "-" else Path("."), processes)
+        with new_folder(figures):  # removed again if a figure cannot be written
+            links = write_walk_figures(spec, inverse, walk_rows, runs, figures,
+                                       output.parent if output is not None and str(output) != "-" else Path("."),
+                                       processes)
         _say(quiet, f"wrote {len(links)} figures to {figures}")
     names, kinds = walk.coordinates(spec)
     return walk_report.markdown(plan, walk_rows, forearm_rows, inverse, fields, names, kinds, settings,
