@@ -244,12 +244,15 @@ def _with_file_size_limit(limit: int, args: list, cwd: Path) -> subprocess.Compl
 
 @pytest.mark.parametrize("existing", [False, True], ids=["new name", "empty file"])
 def test_a_full_disk_leaves_no_database_and_no_journal(tmp_path, existing):
-    """The issue's case left a 0-byte database, a 3-byte -shm and an empty -wal, and sqlite3 then
-    said "disk I/O error". The limit (2 KiB) is below one SQLite page (4 KiB)."""
+    """The issue's case (a refused report) left a 0-byte database, an empty figs/, a 3-byte -shm
+    and an empty -wal, and sqlite3 then said "disk I/O error". The limit (2 KiB) is below one
+    SQLite page (4 KiB); the report is refused before any run (no kernel is compiled)."""
     db = tmp_path / "new.sqlite"
     if existing:
         db.touch()
-    done = _with_file_size_limit(2048, ["control", "--db", str(db), "-q"], tmp_path)
+    done = _with_file_size_limit(2048, ["report", "--db", str(db), "--figures", "figs", "--no-control", "--torque",
+                                        "cs", "--opt", "bfgs", "--no-feedforward", "--seeds", "1", "--budget", "2",
+                                        "--jobs", "1", "-q"], tmp_path)
     assert done.returncode == 2, done.stderr
     lines = done.stderr.splitlines()
     assert len(lines) == 1 and lines[0].startswith(PREFIX) and "new.sqlite" in lines[0], done.stderr

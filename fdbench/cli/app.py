@@ -84,7 +84,7 @@ class FdbenchGroup(TyperGroup):
                 code = _error(f"--db: {exc}", 2)
             elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
                 code = _error(str(exc), 2)
-            elif _output_full(exc):  # help or version text into '> /dev/full': as any full output
+            elif _output_full(exc):  # help text into '> /dev/full': as any full output
                 _closed_stdout()
                 code = _error(f"standard output: cannot write: {exc.strerror}", 2)
             elif os.environ.get("FDBENCH_DEBUG"):
@@ -232,12 +232,15 @@ def _flush_stdout(code: int) -> int:
 
 
 def _output_full(exc: BaseException) -> bool:
-    """An OSError of a full output (no space, quota, file size limit) with no file named: what
-    click's own writes to standard output (help, version) raise."""
+    """An OSError of a full output (no space, quota, file size limit) raised by click's or
+    typer's own writes of the help to standard output."""
     import errno
+    import traceback
 
-    return (isinstance(exc, OSError) and exc.filename is None
-            and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG))
+    if not isinstance(exc, OSError) or exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+        return False
+    return any(frame.name in ("echo", "format_help") and ("click" in frame.filename or "typer" in frame.filename)
+               for frame in traceback.extract_tb(exc.__traceback__))
 
 
 def _closed_stdout() -> int:

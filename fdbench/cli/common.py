@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -162,11 +163,15 @@ def _save_history(outcome, path) -> None:
 
 def _check_store(db: Optional[Path]) -> None:
     """Refuse an unusable --db before any work starts: not a database, damaged, read-only,
-    locked."""
+    locked, planted by another user. A new name is only checked: the database is made when the
+    run is stored, so a command that fails leaves none behind."""
     if db is not None:
-        from ..store import StoreError, open_store
+        from ..store import StoreError, check_path, open_store
 
         try:
+            if not os.path.lexists(db):
+                check_path(db)
+                return
             with open_store(db) as store:
                 store.check_usable()
         except StoreError as exc:
