@@ -166,7 +166,7 @@ def _run(row: dict) -> dict:
     """A stored run from its row; DamagedRow if a JSON column cannot be read."""
     spec = parse_stored(row.pop("spec_json"), "spec_json")
     record = parse_stored(row.pop("record_json"), "record_json")
-    versions = parse_stored(row.pop("versions_json"), "versions_json", (dict, type(None)))
+    versions = parse_stored(row.pop("versions_json") or None, "versions_json", (dict, type(None)))
     run = dict(row, spec=spec, record=record, versions=versions)
     run["status"] = row["status"] if row["status"] is not None else record.get("status")
     run["model"] = spec.get("model_name") or "forearm"
