@@ -59,6 +59,7 @@ DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as m
 DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY
 DEFAULT_RESIDUAL_MOMENT_WEIGHT = 1e-3  # deg^2 / (N m)^2 on MZ
 DEFAULT_MAX_ITER = 1000
+MAX_ITER = 1_000_000  # IPOPT's (and Moco's) iteration limit is a C int; beyond 1e6 --max-time ends a solve first
 DEFAULT_MAX_TIME = 60.0  # s of IPOPT CPU time
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 IPOPT_HINTS = {
@@ -89,8 +90,9 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
             continue
         if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
             raise ValueError(f"{option} must be a non-negative finite number, got {value}")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise ValueError(f"--max-iter must be an integer >= 1, got {max_iter}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or not 1 <= max_iter <= MAX_ITER:
+        shown = str(max_iter) if len(str(max_iter)) <= 24 else str(max_iter)[:20] + "..."
+        raise ValueError(f"--max-iter must be an integer in [1, {MAX_ITER}], got {shown}")
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
         raise ValueError(f"--max-time must be a positive finite number of seconds, got {max_time}")
 

@@ -148,6 +148,9 @@ def test_an_iteration_limit_is_a_status_with_a_message():
     (["--regularization", -1e-3], "--regularization"),
     (["--regularization", "nan"], "--regularization"),
     (["--max-iter", 0], "--max-iter"),
+    (["--max-iter", 2**31], "--max-iter"),  # beyond IPOPT's C int: it printed its option help and exited 1
+    (["--max-iter", 10**20], "--max-iter"),  # wrapped to 0 iterations and exited 0
+    (["--max-iter", 10**6 + 1], "[1, 1000000]"),
     (["--max-time", 0], "--max-time"),
     (["--kinematics", "approx"], "--kinematics"),
     (["--residual-force-weight", -1], "--residual-force-weight"),

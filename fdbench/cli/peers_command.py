@@ -25,7 +25,7 @@ def peer(
     nodes: Annotated[int, typer.Option("--nodes", help="moco: mesh intervals over the motion's span, >= 2 (collocate's default).")] = 100,
     regularization: Annotated[float, typer.Option("--regularization", help="moco: weight of the integral of torque^2 beside that of the squared angle error in deg^2, deg^2/(N m)^2 (collocate's).")] = 1e-6,
     tolerance: Annotated[float, typer.Option("--tolerance", help="moco: IPOPT's convergence and constraint tolerance in MocoTrack, in (0, 1).")] = 1e-4,
-    max_iter: Annotated[int, typer.Option("--max-iter", help="moco: IPOPT iteration limit.")] = 1000,
+    max_iter: Annotated[int, typer.Option("--max-iter", help="moco: IPOPT iteration limit, in [1, 1000000].")] = 1000,
     kinematics: Kinematics = None,
     dt: Dt = 1e-3,
     alpha: Alpha = 1e7,
