@@ -271,7 +271,9 @@ def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray
     ``began``: the perf_counter time the transcription began (default now).
 
     Never raises on a solver failure: IPOPT's status says what happened."""
-    import casadi as ca
+    from .casadi_loader import casadi
+
+    ca = casadi()
 
     began = time.perf_counter() if began is None else began
     t = track.t

@@ -418,3 +418,34 @@ def test_collocate_records_a_floating_bases_units_apart_and_its_residual_weights
     weighted = json.loads(invoke(base + ["--residual-force-weight", 0.01]).stdout)
     assert weighted["residual_force_weight"] == 0.01 and weighted["residual_moment_weight"] == 1e-6
     assert weighted["spec_hash"] != record["spec_hash"]
+
+
+def test_casadi_works_with_opensim_s_library_folder_first_on_ld_library_path(tmp_path):
+    """Importing opensim (or OpenSim's Linux install instructions) puts its library folder, which
+    holds an older libcasadi, on LD_LIBRARY_PATH. A plain 'import casadi' then fails (checked
+    here, so that the test shows the environment is the hostile one); LQR control and collocation
+    still run and give the same indicators as without it."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+
+    found = importlib.util.find_spec("opensim")
+    if found is None:
+        pytest.skip("the opensim package is not installed")
+    env = dict(os.environ, LD_LIBRARY_PATH=list(found.submodule_search_locations)[0])
+    plain = subprocess.run([sys.executable, "-c", "import casadi"], capture_output=True, text=True, env=env,
+                           timeout=120)
+    if plain.returncode == 0:
+        pytest.skip("this opensim package's libraries do not clash with casadi's")
+    assert "undefined symbol" in plain.stderr
+    for args in (["control", "--controller", "lqr", "--model", "arm2"],
+                 ["collocate", "--model", "arm2", "--nodes", "10"]):
+        done = subprocess.run([sys.executable, "-m", "fdbench.cli", *args, "-f", "json", "-q"], capture_output=True,
+                              text=True, env=env, cwd=tmp_path, timeout=600)
+        assert done.returncode == 0, done.stderr
+        clean = invoke([*args, "-f", "json", "-q"])
+        assert clean.exit_code == 0, clean.stderr
+        theirs, ours = json.loads(done.stdout), json.loads(clean.stdout)
+        assert theirs["status"] == "success" and theirs["rmse_rot_deg"] == pytest.approx(ours["rmse_rot_deg"],
+                                                                                          rel=1e-9), (theirs, ours)

@@ -206,7 +206,9 @@ def collocate(
                                      residual_moment_weight, **_noise_seed(conditions, seed),
                                      **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
     try:
-        import casadi  # noqa: F401
+        from ..casadi_loader import casadi
+
+        casadi()
     except ImportError as exc:
         raise ImportError(f"'fdbench collocate' needs casadi (pip install casadi): {exc}") from None
     _check_store(db)
