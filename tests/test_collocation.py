@@ -420,6 +420,28 @@ def test_collocate_records_a_floating_bases_units_apart_and_its_residual_weights
     assert weighted["spec_hash"] != record["spec_hash"]
 
 
+def test_a_repeated_collocation_reuses_its_transcription_and_solves_each_motion_as_a_fresh_one():
+    """The built solver is kept per structure (model, mesh, scheme, options): a second motion of
+    the same structure reuses it (no new solver is built) and gets exactly the solution a freshly
+    built transcription gives it; another mesh builds another."""
+    from fdbench import collocation
+
+    collocation._SOLVERS.clear()
+    solve("paper", nodes=20)
+    assert len(collocation._SOLVERS) == 1
+    kept = next(iter(collocation._SOLVERS.values()))[1]
+    reused = solve("exact", nodes=20)  # another desired motion, the same structure
+    assert len(collocation._SOLVERS) == 1 and next(iter(collocation._SOLVERS.values()))[1] is kept
+    collocation._SOLVERS.clear()
+    fresh = solve("exact", nodes=20)
+    assert fresh.ipopt_status == reused.ipopt_status == "Solve_Succeeded"
+    np.testing.assert_array_equal(reused.angles, fresh.angles)
+    np.testing.assert_array_equal(reused.torque, fresh.torque)
+    assert not np.allclose(solve("paper", nodes=20).angles, fresh.angles)  # the motions do differ
+    solve("exact", nodes=21)
+    assert len(collocation._SOLVERS) == 2
+
+
 def test_casadi_works_with_opensim_s_library_folder_first_on_ld_library_path(tmp_path):
     """Importing opensim (or OpenSim's Linux install instructions) puts its library folder, which
     holds an older libcasadi, on LD_LIBRARY_PATH. A plain 'import casadi' then fails (checked

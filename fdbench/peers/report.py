@@ -1,6 +1,7 @@
 """The report's "Peers" section: OpenSim's PD simulation, its CMCTool and Moco's MocoTrack on the
 report's model, motion and settings, with the columns of the PD row, then each peer beside the
-fdbench method it stands for (PD control, direct collocation): accuracy and time, their ratio,
+fdbench method it stands for (PD control beside OpenSim's simulation, computed-torque control beside CMC, direct
+collocation beside MocoTrack): accuracy and time, their ratio,
 and whether fdbench meets its goal against that peer (``GOAL``: at least 10 times faster at equal
 or better RMSE_rot)."""
 
@@ -11,7 +12,10 @@ import math
 from ..beyond import Method
 from ..benchmark import summarise
 
-PAIRS = {"opensim": "control", "opensim-cmc": "control", "moco": "collocate"}  # peer: the fdbench command beside it
+# peer: the fdbench methods it stands beside, the first found among the report's rows: (command, controller, table)
+PAIRS = {"opensim": (("control", "pd", "control"),),
+         "opensim-cmc": (("control", "computed-torque", None), ("control", "pd", "control")),
+         "moco": (("collocate", None, None),)}
 GOAL = 10.0  # fdbench's goal: at least this many times faster than each peer...
 SAME_ACCURACY = 0.01  # ...at equal or better RMSE_rot: fdbench's at most 1 % above the peer's
 
@@ -86,9 +90,7 @@ def side_by_side(rows: list, ours: list) -> list[dict]:
     pairs = []
     for row in rows:
         rec = row.records[0]
-        command = PAIRS.get(rec.get("peer"))
-        match = next((r for r in ours if r.records and r.records[0].get("command") == command
-                      and (command != "control" or r.table == "control")), None)
+        match = _match(PAIRS.get(rec.get("peer"), ()), ours)
         if match is None:
             continue
         mine = match.records[0]
@@ -97,12 +99,24 @@ def side_by_side(rows: list, ours: list) -> list[dict]:
             built = (mine.get("build_time_s") or 0.0) + (mine.get("solve_time_s") or math.nan)
             times.append((rec.get("solve_time_s"), built, True))
         for theirs, our, alone in times:
-            pair = {"fdbench": match.name, "peer": row.name, "model": str(row.specs[0].model_name) if row.specs else None,
+            pair = {"fdbench": match.name, "peer": row.name, "model": _model_name(row),
                     "rmse_rot_deg_fdbench": mine.get("rmse_rot_deg"), "rmse_rot_deg_peer": rec.get("rmse_rot_deg"),
                     "runtime_s_fdbench": our, "runtime_s_peer": theirs, "time_ratio": _quotient(theirs, our)}
             pair.update(goal_met=goal_met(pair), **({"solve_alone": True} if alone else {}))
             pairs.append(pair)
     return pairs
+
+
+def _match(wanted, ours):
+    """The first of ``ours`` (report rows) that is one of the methods ``wanted`` ((command,
+    controller or None, table or None), in order of preference); None without one."""
+    for command, controller, table in wanted:
+        for row in ours:
+            rec = row.records[0] if row.records else {}
+            if (rec.get("command") == command and (controller is None or (rec.get("controller") or "pd") == controller)
+                    and (table is None or row.table == table)):
+                return row
+    return None
 
 
 def goal_met(pair: dict) -> bool:
@@ -132,6 +146,13 @@ def goal_sentence(pair: dict) -> str:
     where = f" on {pair['model']}" if pair.get("model") else ""
     return (f"- {pair['fdbench']} against {pair['peer']}{where}: {speed} (RMSE_rot {_g(ours)} against {_g(theirs)} "
             f"deg); {verdict}.")
+
+
+def _model_name(row) -> str | None:
+    """The row's model as the reader knows it: its name, or a model file's name without its folder."""
+    from pathlib import Path
+
+    return Path(str(row.specs[0].model_name)).name if row.specs else None
 
 
 def _plain(pair: dict) -> dict:
