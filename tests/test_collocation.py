@@ -420,25 +420,38 @@ def test_collocate_records_a_floating_bases_units_apart_and_its_residual_weights
     assert weighted["spec_hash"] != record["spec_hash"]
 
 
+class Shifted:
+    """A motion ``base`` with every angle raised by ``offset`` (rad)."""
+
+    def __init__(self, base, offset: float):
+        self.base, self.offset, self.duration = base, offset, base.duration
+
+    def __call__(self, t):
+        z, zd, zdd = self.base(t)
+        return np.asarray(z) + self.offset, zd, zdd
+
+
 def test_a_repeated_collocation_reuses_its_transcription_and_solves_each_motion_as_a_fresh_one():
-    """The built solver is kept per structure (model, mesh, scheme, options): a second motion of
-    the same structure reuses it (no new solver is built) and gets exactly the solution a freshly
-    built transcription gives it; another mesh builds another."""
+    """The built solver is kept per structure (model, mesh, scheme, options): another motion of
+    the same structure (the exact motion raised by 0.1 rad) reuses it (no new solver is built),
+    gets exactly the solution a freshly built transcription gives it, and follows its own
+    angles, 0.1 rad above the first motion's solution; another mesh builds another."""
     from fdbench import collocation
 
     collocation._SOLVERS.clear()
-    solve("paper", nodes=20)
+    first = collocate(MODEL, joint_motion("exact", MODEL), 20)
     assert len(collocation._SOLVERS) == 1
     kept = next(iter(collocation._SOLVERS.values()))[1]
-    reused = solve("exact", nodes=20)  # another desired motion, the same structure
+    raised = Shifted(joint_motion("exact", MODEL), 0.1)
+    reused = collocate(MODEL, raised, 20)
     assert len(collocation._SOLVERS) == 1 and next(iter(collocation._SOLVERS.values()))[1] is kept
     collocation._SOLVERS.clear()
-    fresh = solve("exact", nodes=20)
+    fresh = collocate(MODEL, raised, 20)
     assert fresh.ipopt_status == reused.ipopt_status == "Solve_Succeeded"
     np.testing.assert_array_equal(reused.angles, fresh.angles)
     np.testing.assert_array_equal(reused.torque, fresh.torque)
-    assert not np.allclose(solve("paper", nodes=20).angles, fresh.angles)  # the motions do differ
-    solve("exact", nodes=21)
+    np.testing.assert_allclose(reused.angles, first.angles + 0.1, atol=1e-4)  # rad: each tracks its own motion
+    collocate(MODEL, raised, 21)
     assert len(collocation._SOLVERS) == 2
 
 

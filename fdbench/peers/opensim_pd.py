@@ -131,7 +131,10 @@ def solve(osim, request: dict) -> dict:
 
 def _hermite(times, values, rates, at):
     """Angles and rates (shape (len(at), J)) at the times ``at`` (s) by cubic Hermite interpolation
-    of the integrator's steps: ``values`` (rad) and ``rates`` (rad/s), shape (n, J), at ``times``."""
+    of the integrator's steps: ``values`` (rad) and ``rates`` (rad/s), shape (n, J), at ``times``
+    (a time recorded twice counted once)."""
+    keep = np.concatenate([[True], np.diff(times) > 0])
+    times, values, rates = times[keep], values[keep], rates[keep]
     k = np.clip(np.searchsorted(times, at, side="right") - 1, 0, len(times) - 2)
     h = (times[k + 1] - times[k])[:, None]
     s = ((at - times[k])[:, None]) / h
