@@ -17,9 +17,14 @@ import sys
 LIBRARY = re.compile(r"^libcasadi(\.so(\.\d+)*|(\.\d+)*\.dylib)$")  # libcasadi.so.3.7, libcasadi.3.7.dylib
 
 
+class CasadiClash(ImportError):
+    """casadi's own libraries could not be loaded first and others on LD_LIBRARY_PATH were (one line)."""
+
+
 def casadi():
-    """The casadi module, imported after its own libcasadi is loaded (``_preload``); ImportError
-    (one line naming LD_LIBRARY_PATH where that is the cause) when it cannot be imported."""
+    """The casadi module, imported after its own libcasadi is loaded (``_preload``); CasadiClash
+    (one line naming LD_LIBRARY_PATH and the folder at fault) when another libcasadi got in first,
+    ImportError when casadi cannot be imported otherwise."""
     if "casadi" in sys.modules:
         return sys.modules["casadi"]
     _preload()
@@ -27,11 +32,25 @@ def casadi():
         import casadi as ca
     except ImportError as exc:
         if "undefined symbol" in str(exc):
-            raise ImportError("casadi's libraries clash with others found first on LD_LIBRARY_PATH (OpenSim's "
-                              "bundle their own libcasadi): run fdbench without OpenSim's library folder on "
-                              "LD_LIBRARY_PATH") from None
+            raise CasadiClash(_clash_message()) from None
         raise
     return ca
+
+
+def _clash_message() -> str:
+    """One line: the first folder of LD_LIBRARY_PATH holding a libcasadi, and what to do."""
+    import os
+
+    def holds_casadi(folder: str) -> bool:
+        try:
+            return any(LIBRARY.match(name) for name in os.listdir(folder))
+        except OSError:
+            return False
+
+    folders = [f for f in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if f and holds_casadi(f)]
+    where = f" ({folders[0][:200]!r}, OpenSim's?)" if folders else ""
+    return (f"casadi's libraries clash with another libcasadi found first on LD_LIBRARY_PATH{where}: run fdbench "
+            "with that folder removed from LD_LIBRARY_PATH (env -u LD_LIBRARY_PATH fdbench ...)")
 
 
 @functools.lru_cache(maxsize=None)

@@ -484,3 +484,29 @@ def test_casadi_works_with_opensim_s_library_folder_first_on_ld_library_path(tmp
         theirs, ours = json.loads(done.stdout), json.loads(clean.stdout)
         assert theirs["status"] == "success" and theirs["rmse_rot_deg"] == pytest.approx(ours["rmse_rot_deg"],
                                                                                           rel=1e-9), (theirs, ours)
+
+
+def test_where_casadi_s_own_library_cannot_be_loaded_first_the_clash_is_one_line_naming_ld_library_path(tmp_path):
+    """Should loading casadi's own libcasadi first not help (here: not done), collocate and LQR
+    control stop before any work with one line naming LD_LIBRARY_PATH and the folder at fault."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+
+    found = importlib.util.find_spec("opensim")
+    if found is None:
+        pytest.skip("the opensim package is not installed")
+    folder = list(found.submodule_search_locations)[0]
+    env = dict(os.environ, LD_LIBRARY_PATH=folder)
+    entry = ("import sys; import fdbench.casadi_loader as loader; loader._preload = lambda: None; "
+             "from fdbench.cli import main; sys.argv[0] = 'fdbench'; main()")
+    for args in (["collocate", "--model", "arm2", "--nodes", "5"], ["control", "--controller", "lqr"]):
+        done = subprocess.run([sys.executable, "-c", entry, *args, "--db", tmp_path / "runs.sqlite"],
+                              capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+        if done.returncode == 0:
+            pytest.skip("this opensim package's libraries do not clash with casadi's")
+        lines = done.stderr.splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and "LD_LIBRARY_PATH" in lines[0], done.stderr
+        assert folder[:60] in lines[0] and done.stdout == ""
+        assert list(tmp_path.iterdir()) == []

@@ -126,11 +126,26 @@ def control(
     options = _applicable(ctx, options, CONTROLLERS, controller, "--controller")
     spec = _validated(control_spec(kp, kd, controller, options, **_noise_seed(conditions, seed),
                                    **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
+    if controller == "lqr":
+        _casadi_ready("control --controller lqr")
     _check_store(db)
     outcome = run(spec)
     _store(outcome, spec, db, quiet)  # the run is stored before any output is written
     _save_history(outcome, save_history)
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _casadi_ready(command: str) -> None:
+    """Import casadi before any work: bad input (one line naming LD_LIBRARY_PATH) where another
+    libcasadi found first clashes with it; one line naming the package where it is missing."""
+    from ..casadi_loader import CasadiClash, casadi
+
+    try:
+        casadi()
+    except CasadiClash as exc:
+        raise BadInput(str(exc)) from None
+    except ImportError as exc:
+        raise ImportError(f"'fdbench {command}' needs casadi (pip install casadi): {exc}") from None
 
 
 def _applicable(ctx: typer.Context, options: dict, registry, name: str, choice: str) -> dict:
@@ -205,12 +220,7 @@ def collocate(
     spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
                                      residual_moment_weight, **_noise_seed(conditions, seed),
                                      **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
-    try:
-        from ..casadi_loader import casadi
-
-        casadi()
-    except ImportError as exc:
-        raise ImportError(f"'fdbench collocate' needs casadi (pip install casadi): {exc}") from None
+    _casadi_ready("collocate")
     _check_store(db)
     outcome = run(spec)
     _store(outcome, spec, db, quiet)  # the run is stored before any output is written
