@@ -59,6 +59,7 @@ DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as m
 DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY
 DEFAULT_RESIDUAL_MOMENT_WEIGHT = 1e-3  # deg^2 / (N m)^2 on MZ
 DEFAULT_MAX_ITER = 1000
+MAX_ITER = 1_000_000  # IPOPT's (and Moco's) iteration limit is a C int; beyond 1e6 --max-time ends a solve first
 DEFAULT_MAX_TIME = 60.0  # s of IPOPT CPU time
 SOLVED = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 IPOPT_HINTS = {
@@ -89,8 +90,9 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
             continue
         if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
             raise ValueError(f"{option} must be a non-negative finite number, got {value}")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 1:
-        raise ValueError(f"--max-iter must be an integer >= 1, got {max_iter}")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or not 1 <= max_iter <= MAX_ITER:
+        shown = str(max_iter) if len(str(max_iter)) <= 24 else str(max_iter)[:20] + "..."
+        raise ValueError(f"--max-iter must be an integer in [1, {MAX_ITER}], got {shown}")
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
         raise ValueError(f"--max-time must be a positive finite number of seconds, got {max_time}")
 
@@ -254,6 +256,40 @@ def _defects(ca, z, w, a, h: float, scheme: str):
                       ca.vec(w[:, k1] - w[:, k0] - h / 2 * (a[:, k0] + a[:, k1])))
 
 
+SOLVERS_KEPT = 4  # built transcriptions kept in the process (the gait model's takes minutes to build)
+_SOLVERS: dict = {}
+
+
+def _solver(ca, actuation, m: int, J: int, P: int, h: float, scheme: str, tracking: np.ndarray, effort: np.ndarray,
+            max_iter: int, max_time: float):
+    """IPOPT's solver of the transcription (see ``transcribe``), built once per structure and kept
+    (``SOLVERS_KEPT``, the oldest dropped first): what changes from run to run, the desired z and
+    the load parameters at the points, are the NLP's parameters p = [loads, z_d] point by point,
+    and the initial state and the guess are the solver's inputs. The key is what the NLP's
+    structure depends on: the actuation Function (one per model and loads, ``symbolic``), the
+    number of points m, coordinates J and load parameters P, the step h (s), the scheme, the
+    weights and IPOPT's limits."""
+    key = (id(actuation), m, J, P, h, scheme, tracking.tobytes(), effort.tobytes(), max_iter, max_time)
+    found = _SOLVERS.get(key)
+    if found is not None and found[0] is actuation:
+        return found[1]
+    y, p = ca.MX.sym("y", 3 * J, m), ca.MX.sym("p", (P + J) * m)
+    given = ca.reshape(p, P + J, m)  # column k: point k's load parameters, then its desired z
+    cost = _point_cost(ca, actuation, tracking, effort)
+    objective = ca.mtimes(cost.map(m)(y, given[:P, :], given[P:, :]), ca.DM(quadrature_weights(m, h, scheme)))
+    defects = _defects(ca, y[:J, :], y[J:2 * J, :], y[2 * J:, :], h, scheme)
+    options = {
+        "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "verbose": False,
+        "ipopt.max_iter": max_iter, "ipopt.max_cpu_time": max_time, "ipopt.tol": 1e-10,
+        "error_on_fail": False,
+    }
+    solver = ca.nlpsol("collocation", "ipopt", {"x": ca.vec(y), "p": p, "f": objective, "g": defects}, options)
+    while len(_SOLVERS) >= SOLVERS_KEPT:
+        _SOLVERS.pop(next(iter(_SOLVERS)))
+    _SOLVERS[key] = (actuation, solver)  # the actuation kept alive, so that its id is not another's
+    return solver
+
+
 def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray, scheme: str, max_iter: int,
                max_time: float, began: float | None = None) -> CollocationResult:
     """Transcribe the tracking problem of a model with J coordinates at ``track``'s points with
@@ -266,10 +302,14 @@ def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray
     weight times ``_point_cost``, is the only nonlinear part and its Hessian is block diagonal
     (one 3J x 3J block per point): one mapped SX Function in an MX graph, no symbolic M^-1, no
     expansion. The initial state is fixed to the desired one; the guess is the desired motion.
-    ``began``: the perf_counter time the transcription began (default now).
+    ``began``: the perf_counter time the transcription began (default now). The built solver is
+    kept for the next problem of the same structure (``_solver``): a repeated collocation of the
+    same model, mesh and options skips the transcription.
 
     Never raises on a solver failure: IPOPT's status says what happened."""
-    import casadi as ca
+    from .casadi_loader import casadi
+
+    ca = casadi()
 
     began = time.perf_counter() if began is None else began
     t = track.t
@@ -277,24 +317,15 @@ def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray
     hs = scheme == "hermite-simpson"
     n = (m - 1) // 2 if hs else m - 1
     h = float(t[-1] - t[0]) / n
-
-    y = ca.MX.sym("y", 3 * J, m)
-    cost = _point_cost(ca, actuation, np.asarray(tracking, dtype=float), np.asarray(effort, dtype=float))
-    objective = ca.mtimes(cost.map(m)(y, track.loads.T, track.z.T), ca.DM(quadrature_weights(m, h, scheme)))
-    defects = _defects(ca, y[:J, :], y[J:2 * J, :], y[2 * J:, :], h, scheme)
-    x = ca.vec(y)
+    solver = _solver(ca, actuation, m, J, track.loads.shape[1], h, scheme, np.asarray(tracking, dtype=float),
+                     np.asarray(effort, dtype=float), int(max_iter), float(max_time))
     x0 = np.concatenate([track.z, track.zd, track.zdd], axis=1).ravel()  # point by point
     lbx, ubx = np.full(x0.size, -np.inf), np.full(x0.size, np.inf)
     lbx[:2 * J] = ubx[:2 * J] = x0[:2 * J]  # the initial state is the desired motion's
-    options = {
-        "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "verbose": False,
-        "ipopt.max_iter": int(max_iter), "ipopt.max_cpu_time": float(max_time), "ipopt.tol": 1e-10,
-        "error_on_fail": False,
-    }
-    solver = ca.nlpsol("collocation", "ipopt", {"x": x, "f": objective, "g": defects}, options)
+    parameters = np.concatenate([track.loads, track.z], axis=1).ravel()  # point by point: [loads, z_d]
     built = time.perf_counter()
     try:
-        solution = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0)
+        solution = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0, p=parameters)
         stats = solver.stats()
         values, f = np.asarray(solution["x"], dtype=float).ravel(), float(solution["f"])
         status, iterations = str(stats.get("return_status", "unknown")), int(stats.get("iter_count", 0))

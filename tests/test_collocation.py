@@ -148,6 +148,9 @@ def test_an_iteration_limit_is_a_status_with_a_message():
     (["--regularization", -1e-3], "--regularization"),
     (["--regularization", "nan"], "--regularization"),
     (["--max-iter", 0], "--max-iter"),
+    (["--max-iter", 2**31], "--max-iter"),  # beyond IPOPT's C int: it printed its option help and exited 1
+    (["--max-iter", 10**20], "--max-iter"),  # wrapped to 0 iterations and exited 0
+    (["--max-iter", 10**6 + 1], "[1, 1000000]"),
     (["--max-time", 0], "--max-time"),
     (["--kinematics", "approx"], "--kinematics"),
     (["--residual-force-weight", -1], "--residual-force-weight"),
@@ -415,3 +418,95 @@ def test_collocate_records_a_floating_bases_units_apart_and_its_residual_weights
     weighted = json.loads(invoke(base + ["--residual-force-weight", 0.01]).stdout)
     assert weighted["residual_force_weight"] == 0.01 and weighted["residual_moment_weight"] == 1e-6
     assert weighted["spec_hash"] != record["spec_hash"]
+
+
+class Shifted:
+    """A motion ``base`` with every angle raised by ``offset`` (rad)."""
+
+    def __init__(self, base, offset: float):
+        self.base, self.offset, self.duration = base, offset, base.duration
+
+    def __call__(self, t):
+        z, zd, zdd = self.base(t)
+        return np.asarray(z) + self.offset, zd, zdd
+
+
+def test_a_repeated_collocation_reuses_its_transcription_and_solves_each_motion_as_a_fresh_one():
+    """The built solver is kept per structure (model, mesh, scheme, options): another motion of
+    the same structure (the exact motion raised by 0.1 rad) reuses it (no new solver is built),
+    gets exactly the solution a freshly built transcription gives it, and follows its own
+    angles, 0.1 rad above the first motion's solution; another mesh builds another."""
+    from fdbench import collocation
+
+    collocation._SOLVERS.clear()
+    first = collocate(MODEL, joint_motion("exact", MODEL), 20)
+    assert len(collocation._SOLVERS) == 1
+    kept = next(iter(collocation._SOLVERS.values()))[1]
+    raised = Shifted(joint_motion("exact", MODEL), 0.1)
+    reused = collocate(MODEL, raised, 20)
+    assert len(collocation._SOLVERS) == 1 and next(iter(collocation._SOLVERS.values()))[1] is kept
+    collocation._SOLVERS.clear()
+    fresh = collocate(MODEL, raised, 20)
+    assert fresh.ipopt_status == reused.ipopt_status == "Solve_Succeeded"
+    np.testing.assert_array_equal(reused.angles, fresh.angles)
+    np.testing.assert_array_equal(reused.torque, fresh.torque)
+    np.testing.assert_allclose(reused.angles, first.angles + 0.1, atol=1e-4)  # rad: each tracks its own motion
+    collocate(MODEL, raised, 21)
+    assert len(collocation._SOLVERS) == 2
+
+
+def test_casadi_works_with_opensim_s_library_folder_first_on_ld_library_path(tmp_path):
+    """Importing opensim (or OpenSim's Linux install instructions) puts its library folder, which
+    holds an older libcasadi, on LD_LIBRARY_PATH. A plain 'import casadi' then fails (checked
+    here, so that the test shows the environment is the hostile one); LQR control and collocation
+    still run and give the same indicators as without it."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+
+    found = importlib.util.find_spec("opensim")
+    if found is None:
+        pytest.skip("the opensim package is not installed")
+    env = dict(os.environ, LD_LIBRARY_PATH=list(found.submodule_search_locations)[0])
+    plain = subprocess.run([sys.executable, "-c", "import casadi"], capture_output=True, text=True, env=env,
+                           timeout=120)
+    if plain.returncode == 0:
+        pytest.skip("this opensim package's libraries do not clash with casadi's")
+    assert "undefined symbol" in plain.stderr
+    for args in (["control", "--controller", "lqr", "--model", "arm2"],
+                 ["collocate", "--model", "arm2", "--nodes", "10"]):
+        done = subprocess.run([sys.executable, "-m", "fdbench.cli", *args, "-f", "json", "-q"], capture_output=True,
+                              text=True, env=env, cwd=tmp_path, timeout=600)
+        assert done.returncode == 0, done.stderr
+        clean = invoke([*args, "-f", "json", "-q"])
+        assert clean.exit_code == 0, clean.stderr
+        theirs, ours = json.loads(done.stdout), json.loads(clean.stdout)
+        assert theirs["status"] == "success" and theirs["rmse_rot_deg"] == pytest.approx(ours["rmse_rot_deg"],
+                                                                                          rel=1e-9), (theirs, ours)
+
+
+def test_where_casadi_s_own_library_cannot_be_loaded_first_the_clash_is_one_line_naming_ld_library_path(tmp_path):
+    """Should loading casadi's own libcasadi first not help (here: not done), collocate and LQR
+    control stop before any work with one line naming LD_LIBRARY_PATH and the folder at fault."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+
+    found = importlib.util.find_spec("opensim")
+    if found is None:
+        pytest.skip("the opensim package is not installed")
+    folder = list(found.submodule_search_locations)[0]
+    env = dict(os.environ, LD_LIBRARY_PATH=folder)
+    entry = ("import sys; import fdbench.casadi_loader as loader; loader._preload = lambda: None; "
+             "from fdbench.cli import main; sys.argv[0] = 'fdbench'; main()")
+    for args in (["collocate", "--model", "arm2", "--nodes", "5"], ["control", "--controller", "lqr"]):
+        done = subprocess.run([sys.executable, "-c", entry, *args, "--db", tmp_path / "runs.sqlite"],
+                              capture_output=True, text=True, env=env, cwd=tmp_path, timeout=300)
+        if done.returncode == 0:
+            pytest.skip("this opensim package's libraries do not clash with casadi's")
+        lines = done.stderr.splitlines()
+        assert done.returncode == 2 and len(lines) == 1 and "LD_LIBRARY_PATH" in lines[0], done.stderr
+        assert folder[:60] in lines[0] and done.stdout == ""
+        assert list(tmp_path.iterdir()) == []

@@ -1,4 +1,4 @@
-"""``fdbench peer``: one peer (OpenSim's forward simulation, Moco's MocoTrack) run alone, its record
+"""``fdbench peer``: one peer (OpenSim's forward simulation, its CMCTool, Moco's MocoTrack) run alone, its record
 as any run's."""
 
 from __future__ import annotations
@@ -19,13 +19,13 @@ PEER_OPTIONS = ("nodes", "regularization", "tolerance", "max_iter")  # moco's; k
 @_with_conditions
 def peer(
     ctx: typer.Context,
-    name: Annotated[str, typer.Argument(metavar="opensim|moco", help="opensim: OpenSim's forward simulation under fdbench's PD law with computed feedforward (beside 'fdbench control'); moco: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation (beside 'fdbench collocate').", show_default=False)],
+    name: Annotated[str, typer.Argument(metavar="opensim|opensim-cmc|moco", help="opensim: OpenSim's forward simulation under fdbench's PD law with computed feedforward, one integrate (beside 'fdbench control'); opensim-cmc: OpenSim's CMCTool tracking the motion with the model made torque-driven (beside 'fdbench control'); moco: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation (beside 'fdbench collocate').", show_default=False)],
     kp: Annotated[Optional[float], typer.Option("--kp", help="opensim: proportional gain, N m/rad, on every joint (default: fdbench's PD's, 80 on the forearm).", show_default=False)] = None,
     kd: Annotated[Optional[float], typer.Option("--kd", help="opensim: derivative gain, N m s/rad, on every joint (default: fdbench's PD's, 0.3 on the forearm).", show_default=False)] = None,
     nodes: Annotated[int, typer.Option("--nodes", help="moco: mesh intervals over the motion's span, >= 2 (collocate's default).")] = 100,
     regularization: Annotated[float, typer.Option("--regularization", help="moco: weight of the integral of torque^2 beside that of the squared angle error in deg^2, deg^2/(N m)^2 (collocate's).")] = 1e-6,
     tolerance: Annotated[float, typer.Option("--tolerance", help="moco: IPOPT's convergence and constraint tolerance in MocoTrack, in (0, 1).")] = 1e-4,
-    max_iter: Annotated[int, typer.Option("--max-iter", help="moco: IPOPT iteration limit.")] = 1000,
+    max_iter: Annotated[int, typer.Option("--max-iter", help="moco: IPOPT iteration limit, in [1, 1000000].")] = 1000,
     kinematics: Kinematics = None,
     dt: Dt = 1e-3,
     alpha: Alpha = 1e7,
@@ -49,11 +49,11 @@ def peer(
         raise BadInput(str(exc)) from None
     given = {key for key in ("kp", "kd", *PEER_OPTIONS)
              if getattr(ctx.get_parameter_source(key), "name", None) in ("COMMANDLINE", "ENVIRONMENT")}
-    takes = {"kp", "kd"} if name == "opensim" else set(PEER_OPTIONS)
+    takes = {"opensim": {"kp", "kd"}, "opensim-cmc": set()}.get(name, set(PEER_OPTIONS))
     if given - takes:
         wrong = sorted(given - takes)[0]
         raise BadInput(f"--{wrong.replace('_', '-')} does not apply to peer {name} (it takes "
-                       f"{', '.join('--' + k.replace('_', '-') for k in sorted(takes))})")
+                       f"{', '.join('--' + k.replace('_', '-') for k in sorted(takes)) or 'none of the peer options'})")
     options = dict(nodes=nodes, regularization=regularization, tolerance=tolerance, max_iter=max_iter)
     try:
         spec = peer_spec(name, options if name == "moco" else None, kp, kd, **_noise_seed(conditions, seed),

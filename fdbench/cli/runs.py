@@ -126,11 +126,26 @@ def control(
     options = _applicable(ctx, options, CONTROLLERS, controller, "--controller")
     spec = _validated(control_spec(kp, kd, controller, options, **_noise_seed(conditions, seed),
                                    **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
+    if controller == "lqr":
+        _casadi_ready("control --controller lqr")
     _check_store(db)
     outcome = run(spec)
     _store(outcome, spec, db, quiet)  # the run is stored before any output is written
     _save_history(outcome, save_history)
     _finish(outcome.record, fmt, output, "fdbench control", quiet)
+
+
+def _casadi_ready(command: str) -> None:
+    """Import casadi before any work: bad input (one line naming LD_LIBRARY_PATH) where another
+    libcasadi found first clashes with it; one line naming the package where it is missing."""
+    from ..casadi_loader import CasadiClash, casadi
+
+    try:
+        casadi()
+    except CasadiClash as exc:
+        raise BadInput(str(exc)) from None
+    except ImportError as exc:
+        raise ImportError(f"'fdbench {command}' needs casadi (pip install casadi): {exc}") from None
 
 
 def _applicable(ctx: typer.Context, options: dict, registry, name: str, choice: str) -> dict:
@@ -176,7 +191,7 @@ def collocate(
     nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over the motion's span (eq. 5: [0, 1] s), >= 2.")] = 100,
     scheme: Annotated[str, typer.Option("--scheme", help="Transcription: hermite-simpson (piecewise-quadratic torque) or trapezoidal (piecewise-linear).")] = "hermite-simpson",
     regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
-    max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit.")] = 1000,
+    max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit, in [1, 1000000].")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
     residual_force_weight: Annotated[Optional[float], typer.Option("--residual-force-weight", help="A floating base's residual force: weight of the integral of FX^2 + FY^2 beside the squared errors (deg^2, and cm^2 of translations), deg^2/N^2; default 1e-3 with --loads, the --regularization without (the residuals then carry the body's weight).", show_default=False)] = None,
     residual_moment_weight: Annotated[Optional[float], typer.Option("--residual-moment-weight", help="A floating base's residual moment: weight of the integral of MZ^2, deg^2/(N m)^2; default 1e-3 with --loads, the --regularization without.", show_default=False)] = None,
@@ -205,10 +220,7 @@ def collocate(
     spec = _validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
                                      residual_moment_weight, **_noise_seed(conditions, seed),
                                      **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
-    try:
-        import casadi  # noqa: F401
-    except ImportError as exc:
-        raise ImportError(f"'fdbench collocate' needs casadi (pip install casadi): {exc}") from None
+    _casadi_ready("collocate")
     _check_store(db)
     outcome = run(spec)
     _store(outcome, spec, db, quiet)  # the run is stored before any output is written

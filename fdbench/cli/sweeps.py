@@ -35,7 +35,7 @@ def report(
     control: WithControl = True,
     beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation (on a model with a floating base: --no-beyond leaves out its slow collocation row).")] = True,
     all_cells: AllCells = False,
-    peers: Annotated[Optional[str], typer.Option("--peers", metavar="opensim,moco", help="Add the section 'Peers': opensim (OpenSim's forward simulation under the same PD law), moco (MocoTrack, its torque replayed by fdbench), comma-separated. Needs pip install 'fdbench\\[opensim]'.", show_default=False)] = None,
+    peers: Annotated[Optional[str], typer.Option("--peers", metavar="opensim,opensim-cmc,moco", help="Add the section 'Peers': opensim (OpenSim's forward simulation under the same PD law), opensim-cmc (OpenSim's CMCTool), moco (MocoTrack, its torque replayed by fdbench), comma-separated. Needs pip install 'fdbench\\[opensim]'.", show_default=False)] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     budget: Budget = 200,
     jobs: Jobs = None,

@@ -95,7 +95,9 @@ def _in_place(function, argument: np.ndarray, result: np.ndarray):
 def warm_up(model: Model | None = None) -> None:
     """Import scipy's solvers and CasADi and build ``model``'s Functions (when given), so that a
     design's timing excludes them."""
-    import casadi  # noqa: F401
+    from ..casadi_loader import casadi
+
+    casadi()
     import scipy.integrate  # noqa: F401
     import scipy.linalg  # noqa: F401
 

@@ -483,7 +483,9 @@ def _collocate(spec):
 
     options = dict(spec.method_options)
     _warm_up(spec)
-    import casadi  # noqa: F401  (its import is not part of the runtime)
+    from ..casadi_loader import casadi
+
+    casadi()  # its import is not part of the runtime
 
     desired, truth = motions(spec)
     began = time.perf_counter()

@@ -169,7 +169,9 @@ def _solve_spd(ca, M, b):
 def _equations(model: Model):
     """The symbols z, z', z'', tau (SX columns (J, 1)) and the inverse dynamics, M and h as SX
     expressions of them, their common subexpressions eliminated; built once per model."""
-    import casadi as ca
+    from ..casadi_loader import casadi
+
+    ca = casadi()
 
     J = model.n_joints
     z, zd, zdd, tau = (ca.SX.sym(name, J) for name in ("z", "zd", "zdd", "tau"))
@@ -180,7 +182,9 @@ def _equations(model: Model):
 @functools.lru_cache(maxsize=64)
 def _mass_matrix_and_bias(model: Model):
     """M = d tau / d z'' (exact) and h = tau(z, z', 0), SX expressions of ``_equations``' symbols."""
-    import casadi as ca
+    from ..casadi_loader import casadi
+
+    ca = casadi()
 
     z, zd, zdd, _, inverse = _equations(model)
     return ca.cse(ca.jacobian(inverse, zdd)), ca.cse(ca.substitute(inverse, zdd, ca.SX.zeros(model.n_joints)))
@@ -244,7 +248,9 @@ _BUILDERS = {
 @functools.lru_cache(maxsize=256)
 def _function(model: Model, name: str):
     """The model's CasADi Function ``name`` (a key of ``_BUILDERS``), built on first use."""
-    import casadi as ca
+    from ..casadi_loader import casadi
+
+    ca = casadi()
 
     return _BUILDERS[name](ca, model)
 
@@ -253,7 +259,9 @@ def _function(model: Model, name: str):
 def _actuation(model: Model, loads: tuple):
     """tau = ID(z, z', z'') - Q(z, p): the generalised forces (N m; N on translations) that move the
     model along z, z', z'' under the external ``loads`` of parameters p (``load_parameters``)."""
-    import casadi as ca
+    from ..casadi_loader import casadi
+
+    ca = casadi()
 
     z, zd, zdd, _, inverse = _equations(model)
     p = ca.SX.sym("p", LOAD_PARAMETERS * len(loads))
@@ -302,7 +310,9 @@ def riccati_input_size(J: int) -> int:
 
 
 def _is_symbolic(values) -> bool:
-    import casadi as ca
+    from ..casadi_loader import casadi
+
+    ca = casadi()
 
     return any(isinstance(v, (ca.SX, ca.MX)) for v in values)
 

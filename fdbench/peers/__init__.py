@@ -1,8 +1,10 @@
 """Peers: the tools fdbench's methods are compared with, run on the same model, motion and
 indicators and giving the same flat record as fdbench's runs (plus their own fields).
 
-* ``opensim``: OpenSim's forward simulation under fdbench's PD law with computed feedforward
-  (``fdbench.peers.opensim_pd``), beside ``fdbench control``.
+* ``opensim``: OpenSim's forward simulation under fdbench's PD law with computed feedforward, the
+  law inside OpenSim, one integrate (``fdbench.peers.opensim_pd``), beside ``fdbench control``.
+* ``opensim-cmc``: OpenSim's CMCTool on the torque-driven model (``fdbench.peers.cmc``), beside
+  ``fdbench control``.
 * ``moco``: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation
   (``fdbench.peers.moco``), beside ``fdbench collocate``.
 
@@ -40,18 +42,21 @@ class Peer:
 def _peers() -> dict:
     from .moco import DEFAULT_TOLERANCE
     from .moco import SUMMARY as MOCO
+    from .cmc import SUMMARY as CMC
     from .opensim_pd import SUMMARY as OPENSIM
 
     return {
         "opensim": Peer("opensim", "OpenSim forward simulation, PD + feedforward", OPENSIM, {},
                         "fdbench.peers.opensim_pd"),
+        "opensim-cmc": Peer("opensim-cmc", "OpenSim CMCTool (Computed Muscle Control), torque-driven", CMC, {},
+                            "fdbench.peers.cmc"),
         "moco": Peer("moco", "MocoTrack (Hermite-Simpson) + forward replay", MOCO,
                      {"nodes": 100, "regularization": 1e-6, "tolerance": DEFAULT_TOLERANCE, "max_iter": 1000},
                      "fdbench.peers.moco"),
     }
 
 
-NAMES = ("opensim", "moco")
+NAMES = ("opensim", "opensim-cmc", "moco")
 
 
 def peer(name: str) -> Peer:
@@ -62,7 +67,7 @@ def peer(name: str) -> Peer:
 
 
 def parse_names(text: str, option: str = "--peers") -> list[str]:
-    """The peers of a comma-separated list ('opensim,moco'), each once, in the order given;
+    """The peers of a comma-separated list ('opensim,opensim-cmc,moco'), each once, in the order given;
     ValueError naming the option for an unknown or empty one."""
     names = [part.strip() for part in str(text).split(",")]
     for name in names:
@@ -98,6 +103,8 @@ def check_spec(spec) -> None:
     if set(options) - {"peer"} != set(found.defaults):
         raise ValueError(f"peer {found.name}: options {sorted(set(options) - {'peer'})}, expected "
                          f"{sorted(found.defaults)}")
+    if found.name == "opensim-cmc":
+        return
     if found.name == "opensim":
         from ..controllers.pd import PD
 

@@ -20,7 +20,7 @@ from ..multibody.osim import INSTALL_HINT
 
 CHILD_TIMEOUT_S = 3600  # s: a MocoTrack solve of a large model may take long
 ENTRY = "from fdbench.peers.child import main; main()"
-SOLVERS = {"opensim": "fdbench.peers.opensim_pd", "moco": "fdbench.peers.moco"}
+SOLVERS = {"opensim": "fdbench.peers.opensim_pd", "opensim-cmc": "fdbench.peers.cmc", "moco": "fdbench.peers.moco"}
 
 
 class PeerUnavailable(ValueError):

@@ -1,0 +1,155 @@
+"""The ``opensim-cmc`` peer: OpenSim's Computed Muscle Control (``CMCTool``) on the torque-driven
+model, the tracking controller OpenSim's users run, beside ``fdbench control``.
+
+The model is the plant with a CoordinateActuator per coordinate (optimal force ``OPTIMAL_FORCE``
+N m, controls within +-``CONTROL_BOUND``: CMC's static optimisation minimises the squared
+controls, so the torque is reached at a small cost); the desired kinematics are the desired
+motion's angles at its samples (a .sto in radians, not filtered again); one CMC_Joint task per
+coordinate with OpenSim's usual gains (kp ``TASK_KP`` 1/s^2, kv ``TASK_KV`` 1/s: critically
+damped), CMC's default time window ``TIME_WINDOW`` and its fast target. CMC looks one window ahead,
+so it ends one window before the motion does; the indicators are taken over the samples it
+reached, as for any run that stops early. Runtime: the whole
+``CMCTool.run()`` (its set-up, optimisations, forward integration and result files; OpenSim's
+start-up and the model's building excluded). The indicators are measured on CMC's own states
+(cubic Hermite between its steps) and its actuators' forces, as fdbench's runs are."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+OPTIMAL_FORCE = 100.0  # N m per unit control
+CONTROL_BOUND = 1e3  # CMC's controls' bounds: 1e5 N m, never reached
+TASK_KP, TASK_KV = 100.0, 20.0  # CMC_Joint gains (1/s^2, 1/s), those of OpenSim's examples
+TIME_WINDOW = 0.01  # s: CMC's default look-ahead
+SUMMARY = ("OpenSim's CMCTool (Computed Muscle Control, its fast target) on the same model made torque-driven "
+           f"(CoordinateActuators, optimal force {OPTIMAL_FORCE:g} N m), tracking the desired angles with CMC_Joint "
+           f"tasks (kp {TASK_KP:g}, kv {TASK_KV:g}), time window {TIME_WINDOW:g} s; time: its whole run")
+
+
+def run(spec):
+    """The peer's run (``RunOutcome``): CMCTool in a child process, its indicators on the motion's
+    samples against the same reference as fdbench's control."""
+    from ..models import joints
+    from ..records import RunOutcome, base_record
+    from .child import call
+    from .common import desired, grid, indicators, osim_texts, reference
+
+    names = joints(spec.model_name)
+    _, plant = osim_texts(spec)
+    t = grid(spec)
+    z, zd, _ = desired(spec, t)
+    answer = call({"peer": "opensim-cmc", "plant": plant, "coordinates": list(names), "t": t.tolist(),
+                   "z": z.tolist(), "zd": zd.tolist()})
+    angles, torque = np.array(answer["z"], dtype=float), np.array(answer["torque"], dtype=float)
+    fields, table = indicators(spec, t[: len(angles)], angles, torque, answer["t_end"])
+    done = answer["t_end"] >= t[-1] - TIME_WINDOW - 1e-9  # CMC stops one window before the kinematics end
+    message = (f"OpenSim {answer['version']} CMCTool, {answer['steps']} integration steps, time window "
+               f"{TIME_WINDOW:g} s (CMC looks one window ahead and so ends at t = {answer['t_end']:.4g} s, the "
+               "indicators taken over the samples it reached); runtime: its whole run")
+    if not done:
+        message = f"stopped at t = {answer['t_end']:.4g} s: {answer.get('failure')}; " + message
+    record = base_record(spec)
+    record.update(fields, torque="cmc", controller="cmc", evaluations=1, runtime_s=answer["run_s"],
+                  status="success" if done else "error", message=message, peer="opensim-cmc",
+                  opensim_version=answer["version"], cmc_time_window_s=TIME_WINDOW, cmc_task_kp=TASK_KP,
+                  cmc_task_kv=TASK_KV, cmc_optimal_force_nm=OPTIMAL_FORCE, opensim_steps=answer["steps"])
+    return RunOutcome(record, None, reference(spec)[0], table=table)
+
+
+# ---------------------------------------------------------------------------------------- the child
+
+
+def solve(osim, request: dict) -> dict:
+    """In OpenSim's process: CMCTool on the plant made torque-driven; angles (rad) and actuator
+    torques (N m) at the step times reached, shape (m, J), its integration steps and the run's
+    wall time (s)."""
+    import os
+    import tempfile
+
+    from .child import coordinate_paths, model_from, torque_driven
+    from .opensim_pd import _hermite
+
+    names = request["coordinates"]
+    t = np.array(request["t"])
+    z = np.array(request["z"], dtype=float)
+    model = model_from(osim, request["plant"])
+    for actuator in torque_driven(osim, model, names, "_torque"):
+        actuator.setOptimalForce(OPTIMAL_FORCE)
+        actuator.setMinControl(-CONTROL_BOUND)
+        actuator.setMaxControl(CONTROL_BOUND)
+    model.finalizeConnections()
+    model.initSystem()
+    paths = coordinate_paths(model, names)
+    with tempfile.TemporaryDirectory(prefix="fdbench-cmc-") as folder:
+        kinematics = os.path.join(folder, "desired.sto")
+        table = osim.TimeSeriesTable()
+        labels = osim.StdVectorString()
+        for name in names:
+            labels.append(name)
+        table.setColumnLabels(labels)
+        table.addTableMetaDataString("inDegrees", "no")
+        for k in range(len(t)):
+            row = osim.RowVector(len(names), 0.0)
+            for j in range(len(names)):
+                row[j] = float(z[k, j])
+            table.appendRow(float(t[k]), row)
+        osim.STOFileAdapter.write(table, kinematics)
+        tasks = osim.CMC_TaskSet()
+        for name in names:
+            task = osim.CMC_Joint()
+            task.setName(name)
+            task.setCoordinateName(name)
+            task.setKP(TASK_KP, 1.0, 1.0)
+            task.setKV(TASK_KV, 1.0, 1.0)
+            task.setActive(True, False, False)
+            task.setWeight(1.0, 1.0, 1.0)
+            tasks.cloneAndAppend(task)
+        tasks_file = os.path.join(folder, "tasks.xml")
+        tasks.printToXML(tasks_file)
+        tool = osim.CMCTool()
+        tool.setName("fdbench")
+        tool.setModel(model)
+        tool.setDesiredKinematicsFileName(kinematics)
+        tool.setTaskSetFileName(tasks_file)
+        tool.setInitialTime(float(t[0]))
+        tool.setFinalTime(float(t[-1]))
+        tool.setTimeWindow(TIME_WINDOW)
+        tool.setUseFastTarget(True)
+        tool.setLowpassCutoffFrequency(-1.0)
+        tool.setResultsDir(os.path.join(folder, "results"))
+        tool.setReplaceForceSet(False)
+        failure = None
+        began = time.perf_counter()
+        try:
+            tool.run()
+        except RuntimeError as exc:
+            failure = " ".join(str(exc).split())[:200]
+        run_s = time.perf_counter() - began
+        states = _read(osim, os.path.join(folder, "results", "fdbench_states.sto"))
+        forces = _read(osim, os.path.join(folder, "results", "fdbench_Actuation_force.sto"))
+    if states is None or forces is None:
+        return {"z": [], "torque": [], "t_end": 0.0, "run_s": run_s, "steps": 0,
+                "failure": failure or "CMC wrote no states"}
+    times, column = states
+    values = np.column_stack([column(path + "/value") for path in paths])
+    rates = np.column_stack([column(path + "/speed") for path in paths])
+    force_times, force = forces
+    applied = np.column_stack([force(name + "_torque") for name in names])
+    reached = t[(t >= times[0] - 1e-12) & (t <= times[-1] + 1e-12)]
+    angles, _ = _hermite(times, values, rates, reached)
+    torque = np.stack([np.interp(reached, force_times, applied[:, j]) for j in range(len(names))], axis=-1)
+    return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1]), "run_s": run_s,
+            "steps": int(len(times) - 1), "failure": failure}
+
+
+def _read(osim, path):
+    """(times (s), column(label) -> values) of a .sto file CMC wrote; None where it is missing."""
+    import os
+
+    if not os.path.exists(path):
+        return None
+    table = osim.TimeSeriesTable(path)
+    times = np.array(table.getIndependentColumn(), dtype=float)
+    return times, lambda label: table.getDependentColumn(label).to_numpy()
