@@ -404,6 +404,8 @@ class DaskBackend(Backend):
                 distributed = _import_distributed()
                 _quiet_dask_logs()
                 self.folder = tempfile.mkdtemp(prefix="fdbench-dask-")
+                self.safe_path = os.environ.get("PYTHONSAFEPATH")
+                os.environ["PYTHONSAFEPATH"] = "1"  # for the Python processes the cluster starts (below)
                 self.cluster = _local_cluster(distributed, max(1, min(self.jobs, n_runs)), self.folder)
                 self.client = _quiet_client_class(distributed)(self.cluster, set_as_default=False)
                 self.client.run_on_scheduler(_stop_http_server)
@@ -486,17 +488,23 @@ class DaskBackend(Backend):
                 except Exception:  # noqa: BLE001 - closing after a failure must not hide it
                     pass
         if folder is not None:  # the scratch folders that Dask's servers put on this process's path go too
-            sys.path[:] = [p for p in sys.path if not p.startswith(folder)]
+            sys.path[:] = [p for p in sys.path if p != folder and not p.startswith(folder + os.sep)]
             shutil.rmtree(folder, ignore_errors=True)
+            if self.safe_path is None:
+                os.environ.pop("PYTHONSAFEPATH", None)
+            else:
+                os.environ["PYTHONSAFEPATH"] = self.safe_path
 
 
 def _local_cluster(distributed, n_workers: int, folder: str):
     """A Dask cluster on 127.0.0.1 that only this process can use: its scheduler, nannies and
     workers speak TLS with a certificate made for it (``Security.temporary()``, kept in memory),
     so a client without it (another user of this machine) cannot connect; their scratch folders
-    (which Dask puts first on their import path) are in ``folder``, a private folder; the worker
-    processes start with PYTHONSAFEPATH (Python >= 3.11), so the current folder does not enter
-    their import path; their HTTP servers serve nothing (and are stopped once started)."""
+    (which Dask puts first on their import path) are in ``folder``, a private folder; their HTTP
+    servers serve nothing (and are stopped once started). The Python processes it starts (worker
+    processes, multiprocessing's resource tracker) must find PYTHONSAFEPATH set in this process's
+    environment (``DaskBackend.start``), so that the current folder does not enter their import
+    path (Python >= 3.11)."""
     import logging
 
     import dask
@@ -504,7 +512,7 @@ def _local_cluster(distributed, n_workers: int, folder: str):
 
     security = Security.temporary()  # needs the cryptography package (DaskBackend.check)
     private = {"temporary-directory": folder, "distributed.scheduler.http.routes": [],
-               "distributed.worker.http.routes": [], "distributed.nanny.pre-spawn-environ.PYTHONSAFEPATH": "1"}
+               "distributed.worker.http.routes": []}
     with dask.config.set(private):
         return distributed.LocalCluster(
             n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", security=security,

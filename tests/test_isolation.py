@@ -90,6 +90,22 @@ def _process_tree() -> list[int]:
     return [me.pid] + [child.pid for child in me.children(recursive=True)]
 
 
+def _refuses_tls_without_certificate(host: str, port: int) -> bool:
+    """True if the TLS server at host:port ends the connection of a client that offers no
+    certificate (and checks none) before answering anything."""
+    anyone = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
+    anyone.check_hostname, anyone.verify_mode = False, ssl.CERT_NONE
+    with socket.create_connection((host, port), timeout=30) as raw:
+        try:
+            with anyone.wrap_socket(raw) as tls:
+                tls.sendall(b"\x00" * 8)
+                return tls.recv(1) == b""
+        except TimeoutError:  # silent, but open: not a refusal
+            return False
+        except OSError:  # the handshake failed, or the server's alert (certificate required) came
+            return True
+
+
 def _http_answer(host: str, port: int) -> bytes:
     """What the server at host:port answers to an HTTP request for the scheduler's identity."""
     with socket.create_connection((host, port), timeout=30) as connection:
@@ -130,22 +146,12 @@ def test_another_user_s_client_cannot_submit_to_the_local_cluster_and_no_http_is
     with local_cluster(workers=1) as backend:
         address = backend.client.scheduler.address
         assert address.startswith("tls://127.0.0.1:")
-        host, port = address[len("tls://"):].rsplit(":", 1)
         # the issue's attack, from another process that knows the address: Client(addr).submit(f)
         done = subprocess.run([sys.executable, "-c", ATTACK, address, str(marker)], capture_output=True, text=True,
                               timeout=120, cwd=tmp_path)
         outcomes = [line.split(" refused ")[0] for line in done.stdout.splitlines() if " refused " in line]
         assert outcomes == ["plain", "tcp", "own certificate"], done.stdout + done.stderr
         assert not marker.exists()
-        # a TLS client that offers no certificate: the scheduler ends the connection without an answer
-        anyone = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
-        anyone.check_hostname, anyone.verify_mode = False, ssl.CERT_NONE
-        with socket.create_connection((host, int(port)), timeout=30) as raw:
-            with pytest.raises(OSError):
-                with anyone.wrap_socket(raw) as tls:
-                    tls.sendall(b"\x00" * 8)
-                    if not tls.recv(1):
-                        raise ConnectionResetError("closed")
         # fdbench's own client does reach it: the address is the cluster's
         assert backend.client.submit(os.getpid, pure=False).result(timeout=60) != os.getpid()
         ports = _listening(_process_tree()) - before
@@ -154,20 +160,51 @@ def test_another_user_s_client_cannot_submit_to_the_local_cluster_and_no_http_is
         assert ports == {(h, int(p)) for h, p in (a[len("tls://"):].rsplit(":", 1) for a in comms)}
         for ip, number in ports:
             assert not _http_answer(ip, number).startswith(b"HTTP/"), f"port {number} serves HTTP"
+            assert _refuses_tls_without_certificate(ip, number), f"port {number} talks to a client without certificate"
     assert not any(Path(p).name.startswith("fdbench-dask-") or "dask-scratch-space" in p for p in sys.path)
 
 
-def test_a_module_planted_in_the_current_folder_is_not_imported_by_the_dask_workers(tmp_path, monkeypatch):
+LOCAL_CLUSTER = """
+import json, os, sys
+from fdbench.execution import make_backend
+
+if __name__ == "__main__":
+    backend = make_backend("dask", jobs=1)
+    backend.start(1)
+    try:
+        paths = backend.client.run(lambda: list(sys.path))
+    finally:
+        backend.stop()
+    print(json.dumps({"paths": list(paths.values()), "safe_path": os.environ.get("PYTHONSAFEPATH")}))
+"""
+
+
+def test_a_module_planted_in_the_current_folder_is_not_imported_by_the_dask_cluster_s_processes(tmp_path):
+    """fdbench started in a shared folder (a fresh process run as the ``fdbench`` script runs:
+    its own path starts with the script's folder, not the current one) starts its local cluster:
+    neither the worker processes nor multiprocessing's resource tracker import the planted modules."""
     _needs_dask()
     if sys.version_info < (3, 11):
         pytest.skip("Python 3.10 has no safe-path mode for the workers' start (PYTHONSAFEPATH)")
+    import json
+    import subprocess
+
+    from processes import python_path
+
     folder = planted_folder(tmp_path / "shared")
-    monkeypatch.chdir(folder)
-    with local_cluster(workers=1) as backend:
-        paths = backend.client.run(lambda: list(sys.path))
+    script = tmp_path / "bin" / "cluster.py"
+    script.parent.mkdir()
+    script.write_text(LOCAL_CLUSTER)
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONSAFEPATH"}
+    env["PYTHONPATH"] = python_path(ROOT)  # this fdbench
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=folder,
+                          env=env)
+    assert done.returncode == 0, done.stderr
     assert imported(folder) == []
-    for path in paths.values():
+    answer = json.loads(done.stdout.splitlines()[-1])
+    for path in answer["paths"]:
         assert "" not in path and str(folder) not in path
+    assert answer["safe_path"] is None  # set for the cluster's processes only: the command's own is as it was
 
 
 def test_a_module_planted_in_the_current_folder_is_not_imported_by_the_opensim_children(tmp_path, monkeypatch):
