@@ -21,6 +21,7 @@ import threading
 from abc import ABC, abstractmethod
 from contextlib import closing, contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator
 
 from . import __version__
@@ -28,6 +29,7 @@ from .registry import Registry
 
 DASK_INSTALL = "pip install '.[dask]' in fdbench's source folder (or pip install 'dask[distributed]' cryptography)"
 PARENT_POLL_S = 0.5  # how often a local worker checks that its parent is alive
+SAFE_PATH = sys.version_info >= (3, 11)  # PYTHONSAFEPATH keeps the current folder off a child Python's path
 
 
 class BackendError(Exception):
@@ -366,6 +368,14 @@ class DaskBackend(Backend):
             if importlib.util.find_spec("cryptography") is None:
                 raise BackendError("the local Dask cluster is secured by TLS, which needs the cryptography package: "
                                    f"{DASK_INSTALL}")
+            if not SAFE_PATH:
+                from .jit import _not_private
+
+                problem = _not_private(Path.cwd(), follow_links=True)
+                if problem:
+                    raise BackendError(f"a local Dask cluster's processes import modules from the current folder "
+                                       f"before Python 3.11, and {problem}: run fdbench from a folder of your own, "
+                                       "or with Python >= 3.11")
         else:
             self.address = scheduler_address(self.scheduler)
             self.security = client_security(self.address, self._label)

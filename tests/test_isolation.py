@@ -1,6 +1,7 @@
 """Another user of the machine cannot get in: fdbench's local Dask cluster refuses every client
 but fdbench's own and serves no HTTP, and no child Python that fdbench starts (the OpenSim import
-and peer processes, the Dask workers) imports a module planted in the folder it is run from.
+and peer processes, the Dask workers, multiprocessing's resource tracker) imports a module planted
+in the folder it is run from.
 
 The clusters are started as fdbench starts them (``DaskBackend``) and attacked as another user
 would: a plain ``Client`` to the scheduler's address, a client with a certificate of its own, a TLS
@@ -76,7 +77,9 @@ def _listening(pids) -> set[tuple[str, int]]:
     found = set()
     for pid in pids:
         try:
-            connections = psutil.Process(pid).net_connections("inet")
+            process = psutil.Process(pid)
+            connections = getattr(process, "net_connections", None) or process.connections  # psutil < 6
+            connections = connections("inet")
         except psutil.NoSuchProcess:
             continue
         found |= {(c.laddr.ip, c.laddr.port) for c in connections if c.status == psutil.CONN_LISTEN}
@@ -205,6 +208,29 @@ def test_a_module_planted_in_the_current_folder_is_not_imported_by_the_dask_clus
     for path in answer["paths"]:
         assert "" not in path and str(folder) not in path
     assert answer["safe_path"] is None  # set for the cluster's processes only: the command's own is as it was
+
+
+def test_before_python_3_11_a_local_cluster_is_refused_in_a_folder_that_others_can_write(tmp_path, monkeypatch):
+    """Without PYTHONSAFEPATH (Python 3.10) the cluster's processes would import from the current
+    folder: a local cluster is then refused in a folder another user can write to, in one line."""
+    _needs_dask()
+    import fdbench.execution as execution
+
+    monkeypatch.setattr(execution, "SAFE_PATH", False)
+    shared, own = tmp_path / "shared", tmp_path / "own"
+    shared.mkdir()
+    shared.chmod(0o1777)  # as /tmp
+    own.mkdir(mode=0o700)
+    monkeypatch.chdir(shared)
+    db = shared / "runs.sqlite"
+    result = CliRunner().invoke(app, ["report", "--torque", "cs", "--seeds", "1", "--backend", "dask",
+                                      "--db", str(db), "-q"])
+    assert result.exit_code == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "writable by other users" in lines[0] and "Python >= 3.11" in lines[0], lines
+    assert not db.exists()
+    monkeypatch.chdir(own)
+    execution.make_backend("dask", jobs=1)  # checked: a folder of one's own is fine
 
 
 def test_a_module_planted_in_the_current_folder_is_not_imported_by_the_opensim_children(tmp_path, monkeypatch):
