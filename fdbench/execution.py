@@ -13,19 +13,23 @@ in flight and resumes where it stopped. A run that raises is stored as a failed 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import sys
+import tempfile
 import threading
 from abc import ABC, abstractmethod
 from contextlib import closing, contextmanager
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator
 
 from . import __version__
 from .registry import Registry
 
-DASK_INSTALL = "pip install '.[dask]' in fdbench's source folder (or pip install 'dask[distributed]')"
+DASK_INSTALL = "pip install '.[dask]' in fdbench's source folder (or pip install 'dask[distributed]' cryptography)"
 PARENT_POLL_S = 0.5  # how often a local worker checks that its parent is alive
+SAFE_PATH = sys.version_info >= (3, 11)  # PYTHONSAFEPATH keeps the current folder off a child Python's path
 
 
 class BackendError(Exception):
@@ -350,15 +354,31 @@ class DaskBackend(Backend):
             raise BackendError(f"batch must be an integer >= 1, got {batch}")
         self.jobs = jobs or os.cpu_count() or 1
         self.scheduler = scheduler
-        self.address = None  # the scheduler's checked address, tcp://HOST:PORT
+        self.address = None  # the scheduler's checked address, tcp:// or tls://HOST:PORT
+        self.security = None  # the client's TLS files (Dask's configuration), for a tls:// scheduler
         self.batch, self.retries = batch, retries
         self.connect_timeout_s, self.workers_timeout_s = connect_timeout_s, workers_timeout_s
-        self.client = self.cluster = None
+        self.client = self.cluster = self.folder = None
 
     def check(self) -> None:
         _import_distributed()
-        if self.scheduler is not None:
+        if self.scheduler is None:
+            import importlib.util
+
+            if importlib.util.find_spec("cryptography") is None:
+                raise BackendError("the local Dask cluster is secured by TLS, which needs the cryptography package: "
+                                   f"{DASK_INSTALL}")
+            if not SAFE_PATH:
+                from .jit import _not_private
+
+                problem = _not_private(Path.cwd(), follow_links=True)
+                if problem:
+                    raise BackendError(f"a local Dask cluster's processes import modules from the current folder "
+                                       f"before Python 3.11, and {problem}: run fdbench from a folder of your own, "
+                                       "or with Python >= 3.11")
+        else:
             self.address = scheduler_address(self.scheduler)
+            self.security = client_security(self.address, self._label)
 
     @property
     def _label(self) -> str:
@@ -378,9 +398,10 @@ class DaskBackend(Backend):
             self.check()
         distributed = _import_distributed()
         _quiet_dask_logs()
-        _probe_scheduler(self.address, self.connect_timeout_s, self._label)
+        _probe_scheduler(self.address, self.connect_timeout_s, self._label, self.security)
         try:
             self.client = _quiet_client_class(distributed)(self.address, timeout=f"{self.connect_timeout_s}s",
+                                                           security=self.security,
                                                            set_as_default=False)
         except Exception as exc:  # noqa: BLE001 - a scheduler that went away since it answered
             raise BackendError(f"{self._label}: cannot connect to the Dask scheduler: {_reason(exc)}") from None
@@ -390,15 +411,15 @@ class DaskBackend(Backend):
             if self.scheduler is not None:
                 self.connect()
             elif self.client is None:
-                import logging
-
                 distributed = _import_distributed()
                 _quiet_dask_logs()
-                self.cluster = distributed.LocalCluster(
-                    n_workers=max(1, min(self.jobs, n_runs)), threads_per_worker=1, processes=True,
-                    host="127.0.0.1", dashboard_address=None, silence_logs=logging.CRITICAL,
-                )
+                self.folder = tempfile.mkdtemp(prefix="fdbench-dask-")
+                self.safe_path = os.environ.get("PYTHONSAFEPATH")
+                os.environ["PYTHONSAFEPATH"] = "1"  # for the Python processes the cluster starts (below)
+                self.cluster = _local_cluster(distributed, max(1, min(self.jobs, n_runs)), self.folder)
                 self.client = _quiet_client_class(distributed)(self.cluster, set_as_default=False)
+                self.client.run_on_scheduler(_stop_http_server)
+                self.client.run(_stop_http_server)
             self._join_workers()
         except BaseException:
             self.stop()
@@ -463,8 +484,8 @@ class DaskBackend(Backend):
                     pass
 
     def stop(self) -> None:
-        client, cluster = self.client, self.cluster
-        self.client = self.cluster = None
+        client, cluster, folder = self.client, self.cluster, self.folder
+        self.client = self.cluster = self.folder = None
         if client is not None or cluster is not None:
             _quiet_dask_logs()
         for thing in (client, cluster):
@@ -476,13 +497,50 @@ class DaskBackend(Backend):
                         thing.close()
                 except Exception:  # noqa: BLE001 - closing after a failure must not hide it
                     pass
+        if folder is not None:  # the scratch folders that Dask's servers put on this process's path go too
+            sys.path[:] = [p for p in sys.path if p != folder and not p.startswith(folder + os.sep)]
+            shutil.rmtree(folder, ignore_errors=True)
+            if self.safe_path is None:
+                os.environ.pop("PYTHONSAFEPATH", None)
+            else:
+                os.environ["PYTHONSAFEPATH"] = self.safe_path
+
+
+def _local_cluster(distributed, n_workers: int, folder: str):
+    """A Dask cluster on 127.0.0.1 that only this process can use: its scheduler, nannies and
+    workers speak TLS with a certificate made for it (``Security.temporary()``, kept in memory),
+    so a client without it (another user of this machine) cannot connect; their scratch folders
+    (which Dask puts first on their import path) are in ``folder``, a private folder; their HTTP
+    servers serve nothing (and are stopped once started). The Python processes it starts (worker
+    processes, multiprocessing's resource tracker) must find PYTHONSAFEPATH set in this process's
+    environment (``DaskBackend.start``), so that the current folder does not enter their import
+    path (Python >= 3.11)."""
+    import logging
+
+    import dask
+    from distributed.security import Security
+
+    security = Security.temporary()  # needs the cryptography package (DaskBackend.check)
+    private = {"temporary-directory": folder, "distributed.scheduler.http.routes": [],
+               "distributed.worker.http.routes": []}
+    with dask.config.set(private):
+        return distributed.LocalCluster(
+            n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1", security=security,
+            protocol="tls://", dashboard_address="127.0.0.1:0", scheduler_kwargs={"dashboard": False},
+            local_directory=folder, silence_logs=logging.CRITICAL,
+        )
+
+
+def _stop_http_server(dask_scheduler=None, dask_worker=None) -> None:
+    """Stop the HTTP server that every Dask scheduler and worker starts (no dashboard is asked for)."""
+    (dask_scheduler or dask_worker).http_server.stop()
 
 
 def scheduler_address(text) -> str:
-    """The Dask scheduler's address as ``tcp://HOST:PORT`` (``HOST:PORT`` means the same), or
-    BackendError saying what is wrong, before any connection is tried: fdbench reaches a
-    scheduler over plain TCP (it passes no TLS certificates and runs no UCX or in-process
-    scheduler), HOST is a host name or an IP address ([...] for IPv6), PORT is in [1, 65535]."""
+    """The Dask scheduler's address as ``tcp://HOST:PORT`` or ``tls://HOST:PORT`` (``HOST:PORT``
+    means tcp), or BackendError saying what is wrong, before any connection is tried: fdbench
+    reaches a scheduler over TCP or TLS (no UCX or in-process scheduler), HOST is a host name or
+    an IP address ([...] for IPv6), PORT is in [1, 65535]."""
     import ipaddress
     import re
 
@@ -496,9 +554,10 @@ def scheduler_address(text) -> str:
     scheme, separator, rest = address.partition("://")
     if not separator:
         scheme, rest = "tcp", address
-    if scheme.lower() != "tcp":
-        raise BackendError(f"{where}: fdbench reaches a Dask scheduler over tcp:// only, not {_shown(scheme)}://; "
-                           f"{example}")
+    scheme = scheme.lower()
+    if scheme not in ("tcp", "tls"):
+        raise BackendError(f"{where}: fdbench reaches a Dask scheduler over tcp:// or tls://, not "
+                           f"{_shown(scheme)}://; {example}")
     host, colon, port = rest.rpartition(":")
     if not colon or not host:
         raise BackendError(f"{where}: give the host and the port, {example}")
@@ -511,7 +570,34 @@ def scheduler_address(text) -> str:
         raise BackendError(f"{where}: {_shown(host)} is not a host name or an IP address; {example}")
     if not (port.isascii() and port.isdigit() and len(port) <= 5 and 1 <= int(port) <= 65535):
         raise BackendError(f"{where}: the port must be an integer in [1, 65535], got {_shown(port)}; {example}")
-    return f"tcp://{host}:{int(port)}"
+    return f"{scheme}://{host}:{int(port)}"
+
+
+TLS_CONFIG = "DASK_DISTRIBUTED__COMM__TLS__"  # Dask's configuration of a client's TLS files, by environment
+
+
+def client_security(address: str, where: str):
+    """The ``distributed.security.Security`` of a client of the scheduler at ``address``, from
+    Dask's configuration (``distributed.comm.tls``: a Dask configuration file, or the environment
+    variables DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT and __CLIENT__KEY). A tls://
+    address needs the CA file and the client's certificate, readable: BackendError otherwise."""
+    from distributed.security import Security
+
+    security = Security()
+    if not address.startswith("tls://"):
+        return security
+    missing = [TLS_CONFIG + name for name, value in (("CA_FILE", security.tls_ca_file),
+                                                      ("CLIENT__CERT", security.tls_client_cert)) if not value]
+    if missing:
+        raise BackendError(f"{where}: a tls:// scheduler needs the client's TLS files in Dask's configuration: "
+                           f"set {' and '.join(missing)} (and {TLS_CONFIG}CLIENT__KEY unless the certificate "
+                           "file holds the key)")
+    try:
+        security.get_connection_args("client")
+    except (OSError, ValueError) as exc:  # ssl.SSLError is an OSError
+        raise BackendError(f"{where}: cannot load the TLS files of Dask's configuration ({TLS_CONFIG}*): "
+                           f"{_reason(exc)}") from None
+    return security
 
 
 def _shown(text, limit: int = 60) -> str:
@@ -526,29 +612,37 @@ def _reason(exc: BaseException) -> str:
     return " ".join(f"{type(exc).__name__}: {exc}".split())
 
 
-def _probe_scheduler(address: str, timeout_s: float, where: str) -> None:
+def _probe_scheduler(address: str, timeout_s: float, where: str, security=None) -> None:
     """Ask the server at ``address`` who it is, within ``timeout_s`` seconds in all, before a
     Dask client is made: BackendError (one line) for a port where nothing listens, a server
-    that never answers, or one that answers in another protocol."""
+    that never answers, one that answers in another protocol, or (tls://, with ``security``'s
+    files) a TLS handshake that fails."""
     import asyncio
     import socket
+    import ssl
     import time
 
     from distributed.comm import connect
 
     started = time.monotonic()
-    host, _, port = address[len("tcp://"):].rpartition(":")
+    host, _, port = address.partition("://")[2].rpartition(":")
     silent = f"{where}: no answer from a Dask scheduler within {timeout_s:g} s"
-    try:  # a refused port or an unknown host is said at once, not after the timeout
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    args = security.get_connection_args("client") if address.startswith("tls://") else {}
+    try:  # a refused port, an unknown host or a failed handshake is said at once, not after the timeout
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s) as raw:
+            if args:
+                args["ssl_context"].wrap_socket(raw).close()
     except socket.timeout:
         raise BackendError(silent) from None
+    except ssl.SSLError as exc:
+        raise BackendError(f"{where}: the TLS handshake with the scheduler failed ({_reason(exc)}); check the TLS "
+                           f"files of Dask's configuration ({TLS_CONFIG}*)") from None
     except OSError as exc:
         raise BackendError(f"{where}: cannot connect to a Dask scheduler: {_reason(exc)}") from None
     left_s = max(0.1, timeout_s - (time.monotonic() - started))
 
     async def identity():
-        comm = await connect(address, timeout=left_s + 5)  # the deadline below comes first
+        comm = await connect(address, timeout=left_s + 5, **args)  # the deadline below comes first
         try:
             await comm.write({"op": "identity", "reply": True})
             return await comm.read()
@@ -566,8 +660,10 @@ def _probe_scheduler(address: str, timeout_s: float, where: str) -> None:
         except (TimeoutError, asyncio.TimeoutError):
             raise BackendError(silent) from None
         except OSError:
+            refused = (f" (does the scheduler accept the client certificate of {TLS_CONFIG}CLIENT__CERT?)"
+                       if args else "")
             raise BackendError(f"{where}: the server there closed the connection without answering as a Dask "
-                               "scheduler") from None
+                               f"scheduler{refused}") from None
         except Exception:  # noqa: BLE001 - e.g. a length of exabytes read from another protocol's bytes
             raise BackendError(f"{where}: the server there is not a Dask scheduler (it answers in another "
                                "protocol)") from None

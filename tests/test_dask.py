@@ -265,7 +265,7 @@ def test_bad_backend_options_exit_2_before_any_work(tmp_path, args, option):
     assert not db.exists()
 
 
-BAD_ADDRESSES = ["http://x:1", "tls://x:1", "ucx://x:1", "inproc://x", "not an address", "tcp://x:1\nx",
+BAD_ADDRESSES = ["http://x:1", "tcps://x:1", "ucx://x:1", "inproc://x", "not an address", "tcp://x:1\nx",
                  "tcp://127.0.0.1:" + "9" * 5000, "tcp://127.0.0.1:0", "127.0.0.1", "tcp://:8786", "tcp://a b:1", "tcp://x:\u00b2"]
 
 

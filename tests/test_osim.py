@@ -9,7 +9,6 @@ import importlib.util
 import io
 import json
 import math
-import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -493,7 +492,7 @@ def test_without_opensim_the_import_names_the_extra_to_install(tmp_path, monkeyp
     hidden = tmp_path / "hidden"
     hidden.mkdir()
     (hidden / "opensim.py").write_text("raise ImportError('No module named opensim')\n")  # the child's opensim
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(hidden), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.syspath_prepend(str(hidden))  # the children import what this process would
     for args in (("import-osim", path), ("inverse", "--model", path), ("models", "show", path)):
         refused(*args, contains=("pip install 'fdbench[opensim]'",))
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 import importlib.util
 import io
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -202,7 +201,7 @@ def test_without_opensim_the_peers_name_the_extra_to_install(tmp_path, monkeypat
     hidden = tmp_path / "hidden"
     hidden.mkdir()
     (hidden / "opensim.py").write_text("raise ImportError('No module named opensim')\n")  # the child's opensim
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(hidden), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.syspath_prepend(str(hidden))  # the children import what this process would
     out, db = tmp_path / "out.md", tmp_path / "runs.sqlite"
     refused("peer", "moco", "--model", "arm2", "-o", out, contains=(HINT,))
     refused("report", "--peers", "opensim", "--db", db, "-o", out, contains=(HINT,))

@@ -84,7 +84,7 @@ PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal 
 BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install '.\\[dask]' in fdbench's source folder).")]
 
 
-Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version).", show_default=False)]
+Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version). Whoever reaches a tcp:// scheduler can run code on its workers: across a network or a shared machine use tls://HOST:PORT, with the client's files in Dask's configuration (DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY; see the README).", show_default=False)]
 
 
 Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once, in [1, 256]: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)]

@@ -99,10 +99,10 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
     symbols)."""
     import base64
     import json
-    import os
     import subprocess
-    import sys
+    import tempfile
 
+    from ..isolation import python_command
     from .description import ModelError, model_from_dict
 
     _model_element(content, source)  # a file that is not an OpenSim model is refused before a process starts
@@ -110,13 +110,11 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
 
     if importlib.util.find_spec("opensim") is None:
         _fail(source, f"reading an OpenSim model needs the opensim package: {INSTALL_HINT}")
-    package_root = str(Path(__file__).resolve().parents[2])  # so that the child finds this fdbench, after
-    # what the user's PYTHONPATH puts first (for an installed fdbench that is site-packages itself)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), package_root) if p))
     request = json.dumps({"content": base64.b64encode(content).decode(), "source": source,
                           "max_tilt_deg": max_tilt_deg})
-    done = subprocess.run([sys.executable, "-c", "from fdbench.multibody.osim import _child; _child()"],
-                          input=request, capture_output=True, text=True, env=env, timeout=CHILD_TIMEOUT_S)
+    with tempfile.TemporaryDirectory(prefix="fdbench-osim-") as folder:  # a private working directory
+        done = subprocess.run(python_command("from fdbench.multibody.osim import _child; _child()"),
+                              input=request, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S, cwd=folder)
     try:
         answer = json.loads(done.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):

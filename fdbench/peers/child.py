@@ -14,8 +14,8 @@ import os
 import subprocess
 import sys
 import tempfile
-from pathlib import Path
 
+from ..isolation import python_command
 from ..multibody.osim import INSTALL_HINT
 
 CHILD_TIMEOUT_S = 3600  # s: a MocoTrack solve of a large model may take long
@@ -30,13 +30,11 @@ class PeerUnavailable(ValueError):
 def call(request: dict, timeout_s: float = CHILD_TIMEOUT_S) -> dict:
     """The child's answer (a dict) to ``request``; PeerUnavailable without the opensim package,
     RuntimeError (one line) when the child fails."""
-    package_root = str(Path(__file__).resolve().parents[2])  # the child imports this fdbench, after the user's path
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (os.environ.get("PYTHONPATH"), package_root) if p))
     try:
         with tempfile.TemporaryDirectory(prefix="fdbench-opensim-") as folder:  # its working directory: MocoTrack
             # writes '<name>_tracked_states.sto' there, which must not land in the user's
-            done = subprocess.run([sys.executable, "-c", ENTRY], input=json.dumps(request), capture_output=True,
-                                  text=True, env=env, timeout=timeout_s, cwd=folder)
+            done = subprocess.run(python_command(ENTRY), input=json.dumps(request), capture_output=True,
+                                  text=True, timeout=timeout_s, cwd=folder)
     except subprocess.TimeoutExpired:
         raise RuntimeError(f"OpenSim's process did not finish within {timeout_s:g} s") from None
     try:
