@@ -430,6 +430,7 @@ def _optimize(spec, on_evaluation, on_start):
     from ..experiment import base_record
     from ..method_options import options_text
     from ..optimizers import make_optimizer
+    from ..optimizers.base import NO_ITERATION
     from ..torques import TORQUES
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
@@ -469,7 +470,10 @@ def _optimize(spec, on_evaluation, on_start):
                   torque_options=options_text(sorted(options.items())),
                   optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
-    return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+    outcome = _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+    if found.stop_reason.startswith(NO_ITERATION):  # "success" of a run that hardly moved: say why
+        outcome.record["message"] += f"; {spec.optimizer} completed no iteration within the budget (see stop_reason)"
+    return outcome
 
 
 def _collocate(spec):
