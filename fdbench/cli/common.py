@@ -313,6 +313,9 @@ class _progress:
     def start(self, total: int, show_best: bool = True) -> None:
         if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
             return
+        from ..jit import quiet
+
+        quiet()  # the bar owns the last line now: no compilation spinner beside it
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                    TimeRemainingColumn)
 
