@@ -128,6 +128,7 @@ class _CompileNotice:  # state of the process, on the class
 
     _installed = False
     enabled = True
+    spinner = True
     depth = compiled = 0
     started = status = None
 
@@ -162,6 +163,8 @@ class _CompileNotice:  # state of the process, on the class
             sys.stderr.write(f"fdbench: compiling the kernels for this machine, once per fdbench version ({FIRST_RUN}; "
                              f"later runs load them from {CACHE_DIR or 'nowhere: no cache'})\n")
             sys.stderr.flush()
+        if not cls.spinner:
+            return
         try:
             from rich.console import Console
 
@@ -190,9 +193,15 @@ class _CompileNotice:  # state of the process, on the class
 
 
 def quiet() -> None:
-    """No notice of compilation on stderr from now on in this process (``--quiet``, worker
-    processes, a progress bar taking the terminal's last line)."""
+    """No notice of compilation on stderr from now on in this process (``--quiet``, worker processes)."""
     _CompileNotice.enabled = False
+    _CompileNotice.stop()
+
+
+def no_spinner() -> None:
+    """The notice's line without its spinner from now on: a progress bar holds the terminal's last
+    line (and shows the line above itself)."""
+    _CompileNotice.spinner = False
     _CompileNotice.stop()
 
 

@@ -212,7 +212,8 @@ def notice(monkeypatch, capsys):
     import fdbench.jit as jit
 
     monkeypatch.setattr(jit, "_stderr_is_terminal", lambda: True)
-    for name, value in (("enabled", True), ("started", None), ("status", None), ("compiled", 0), ("depth", 0)):
+    for name, value in (("enabled", True), ("spinner", True), ("started", None), ("status", None), ("compiled", 0),
+                        ("depth", 0)):
         monkeypatch.setattr(jit._CompileNotice, name, value)
     capsys.readouterr()
     return jit, lambda: capsys.readouterr().err

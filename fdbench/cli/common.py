@@ -313,9 +313,9 @@ class _progress:
     def start(self, total: int, show_best: bool = True) -> None:
         if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
             return
-        from ..jit import quiet
+        from ..jit import no_spinner
 
-        quiet()  # the bar owns the last line now: no compilation spinner beside it
+        no_spinner()  # the bar owns the last line now: a compilation is said in one line above it
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                    TimeRemainingColumn)
 
