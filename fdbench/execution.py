@@ -300,7 +300,10 @@ def _local_worker_init(parent_pid: int) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     die_with_parent(parent_pid)
+    from .jit import quiet
     from .population import set_threads
+
+    quiet()  # the parent said it once if kernels are compiled; workers' lines would cross its display
 
     set_threads(1)  # the workers already share the cores: one thread each for population evaluation
 

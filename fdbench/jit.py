@@ -112,7 +112,104 @@ def _configure():
 
     if CACHE_DIR is not None:
         numba.config.CACHE_DIR = str(CACHE_DIR / "numba" / source_digest())
+    _CompileNotice.install()
     return numba
+
+
+FIRST_RUN = "a first run takes from half a minute to a few minutes"  # measured: README, first lines
+
+
+class _CompileNotice:  # state of the process, on the class
+    """On a terminal, says on stderr that the kernels are being compiled (they are cached
+    afterwards), with a spinner counting the kernels and the time while numba compiles: a machine's
+    first run would otherwise be silent for minutes. Nothing when stderr is not a terminal (scripts
+    keep a clean stderr) or once ``quiet()`` was called (``--quiet``). numba reports a compilation
+    (event ``numba:compile``) only when a kernel is not found in the cache."""
+
+    _installed = False
+    enabled = True
+    spinner = True
+    depth = compiled = 0
+    started = status = None
+
+    @classmethod
+    def install(cls) -> None:
+        if cls._installed:
+            return
+        cls._installed = True
+        from numba.core import event
+
+        class Listener(event.Listener):
+            def on_start(self, _event):
+                cls.on_start()
+
+            def on_end(self, _event):
+                cls.on_end()
+
+        event.register("numba:compile", Listener())
+        import atexit
+
+        atexit.register(cls.stop)  # a spinner left on would leave the terminal's cursor hidden
+
+    @classmethod
+    def on_start(cls) -> None:
+        import time
+
+        cls.depth += 1
+        if cls.depth > 1 or not cls.enabled or not _stderr_is_terminal():
+            return
+        if cls.started is None:
+            cls.started = time.monotonic()
+            sys.stderr.write(f"fdbench: compiling the kernels for this machine, once per fdbench version ({FIRST_RUN}; "
+                             f"later runs load them from {CACHE_DIR or 'nowhere: no cache'})\n")
+            sys.stderr.flush()
+        if not cls.spinner:
+            return
+        try:
+            from rich.console import Console
+
+            cls.status = Console(stderr=True).status(cls())  # its text from __rich__ at every refresh
+            cls.status.start()
+        except Exception:  # noqa: BLE001 - no spinner (another live display): the line above said it
+            cls.status = None
+
+    @classmethod
+    def on_end(cls) -> None:
+        cls.depth = max(0, cls.depth - 1)
+        if cls.depth == 0:
+            cls.compiled += 1
+            cls.stop()  # at once: the command's own output may follow
+
+    @classmethod
+    def stop(cls) -> None:
+        status, cls.status = cls.status, None
+        if status is not None:
+            status.stop()
+
+    def __rich__(self) -> str:
+        import time
+
+        return f"compiling kernel {self.compiled + 1}: {time.monotonic() - self.started:.0f} s since the first"
+
+
+def quiet() -> None:
+    """No notice of compilation on stderr from now on in this process (``--quiet``, worker processes)."""
+    _CompileNotice.enabled = False
+    _CompileNotice.stop()
+
+
+def no_spinner() -> None:
+    """The notice's line without its spinner from now on: a progress bar holds the terminal's last
+    line (and shows the line above itself)."""
+    _CompileNotice.spinner = False
+    _CompileNotice.stop()
+
+
+def _stderr_is_terminal() -> bool:
+    try:
+        return sys.stderr is not None and sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
 
 
 def njit(*args, **options):

@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.integrate import INTEGRATORS
+from fdbench.models import named_motions, names
 from fdbench.motion import KINEMATICS
 from fdbench.optimizers import OPTIMIZERS
 from fdbench.torques import TORQUES
@@ -40,7 +41,9 @@ def choice(names) -> str:
 def test_method_options_show_the_registered_names(command):
     text = help_text(command)
     assert choice(TORQUES) in text and choice(OPTIMIZERS) in text
-    assert choice(KINEMATICS + ("reach", "FILE")) in text and choice(INTEGRATORS) in text
+    motions = dict.fromkeys(m for model in names() for m in named_motions(model))  # the library's, in order
+    assert choice([*motions, "FILE"]) in text and choice(INTEGRATORS) in text
+    assert set(KINEMATICS) <= set(motions)
 
 
 def test_formats_are_shown_as_choices():

@@ -31,7 +31,7 @@ KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as print
                    "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
                    "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
                    "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With another model (--model arm2, leg3 or a file): "
-                   "one of the motions its file declares ('reach' for arm2, 'swing' for leg3; the first is the default) or a "
+                   "one of the motions its file declares (the library's: 'fdbench models show NAME'; the first is the default) or a "
                    "CSV file t,<joint>... with one angle column per joint (optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
 
 
@@ -54,6 +54,10 @@ class FdbenchGroup(TyperGroup):
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
         self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
+        if any(a in ("-q", "--quiet") for a in (sys.argv[1:] if args is None else args)):
+            from ..jit import quiet
+
+            quiet()  # no notice of compilation either
         code = 0
         import warnings
 
@@ -135,9 +139,10 @@ def _choices(name: str, command: str):
 
         return list(SMOOTHING)
     if name == "kinematics":
-        from ..motion import KINEMATICS
+        from ..models import named_motions, names
 
-        return list(KINEMATICS) + ["reach", "FILE"]
+        found = [motion for model in names() for motion in named_motions(model)]  # the library's, in order
+        return list(dict.fromkeys(found)) + ["FILE"]
     if name == "backend":
         from ..execution import BACKENDS
 
@@ -155,9 +160,28 @@ def _choices(name: str, command: str):
     return None
 
 
+def _escape_help(command) -> None:
+    """Help only: the help texts of ``command``, of its options and of its subcommands as plain
+    text under rich markup, so that an example in brackets ('cs[knots=21]', '.[dask]') is shown
+    as written instead of read as a style tag (each text once)."""
+    from rich.markup import escape
+
+    items = [command, *getattr(command, "params", [])] + list(getattr(command, "commands", {}).values())
+    for item in items:
+        if getattr(item, "_fdbench_escaped", False):
+            continue
+        item._fdbench_escaped = True
+        for attribute in ("help", "short_help"):
+            text = getattr(item, attribute, None)
+            if isinstance(text, str):  # a bracket escaped by hand ('\\[opensim]') is escaped once
+                setattr(item, attribute, escape(text.replace("\\[", "[")))
+
+
 def _show_choices(command, ctx) -> None:
     """Help only: show registered names as an option's choices ('[ann|cs|pf]') and no type for
-    on/off flags (computed when help is asked for, so plugins appear and other commands stay fast)."""
+    on/off flags (computed when help is asked for, so plugins appear and other commands stay fast);
+    texts in brackets shown as written (``_escape_help``)."""
+    _escape_help(command)
     params = list(getattr(command, "params", []))
     help_option = command.get_help_option(ctx) if hasattr(command, "get_help_option") else None
     for param in params + ([help_option] if help_option is not None else []):

@@ -334,6 +334,9 @@ class _progress:
     def start(self, total: int, show_best: bool = True) -> None:
         if self.quiet or not sys.stderr.isatty():  # a bar only for a person watching
             return
+        from ..jit import no_spinner
+
+        no_spinner()  # the bar owns the last line now: a compilation is said in one line above it
         from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn,
                                    TimeRemainingColumn)
 

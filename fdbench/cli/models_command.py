@@ -66,7 +66,7 @@ def show_model(
     fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
     output: Output = None,
 ):
-    """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads, named motions, short keys and the total mass. A file that cannot be used is refused in one line naming the key."""
+    """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads, named motions, short keys, the paths --model PATH=VALUE takes with their values, and the total mass. A file that cannot be used is refused in one line naming the key."""
     from ..multibody.description import library
 
     # a library model's file is an input too: an output may not write over it
@@ -109,7 +109,8 @@ def _shown(model, source: str) -> dict:
     from ..multibody.description import short_key_values, to_dict
 
     return {"source": source, "total_mass_kg": model.total_mass, "coordinates": list(model.coordinates),
-            "short_key_values": short_key_values(model), "model": to_dict(model, explicit_ends=True)}
+            "short_key_values": short_key_values(model), "paths": _path_values(model),
+            "model": to_dict(model, explicit_ends=True)}
 
 
 def _point(point) -> str:
@@ -141,7 +142,7 @@ def _show_text(model, source: str) -> str:
     text += _table("joints in order (m, rad)", joints, list(joints[0]))
     if loads:
         text += _table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
-    return text + _motions_text(model) + _keys_text(model)
+    return text + _motions_text(model) + _keys_text(model) + _paths_text(model)
 
 
 def _joint_type(joint) -> str:
@@ -169,6 +170,21 @@ def _motions_text(model) -> str:
             | {key: value for (joint, a), (_, b) in zip(m.start, m.goal) for key, value in span(joint, a, b).items()}
             for i, m in enumerate(model.motions)]
     return _table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
+
+
+def _path_values(model) -> dict:
+    """{path: its value in this model (SI units, rad)}: every path --model PATH=VALUE, --plant and
+    study mismatch --param take."""
+    from ..multibody.description import change_paths, path_value
+
+    return {path: path_value(model, path) for path in change_paths(model)}
+
+
+def _paths_text(model) -> str:
+    from .store_commands import _table
+
+    rows = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
+    return _table("paths (--model PATH=VALUE)", rows, ["path", "value"])
 
 
 def _keys_text(model) -> str:

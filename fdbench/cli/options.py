@@ -41,7 +41,7 @@ Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for 
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
 
 
-SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (one row per sample of the motion, 1001 for eq. 5), as CSV to FILE in a motion file's units, so that --motion reads back the simulated angle and --torque-file the applied torque: t (s), theta, theta_desired (deg), theta_vel, theta_vel_desired (deg/s), theta_acc, theta_acc_desired (deg/s^2), torque, torque_inverse (N m), x2, y2 (m); another model: per joint <joint>, <joint>_desired (deg), <joint>_torque, <joint>_torque_inverse (N m). --save-history is an older name.")]
+SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (one row per sample of the motion, 1001 for eq. 5), as CSV to FILE in a motion file's units, so that --motion reads back the simulated angle and --torque-file the applied torque: t (s), theta, theta_desired (deg), theta_vel, theta_vel_desired (deg/s), theta_acc, theta_acc_desired (deg/s^2), theta_torque, theta_torque_inverse (N m); another model: the same per joint, <joint>, <joint>_desired, <joint>_vel, <joint>_vel_desired, <joint>_acc, <joint>_acc_desired, <joint>_torque, <joint>_torque_inverse (a free joint's translations in m, m/s, m/s^2 and N). --save-history is an older name.")]
 
 
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
@@ -81,7 +81,7 @@ PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal 
 
 
 # Execution of many runs (report, study): where they run and how many at once.
-BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install '.\\[dask]' in fdbench's source folder).")]
+BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install '.[dask]' in fdbench's source folder).")]
 
 
 Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version). Whoever reaches a tcp:// scheduler can run code on its workers: across a network or a shared machine use tls://HOST:PORT, with the client's files in Dask's configuration (DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY; see the README).", show_default=False)]

@@ -48,7 +48,7 @@ def inverse(
 @app.command()
 @_with_conditions
 def simulate(
-    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and torque (N m) covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
+    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and the joint's torque (N m): theta, theta_torque or torque for the forearm, one column per joint (<joint> or <joint>_torque) for another model; covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
     params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
     kinematics: Kinematics = None,
     integrator: Integrator = "rk4",
@@ -62,13 +62,14 @@ def simulate(
     fmt: Format = "table",
     output: Output = None,
     save_history: SaveHistory = None,
+    db: Db = None,
     quiet: Quiet = False,
     conditions: dict = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from ..experiment import RunSpec
 
-    _check_outputs(fmt, output=output, save_history=save_history,
+    _check_outputs(fmt, output=output, save_history=save_history, db=db,
                    inputs=_spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
     if torque_file is not None and params is not None:
         raise BadInput("--torque-file and --params: give one of them, not both")
@@ -77,10 +78,12 @@ def simulate(
     from ..experiment import run_simulation
     from ..files import BadFile
 
+    _check_store(db)
     try:
         outcome = run_simulation(spec, torque_file=torque_file, params_file=params)
     except BadFile as exc:
         raise BadInput(str(exc)) from None
+    _store(outcome, outcome.extra.get("spec", spec), db, quiet)  # stored before any output is written
     _save_history(outcome, save_history)
     _finish(outcome.record, fmt, output, "fdbench simulate", quiet)
 

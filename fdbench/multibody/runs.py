@@ -238,6 +238,28 @@ def _message(result) -> str:
     return text + (f": {result.detail}" if result.detail else "")
 
 
+DRIFT_DEG = 10.0  # an angle this far from its motion: the torques, not --alpha or --dt, made the run fail
+
+
+def _drift_hint(message: str, result, desired, kinds) -> str:
+    """A constraint failure's message, its hint on --alpha and --dt replaced when an angle had
+    drifted more than DRIFT_DEG from its desired value (rad, shape (n, J)) by then: the penalty
+    then fails because the torques whirl the bodies far off the motion (an unstable open loop, or
+    a torque history made for another model or motion), which a larger --alpha does not cure."""
+    from ..records import ALPHA_HINT
+
+    angle = np.array([kind == "angle" for kind in kinds])
+    reached = result.reached
+    if not angle.any() or not reached.any():
+        return message
+    drift = float(np.degrees(np.max(np.abs(result.angles[reached][:, angle] - desired[reached][:, angle]))))
+    if not drift > DRIFT_DEG:
+        return message
+    return message.replace(ALPHA_HINT, f"; by then an angle was {drift:.3g} deg off the desired motion: the torques "
+                                       "drive the model far from it (an unstable open loop, or a torque history made "
+                                       "for another model or motion?), which --alpha and --dt do not change")
+
+
 def _outcome(spec, record: dict, result, inverse, **more):
     """The RunOutcome of a finished simulation: indicators over every joint and per joint (angles
     and translations apart), the trajectory table."""
@@ -254,6 +276,8 @@ def _outcome(spec, record: dict, result, inverse, **more):
     if "translation" in kinds:
         record.update(rmse_trans_cm=trans, rmse_force_n=force)
     record.update(residual_fields(nominal(spec), result.torque[result.reached]))
+    if result.status is sim.Status.CONSTRAINT:
+        record["message"] = _drift_hint(record["message"], result, desired, kinds)
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_acc", "_acc_desired", "_torque",
                                           "_torque_inverse") for j in names]
     values = (result.angles, desired, result.zd, inverse.velocities, _accelerations(spec, result), inverse.accelerations)
@@ -377,7 +401,9 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
-    return _outcome(spec, record, result, inverse)
+    outcome = _outcome(spec, record, result, inverse)
+    outcome.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
+    return outcome
 
 
 def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):
@@ -430,6 +456,7 @@ def _optimize(spec, on_evaluation, on_start):
     from ..experiment import base_record
     from ..method_options import options_text
     from ..optimizers import make_optimizer
+    from ..optimizers.base import NO_ITERATION
     from ..torques import TORQUES
 
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
@@ -469,7 +496,10 @@ def _optimize(spec, on_evaluation, on_start):
                   torque_options=options_text(sorted(options.items())),
                   optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
-    return _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+    outcome = _outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+    if found.stop_reason.startswith(NO_ITERATION):  # "success" of a run that hardly moved: say why
+        outcome.record["message"] += f"; {spec.optimizer} completed no iteration within the budget (see stop_reason)"
+    return outcome
 
 
 def _collocate(spec):

@@ -23,6 +23,9 @@ from ..registry import Registry
 Objective = Callable[[np.ndarray], float]
 
 
+NO_ITERATION = "no iteration completed"  # how a stop reason begins when the budget could not buy one
+
+
 class BudgetExhausted(Exception):
     """Raised inside the objective when the evaluation budget is spent."""
 
@@ -134,10 +137,23 @@ class Optimizer(ABC):
                 f(x0)
             except BudgetExhausted:  # pragma: no cover - budget >= 1
                 pass
-        return f.result(reason)
+        result = f.result(reason)
+        need = self.smallest_budget(len(x0), gradient is not None)
+        if budget < need:  # the result is the start or a point of an unfinished line search: say so
+            result.stop_reason = (f"{NO_ITERATION}: {self.name} needs {need} evaluations for its first iteration on "
+                                  f"{len(x0)} parameters" + ("" if gradient is not None else
+                                                             " with finite-difference gradients")
+                                  + f", the budget was {budget} (give --budget {need} or more"
+                                  + ("" if gradient is not None else ", or --gradient exact, which needs 2") + ")")
+        return result
 
     def warm_up(self) -> None:
         """Import what the optimiser needs, so that its timing excludes start-up costs."""
+
+    def smallest_budget(self, n_params: int, exact_gradient: bool = False) -> int:
+        """The fewest evaluations in which the optimiser completes one iteration from its start on
+        ``n_params`` parameters (1: any budget does)."""
+        return 1
 
 
 OPTIMIZERS: Registry[type[Optimizer]] = Registry("optimizer")

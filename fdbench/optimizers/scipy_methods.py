@@ -18,6 +18,14 @@ class ScipyMinimize(Optimizer):
     def warm_up(self):
         import scipy.optimize  # noqa: F401  (its import is not part of the runtime)
 
+    def smallest_budget(self, n_params: int, exact_gradient: bool = False) -> int:
+        """A gradient optimiser's first iteration needs the value and the gradient at its start
+        and at the first point of its line search: 2 (n + 1) evaluations with forward differences
+        (a value and one per parameter, twice), 2 with exact gradients; 1 for the others."""
+        if not self.uses_gradient:
+            return 1
+        return 2 if exact_gradient else 2 * (n_params + 1)
+
     def run(self, f: Budgeted, x0, seed):
         from scipy.optimize import minimize
 
