@@ -419,7 +419,7 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
                 values[name].append(float(row[i]))
             except ValueError:
                 raise BadFile(f"{option}: {path} line {number}: column {quoted(labels[i].strip())} holds "
-                              f"{quoted(row[i], 20)}, not a number") from None
+                              f"{quoted(row[i], 20)} where numbers are expected") from None
     return {name: np.array(column) for name, column in values.items()}
 
 

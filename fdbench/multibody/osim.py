@@ -783,7 +783,7 @@ def read_storage(path, option: str, joints) -> tuple[dict, bool, list]:
                                   f"column labels (no value for {quoted(labels[k])})") from None
                 except ValueError:
                     raise BadFile(f"{option}: {path} line {number}: column {quoted(labels[k])} holds "
-                                  f"{quoted(row[k], 20)}, not a number") from None
+                                  f"{quoted(row[k], 20)} where numbers are expected") from None
             columns[wanted[label]] = np.array(values)
     unused = [label for label, name in zip(labels, header) if name not in wanted]
     return columns, in_degrees, unused
