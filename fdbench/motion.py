@@ -267,7 +267,7 @@ def extended(values: np.ndarray, pad: int, window: int) -> np.ndarray:
     for end, side in ((values[:window], slice(pad - 1, None, -1) if pad else slice(0)),
                       (values[::-1][:window], slice(pad + n, None))):
         if window > FIT_DEGREE + 1:
-            c = np.polynomial.polynomial.polyfit(np.arange(window) / window, end, FIT_DEGREE)
+            c = np.polynomial.polynomial.polyfit(np.arange(window) / window, end - end[0], FIT_DEGREE)
             out[side] += 2 * c[2] * s**2  # x''(end) s^2, both in window units
     return out
 

@@ -419,7 +419,7 @@ def _path(osim, model, state, joint, coordinate, X_hF):
         axis_of = transform.getTransformAxis(i)
         names = axis_of.getCoordinateNamesInArray()
         axis = np.array([axis_of.getAxis().get(k) for k in range(3)])
-        samples = _function_samples(osim, axis_of.getFunction(), f"{quoted(axis_of.getName())} of {quoted(name)}")
+        samples = _function_samples(osim, axis_of.getFunction(), f"{shown(axis_of.getName())} of {quoted(name)}")
         if names.getSize() == 0 or samples[1] is None:
             constant += axis * (samples[0] if samples[1] is None else _constant_of(osim, axis_of.getFunction()))
             continue
