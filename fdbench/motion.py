@@ -290,7 +290,7 @@ def check_samples(t: np.ndarray, theta: np.ndarray) -> None:
         raise ValueError(f"times must be finite numbers apart, got {t[0]:g} to {t[-1]:g} s")
     if np.any(steps <= 0):
         raise ValueError("times must be strictly increasing")
-    if steps.min() < MIN_RECORDING_DT:
+    if steps.min() < MIN_RECORDING_DT * (1 - 1e-9):  # a 100 kHz clock's rounding is not refused
         k = int(np.argmin(steps))
         raise ValueError(f"samples at {t[k]:.10g} and {t[k + 1]:.10g} s are {steps[k]:.3g} s apart; a recording's "
                          f"samples must be at least {MIN_RECORDING_DT:g} s apart (at most {1 / MIN_RECORDING_DT:g} Hz): "

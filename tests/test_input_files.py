@@ -85,6 +85,17 @@ def test_times_in_the_wrong_unit_are_refused_naming_the_interval(tmp_path):
             words=("scaled.csv", "1e-10 s apart", "at least 1e-05 s apart", "seconds"))
 
 
+def test_the_fastest_capture_allowed_is_not_refused_for_its_clock_s_rounding():
+    """--capture-hz 100000 samples every 1e-5 s, the smallest interval a recording may have; the
+    rounding of linspace's steps (1e-5 - 1e-21 s) must not refuse it, and it is still eq. 5 within
+    what the filter removes (``filter_bound``)."""
+    from fdbench.motion import as_motion, noisy
+
+    captured = noisy(as_motion("exact"), 0.0, 1, capture_hz=100_000.0)
+    t = np.linspace(0.1, 0.9, 9)
+    np.testing.assert_allclose(captured(t)[0], eq5(t, "exact")[0], atol=2 * filter_bound(100_000.0) * math.pi / 4)
+
+
 def test_a_load_of_1e300_n_is_refused_naming_the_load_and_time(tmp_path):
     from test_loads_cli import storage as loads_storage, write
 
