@@ -210,7 +210,7 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
                 if not joint.get_coordinates(i).getDefaultLocked()]
         if not free:
             hosts[child] = _welded_host(hosts[parent], joint, state)
-            welded.append(f"{quoted(child)} ({_weld_reason(joint)}) into {quoted(hosts[parent][0])}")
+            welded.append(f"{shown(child)} ({_weld_reason(joint)}) into {shown(hosts[parent][0])}")
             continue
         hosts[child] = (child, np.eye(3), np.zeros(3))
         try:
