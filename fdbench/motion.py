@@ -230,9 +230,11 @@ def butterworth_design_hz(cutoff_hz: float, rate_hz: float, passes: int = 2, ord
 def zero_lag_lowpass(values: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
     """Winter's zero-lag 4th-order Butterworth low-pass: a 2nd-order filter forward then backward
     (scipy's butter + filtfilt), its design cutoff corrected so that the -3 dB point of the whole
-    is ``cutoff_hz``. values: shape (n,) sampled at ``rate_hz``. Each end is extended as
-    ``extended`` does, for as long as the filter takes to forget its start (``settling_samples``),
-    so that the ends carry no transient and keep their slope and curvature."""
+    is ``cutoff_hz``. values: shape (n,) sampled at ``rate_hz``. Each end is extended by its point
+    reflection (value and slope continuous; repeated as far as needed, as OpenSim's Signal::Pad
+    once) for as long as the filter takes to forget its start (``settling_samples``): the ends
+    carry no start-up transient. The reflection reverses the curvature, so at an end that is not at
+    rest the acceleration is drawn towards 0 over about 1 / (2 cutoff_hz) s."""
     from scipy.signal import butter, filtfilt
 
     if not 0 < cutoff_hz < rate_hz / 2:
@@ -240,36 +242,18 @@ def zero_lag_lowpass(values: np.ndarray, rate_hz: float, cutoff_hz: float) -> np
     b, a = butter(FILTER_ORDER, butterworth_design_hz(cutoff_hz, rate_hz), fs=rate_hz)
     values = np.asarray(values, dtype=float)
     pad = min(settling_samples(a), PAD_RECORDINGS * len(values))
-    out = filtfilt(b, a, extended(values, pad, max(FIT_DEGREE + 3, round(rate_hz / (2 * cutoff_hz)))), padtype=None)
+    out = filtfilt(b, a, np.pad(values, pad, mode="reflect", reflect_type="odd"), padtype=None)
     return out[pad:pad + len(values)]
 
 
 SETTLED = 1e-6  # the filter's start transient is forgotten when it has decayed to this fraction
 PAD_RECORDINGS = 20  # at most this many times the recording's length of padding at each end
-FIT_DEGREE = 4  # the local polynomial that gives an end's curvature
 
 
 def settling_samples(a) -> int:
     """Samples in which the transients of the filter of denominator ``a`` decay to SETTLED."""
     radius = float(np.max(np.abs(np.roots(a))))
     return int(math.ceil(math.log(SETTLED) / math.log(radius)))
-
-
-def extended(values: np.ndarray, pad: int, window: int) -> np.ndarray:
-    """``values`` with ``pad`` samples before and after: each end's point reflection (value and
-    slope continuous, as scipy's odd padding), repeated as far as needed, plus the curvature term
-    x''(end) s^2 that the reflection loses (x'' from a degree-4 least-squares fit to the ``window``
-    samples at the end, a span of half the cutoff's period: the filter's reach)."""
-    n = len(values)
-    window = min(window, n)
-    out = np.pad(values, pad, mode="reflect", reflect_type="odd")
-    s = np.arange(1, pad + 1) / window  # distance from the end, in windows
-    for end, side in ((values[:window], slice(pad - 1, None, -1) if pad else slice(0)),
-                      (values[::-1][:window], slice(pad + n, None))):
-        if window > FIT_DEGREE + 1:
-            c = np.polynomial.polynomial.polyfit(np.arange(window) / window, end - end[0], FIT_DEGREE)
-            out[side] += 2 * c[2] * s**2  # x''(end) s^2, both in window units
-    return out
 
 
 MIN_RECORDING_DT = 1e-5  # s: samples closer than this (faster than 100 kHz) are not a motion capture's
