@@ -413,7 +413,7 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
     for number, row in rows[1:]:
         for name, i in index.items():
             if i >= len(row):
-                raise BadFile(f"{option}: {path} line {number}: {len(row)} values, fewer than the {len(labels)} "
+                raise BadFile(f"{option}: {path} line {number}: {len(row)} value{'s' if len(row) != 1 else ''}, fewer than the {len(labels)} "
                               f"columns of the header (no value for {quoted(labels[i].strip())})")
             try:
                 values[name].append(float(row[i]))

@@ -779,7 +779,7 @@ def read_storage(path, option: str, joints) -> tuple[dict, bool, list]:
                 try:
                     values.append(float(row[k]))
                 except IndexError:
-                    raise BadFile(f"{option}: {path} line {number}: {len(row)} values, fewer than the {len(labels)} "
+                    raise BadFile(f"{option}: {path} line {number}: {len(row)} value{'s' if len(row) != 1 else ''}, fewer than the {len(labels)} "
                                   f"column labels (no value for {quoted(labels[k])})") from None
                 except ValueError:
                     raise BadFile(f"{option}: {path} line {number}: column {quoted(labels[k])} holds "
