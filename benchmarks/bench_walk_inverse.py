@@ -5,7 +5,8 @@ derivative estimate at the same cutoff (6 Hz), measured in one run.
 fdbench: its default estimate of a recorded motion (``fdbench inverse --model subject01.osim
 --motion subject01_walk_IK.mot --loads subject01_walk_grf.xml``): a 2nd-order Butterworth run
 forward and backward (4th-order zero lag), its design cutoff corrected so that the whole is -3 dB
-at the cutoff, odd padding of 90 samples (scipy's filtfilt), then an interpolating quintic spline.
+at the cutoff, each end point-reflected for as long as the filter takes to settle, then an
+interpolating quintic spline.
 OpenSim's InverseDynamicsTool (``lowpass_cutoff_frequency_for_coordinates`` 6, the external loads
 file, muscles excluded): the coordinates padded by half their count at each end (point-reflected,
 Signal::Pad), a 3rd-order Butterworth IIR run forward and backward at the uncorrected design

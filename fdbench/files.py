@@ -28,6 +28,33 @@ class BadFile(ValueError):
 MAX_INPUT_BYTES = 64 * 2**20  # a torque or motion CSV, a parameter file: far more than any real one
 
 
+SHOWN_CHARACTERS = 80  # a name or label from a file, as an error line quotes it
+
+
+def shown(text, limit: int = SHOWN_CHARACTERS) -> str:
+    """``text`` (from a file, or from another program) as one line of a message: whitespace runs as
+    one space, other control and invisible characters escaped (``\\x1b``, ``\\u202e``), cut after
+    about ``limit`` characters on a word boundary (within the last quarter), else on a character's,
+    with '...'."""
+    line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in " ".join(str(text).split()))
+    if len(line) <= limit:
+        return line
+    cut = line[:limit]
+    space = cut.rfind(" ")
+    if space >= limit * 3 // 4:
+        cut = cut[:space]
+    elif "\\" in cut[-9:]:  # an escape is not cut in two
+        cut = cut[:cut.rfind("\\", len(cut) - 9)]
+    return cut.rstrip() + "..."
+
+
+def quoted(text, limit: int = SHOWN_CHARACTERS) -> str:
+    """``text`` quoted for a message: in single quotes, as ``shown`` makes it (every whitespace
+    character but the space escaped too, so that 'a\\tb' is not 'a b')."""
+    escaped = "".join(c if c == " " or c.isprintable() else repr(c)[1:-1] for c in str(text))
+    return "'" + shown(escaped, limit) + "'"
+
+
 def _stat(path, option: str | None = None) -> os.stat_result | None:
     """os.stat following symlinks, or None where nothing exists (a dangling link included);
     BadFile (naming ``option``) for a path that cannot be inspected (a loop of links)."""
@@ -422,38 +449,51 @@ def read_columns(path: str | os.PathLike, option: str, required: tuple, optional
     """Named columns of numbers from a CSV file with a header (names case-insensitive, any order,
     other columns ignored; line endings LF, CRLF or CR): {name: array of shape (n,)}; optional
     columns absent from the header are absent from the result. Raises BadFile with a one-line
-    message."""
+    message naming the file's line where there is one."""
     path = Path(path)
     rows = _csv_rows(path, option, read_input_text(path, option))
     expected = ",".join(required)
     if not rows:
         raise BadFile(f"{option}: {path} is empty; expected a header '{expected}' and rows of numbers")
-    header = [cell.strip().lower() for cell in rows[0]]
+    header_line, labels = rows[0]
+    header = [cell.strip().lower() for cell in labels]
     missing = [name for name in required if name not in header]
     if missing:
         raise BadFile(f"{option}: {path} needs columns {', '.join(repr(n) for n in required)} in its header, "
-                      f"found {', '.join(header)}")
-    twice = [name for name in required + tuple(optional) if header.count(name) > 1]
-    if twice:
-        raise BadFile(f"{option}: {path}: the header names column {twice[0]!r} more than once")
+                      f"found {shown(', '.join(labels), 120)}")
+    for k, name in enumerate(header):
+        first = header.index(name)
+        if first != k and name in required + tuple(optional):
+            raise BadFile(f"{option}: {path} line {header_line}: columns {quoted(labels[first].strip())} and "
+                          f"{quoted(labels[k].strip())} both name {quoted(name)} (names are matched ignoring case); "
+                          "keep one")
     index = {name: header.index(name) for name in required + tuple(optional) if name in header}
     values = {name: [] for name in index}
-    for number, row in enumerate(rows[1:], start=2):
-        try:
-            for name, i in index.items():
+    for number, row in rows[1:]:
+        for name, i in index.items():
+            if i >= len(row):
+                raise BadFile(f"{option}: {path} line {number}: {len(row)} value{'s' if len(row) != 1 else ''}, fewer than the {len(labels)} "
+                              f"columns of the header (no value for {quoted(labels[i].strip())})")
+            try:
                 values[name].append(float(row[i]))
-        except (ValueError, IndexError):
-            raise BadFile(f"{option}: {path} line {number}: expected numbers in columns {', '.join(index)}") from None
+            except ValueError:
+                raise BadFile(f"{option}: {path} line {number}: column {quoted(labels[i].strip())} holds "
+                              f"{quoted(row[i], 20)} where numbers are expected") from None
     return {name: np.array(column) for name, column in values.items()}
 
 
 def _csv_rows(path: Path, option: str, text: str) -> list:
-    """The non-blank rows of a CSV text; old Mac line endings (CR only) are read as line ends."""
+    """(line number, cells) of the non-blank rows of a CSV text; old Mac line endings (CR only)
+    are read as line ends."""
     reader = csv.reader(io.StringIO(text.replace("\r\n", "\n").replace("\r", "\n")))
+    rows = []
     try:
-        return [row for row in reader if row and any(cell.strip() for cell in row)]
+        for row in reader:
+            if row and any(cell.strip() for cell in row):
+                rows.append((reader.line_num, row))
     except csv.Error as exc:
         raise BadFile(f"{option}: {path} line {reader.line_num}: not a CSV file of numbers ({exc})") from None
+    return rows
 
 
 def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple, preferred: tuple = ()

@@ -180,9 +180,10 @@ class SampledMotion(Motion):
     def _interpolants_given(self, theta, vel, acc):
         from scipy.interpolate import CubicHermiteSpline, make_interp_spline
 
-        for values, what in ((vel, "theta_vel"), (acc, "theta_acc")):
-            if values.shape != theta.shape or not np.all(np.isfinite(values)):
-                raise ValueError(f"{what} must be finite, one value per sample")
+        for values, what, unit in ((vel, "the velocity", "rad/s (or m/s)"), (acc, "the acceleration", "rad/s^2 (or m/s^2)")):
+            if values.shape != theta.shape:
+                raise ValueError(f"{what} must have one value per sample")
+            check_bounded(values, self._t + self.start_s, what, unit)
         # theta and theta' are each Hermite-interpolated with their own derivative: at the samples
         # the motion is exactly as given
         position = CubicHermiteSpline(self._t, theta, vel)
@@ -199,7 +200,11 @@ class SampledMotion(Motion):
             uniform_t, uniform_theta = _uniform(self._t, theta)
             filtered = zero_lag_lowpass(uniform_theta, 1.0 / (uniform_t[1] - uniform_t[0]), self.cutoff_hz)
             spline = make_interp_spline(uniform_t, filtered, k=5)  # quintic: a smooth acceleration
-        return spline, spline.derivative(1), spline.derivative(2)
+        velocity, acceleration = spline.derivative(1), spline.derivative(2)
+        for values, what, unit in ((velocity(self._t), "the estimated velocity", "rad/s (or m/s)"),
+                                   (acceleration(self._t), "the estimated acceleration", "rad/s^2 (or m/s^2)")):
+            check_bounded(values, self._t + self.start_s, what, unit)
+        return spline, velocity, acceleration
 
 
 def _uniform(t, theta):
@@ -225,26 +230,67 @@ def butterworth_design_hz(cutoff_hz: float, rate_hz: float, passes: int = 2, ord
 def zero_lag_lowpass(values: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
     """Winter's zero-lag 4th-order Butterworth low-pass: a 2nd-order filter forward then backward
     (scipy's butter + filtfilt), its design cutoff corrected so that the -3 dB point of the whole
-    is ``cutoff_hz``. values: shape (n,) sampled at ``rate_hz``."""
+    is ``cutoff_hz``. values: shape (n,) sampled at ``rate_hz``. Each end is extended by its point
+    reflection (value and slope continuous; repeated as far as needed, as OpenSim's Signal::Pad
+    once) for as long as the filter takes to forget its start (``settling_samples``): the ends
+    carry no start-up transient. The reflection reverses the curvature, so at an end that is not at
+    rest the acceleration is drawn towards 0 over about 1 / (2 cutoff_hz) s."""
     from scipy.signal import butter, filtfilt
 
     if not 0 < cutoff_hz < rate_hz / 2:
         raise ValueError(f"the cutoff {cutoff_hz:g} Hz must be below half the sampling rate ({rate_hz / 2:.4g} Hz)")
     b, a = butter(FILTER_ORDER, butterworth_design_hz(cutoff_hz, rate_hz), fs=rate_hz)
-    # odd (point-reflected) padding of a few filter time constants keeps the ends from ringing
-    return filtfilt(b, a, values, padtype="odd", padlen=min(len(values) - 1, 30 * max(len(a), len(b))))
+    values = np.asarray(values, dtype=float)
+    pad = min(settling_samples(a), PAD_RECORDINGS * len(values))
+    out = filtfilt(b, a, np.pad(values, pad, mode="reflect", reflect_type="odd"), padtype=None)
+    return out[pad:pad + len(values)]
+
+
+SETTLED = 1e-6  # the filter's start transient is forgotten when it has decayed to this fraction
+PAD_RECORDINGS = 20  # at most this many times the recording's length of padding at each end
+
+
+def settling_samples(a) -> int:
+    """Samples in which the transients of the filter of denominator ``a`` decay to SETTLED."""
+    radius = float(np.max(np.abs(np.roots(a))))
+    return int(math.ceil(math.log(SETTLED) / math.log(radius)))
+
+
+MIN_RECORDING_DT = 1e-5  # s: samples closer than this (faster than 100 kHz) are not a motion capture's
 
 
 def check_samples(t: np.ndarray, theta: np.ndarray) -> None:
-    """Times and angles a motion can be built from; ValueError with a one-line message."""
+    """Times and angles a motion can be built from; ValueError with a one-line message. Values are
+    bounded as a model file's numbers are (``description.MAX_MAGNITUDE`` in SI units)."""
     if t.ndim != 1 or t.shape != theta.shape:
         raise ValueError("times and angles must be two columns of the same length")
     if len(t) < MIN_SAMPLES:
         raise ValueError(f"a motion needs at least {MIN_SAMPLES} samples, found {len(t)}")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(theta))):
         raise ValueError("times and angles must be finite numbers (no NaN or empty cells)")
-    if np.any(np.diff(t) <= 0):
+    check_bounded(theta, t, "the angle", "rad (or m)")
+    steps = np.diff(t)
+    if not (np.all(np.isfinite(steps)) and math.isfinite(t[-1] - t[0])):
+        raise ValueError(f"times must be finite numbers apart, got {t[0]:g} to {t[-1]:g} s")
+    if np.any(steps <= 0):
         raise ValueError("times must be strictly increasing")
+    if steps.min() < MIN_RECORDING_DT * (1 - 1e-9):  # a 100 kHz clock's rounding is not refused
+        k = int(np.argmin(steps))
+        raise ValueError(f"samples at {t[k]:.10g} and {t[k + 1]:.10g} s are {steps[k]:.3g} s apart; a recording's "
+                         f"samples must be at least {MIN_RECORDING_DT:g} s apart (at most {1 / MIN_RECORDING_DT:g} Hz): "
+                         "are the times in seconds?")
+
+
+def check_bounded(values: np.ndarray, t: np.ndarray, what: str, unit: str) -> None:
+    """ValueError naming the first sample (its time t, s) where ``values`` are not finite or exceed
+    a model file's bound on any number (``description.MAX_MAGNITUDE``), in ``unit``."""
+    from .multibody.description import MAX_MAGNITUDE
+
+    bad = ~(np.abs(values) <= MAX_MAGNITUDE)  # NaN included
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        raise ValueError(f"{what} is {values[k]:.4g} {unit} at t = {t[k]:.10g} s; a motion's values must be finite "
+                         f"and at most {MAX_MAGNITUDE:g} in magnitude")
 
 
 SINGULAR_COS = 1e-2  # |cos| below this (within 0.57 deg of +-90 deg): a singular mixed coordinate

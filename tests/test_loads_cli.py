@@ -76,7 +76,7 @@ BAD = {  # case: (how the folder is set up -> the --loads argument, words of the
                       ("point_expressed_in_body", "'heel'", "thigh, shank, foot, ground")),
     "missing column": (lambda f: write(f, data=storage(columns=COLUMNS[:3] + COLUMNS[4:])),
                        ("push.mot", "no column 'f_px'", "push.xml")),
-    "not a number": (lambda f: write(f, data=storage(value="nan")), ("push.mot", "not a finite number")),
+    "not a number": (lambda f: write(f, data=storage(value="nan")), ("push.mot", "the force of load 'push' is nan N", "must be finite")),
     "data short of the motion": (lambda f: write(f, data=storage(0.0, 0.5)),
                                  ("push.xml", "the loads cover 0 to 0.5 s", "not all of 0 to 1 s")),
     "data after the motion's start": (lambda f: write(f, data=storage(0.2, 1.5)), ("the loads cover 0.2 to 1.5 s",)),

@@ -389,6 +389,28 @@ def test_bad_models_are_refused_in_one_line_and_nothing_is_written(tmp_path, cas
         assert not out.exists()
 
 
+# ---------------------------------------------------------------- names in messages
+
+
+def test_an_endless_body_name_gives_a_short_line(tmp_path):
+    name = "b" * 100_000
+    path = osim_file(tmp_path / "long.osim", [body(name, 1.0, (0.1, 0, 0), (0.01, 0.01, 0.01, 0, 0, 0))],
+                     [joint("PinJoint", "j1", "ground", name, [("q1", 0.0, False)])])
+    line = refused("models", "show", path,
+                   contains=("long.osim", "'" + "b" * 80 + "...'", "is not a name fdbench accepts"))
+    assert len(line) < 300
+
+
+def test_a_spline_with_knots_out_of_order_names_its_joint_and_coordinate(tmp_path):
+    path = path_knee_model(tmp_path / "knee_nonmono.osim",
+                           spline="<SimmSpline><x> -2 0 -1 1</x><y> -0.01 -0.005 0 0.001</y></SimmSpline>")
+    out = tmp_path / "out.toml"
+    refused("import-osim", path, "-o", out, contains=("knee_nonmono.osim", "joint 'knee' (CustomJoint)",
+                                                      "coordinate 'knee_angle'",
+                                                      "knots (-2 0 -1 1) are not strictly increasing"))
+    assert not out.exists()
+
+
 def random_states(model, count: int, seed: int):
     """count random (z, z', z''), each (count, J): angles in [-1, 0.15] rad (the knees' range), the
     translations about their defaults, rates up to 3 (rad or m)/s, accelerations up to 20 /s^2."""

@@ -471,7 +471,9 @@ class _Checker:
         if not isinstance(value, str):
             self.fail(key, f"must be {ALLOWED['name']}, got {_kind(value)}")
         if not NAME_PATTERN.fullmatch(value):
-            self.fail(key, f"{value!r} is not a name fdbench accepts: a letter then letters, digits or '_', "
+            from ..files import quoted
+
+            self.fail(key, f"{quoted(value)} is not a name fdbench accepts: a letter then letters, digits or '_', "
                            "at most 64 characters")
         if value.lower() == GROUND:
             self.fail(key, "'ground' is reserved for the fixed world; choose another name")
@@ -681,7 +683,9 @@ def _short_keys(check: _Checker, value, model: Model) -> tuple[tuple[str, str], 
     for name, target in value.items():
         key = f"keys.{name}"
         if not NAME_PATTERN.fullmatch(name):
-            check.fail(key, f"{name!r} is not a short key fdbench accepts: a letter then letters, digits or '_'")
+            from ..files import quoted
+
+            check.fail(key, f"{quoted(name)} is not a short key fdbench accepts: a letter then letters, digits or '_'")
         if not isinstance(target, str):
             check.fail(key, f"must be a path of the model as a text ('[-]path[@joint]'), got {_kind(target)}")
         problem = _target_problem(model, target)

@@ -29,8 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import quoted, shown
+
 GROUND = "ground"
 MAX_LOADS = 100
+MAX_PATH_CHARACTERS = 4096  # a <datafile> name (Linux's PATH_MAX)
 
 
 @dataclass(frozen=True)
@@ -58,9 +61,15 @@ class ExternalLoads:
             raise ValueError(f"loads: force and point must have shape ({n}, {L}, 2) and moment ({n}, {L})")
         if n < 2 or not np.all(np.diff(self.t) > 0):
             raise ValueError(f"{source}: the loads' times must be at least two and increasing")
-        for name, values in (("force", self.force), ("point", self.point), ("moment", self.moment)):
-            if not np.all(np.isfinite(values)):
-                raise ValueError(f"{source}: a load's {name} holds a value that is not a finite number")
+        from .description import MAX_MAGNITUDE
+
+        for name, unit, values in (("force", "N", self.force), ("point", "m", self.point), ("moment", "N m", self.moment)):
+            bad = ~(np.abs(values) <= MAX_MAGNITUDE)  # NaN included
+            if np.any(bad):
+                where = tuple(np.argwhere(bad)[0])
+                raise ValueError(f"{source}: the {name} of load {quoted(self.loads[where[1]].name)} is {values[where]:.4g} "
+                                 f"{unit} at t = {self.t[where[0]]:g} s; a load's values must be finite and at most "
+                                 f"{MAX_MAGNITUDE:g} in magnitude")
 
     def at(self, t) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(force (k, L, 2), point (k, L, 2), moment (k, L)) at times t (s, shape (k,)), linear
@@ -138,9 +147,13 @@ def _fail(option: str, path, problem: str):
     raise BadFile(f"{option}: {path}: {problem}")
 
 
-def _text(element, tag: str, default: str = "") -> str:
+def _text(element, tag: str, default: str = "", collapse: bool = True) -> str:
+    """An element's text, stripped, its inner whitespace runs made one space unless not ``collapse``
+    (a file name is kept as written)."""
     found = element.find(tag)
-    return default if found is None or found.text is None else " ".join(found.text.split())
+    if found is None or found.text is None:
+        return default
+    return " ".join(found.text.split()) if collapse else found.text.strip()
 
 
 def _root_and_datafile(path: Path, option: str):
@@ -154,9 +167,12 @@ def _root_and_datafile(path: Path, option: str):
     element = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
     if element is None:
         _fail(option, path, "has no <ExternalLoads> element (OpenSim's external loads file)")
-    datafile = _text(element, "datafile")
+    datafile = _text(element, "datafile", collapse=False)
     if not datafile:
         _fail(option, path, "names no <datafile> (the storage file of the forces)")
+    if not datafile.isprintable() or len(datafile) > MAX_PATH_CHARACTERS:
+        _fail(option, path, f"its <datafile> {quoted(datafile)} is not a file name (control characters, or more "
+                            f"than {MAX_PATH_CHARACTERS} characters)")
     return element, Path(datafile) if Path(datafile).is_absolute() else path.parent / datafile
 
 
@@ -204,7 +220,7 @@ def read_external_loads(path, model, option: str = "--loads") -> ExternalLoads:
     table, _, _ = read_storage(data_path, _data_option(option, path), names)
     for name in names:
         if name.lower() not in table:
-            _fail(option, data_path, f"has no column {name!r} (named by {path.name})")
+            _fail(option, data_path, f"has no column {quoted(name)} (named by {path.name})")
     t = table["t"]
     n, L = len(t), len(loads)
     force, point, moment = np.zeros((n, L, 2)), np.zeros((n, L, 2)), np.zeros((n, L))
@@ -234,11 +250,11 @@ def _external_force(force, model, option: str, path) -> tuple[ExternalLoad, dict
                 from ..registry import unknown_name_message
 
                 known = [b.name for b in model.bodies] + [f.name for f in model.frames]
-                _fail(option, path, f"ExternalForce {name!r}: {what}: "
-                                    + unknown_name_message("body", frame, known + ([GROUND] if what != "applied_to_body" else [])))
+                _fail(option, path, f"ExternalForce {quoted(name)}: {what}: "
+                                    + unknown_name_message("body", shown(frame), known + ([GROUND] if what != "applied_to_body" else [])))
     force_id, point_id, torque_id = (_text(force, f"{key}_identifier") for key in ("force", "point", "torque"))
     if not force_id:
-        _fail(option, path, f"ExternalForce {name!r} has no <force_identifier>")
+        _fail(option, path, f"ExternalForce {quoted(name)} has no <force_identifier>")
     if not point_id:  # as OpenSim: a force without a point acts at the origin of the body it is applied to
         frames["point"] = body
     wanted = {"force": [force_id + "x", force_id + "y"], "point": [point_id + "x", point_id + "y"] if point_id else [],

@@ -181,7 +181,7 @@ def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool 
     'translation' (``Model.coordinate_kinds``; default all angles): a translation's column is in m
     (m/s, m/s^2) whatever the angles' unit, as OpenSim writes it.
     Raises files.BadFile naming the file (and the joint) in one line."""
-    from ..files import BadFile, read_columns
+    from ..files import BadFile, quoted, read_columns, shown
     from ..motion import SampledMotion, given_rates, rate_column_names
     from .osim import is_storage, read_storage
 
@@ -195,8 +195,8 @@ def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool 
     for joint, name in zip(joints, names):
         if name not in columns:
             needed = "a time column and" if is_storage(path) else "columns t,"
-            raise BadFile(f"{option}: {path} has no column for joint {joint!r}; a motion file needs {needed} "
-                          f"{', '.join(joints)} (angles in {'rad' if radians else 'deg'})")
+            raise BadFile(f"{option}: {path} has no column for joint {quoted(joint)}; a motion file needs {needed} "
+                          f"{shown(', '.join(joints), 200)} (angles in {'rad' if radians else 'deg'})")
     angle_unit = 1.0 if radians else math.pi / 180
     parts = []
     for joint, name, kind in zip(joints, names, kinds or ("angle",) * len(joints)):
@@ -206,7 +206,7 @@ def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool 
             parts.append(SampledMotion(columns["t"], columns[name] * unit, None if vel is None else vel * unit,
                                        None if acc is None else acc * unit, name=joint, absolute=False, **estimate))
         except ValueError as exc:
-            raise BadFile(f"{option}: {path}: {joint}: {exc}") from None
+            raise BadFile(f"{option}: {path}: {shown(joint)}: {exc}") from None
     motion = PerJoint(parts, joints)
     motion.name = f"file:{path.name}"
     return motion

@@ -60,6 +60,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files import quoted, shown
+
 INSTALL_HINT = "pip install 'fdbench[opensim]'"
 MAX_OSIM_BYTES = 64 * 2**20
 STORAGE_SUFFIXES = (".mot", ".sto")
@@ -189,8 +191,7 @@ def _built(osim, content: bytes, source: str):
             model = osim.Model(copy)
             state = model.initSystem()
         except Exception as exc:  # noqa: BLE001 - OpenSim's errors are RuntimeErrors of many kinds
-            message = " ".join(str(exc).replace(copy, Path(source).name).split())
-            _fail(source, f"OpenSim cannot build this model: {message[:300]}")
+            _fail(source, f"OpenSim cannot build this model: {shown(str(exc).replace(copy, Path(source).name), 300)}")
     return model, state
 
 
@@ -207,7 +208,7 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
                 if not joint.get_coordinates(i).getDefaultLocked()]
         if not free:
             hosts[child] = _welded_host(hosts[parent], joint, state)
-            welded.append(f"{child} ({_weld_reason(joint)}) into {hosts[parent][0]}")
+            welded.append(f"{shown(child)} ({_weld_reason(joint)}) into {shown(hosts[parent][0])}")
             continue
         hosts[child] = (child, np.eye(3), np.zeros(3))
         try:
@@ -216,12 +217,13 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
             else:
                 pin, tilt = _pin(osim, model, state, joint, free, hosts[parent], max_tilt_deg)
         except _Refused as exc:
-            refused.append(f"joint {joint.getName()!r} ({joint.getConcreteClassName()}) {exc}")
+            refused.append(f"joint {quoted(joint.getName())} ({joint.getConcreteClassName()}) {exc}")
             continue
         kept.append(pin)
         tilts += tilt
     if refused:
-        _fail(source, f"cannot be imported: {'; '.join(refused)}; fdbench imports planar trees of pin joints (one "
+        more = f"; and {len(refused) - 3} more joints" if len(refused) > 3 else ""
+        _fail(source, f"cannot be imported: {'; '.join(refused[:3])}{more}; fdbench imports planar trees of pin joints (one "
                       f"coordinate, the axis within --max-tilt {max_tilt_deg:g} deg of the plane's normal z, the "
                       "joint's point fixed or on a path of the coordinate) and one free planar joint on ground")
     gravity, gravity_tilt = _gravity(model, source, max_tilt_deg)
@@ -244,7 +246,7 @@ def _body_name(frame) -> str:
 def _refuse_constraints(model, source: str) -> None:
     for constraint in model.getConstraintSet():
         if constraint.get_isEnforced():
-            _fail(source, f"constraint {constraint.getName()!r} ({constraint.getConcreteClassName()}): fdbench imports "
+            _fail(source, f"constraint {quoted(constraint.getName())} ({constraint.getConcreteClassName()}): fdbench imports "
                           "trees without constraints (no closed loops or coupled coordinates)")
 
 
@@ -254,12 +256,12 @@ def _joints_by_child(model, source: str) -> dict:
     for joint in model.getJointSet():
         child = _body_name(joint.getChildFrame())
         if child in joints:
-            _fail(source, f"joint {joint.getName()!r}: body {child!r} is already the child of joint "
-                          f"{joints[child].getName()!r} (a closed loop); fdbench imports trees")
+            _fail(source, f"joint {quoted(joint.getName())}: body {quoted(child)} is already the child of joint "
+                          f"{quoted(joints[child].getName())} (a closed loop); fdbench imports trees")
         joints[child] = joint
     for body in model.getBodySet():
         if body.getName() not in joints:
-            _fail(source, f"body {body.getName()!r} is attached by no joint; every body must hang from ground")
+            _fail(source, f"body {quoted(body.getName())} is attached by no joint; every body must hang from ground")
     return joints
 
 
@@ -272,7 +274,7 @@ def _tree_order(joints: dict, source: str) -> list:
     while pending:
         ready = [joint for joint in pending if _body_name(joint.getParentFrame()) in placed]
         if not ready:
-            _fail(source, f"joint {pending[0].getName()!r}: its parent has no path to ground; fdbench imports trees")
+            _fail(source, f"joint {quoted(pending[0].getName())}: its parent has no path to ground; fdbench imports trees")
         for joint in ready:
             order.append(joint)
             placed.add(_body_name(joint.getChildFrame()))
@@ -282,9 +284,9 @@ def _tree_order(joints: dict, source: str) -> list:
 
 def _weld_reason(joint) -> str:
     if joint.numCoordinates() == 0:
-        return f"{joint.getConcreteClassName()} {joint.getName()!r}"
-    names = ", ".join(joint.get_coordinates(i).getName() for i in range(joint.numCoordinates()))
-    return f"joint {joint.getName()!r}, coordinate {names} locked"
+        return f"{joint.getConcreteClassName()} {quoted(joint.getName())}"
+    names = shown(", ".join(joint.get_coordinates(i).getName() for i in range(joint.numCoordinates())))
+    return f"joint {quoted(joint.getName())}, coordinate {names} locked"
 
 
 # ---------------------------------------------------------------------------------------- frames
@@ -356,7 +358,7 @@ def _pin(osim, model, state, joint, free: list, parent_host, max_tilt_deg: float
     """(the description's joint, [(tilt deg, what)]) of a one-coordinate joint about a fixed axis,
     its point fixed or on a path of the coordinate."""
     if len(free) > 1:
-        raise _Refused(f"has {len(free)} free coordinates ({', '.join(c.getName() for c in free)}): a 3D joint, or "
+        raise _Refused(f"has {len(free)} free coordinates ({shown(', '.join(c.getName() for c in free))}): a 3D joint, or "
                        "a free planar base not on ground")
     coordinate, name = free[0], joint.getName()
     q0 = coordinate.getValue(state)
@@ -369,12 +371,12 @@ def _pin(osim, model, state, joint, free: list, parent_host, max_tilt_deg: float
     moves = max(np.linalg.norm(X1[1] - X0[1]), np.linalg.norm(X2[1] - X0[1])) > SAME_POINT
     axis = _rotation_axis(X0[0], X1[0], q1 - q0, coordinate)
     if not np.allclose(_axis_rotation(axis, q2 - q0) @ X0[0], X2[0], atol=SAME_ANGLE):
-        raise _Refused(f"turns its child about more than one axis with coordinate {coordinate.getName()!r}")
+        raise _Refused(f"turns its child about more than one axis with coordinate {quoted(coordinate.getName())}")
     host, R_hP, p_hP = parent_host
     X_hF = _compose((R_hP, p_hP), _in_base(joint.getParentFrame()))
     X_CM = _in_base(joint.getChildFrame())
     R_hC = X_hF[0] @ X0[0] @ X_CM[0].T
-    tilts = [(_off_normal(X_hF[0] @ axis), f"{name}'s axis"), (_off_normal(R_hC[:, 2]), f"{name}'s child frame")]
+    tilts = [(_off_normal(X_hF[0] @ axis), f"{shown(name)}'s axis"), (_off_normal(R_hC[:, 2]), f"{shown(name)}'s child frame")]
     for (tilt, _), what in zip(tilts, ("axis", "child frame")):
         if tilt > 90:
             raise _Refused(f"has its {what} along -z ({tilt:.3g} deg from +z): fdbench's coordinates turn "
@@ -408,19 +410,19 @@ def _path(osim, model, state, joint, coordinate, X_hF):
     custom = osim.CustomJoint.safeDownCast(joint)
     name = coordinate.getName()
     if custom is None:
-        raise _Refused(f"moves its child with coordinate {name!r} and is not a CustomJoint")
+        raise _Refused(f"moves its child with coordinate {quoted(name)} and is not a CustomJoint")
     transform = custom.getSpatialTransform()
     constant, varying = np.zeros(3), []  # the translation in F: constant + sum of axis * f(q)
     for i in range(3, 6):
         axis_of = transform.getTransformAxis(i)
         names = axis_of.getCoordinateNamesInArray()
         axis = np.array([axis_of.getAxis().get(k) for k in range(3)])
-        samples = _function_samples(osim, axis_of.getFunction(), f"{axis_of.getName()} of {name!r}")
+        samples = _function_samples(osim, axis_of.getFunction(), f"{shown(axis_of.getName())} of {quoted(name)}")
         if names.getSize() == 0 or samples[1] is None:
             constant += axis * (samples[0] if samples[1] is None else _constant_of(osim, axis_of.getFunction()))
             continue
         if names.getSize() != 1 or names.get(0) != name:
-            raise _Refused(f"translates its child by a function of coordinates other than {name!r}")
+            raise _Refused(f"translates its child by a function of coordinates other than {quoted(name)}")
         varying.append((X_hF[0] @ axis, samples))
     at_parent = _xy(X_hF[0] @ constant + X_hF[1])
     path = _planar_path(varying, name)
@@ -474,7 +476,7 @@ def _planar_path(varying: list, name: str) -> dict:
     for knots, xy in by_knots.items():
         moving = [k for k in (0, 1) if np.any(xy[k] != 0.0)]
         if len(moving) != 1 or moving[0] in along:
-            raise _Refused(f"translates its child along a path of {name!r} whose two components have different "
+            raise _Refused(f"translates its child along a path of {quoted(name)} whose two components have different "
                            "knots and do not lie along the parent's x and y axes")
         along[moving[0]] = (list(knots), xy[moving[0]].tolist())
     x_knots, x_values = along.get(0, (along[1][0], [0.0] * len(along[1][0])))
@@ -487,7 +489,12 @@ def _check_path(model, state, joint, coordinate, X_hF, at_parent, path) -> None:
     """The child's point from at_parent + path against OpenSim's at PATH_CHECKS values."""
     from .spline import fit
 
-    x_of, y_of = fit(path["angles"], path["x"]), fit(path.get("y_angles", path["angles"]), path["y"])
+    try:
+        x_of, y_of = fit(path["angles"], path["x"]), fit(path.get("y_angles", path["angles"]), path["y"])
+    except ValueError:
+        knots = path["angles"] if np.any(np.diff(path["angles"]) <= 0) else path.get("y_angles", path["angles"])
+        raise _Refused(f"moves its child along a path of coordinate {quoted(coordinate.getName())} whose spline knots "
+                       f"({shown(' '.join(f'{k:g}' for k in knots), 60)}) are not strictly increasing") from None
     low, high = coordinate.getRangeMin(), coordinate.getRangeMax()
     if not (math.isfinite(low) and math.isfinite(high) and low < high):
         low, high = -math.pi, math.pi
@@ -503,7 +510,7 @@ def _check_path(model, state, joint, coordinate, X_hF, at_parent, path) -> None:
     coordinate.setValue(state, q0, False)
     model.realizePosition(state)
     if worst > PATH_TOLERANCE:
-        raise _Refused(f"moves its child along a path of {coordinate.getName()!r} that fdbench's spline does not "
+        raise _Refused(f"moves its child along a path of {quoted(coordinate.getName())} that fdbench's spline does not "
                        f"reproduce (off by {worst:.3g} m)")
 
 
@@ -530,14 +537,14 @@ def _free_joint(model, state, joint, free: list, parent_host, max_tilt_deg: floa
         elif turn <= SAME_ANGLE and np.allclose(moved, [0.0, 1.0, 0.0], atol=1e-9):
             roles.setdefault("y", []).append((coordinate, q0, X1))
         else:
-            raise _Refused(f"has coordinate {coordinate.getName()!r} that neither turns its child about a fixed point "
+            raise _Refused(f"has coordinate {quoted(coordinate.getName())} that neither turns its child about a fixed point "
                            "nor moves it along the ground's x or y by its value: not a free planar joint")
     if any(len(roles.get(role, ())) != 1 for role in ("angle", "x", "y")):
         raise _Refused("has three coordinates that are not one angle and the translations along x and y")
     (angle, q_angle, X1), = roles["angle"]
     axis = _rotation_axis(X0[0], X1[0], PROBE_STEP, angle)
     R_hC = X_hF[0] @ X0[0] @ X_CM[0].T
-    tilts = [(_off_normal(X_hF[0] @ axis), f"{name}'s axis"), (_off_normal(R_hC[:, 2]), f"{name}'s child frame")]
+    tilts = [(_off_normal(X_hF[0] @ axis), f"{shown(name)}'s axis"), (_off_normal(R_hC[:, 2]), f"{shown(name)}'s child frame")]
     for (tilt, _), what in zip(tilts, ("axis", "child frame")):
         if tilt > 90 or tilt > max_tilt_deg:
             raise _Refused(f"has its {what} {tilt:.3g} deg off the plane's normal z")
@@ -560,7 +567,7 @@ def _rotation_axis(R0, R1, step: float, coordinate) -> np.ndarray:
     """The unit axis (in F) about which the child turns by +step from R0 to R1."""
     angle, axis = _angle_axis(R1 @ R0.T)
     if abs(angle - abs(step)) > SAME_ANGLE:
-        raise _Refused(f"turns its child by {math.degrees(angle):.4g} deg when coordinate {coordinate.getName()!r} "
+        raise _Refused(f"turns its child by {math.degrees(angle):.4g} deg when coordinate {quoted(coordinate.getName())} "
                        f"changes by {math.degrees(abs(step)):.4g} deg: its angle is not the coordinate")
     return axis if step > 0 else -axis
 
@@ -749,21 +756,34 @@ def read_storage(path, option: str, joints) -> tuple[dict, bool, list]:
         raise BadFile(f"{option}: {path} is not an OpenSim storage file: no 'endheader' line")
     settings = dict(line.strip().lower().split("=", 1) for line in lines[:end] if "=" in line)
     in_degrees = settings.get("indegrees", "no").strip() == "yes"
-    rows = [line.split() for line in lines[end + 1:] if line.strip()]
+    rows = [(number, line.split()) for number, line in enumerate(lines[end + 1:], start=end + 2) if line.strip()]
     if not rows:
         raise BadFile(f"{option}: {path} has no column labels after 'endheader'")
-    header = [_column_name(label) for label in rows[0]]
+    header_line, labels = rows[0]
+    header = [_column_name(label) for label in labels]
     if "time" not in header:
         raise BadFile(f"{option}: {path} has no 'time' column after 'endheader'")
     wanted = {"time": "t"} | {joint.lower(): joint.lower() for joint in joints}
+    for k, label in enumerate(header):
+        first = header.index(label)
+        if label in wanted and first != k:
+            raise BadFile(f"{option}: {path} line {header_line}: columns {quoted(labels[first])} and "
+                          f"{quoted(labels[k])} both name {quoted(label)} (labels are matched ignoring case); keep one")
     columns = {}
     for k, label in enumerate(header):
         if label in wanted:
-            try:
-                columns[wanted[label]] = np.array([float(row[k]) for row in rows[1:]])
-            except (ValueError, IndexError):
-                raise BadFile(f"{option}: {path}: column {rows[0][k]!r} holds something that is not a number") from None
-    unused = [label for label, name in zip(rows[0], header) if name not in wanted]
+            values = []
+            for number, row in rows[1:]:
+                try:
+                    values.append(float(row[k]))
+                except IndexError:
+                    raise BadFile(f"{option}: {path} line {number}: {len(row)} value{'s' if len(row) != 1 else ''}, fewer than the {len(labels)} "
+                                  f"column labels (no value for {quoted(labels[k])})") from None
+                except ValueError:
+                    raise BadFile(f"{option}: {path} line {number}: column {quoted(labels[k])} holds "
+                                  f"{quoted(row[k], 20)} where numbers are expected") from None
+            columns[wanted[label]] = np.array(values)
+    unused = [label for label, name in zip(labels, header) if name not in wanted]
     return columns, in_degrees, unused
 
 
@@ -784,7 +804,7 @@ def storage_note(path, joints) -> str:
         _, _, unused = read_storage(path, "--motion", joints)
     except BadFile:
         return ""
-    return f"{path}: columns the model lacks were ignored: {', '.join(unused)}" if unused else ""
+    return f"{path}: columns the model lacks were ignored: {shown(', '.join(unused), 200)}" if unused else ""
 
 
 def toml_text(model, notes, source) -> str:
