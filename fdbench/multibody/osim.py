@@ -121,7 +121,7 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
         answer = json.loads(done.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):
         last = (done.stderr.strip().splitlines() or ["no output"])[-1]
-        _fail(source, f"OpenSim's import process failed (exit {done.returncode}): {last[:300]}")
+        _fail(source, f"OpenSim's import process failed (exit {done.returncode}): {shown(last, 300)}")
     if "error" in answer:
         raise ModelError(*answer["error"])
     return model_from_dict(answer["model"], source, default_name=Path(source).stem), tuple(answer["notes"])

@@ -15,6 +15,7 @@ import subprocess
 import sys
 import tempfile
 
+from ..files import shown
 from ..isolation import python_command
 from ..multibody.osim import INSTALL_HINT
 
@@ -41,7 +42,7 @@ def call(request: dict, timeout_s: float = CHILD_TIMEOUT_S) -> dict:
         answer = json.loads(done.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):
         last = (done.stderr.strip().splitlines() or ["no output"])[-1]
-        raise RuntimeError(f"OpenSim's process failed (exit {done.returncode}): {last[:300]}") from None
+        raise RuntimeError(f"OpenSim's process failed (exit {done.returncode}): {shown(last, 300)}") from None
     if answer.get("unavailable"):
         raise PeerUnavailable(f"the peers run OpenSim and need the opensim package: {INSTALL_HINT}")
     if "error" in answer:
