@@ -374,7 +374,7 @@ def _animation_axes(plt, recorded: list, simulated: dict) -> tuple:
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
         ax.tick_params(labelsize=_points(ANIMATION_FONT_PX))
-        ax.xaxis.set_major_locator(MaxNLocator(5))
+        ax.xaxis.set_major_locator(MaxNLocator(max(2, int(panel * ANIMATION_DPI / (6 * ANIMATION_FONT_PX)))))
         ax.yaxis.set_major_locator(MaxNLocator(4))
         ax.set_title("\n", fontsize=_points(ANIMATION_FONT_PX))  # room for each frame's two lines of title
     fig.tight_layout(rect=(0, 0, 1, 1 - 2 * ANIMATION_FONT_PX / ANIMATION_DPI / height))
