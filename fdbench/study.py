@@ -249,7 +249,7 @@ def write_figures(sweep: Sweep, rows: list[dict], directory) -> dict:
             points = [r for r in rows if r["method"] == method]
             x = np.array([r["level"] for r in points])
             median = np.array([r[f"{name}_median"] for r in points])
-            (line,) = ax.plot(x, median, marker="o", label=method, **styles.get(method, {}))
+            (line,) = ax.plot(x, median, marker="o", label=method, **styles[method])
             ax.fill_between(x, [r[f"{name}_q1"] for r in points], [r[f"{name}_q3"] for r in points],
                             color=line.get_color(), alpha=0.15)
         ax.set_xlabel(axis)
@@ -267,18 +267,17 @@ def write_figures(sweep: Sweep, rows: list[dict], directory) -> dict:
 
 
 def _styles(sweep: Sweep) -> dict:
-    """The report's style of each method (PD red; colour by torque, line by optimiser)."""
-    from .figures import method_style
+    """The report's style of each method (PD red; colour by torque, line by optimiser; with
+    feedforward the same colour, thicker, its own dashes), no two alike (``distinct_styles``)."""
+    from .figures import distinct_styles, method_style
 
-    out = {}
+    styles = []
     for method in sweep.methods:
-        specs = sweep.specs[(method, sweep.levels[0])]
-        spec = specs[0]
-        style = method_style(None if spec.command == "control" else spec.torque, spec.optimizer)
-        if spec.feedforward and spec.command == "optimize":
-            style["linewidth"] = 2.4  # with feedforward: the same colour and line, drawn thicker
-        out[method] = style
-    return out
+        spec = sweep.specs[(method, sweep.levels[0])][0]
+        optimised = spec.command == "optimize"
+        styles.append(method_style(spec.torque if optimised else None, spec.optimizer,
+                                   feedforward=bool(spec.feedforward) and optimised))
+    return dict(zip(sweep.methods, distinct_styles(styles)))
 
 
 FIGURE_NAMES = tuple(f"study_{kind}_{name}.png" for kind in KINDS for name in INDICATORS)

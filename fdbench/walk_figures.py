@@ -24,8 +24,11 @@ ANIMATION_FPS = 20
 ANIMATION_PANEL_HEIGHT = 1.9  # in: a panel per method, as wide as the walk's extent needs, at most ...
 ANIMATION_WIDTH = 10.0  # in: ... this wide in all
 ANIMATION_DPI = 70
+ANIMATION_FONT_PX = 11  # px: the animation's tick labels and panel titles (its top line 1 px more), read at its size
 RECORDED = {"color": "black", "linewidth": 1.0, "linestyle": "none", "marker": ".", "markersize": 2.5}
-DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.4}
+# the tracked reference (the filtered recording, inverse dynamics' residuals): dashed, drawn over the methods'
+DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.4, "zorder": 4}
+METHOD = {"linewidth": 1.1, "zorder": 2}  # a method's line (its colour from COLOURS)
 COLOURS = {"open-loop": "tab:orange", "pd": "tab:red", "computed-torque": "tab:blue", "lqr": "tab:purple",
            "collocation": "tab:brown", "cs-cmaes": "tab:green", "cs-bfgs": "tab:olive"}
 OWN_SOLUTION = "collocation (own solution)"  # the key and label of the collocated trajectory in the figures' data
@@ -217,7 +220,7 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
         ax.plot(curves["desired"][0], curves["desired"][1][:, j], label="recording, filtered (tracked)", **DESIRED)
         for key, label in labels.items():
             if key in curves:
-                ax.plot(curves[key][0], curves[key][1][:, j], label=label, color=COLOURS.get(key), linewidth=1.1)
+                ax.plot(curves[key][0], curves[key][1][:, j], label=label, color=COLOURS.get(key), **METHOD)
         if OWN_SOLUTION in curves:
             ax.plot(curves[OWN_SOLUTION][0], curves[OWN_SOLUTION][1][:, j], label=OWN_SOLUTION, **OWN_STYLE)
         ax.set_title(name, fontsize=9)
@@ -227,9 +230,9 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
         ax.set_xlabel("time (s)")
     for ax in axes.flat[len(names):]:
         ax.set_visible(False)
-    axes[0, 0].legend(fontsize=6.5, loc="best")
     fig.suptitle("Every coordinate: the recording and each method's simulation", fontsize=11)
     fig.tight_layout()
+    _legend_outside(fig, axes[0, 0])
     _save(fig, path)
     plt.close(fig)
 
@@ -244,16 +247,24 @@ def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
     for ax, (name, unit) in zip(axes, (("FX", "N"), ("FY", "N"), ("MZ", "N m"))):
         for key, (t, values) in curves[name].items():
             style = (DESIRED if key == "inverse dynamics" else OWN_STYLE if key == OWN_SOLUTION
-                     else {"color": COLOURS.get(key), "linewidth": 1.1})
+                     else {"color": COLOURS.get(key), **METHOD})
             ax.plot(t, values, label=labels.get(key, key), **style)
         ax.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)
         ax.set_ylabel(f"{name} ({unit})")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
-    axes[0].legend(fontsize=7)
     axes[0].set_title("Residuals on the floating base over the gait cycle", fontsize=11)
+    fig.tight_layout()
+    _legend_outside(fig, axes[0])
     _save(fig, path)
     plt.close(fig)
+
+
+def _legend_outside(fig, ax) -> None:
+    """The legend of ``ax``'s lines to the right of the figure's panels, covering none of them (the
+    saved PNG's tight bounding box takes it in)."""
+    fig.legend(*ax.get_legend_handles_labels(), loc="upper left", bbox_to_anchor=(1.0, 0.95), fontsize=8,
+               frameon=False)
 
 
 def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Path, stops: dict | None = None) -> None:
@@ -321,7 +332,7 @@ def animation(data: tuple, labels: dict, t: np.ndarray, stops: dict, path: Path)
     for k in range(len(indices)):
         fig.canvas.restore_region(background)
         artists = [fig.text(0.5, 0.995, f"recorded (grey) and each method's walk, t = {t[indices[k]]:.2f} s",
-                            ha="center", va="top", fontsize=9)]
+                            ha="center", va="top", fontsize=_points(ANIMATION_FONT_PX + 1))]
         for ax, key in zip(axes.flat, simulated):
             artists += _draw(ax, recorded[k], color="0.6", linewidth=2.2)
             pose, colour = simulated[key][k], COLOURS.get(key, "tab:red")
@@ -329,7 +340,7 @@ def animation(data: tuple, labels: dict, t: np.ndarray, stops: dict, path: Path)
                 artists += _draw(ax, pose, color=colour, **(STOPPED_STYLE if held[key][k] else {"linewidth": 1.2}))
             note = f"fell at {stops[key].t_end:.3f} s: last pose held" if held[key][k] else ""
             artists.append(ax.text(0.5, 1.02, f"{labels.get(key, key)}\n{note}", transform=ax.transAxes, ha="center",
-                                   va="bottom", fontsize=7))
+                                   va="bottom", fontsize=_points(ANIMATION_FONT_PX)))
         for artist in artists:
             fig.draw_artist(artist)
         images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()))
@@ -350,18 +361,29 @@ def _animation_axes(plt, recorded: list, simulated: dict) -> tuple:
     panel = ANIMATION_PANEL_HEIGHT * float(np.clip((np.ptp(every[:, 0]) + 0.4) / (np.ptp(every[:, 1]) + 0.2), 1, 5))
     columns = int(np.clip(ANIMATION_WIDTH // panel, 1, min(3, len(simulated))))
     rows = -(-len(simulated) // columns)
-    fig, axes = plt.subplots(rows, columns, figsize=(columns * panel + 0.4, rows * (ANIMATION_PANEL_HEIGHT + 0.5) + 0.3),
-                             squeeze=False, dpi=ANIMATION_DPI)
+    text = 3.5 * ANIMATION_FONT_PX / ANIMATION_DPI  # in: a panel's two lines of title and a row of tick labels
+    height = rows * (ANIMATION_PANEL_HEIGHT + text) + 2 * ANIMATION_FONT_PX / ANIMATION_DPI
+    fig, axes = plt.subplots(rows, columns, figsize=(columns * panel + 0.6, height), squeeze=False, dpi=ANIMATION_DPI)
     for ax in axes.flat[len(simulated):]:
         ax.set_visible(False)
+    from matplotlib.ticker import MaxNLocator
+
     for ax in axes.flat[:len(simulated)]:
         ax.set_xlim(every[:, 0].min() - 0.2, every[:, 0].max() + 0.2)
         ax.set_ylim(every[:, 1].min() - 0.1, every[:, 1].max() + 0.1)
         ax.set_aspect("equal")
         ax.grid(alpha=0.3)
-        ax.tick_params(labelsize=6)
-    fig.tight_layout(rect=(0, 0, 1, 0.93), h_pad=2.5)
+        ax.tick_params(labelsize=_points(ANIMATION_FONT_PX))
+        ax.xaxis.set_major_locator(MaxNLocator(max(2, int(panel * ANIMATION_DPI / (6 * ANIMATION_FONT_PX)))))
+        ax.yaxis.set_major_locator(MaxNLocator(4))
+        ax.set_title("\n", fontsize=_points(ANIMATION_FONT_PX))  # room for each frame's two lines of title
+    fig.tight_layout(rect=(0, 0, 1, 1 - 2 * ANIMATION_FONT_PX / ANIMATION_DPI / height))
     return fig, axes
+
+
+def _points(pixels: float) -> float:
+    """A font size in points that is ``pixels`` high in the animation's frames (at ANIMATION_DPI)."""
+    return pixels * 72.0 / ANIMATION_DPI
 
 
 def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: Path, jobs: int = 1) -> dict:

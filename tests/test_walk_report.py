@@ -509,3 +509,36 @@ def test_collocations_own_solution_is_named_beside_its_replay():
     (text,) = [line for line in collocation_own_lines([WalkRow(COLLOCATION, "collocation", record)]) if line]
     assert all(f"{value:.3g}" in text for key, value in record.items() if key.startswith("collocation_"))
     assert collocation_own_lines([WalkRow(PD, "PD", {"status": "success"})]) == []
+
+
+# ---- the import's warnings: once, before the work ---------------------------------------------------
+
+
+def test_an_imported_models_warnings_are_said_once_before_the_work(tmp_path):
+    """A free pelvis and a knee on a path written as an OpenSim model with one marker (which the
+    import drops, saying so): its report says that warning once, before the line saying what it
+    wrote."""
+    if importlib.util.find_spec("opensim") is None:
+        pytest.skip("the opensim package is not installed")
+    from test_osim import path_knee_model
+
+    model = path_knee_model(tmp_path / "knee.osim")
+    marker = ('<MarkerSet name="markerset"><objects><Marker name="m1"><socket_parent_frame>/bodyset/thigh'
+              "</socket_parent_frame><location>0 0 0</location></Marker></objects></MarkerSet>")
+    model.write_text(model.read_text().replace("</Model>", marker + "</Model>"))
+    t = np.round(np.arange(0, DURATION + 1e-9, 0.01), 6)
+    s = np.sin(2 * np.pi * t / DURATION)
+    motion = tmp_path / "hop.csv"
+    with motion.open("w", newline="") as handle:
+        csv.writer(handle).writerows([("t", "pelvis_tilt", "pelvis_tx", "pelvis_ty", "knee_angle")]
+                                     + np.column_stack([t, 2 * s, 0.3 * t, 1 + 0.01 * s, -20 - 10 * s]).tolist())
+    out = tmp_path / "walk.md"
+    result = CliRunner().invoke(app, ["report", "--model", str(model), "--motion", str(motion), "--loads",
+                                      str(_loads_file(tmp_path)), "--db", str(tmp_path / "runs.sqlite"), "--budget",
+                                      "4", "--popsize", "2", "--no-beyond", "--jobs", "1", "--output", str(out)])
+    assert result.exit_code == 0, result.output
+    lines = result.stderr.splitlines()
+    warnings = [i for i, line in enumerate(lines) if line.startswith("fdbench: warning: --model: ")]
+    assert len(warnings) == 1 and "dropped 1 marker" in lines[warnings[0]], lines
+    (wrote,) = [i for i, line in enumerate(lines) if line.startswith(f"wrote {out}")]
+    assert warnings[0] < wrote, lines

@@ -136,6 +136,9 @@ CONDITIONS = {
 }
 
 
+_SAID: set = set()  # the warnings of ``_warn_opensim`` said during the current command
+
+
 def _with_conditions(command):
     """Add the CONDITIONS options to a command; it receives them as ``conditions`` (a dict of
     RunSpec fields, the model's name among them), the motion and model files among
@@ -152,6 +155,7 @@ def _with_conditions(command):
     @functools.wraps(command)
     def wrapper(**kwargs):
         values = {name: kwargs.pop(name) for name in CONDITIONS}
+        _SAID.clear()
         conditions = _conditions(**values)
         _warn_implausible(conditions, kwargs.get("quiet", False))
         if kwargs.get("kinematics") is None:
@@ -191,7 +195,8 @@ def _warn_implausible(conditions: dict, quiet: bool) -> None:
 def _warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
     """Warnings on stderr once a command has run (a refused one says one line only): the notes of
     an OpenSim model's import (--model X.osim) and the columns of an OpenSim motion file (.mot,
-    .sto) that the model lacks."""
+    .sto) that the model lacks. Each is said once per command: a long command says them before its
+    work, once its input is checked (the walk's report), and not again at its end."""
     import sys
 
     from ..models import import_notes, joints
@@ -200,7 +205,9 @@ def _warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
     notes = [f"--model: {note}" for note in import_notes(model_name)]
     notes += [f"--motion: {note}" for note in [storage_note(kinematics, joints(model_name))] if note]
     for note in [] if quiet else notes:
-        sys.stderr.write(f"fdbench: warning: {note}\n")
+        if note not in _SAID:
+            _SAID.add(note)
+            sys.stderr.write(f"fdbench: warning: {note}\n")
 
 
 def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,

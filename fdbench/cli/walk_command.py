@@ -37,7 +37,7 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
     """Carry out the walk's report: check, plan, run (stored and resumed), write."""
     from .. import walk
     from .common import _emit, _say, _validated
-    from .options import _common
+    from .options import _common, _warn_opensim
     from .sweeps import _run_specs
 
     check_walk_options(ctx)
@@ -50,6 +50,7 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
         raise BadInput(str(exc)) from None
     for spec in plan.all_specs():
         _validated(spec)
+    _warn_opensim(conditions["model_name"], kinematics, quiet)  # the import's notes before the work, not after it
     runs = _run_specs(plan.all_specs(), db_path, db is None, executor, rerun, quiet)
     from ..store import open_store
 
