@@ -17,6 +17,8 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 
+from cli_checks import assert_one_line_error
+
 PREFIX = "fdbench: error: "
 
 runner = CliRunner()
@@ -30,14 +32,8 @@ def invoke(*args, code=0, env=None):
 
 
 def refused(*args, contains=()) -> str:
-    """Exit 2, nothing on stdout, one line on stderr naming every word of ``contains``."""
-    result = invoke(*args, code=2)
-    assert result.stdout == ""
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith(PREFIX), result.stderr
-    for word in contains:
-        assert word in lines[0], lines[0]
-    return lines[0]
+    """Exit 2, nothing on stdout, one line on stderr holding every word of ``contains``."""
+    return assert_one_line_error(invoke(*args, code=2), *contains)
 
 
 # ---- two databases of real runs ---------------------------------------------------------------

@@ -25,6 +25,7 @@ from fdbench.experiment import RunSpec, control_spec
 from fdbench.store import Store, StoreError, open_store
 from fdbench.store_queries import method_label
 
+from cli_checks import assert_one_line_error
 from processes import python_path
 
 PREFIX = "fdbench: error: "
@@ -44,13 +45,7 @@ def invoke(*args, code=0):
 
 def refused(*args, contains=()) -> str:
     """Exit 2, nothing on stdout, one line on stderr holding every word of ``contains``."""
-    result = invoke(*args, code=2)
-    assert result.stdout == ""
-    lines = result.stderr.splitlines()
-    assert len(lines) == 1 and lines[0].startswith(PREFIX), result.stderr
-    for word in contains:
-        assert word in lines[0], lines[0]
-    return lines[0]
+    return assert_one_line_error(invoke(*args, code=2), *contains)
 
 
 def listing(folder: Path) -> dict:
