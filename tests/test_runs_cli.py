@@ -19,7 +19,6 @@ from fdbench.cli import app
 
 from cli_checks import assert_one_line_error
 
-PREFIX = "fdbench: error: "
 
 runner = CliRunner()
 
