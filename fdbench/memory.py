@@ -1,7 +1,7 @@
 """The memory a run may take, checked before its large arrays are allocated: a run whose
 estimate exceeds ``budget_bytes()`` (a quarter of the machine's physical memory; 4 GiB where the
-system does not say; at most a quarter of a ``ulimit -v``) is refused with one line naming the option to change, instead of dying of
-MemoryError minutes later.
+system does not say; at most a quarter of a ``ulimit -v``) is refused with one line naming the
+option to change, instead of dying of MemoryError minutes later.
 
 The estimates count the arrays that grow with the options (in float64 values of 8 bytes): the
 reporting grid (samples), a noisy capture, the RK4 steps of one simulation and the torques of a

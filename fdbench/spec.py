@@ -103,7 +103,8 @@ class RunSpec:
 
             if self.controller not in (None, "pd"):
                 check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
-            self._runs().controller(self)  # a ValueError names a bad option or gain
+            law = self._runs().controller(self)  # a ValueError names a bad option or gain
+            law.check_model(self._runs().nominal(self))  # one it cannot design for in reasonable time
         if self.command == "peer":
             from .peers import check_spec
 

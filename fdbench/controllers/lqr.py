@@ -5,6 +5,12 @@ from __future__ import annotations
 
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive
 
+# The Riccati equation of J coordinates has 4 J^2 states and its CasADi expressions grow as J^3:
+# `fdbench control --controller lqr` on a chain of J forearms took 8 s (J = 10), 29 s (20) and
+# 4.6 min (40, 1.2 GB); on a star 6 s (10), 8 s (20), 3.8 min (40) and 7.5 min (100, 2.9 GB), on
+# 2 busy cores. 30 coordinates stay within about a minute and a half.
+MAX_COORDINATES = 30
+
 
 @CONTROLLERS.register("lqr")
 class LQR(Controller):
@@ -24,6 +30,13 @@ class LQR(Controller):
         self.q_angle = check_positive("--q-angle", q_angle)  # rad^-2
         self.q_rate = check_non_negative("--q-rate", q_rate)  # s^2 rad^-2
         self.r_torque = check_positive("--r-torque", r_torque)  # (N m)^-2
+
+    def check_model(self, model) -> None:
+        J = model.n_joints
+        if J > MAX_COORDINATES:
+            raise ValueError(f"--controller lqr: model {model.name!r} has {J} coordinates; lqr takes at most "
+                             f"{MAX_COORDINATES} (its Riccati equation has 4 J^2 = {4 * J * J} states and takes minutes "
+                             "to build beyond that: 4.6 min for 40); use pd or computed-torque")
 
     def warm_up(self, plan: Plan) -> None:
         from ..multibody.lqr import warm_up

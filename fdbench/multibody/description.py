@@ -390,7 +390,7 @@ ALLOWED = {
     "force": "[x, y] (N, world axes)", "frames": "a list of tables ([[frames]] in TOML)",
     "angle": "a number (rad, the frame's x axis in the body's frame)", "motions": "a list of tables ([[motions]] in TOML)",
     "keys": "a table of short names, each a path of with_changes ([keys] in TOML)",
-    "duration": "a number of seconds, at least 0.01", "start": "a table {joint = angle} (rad), every joint",
+    "duration": "a positive number (s)", "start": "a table {joint = angle} (rad), every joint",
     "goal": "a table {joint = angle} (rad), every joint",
     "path": "a table with angles (rad, strictly increasing), x and y (m), lists of the same length (2 to 1000)",
     "coordinates": "three names [angle, x, y] of a free joint's coordinates",

@@ -64,6 +64,7 @@ is just another layout of arrays.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,7 +77,8 @@ from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, P
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
 MODES = (PD, COMPUTED, GAINS)  # the feedback laws of ``Engine.simulate``
-CHUNK_VALUES = 2_000_000  # state values (steps x state size) per call of a compiled RK4: well under 0.1 s
+FIRST_CHUNK_VALUES = 100_000  # state values (steps x state size) of a compiled RK4's first call: a few ms
+CHUNK_S = 0.1  # s: the calls after it, by the time the first took
 
 
 @dataclass
@@ -795,21 +797,23 @@ class Engine:
 
     def _in_chunks(self, run, y0, n_steps: int, out: tuple) -> tuple[int, int, float]:
         """``run(y, n, rows, out)`` (a compiled RK4 of n steps from y on the half-step rows ``rows``,
-        filling the rows of ``out``) over n_steps steps in chunks of about CHUNK_VALUES state values
-        each, so that Ctrl-C (acted on between two calls, never inside compiled code) ends a long
-        simulation within a fraction of a second. Each chunk starts from the last state of the one
-        before, at the same grid row, so the numbers are those of one call. (status, steps done,
-        largest violation)."""
-        chunk = max(1, CHUNK_VALUES // self.n_state)
+        filling the rows of ``out``) over n_steps steps in chunks of about CHUNK_S seconds each (the
+        first of FIRST_CHUNK_VALUES state values), so that Ctrl-C (acted on between two calls, never
+        inside compiled code) ends a long simulation within a fraction of a second. Each chunk starts
+        from the last state of the one before, at the same grid row, so the numbers are those of one
+        call. (status, steps done, largest violation)."""
+        chunk = max(1, FIRST_CHUNK_VALUES // self.n_state)
         start, worst = 0, 0.0
         while True:
             n = min(chunk, n_steps - start)
             rows = slice(2 * start, 2 * (start + n) + 1)
+            began = time.perf_counter()
             code, done, viol = run(out[0][start].copy() if start else y0, n, rows,
                                    tuple(array[start:start + n + 1] for array in out))
             worst, start = max(worst, viol), start + int(done)
             if code != 0 or start == n_steps:
                 return int(code), start, worst
+            chunk = max(1, int(CHUNK_S * n / max(time.perf_counter() - began, 1e-9)))
 
     def simulate_pd(self, z0, zd0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd) -> SimResult:
         """``simulate`` under PD from the joint state (z0, zd0) (rad, rad/s), shapes (J,)."""
