@@ -189,3 +189,12 @@ def test_a_json_model_of_80000_keys_is_read_in_linear_time(tmp_path):
     assert path.stat().st_size <= 2**20  # within the model file's limit
     line = one_line_error(fdbench("models", "show", path, cwd=tmp_path, timeout=120))
     assert "'k79999' appears twice" in line, line
+
+
+def test_lqr_refuses_a_model_it_would_take_minutes_to_design_for(tmp_path):
+    """Building the Riccati equation took 4.6 minutes for a chain of 40 coordinates: beyond 30, lqr
+    refuses before any work, naming the limit and the controllers that take the model."""
+    path = tmp_path / "star31.toml"
+    path.write_text(tree_model(31, star=True))
+    line = one_line_error(fdbench("control", "--model", path, "--controller", "lqr", cwd=tmp_path, timeout=120))
+    assert "31 coordinates" in line and "at most 30" in line and "use pd or computed-torque" in line, line
