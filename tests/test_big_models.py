@@ -198,3 +198,38 @@ def test_lqr_refuses_a_model_it_would_take_minutes_to_design_for(tmp_path):
     path.write_text(tree_model(31, star=True))
     line = one_line_error(fdbench("control", "--model", path, "--controller", "lqr", cwd=tmp_path, timeout=120))
     assert "31 coordinates" in line and "at most 30" in line and "use pd or computed-torque" in line, line
+
+
+def test_ctrl_c_while_kernels_compile_ends_the_command_at_once(tmp_path):
+    """Kernels compile within ``execution.compiling`` (``simulation.warm_up``): numba and LLVM run
+    callbacks a KeyboardInterrupt cannot cross (it used to surface as 'RuntimeError: no compiled
+    object yet' and exit 1), so in the command line's process Ctrl-C there ends it at once. Here the
+    block holds a sleep in place of a compilation; the test waits for the line printed inside it."""
+    code = ("import sys, time\n"
+            "from fdbench.execution import compiling, interrupts_end_compiling\n"
+            "interrupts_end_compiling()\n"
+            "with compiling():\n"
+            "    print('compiling', flush=True)\n"
+            "    time.sleep(600)\n"
+            "print('not reached', flush=True)\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=tmp_path, start_new_session=True)
+    try:
+        assert proc.stdout.readline() == "compiling\n"
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=HANG_GUARD_S)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130 and stdout == "" and stderr == "fdbench: error: interrupted\n"
+
+
+def test_the_python_api_keeps_its_keyboard_interrupt_while_kernels_compile():
+    import signal as signals
+
+    from fdbench.execution import compiling
+
+    before = signals.getsignal(signals.SIGINT)
+    with compiling():  # this process is not the command line's
+        assert signals.getsignal(signals.SIGINT) is before
