@@ -192,12 +192,12 @@ def test_a_json_model_of_80000_keys_is_read_in_linear_time(tmp_path):
 
 
 def test_lqr_refuses_a_model_it_would_take_minutes_to_design_for(tmp_path):
-    """Building the Riccati equation took 4.6 minutes for a chain of 40 coordinates: beyond 30, lqr
-    refuses before any work, naming the limit and the controllers that take the model."""
-    path = tmp_path / "star31.toml"
-    path.write_text(tree_model(31, star=True))
+    """Building the Riccati equation took 2.3 minutes and 3.7 GB for a chain of 60 coordinates:
+    beyond 40, lqr refuses before any work, naming the limit and the controllers that take the model."""
+    path = tmp_path / "star41.toml"
+    path.write_text(tree_model(41, star=True))
     line = one_line_error(fdbench("control", "--model", path, "--controller", "lqr", cwd=tmp_path, timeout=120))
-    assert "31 coordinates" in line and "at most 30" in line and "use pd or computed-torque" in line, line
+    assert "41 coordinates" in line and "at most 40" in line and "use pd or computed-torque" in line, line
 
 
 def test_ctrl_c_while_kernels_compile_ends_the_command_at_once(tmp_path):
