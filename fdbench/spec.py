@@ -110,9 +110,10 @@ class RunSpec:
 
             check_spec(self)
         if self.command == "collocate":
-            from .collocation import check_options
+            from .collocation import check_model, check_options
 
             check_options(**dict(self.method_options))
+            check_model(self._runs().nominal(self))  # one whose equations take minutes to build
         if self.command == "optimize":
             from .optimizers import make_optimizer
             from .torques import make_torque

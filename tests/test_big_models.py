@@ -233,3 +233,30 @@ def test_the_python_api_keeps_its_keyboard_interrupt_while_kernels_compile():
     before = signals.getsignal(signals.SIGINT)
     with compiling():  # this process is not the command line's
         assert signals.getsignal(signals.SIGINT) is before
+
+
+def test_the_memory_budget_is_at_most_a_quarter_of_ulimit_v(tmp_path):
+    code = ("import resource\n"
+            "from fdbench.memory import budget_bytes\n"
+            "unlimited = budget_bytes()\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (4 * 2**30, 4 * 2**30))\n"
+            "print(unlimited, budget_bytes())\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, timeout=120)
+    assert done.returncode == 0, done.stderr
+    unlimited, limited = map(int, done.stdout.split())
+    assert limited == min(unlimited, 2**30)
+
+
+def test_path_pairs_count_each_coordinate_once_per_body_below_it():
+    from fdbench.multibody.description import find_model, path_pairs
+
+    assert [path_pairs(find_model(name)) for name in ("forearm", "arm2")] == [1, 1 + 2]
+
+
+def test_collocation_refuses_a_model_whose_equations_take_minutes_to_build(tmp_path):
+    """A chain of 100 bodies (5050 path pairs) took more than 5 minutes to transcribe; a chain of
+    45 (1035) is refused before any work, while a star of 1000 (1000 pairs, 13 s) is not."""
+    path = tmp_path / "chain45.toml"
+    path.write_text(tree_model(45, star=False))
+    line = one_line_error(fdbench("collocate", "--model", path, cwd=tmp_path, timeout=120))
+    assert "1035 (coordinate, body) pairs" in line and "at most 1000" in line and "use control or optimize" in line

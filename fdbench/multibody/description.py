@@ -970,6 +970,17 @@ def _target_value(model: Model, target: str) -> float:
     return -value if negated else value
 
 
+def path_pairs(model: Model) -> int:
+    """The pairs (coordinate, body) with the coordinate on the body's path from ground: the entries
+    of M(z) on and above its diagonal that are not zero, the size of the symbolic equations (a star
+    of B pin joints has B, a chain B (B + 1) / 2)."""
+    index, depth = {joint.child: k for k, joint in enumerate(model.joints)}, []
+    for joint in model.joints:  # topological order: the parent's depth is known
+        above = depth[index[joint.parent]] if joint.parent != GROUND else 0
+        depth.append(above + len(joint.coordinate_names))
+    return sum(depth)
+
+
 def inertia_about(model: Model, body_name: str, joint_name: str) -> float:
     """kg m^2: the body's inertia about the point of joint ``joint_name`` (one of the body's joints):
     inertia + mass |com - point|^2."""
