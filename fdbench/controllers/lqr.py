@@ -36,8 +36,9 @@ class LQR(Controller):
         J = model.n_joints
         if J > MAX_COORDINATES:
             raise ValueError(f"--controller lqr: model {model.name!r} has {J} coordinates; lqr takes at most "
-                             f"{MAX_COORDINATES} (its Riccati equation has 4 J^2 = {4 * J * J} states and takes minutes "
-                             "to build beyond that: 2.3 min and 3.7 GB for a chain of 60); use pd or computed-torque")
+                             f"{MAX_COORDINATES} (its Riccati equation has 4 J^2 = {4 * J * J} states and takes "
+                             "minutes to build beyond that: 2.3 min and 3.7 GB for a chain of 60); use pd or "
+                             "computed-torque")
 
     def warm_up(self, plan: Plan) -> None:
         from ..multibody.lqr import warm_up
