@@ -50,6 +50,10 @@ import numpy as np
 SCHEMES = ("hermite-simpson", "trapezoidal")
 DEFAULT_NODES = 100
 MIN_NODES, MAX_NODES = 2, 10_000
+# The transcription's symbolic equations grow with the model's path pairs (description.path_pairs):
+# `fdbench collocate --model` on a chain of forearms took 3.9 s (20 bodies, 210 pairs), 29 s and 1 GB
+# (44, 990) and more than 5 min (100, 5050); on a star of 1000 (1000 pairs) 13 s and 1.5 GB.
+MAX_PATH_PAIRS = 1000
 DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as much as 0.001 deg of error
 # A floating base's residuals with external loads: 1 N (1 N m) of residual costs as much as 0.03 deg of error.
 # On the recorded walk (subject01, its ground reactions, 100 intervals) the residuals' RMS at the nodes fall from
@@ -95,6 +99,19 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
         raise ValueError(f"--max-iter must be an integer in [1, {MAX_ITER}], got {shown}")
     if not (isinstance(max_time, (int, float)) and math.isfinite(max_time) and max_time > 0):
         raise ValueError(f"--max-time must be a positive finite number of seconds, got {max_time}")
+
+
+def check_model(model) -> None:
+    """ValueError (one line) for a model (``multibody.description.Model``) whose transcription
+    would take minutes to build (``MAX_PATH_PAIRS``)."""
+    from .multibody.description import path_pairs
+
+    pairs = path_pairs(model)
+    if pairs > MAX_PATH_PAIRS:
+        raise ValueError(f"collocate: model {model.name!r} is too large for direct collocation: its equations couple "
+                         f"{pairs} (coordinate, body) pairs along its paths, at most {MAX_PATH_PAIRS} (a chain of 44 "
+                         "bodies, a star of 1000; a chain of 100 took more than 5 min to build); use control or "
+                         "optimize")
 
 
 @dataclass

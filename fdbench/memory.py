@@ -1,7 +1,7 @@
 """The memory a run may take, checked before its large arrays are allocated: a run whose
 estimate exceeds ``budget_bytes()`` (a quarter of the machine's physical memory; 4 GiB where the
-system does not say) is refused with one line naming the option to change, instead of dying of
-MemoryError minutes later.
+system does not say; at most a quarter of a ``ulimit -v``) is refused with one line naming the
+option to change, instead of dying of MemoryError minutes later.
 
 The estimates count the arrays that grow with the options (in float64 values of 8 bytes): the
 reporting grid (samples), a noisy capture, the RK4 steps of one simulation and the torques of a
@@ -20,11 +20,19 @@ FALLBACK_BYTES = 4 * 2**30
 
 
 def budget_bytes() -> int:
-    """The bytes one run may take: a quarter of the physical memory (4 GiB if unknown)."""
+    """The bytes one run may take: a quarter of the physical memory (4 GiB if unknown), and at most
+    a quarter of the address space the process may use (``ulimit -v``, RLIMIT_AS)."""
     try:
-        return os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") // 4
+        budget = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") // 4
     except (AttributeError, OSError, ValueError):
-        return FALLBACK_BYTES
+        budget = FALLBACK_BYTES
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    except (ImportError, OSError, ValueError):
+        return budget
+    return budget if limit == resource.RLIM_INFINITY else min(budget, limit // 4)
 
 
 def check_fits(needs: dict) -> None:
@@ -35,7 +43,7 @@ def check_fits(needs: dict) -> None:
         return
     advice = max(needs, key=needs.get)
     raise ValueError(f"this run would need about {_size(total)} of memory, more than the {_size(budget)} fdbench "
-                     f"allows one run on this machine (a quarter of its memory); {advice}")
+                     f"allows one run on this machine (a quarter of its memory or of ulimit -v); {advice}")
 
 
 def _size(count: float) -> str:

@@ -103,15 +103,17 @@ class RunSpec:
 
             if self.controller not in (None, "pd"):
                 check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
-            self._runs().controller(self)  # a ValueError names a bad option or gain
+            law = self._runs().controller(self)  # a ValueError names a bad option or gain
+            law.check_model(self._runs().nominal(self))  # one it cannot design for in reasonable time
         if self.command == "peer":
             from .peers import check_spec
 
             check_spec(self)
         if self.command == "collocate":
-            from .collocation import check_options
+            from .collocation import check_model, check_options
 
             check_options(**dict(self.method_options))
+            check_model(self._runs().nominal(self))  # one whose equations take minutes to build
         if self.command == "optimize":
             from .optimizers import make_optimizer
             from .torques import make_torque

@@ -51,3 +51,21 @@ class GatedBFGS(BFGS):
         if seed >= int(os.environ.get("FDBENCH_GATE_FROM", "0")):
             _wait_for_gate()
         return super().run(f, x0, seed)
+
+
+from fdbench.controllers import CONTROLLERS  # noqa: E402
+from fdbench.controllers.pd import PD  # noqa: E402
+
+
+@CONTROLLERS.register("marked-pd")
+class MarkedPD(PD):
+    """PD that creates the file $FDBENCH_MARK once its design is done, just before the simulation:
+    a test then knows that the command has reached its long part."""
+
+    name = "marked-pd"
+    summary = "PD that creates the file $FDBENCH_MARK before simulating (tests)"
+
+    def design(self, plan):
+        design = super().design(plan)
+        open(os.environ["FDBENCH_MARK"], "w").close()
+        return design

@@ -327,4 +327,7 @@ def formats_of(command: str) -> tuple:
 
 def main() -> None:
     """Console-script entry point."""
+    from ..execution import interrupts_end_compiling
+
+    interrupts_end_compiling()  # this process is the command's: Ctrl-C while kernels compile ends it
     typer.main.get_command(app).main(prog_name="fdbench")

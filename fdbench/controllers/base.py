@@ -76,6 +76,10 @@ class Controller(ABC):
     def design(self, plan: Plan) -> Design:
         """The feedforward torques and the feedback law towards ``plan.motion``."""
 
+    def check_model(self, model) -> None:
+        """ValueError (one line) for a model (``multibody.description.Model``) whose design would
+        take more time or memory than a run is allowed; checked before any work."""
+
     def warm_up(self, plan: Plan) -> None:
         """Import or build what ``design`` needs, so that a run's timing excludes it."""
 

@@ -5,6 +5,13 @@ from __future__ import annotations
 
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive
 
+# The Riccati equation of J coordinates has 4 J^2 states and its CasADi expressions grow as J^3.
+# `fdbench control --controller lqr` on a chain of J forearms (tests/test_big_models.py's) took
+# 4.3 s and 0.39 GB (J = 20), 14 s and 0.73 GB (30), 36 s and 1.25 GB (40), 137 s and 3.7 GB (60);
+# on a star 3.3 s (30), 6 s (40), 80 s and 2.9 GB (100), on an idle core (5 to 40 times longer with
+# both cores busy). Beyond 40 coordinates it takes minutes and gigabytes.
+MAX_COORDINATES = 40
+
 
 @CONTROLLERS.register("lqr")
 class LQR(Controller):
@@ -24,6 +31,14 @@ class LQR(Controller):
         self.q_angle = check_positive("--q-angle", q_angle)  # rad^-2
         self.q_rate = check_non_negative("--q-rate", q_rate)  # s^2 rad^-2
         self.r_torque = check_positive("--r-torque", r_torque)  # (N m)^-2
+
+    def check_model(self, model) -> None:
+        J = model.n_joints
+        if J > MAX_COORDINATES:
+            raise ValueError(f"--controller lqr: model {model.name!r} has {J} coordinates; lqr takes at most "
+                             f"{MAX_COORDINATES} (its Riccati equation has 4 J^2 = {4 * J * J} states and takes "
+                             "minutes to build beyond that: 2.3 min and 3.7 GB for a chain of 60); use pd or "
+                             "computed-torque")
 
     def warm_up(self, plan: Plan) -> None:
         from ..multibody.lqr import warm_up

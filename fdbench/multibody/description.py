@@ -39,7 +39,7 @@ Choices made here (documented in the README's "Your own model"):
   next default.
 * ``[[motions]]`` (optional) names motions of the model, the first its default: ``name``,
   ``type`` ('minimum-jerk', the only type: z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t /
-  duration, from rest to rest), ``duration`` (s, positive), ``start`` and ``goal`` (tables
+  duration, from rest to rest), ``duration`` (s, at least 0.01), ``start`` and ``goal`` (tables
   {joint = angle}, rad, naming every joint and no other).
 * ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
   a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
@@ -62,6 +62,7 @@ MAX_MAGNITUDE = 1e6  # any number of a model file, in its unit
 MAX_BODIES = 1000  # bodies, joints or loads of one model
 MAX_FILE_BYTES = 2**20  # a model file
 MIN_SEGMENT = 1e-3  # m: a body's end point is at least this far from its joint point
+MIN_MOTION_DURATION = 0.01  # s: a named motion spans at least ten samples of its 1 ms grid
 JOINT_TYPES = ("pin", "free")
 ANGLE, TRANSLATION = "angle", "translation"  # the kinds of coordinates (rad, m)
 MAX_PATH_SAMPLES = 1000  # samples of a joint's path
@@ -347,11 +348,12 @@ def _parse_json(text: str, source: str):
     import json
 
     def unique_keys(pairs):
-        keys = [key for key, _ in pairs]
-        for key in keys:
-            if keys.count(key) > 1:
-                raise ModelError(source, "", f"the key {key!r} appears twice in one object; give it once")
-        return dict(pairs)
+        found = dict(pairs)
+        if len(found) < len(pairs):  # linear: a set of the keys seen, not a count per key
+            seen = set()
+            key = next(key for key, _ in pairs if key in seen or seen.add(key))
+            raise ModelError(source, "", f"the key {key!r} appears twice in one object; give it once")
+        return found
 
     try:
         return json.loads(text, parse_int=float, object_pairs_hook=unique_keys)
@@ -641,8 +643,11 @@ def _motion(check: _Checker, entry, key: str, joints: tuple, kinds: tuple = ()) 
     kind = entry.get("type", MOTION_TYPES[0])
     if kind not in MOTION_TYPES:
         check.fail(f"{key}.type", f"{_kind(kind)} is not a motion type fdbench knows; valid: {', '.join(MOTION_TYPES)}")
-    return MotionSpec(name=check.name(entry["name"], f"{key}.name"), type=kind,
-                      duration=check.number(entry["duration"], f"{key}.duration", positive=True),
+    duration = check.number(entry["duration"], f"{key}.duration", positive=True)
+    if duration < MIN_MOTION_DURATION:
+        check.fail(f"{key}.duration", f"must be at least {MIN_MOTION_DURATION:g} s (ten samples of the motion's "
+                                      f"1 ms grid), got {duration:g}")
+    return MotionSpec(name=check.name(entry["name"], f"{key}.name"), type=kind, duration=duration,
                       start=_joint_angles(check, entry["start"], f"{key}.start", joints, kinds),
                       goal=_joint_angles(check, entry["goal"], f"{key}.goal", joints, kinds))
 
@@ -967,6 +972,17 @@ def _target_value(model: Model, target: str) -> float:
     else:
         value = path_value(model, path)
     return -value if negated else value
+
+
+def path_pairs(model: Model) -> int:
+    """The pairs (coordinate, body) with the coordinate on the body's path from ground: the entries
+    of M(z) on and above its diagonal that are not zero, the size of the symbolic equations (a star
+    of B pin joints has B, a chain B (B + 1) / 2)."""
+    index, depth = {joint.child: k for k, joint in enumerate(model.joints)}, []
+    for joint in model.joints:  # topological order: the parent's depth is known
+        above = depth[index[joint.parent]] if joint.parent != GROUND else 0
+        depth.append(above + len(joint.coordinate_names))
+    return sum(depth)
 
 
 def inertia_about(model: Model, body_name: str, joint_name: str) -> float:

@@ -64,6 +64,7 @@ is just another layout of arrays.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -76,6 +77,8 @@ from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, P
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
 MODES = (PD, COMPUTED, GAINS)  # the feedback laws of ``Engine.simulate``
+FIRST_CHUNK_VALUES = 100_000  # state values (steps x state size) of a compiled RK4's first call: a few ms
+CHUNK_S = 0.1  # s: the calls after it, by the time the first took
 
 
 @dataclass
@@ -523,23 +526,6 @@ class Engine:
                     self.pt_owner[pt], self.pt_local[pt], phi, w, al, o, vo, ao)
         return p, pd, pdd, kin
 
-    def _velocity_transform(self, p, kin) -> np.ndarray:
-        """R_p = dp/dz, shape (n, n_p, J): for every joint m on the path of P's owner, dr_P/dz = R90
-        (r_P - r_joint_m) for its angle (plus the path's direction for a joint with a path), and the
-        world axes for a free joint's x and y."""
-        joint_at, path_dir = kin[-2], kin[-1]
-        R = np.zeros((p.shape[0], self.n_p, self.n_joints))
-        for pt in range(self.n_points):
-            k = self.pt_index[pt]
-            if k == FIXED:
-                continue
-            for joint in self.model.path(self.body_names[self.pt_owner[pt]]):
-                c = self.joint_column[joint]
-                R[:, k:k + 2, c] = _perp(p[:, k:k + 2] - joint_at[:, joint]) + path_dir[:, joint]
-                if self.model.joints[joint].type == "free":
-                    R[:, k, c + 1] = R[:, k + 1, c + 2] = 1.0
-        return R
-
     def _samples(self, *arrays):
         """Arrays of shape (J,) or (n, J), all alike, as (n, J), and whether the input was one
         sample. ValueError for another shape."""
@@ -626,7 +612,7 @@ class Engine:
         t (s, shape (n,) or a number) they are taken at, and their generalised forces subtracted."""
         (z, zd, zdd), single = self._samples(z, zd, zdd)
         p, _, pdd, kin = self._free_points(z, zd, zdd)
-        tau = np.einsum("npj,np->nj", self._velocity_transform(p, kin), pdd @ self.mass - self.q_ext)
+        tau = self._generalized_forces(p, self._mass_times(pdd) - self.q_ext, kin)
         if self.loads is not None:
             if t is None:
                 raise ValueError("a model with external loads needs the times of its inverse dynamics")
@@ -636,12 +622,99 @@ class Engine:
         return tau[0] if single else tau
 
     def mass_matrix(self, z) -> np.ndarray:
-        """Minimal M(z) = R^T M R, shape (J, J) (or (n, J, J) for z of shape (n, J)), kg m^2."""
+        """Minimal M(z) = R^T M R, shape (J, J) (or (n, J, J) for z of shape (n, J)), kg m^2, by
+        composite bodies (Featherstone's CRBA, planar): the points' mass matrix is each body's rigid
+        inertia, so M_cd = S_c^T I_d S_d for coordinate c on the path of d's body, S the coordinates'
+        twists (rad/s and the velocity of the body point at the world origin, m/s, per unit rate) and
+        I_d the composite inertia of the subtree d moves, about the origin. Cost O(J^2), no R."""
         (z,), single = self._samples(z)
-        p, _, _, kin = self._free_points(z, np.zeros_like(z), np.zeros_like(z))
-        R = self._velocity_transform(p, kin)
-        M = np.einsum("npj,pq,nqk->njk", R, self.mass, R)
+        zero = np.zeros_like(z)
+        phi, w, al, o, vo, ao, joint_at, path_dir = self._kinematics(z, zero, zero)
+        com = np.stack([self._body_point(b, self.model.body(name).com, phi, w, al, o, vo, ao)[0]
+                        for b, name in enumerate(self.body_names)], axis=1)  # (n, B, 2) m
+        mass, inertia = self._body_inertias
+        # per subtree: mass (kg), first moment about the origin (kg m), inertia about the origin (kg m^2)
+        m_sub = np.broadcast_to(mass, z.shape[:1] + mass.shape).copy()
+        h_sub = mass[:, None] * com
+        j_sub = inertia + mass * np.sum(com**2, axis=-1)
+        self._to_subtrees(m_sub, h_sub, j_sub)
+        S = np.zeros(z.shape + (3,))  # per coordinate (omega, v0x, v0y)
+        F = np.zeros(z.shape + (3,))  # I_sub S
+        for b, joint in enumerate(self.model.joints):
+            c = self.joint_column[b]
+            S[:, c, 0] = 1.0
+            S[:, c, 1:] = _perp(-joint_at[:, b]) + path_dir[:, b]
+            if joint.type == "free":
+                S[:, c + 1, 1], S[:, c + 2, 2] = 1.0, 1.0
+            h = _perp(h_sub[:, b])  # the subtree's m perp(com), kg m
+            for k in range(c, c + len(joint.coordinate_names)):
+                F[:, k, 0] = j_sub[:, b] * S[:, k, 0] + np.sum(h * S[:, k, 1:], axis=-1)
+                F[:, k, 1:] = h * S[:, k, 0, None] + m_sub[:, b, None] * S[:, k, 1:]
+        M = S @ np.swapaxes(F, 1, 2)  # S_c^T I_d S_d for every pair: kept where c moves d's body
+        upper = self._on_path  # c <= d (an ancestor's columns come first), mirrored: M exactly symmetric
+        M = np.where(upper, M, np.where(upper.T, np.swapaxes(M, 1, 2), 0.0))
         return M[0] if single else M
+
+    @property
+    def _body_inertias(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per body its mass (kg) and inertia about its centre of mass (kg m^2), shape (B,) each."""
+        bodies = [self.model.body(name) for name in self.body_names]
+        return np.array([b.mass for b in bodies], dtype=float), np.array([b.inertia for b in bodies], dtype=float)
+
+    @property
+    def _on_path(self) -> np.ndarray:
+        """(J, J) bool: coordinate c's joint is on the path from ground to coordinate d's body, and
+        c <= d (the upper triangle: joints are in topological order)."""
+        if getattr(self, "_on_path_cache", None) is None:
+            B = self.n_bodies
+            above = np.zeros((B, B), dtype=bool)  # above[a, b]: joint a on body b's path (b's own included)
+            for b, parent in enumerate(self.joint_parent):  # topological order: the parent's column is done
+                if parent != FIXED:
+                    above[:, b] = above[:, parent]
+                above[b, b] = True
+            body = np.repeat(np.arange(B), [len(j.coordinate_names) for j in self.model.joints])
+            self._on_path_cache = np.triu(above[np.ix_(body, body)])
+        return self._on_path_cache
+
+    def _to_subtrees(self, *arrays) -> None:
+        """Each array (n, B, ...) of values per body, in place, summed over each body's subtree."""
+        for b in range(self.n_bodies - 1, -1, -1):  # children come after their parent
+            parent = self.joint_parent[b]
+            if parent != FIXED:
+                for array in arrays:
+                    array[:, parent] += array[:, b]
+
+    def _mass_times(self, pdd) -> np.ndarray:
+        """pdd M (n, n_p) for point accelerations pdd (n, n_p): the points' mass matrix is sparse
+        (4 x 4 blocks per body), so this costs O(n B), not O(n n_p^2)."""
+        if getattr(self, "_sparse_mass", None) is None:
+            from scipy.sparse import csr_matrix
+
+            self._sparse_mass = csr_matrix(self.mass)
+        return np.asarray((self._sparse_mass @ pdd.T).T)  # M is symmetric
+
+    def _generalized_forces(self, p, f, kin) -> np.ndarray:
+        """R^T f (n, J) for forces f (n, n_p) at the free points p (n, n_p) (N and m), without R:
+        a joint's angle takes the moment about its point of the forces on its subtree's points (plus
+        their sum along a path's direction), a free joint's x and y their sum."""
+        joint_at, path_dir = kin[-2], kin[-1]
+        n, B = p.shape[0], self.n_bodies
+        force, moment = np.zeros((n, B, 2)), np.zeros((n, B))  # per body, about the world origin
+        for pt in range(self.n_points):
+            k = self.pt_index[pt]
+            if k != FIXED:
+                b = self.pt_owner[pt]
+                force[:, b] += f[:, k:k + 2]
+                moment[:, b] += p[:, k] * f[:, k + 1] - p[:, k + 1] * f[:, k]
+        self._to_subtrees(force, moment)
+        tau = np.empty((n, self.n_joints))
+        for b, joint in enumerate(self.model.joints):
+            c, r = self.joint_column[b], joint_at[:, b]
+            tau[:, c] = (moment[:, b] - (r[:, 0] * force[:, b, 1] - r[:, 1] * force[:, b, 0])
+                         + np.sum(path_dir[:, b] * force[:, b], axis=-1))
+            if joint.type == "free":
+                tau[:, c + 1:c + 3] = force[:, b]
+        return tau
 
     def bias(self, z, zd) -> np.ndarray:
         """h(z, z') (N m) with M(z) z'' + h(z, z') = tau: R^T (M R' z' - Q_ext), shape (J,) (or (n, J))."""
@@ -706,15 +779,41 @@ class Engine:
             layout = self.dense_simulation_layout(nominal)
             times = np.arange(2 * n_steps + 1) * (0.5 * dt)
             loads = self._load_values_for(times, nominal)
-            code, done, max_viol = dense_rk4(y0, float(dt), int(n_steps), tau, ref, refd, refdd, kp, kd, mode, gains,
-                                             *loads, *layout, states, rates, applied)
+
+            def run(y, n, rows, out):
+                return dense_rk4(y, float(dt), n, *(a[rows] for a in (tau, ref, refd, refdd)), kp, kd, mode,
+                                 gains[rows] if mode == GAINS else gains, *(a[rows] for a in loads), *layout, *out)
         else:
-            code, done, max_viol = rk4(y0, float(dt), int(n_steps), tau, ref + self.joint_offset, refd, refdd, kp, kd,
-                                       mode, gains, *self.simulation_layout(nominal), states, rates, applied)
+            layout, ref = self.simulation_layout(nominal), ref + self.joint_offset
+
+            def run(y, n, rows, out):
+                return rk4(y, float(dt), n, *(a[rows] for a in (tau, ref, refd, refdd)), kp, kd, mode,
+                           gains[rows] if mode == GAINS else gains, *layout, *out)
+        code, done, max_viol = self._in_chunks(run, y0, int(n_steps), (states, rates, applied))
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
             array[done + 1:] = np.nan
         z, zd = self.joints_from_state(states)
         return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
+
+    def _in_chunks(self, run, y0, n_steps: int, out: tuple) -> tuple[int, int, float]:
+        """``run(y, n, rows, out)`` (a compiled RK4 of n steps from y on the half-step rows ``rows``,
+        filling the rows of ``out``) over n_steps steps in chunks of about CHUNK_S seconds each (the
+        first of FIRST_CHUNK_VALUES state values), so that Ctrl-C (acted on between two calls, never
+        inside compiled code) ends a long simulation within a fraction of a second. Each chunk starts
+        from the last state of the one before, at the same grid row, so the numbers are those of one
+        call. (status, steps done, largest violation)."""
+        chunk = max(1, FIRST_CHUNK_VALUES // self.n_state)
+        start, worst = 0, 0.0
+        while True:
+            n = min(chunk, n_steps - start)
+            rows = slice(2 * start, 2 * (start + n) + 1)
+            began = time.perf_counter()
+            code, done, viol = run(out[0][start].copy() if start else y0, n, rows,
+                                   tuple(array[start:start + n + 1] for array in out))
+            worst, start = max(worst, viol), start + int(done)
+            if code != 0 or start == n_steps:
+                return int(code), start, worst
+            chunk = max(1, int(CHUNK_S * n / max(time.perf_counter() - began, 1e-9)))
 
     def simulate_pd(self, z0, zd0, dt, n_steps, tau_half, ref_half, refd_half, kp, kd) -> SimResult:
         """``simulate`` under PD from the joint state (z0, zd0) (rad, rad/s), shapes (J,)."""

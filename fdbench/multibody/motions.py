@@ -65,10 +65,19 @@ class MinimumJerk(JointMotion):
         self.goal = np.array([goal[joint] for joint in self.joints], dtype=float)
         if not self.T > 0:
             raise ValueError(f"the duration must be positive, got {self.T}")
-        self._samples = _grid(self.T)
+        self._samples = None  # the 1 ms grid, made when asked for (a --sample-dt grid replaces it)
+
+    @property
+    def duration(self) -> float:
+        return self.T
 
     @property
     def samples(self) -> np.ndarray:
+        if self._samples is None:
+            from ..memory import check_grid
+
+            check_grid(self.T, SAMPLE_DT, "--sample-dt", len(self.joints))  # before the allocation
+            self._samples = _grid(self.T)
         return self._samples
 
     def __call__(self, t):

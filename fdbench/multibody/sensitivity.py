@@ -89,12 +89,14 @@ def rk4_sensitivity_dense(y0, dt, n_steps, tau, ref, refd, G, param_col, every, 
 def warm_up() -> None:
     """Load (or compile) the sensitivity kernel on a small library model, so that later timings
     exclude it."""
+    from ..execution import compiling
     from .description import find_model
     from .engine import Engine
 
     engine = Engine(find_model("forearm"))
     n, rows = 2, np.zeros((5, 1))
     y0 = engine.state_from_joints(np.zeros(1), np.zeros(1))
-    rk4_sensitivity(y0, 0.05, n, rows, rows, rows, np.zeros((5, 1)), np.zeros(1, dtype=np.int64), 1,
-                    *engine.simulation_layout(), np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)),
-                    np.empty((n + 1, 1)), np.empty((n + 1, 1, 1)))
+    with compiling():  # Ctrl-C while the kernel compiles ends the command at once
+        rk4_sensitivity(y0, 0.05, n, rows, rows, rows, np.zeros((5, 1)), np.zeros(1, dtype=np.int64), 1,
+                        *engine.simulation_layout(), np.empty((n + 1, engine.n_state)),
+                        np.empty((n + 1, engine.n_state)), np.empty((n + 1, 1)), np.empty((n + 1, 1, 1)))
