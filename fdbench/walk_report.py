@@ -321,8 +321,9 @@ def _times(ratio: float) -> str:
 
 
 def markdown(plan, walk: list[WalkRow], forearm: list[WalkRow], inverse, inverse_fields: dict, names: tuple,
-             kinds: tuple, settings: dict, provenance: list[str], figures: dict | None = None) -> str:
-    """The walk's report as Markdown."""
+             kinds: tuple, settings: dict, provenance: list[str], figures: dict | None = None,
+             peers: list[str] | None = None) -> str:
+    """The walk's report as Markdown; ``peers``: the lines of its section "Peers" (``--peers``)."""
     duration, forearm_duration = float(inverse.t[-1]), _duration(forearm)
     out = ["# fdbench report: a recorded walk", "",
            f"Trajectory tracking of a recorded motion of {len(names)} coordinates ({', '.join(names)}) on a model with "
@@ -357,6 +358,8 @@ def markdown(plan, walk: list[WalkRow], forearm: list[WalkRow], inverse, inverse
             "The paper offers the forearm as a stand-in that \"generates the same problems as more complex models\". "
             "From the runs above:", ""]
     out += claim_lines(walk, forearm, duration, forearm_duration, True, inverse_fields)
+    if peers:
+        out += [""] + peers
     out += ["", "## When and where the runs were made", ""] + provenance
     if figures:
         out += ["", "## Figures", ""] + [f"![{name}]({path})" for name, path in figures.items()]

@@ -440,7 +440,7 @@ def test_claim_says_when_an_optimisation_ended_worse_than_its_start():
 
 
 @pytest.mark.parametrize("extra, word", [(["--torque", "cs"], "--torque"), (["--seeds", "3"], "--seeds"),
-                                         (["--kp", "10"], "--kp"), (["--peers", "opensim"], "--peers"),
+                                         (["--kp", "10"], "--kp"),
                                          (["--jobs", "0"], "--jobs"), (["--budget", "0"], "--budget")])
 def test_options_of_the_papers_tables_are_refused_in_one_line_before_any_work(tmp_path, extra, word):
     files = [_hopper_file(tmp_path), _motion_file(tmp_path), _loads_file(tmp_path)]

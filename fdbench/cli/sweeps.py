@@ -86,7 +86,7 @@ def report(
         return walk_report(ctx, conditions=conditions, kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol,
                            atol=atol, alpha=alpha, xi=xi, omega=omega, budget=budget, popsize=popsize, beyond=beyond,
                            executor=_backend(backend, jobs, scheduler), db=db, db_path=db_path, rerun=rerun,
-                           figures=figures, fmt=fmt, output=output, quiet=quiet)
+                           figures=figures, fmt=fmt, output=output, quiet=quiet, peers=peers)
     if figures is not None:
         _check_figures_dir(figures, output, db_path, inputs)
     torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, jobs, torque, opt, hidden, knots, terms,

@@ -12,7 +12,7 @@ from .app import BadInput
 
 # report options that shape the paper's tables and have no meaning in the walk's report
 NOT_FOR_THE_WALK = {"torque": "--torque", "opt": "--opt", "feedforward": "--feedforward", "all_cells": "--all-cells",
-                    "peers": "--peers", "seeds": "--seeds", "gradient": "--gradient", "hidden": "--hidden",
+                    "seeds": "--seeds", "gradient": "--gradient", "hidden": "--hidden",
                     "knots": "--knots", "terms": "--terms", "sigma0": "--sigma0", "kp": "--kp", "kd": "--kd",
                     "penalty_weight": "--penalty-weight", "control": "--control/--no-control"}
 
@@ -22,8 +22,8 @@ def check_walk_options(ctx) -> None:
     given = [option for name, option in NOT_FOR_THE_WALK.items() if _given(ctx, name)]
     if given:
         raise BadInput(f"{', '.join(given)}: not used by the report of a model with a floating base (one run per "
-                       "method; its options: --budget, --popsize, --no-beyond, --figures, --jobs, --db, --rerun, "
-                       "--format, --output)")
+                       "method; its options: --budget, --popsize, --no-beyond, --peers, --figures, --jobs, --db, "
+                       "--rerun, --format, --output)")
 
 
 def _given(ctx, name: str) -> bool:
@@ -33,12 +33,13 @@ def _given(ctx, name: str) -> bool:
 
 def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: float, rtol: float, atol: float,
                 alpha: float, xi: float, omega: float, budget: int, popsize, beyond: bool, executor, db, db_path: Path,
-                rerun: bool, figures, fmt: str, output, quiet: bool) -> None:
-    """Carry out the walk's report: check, plan, run (stored and resumed), write."""
+                rerun: bool, figures, fmt: str, output, quiet: bool, peers: str | None = None) -> None:
+    """Carry out the walk's report: check, plan, run (stored and resumed), write; with ``peers``
+    (--peers) the peers on the walk too, in a section of their own."""
     from .. import walk
     from .common import _emit, _say, _validated
     from .options import _common, _warn_opensim
-    from .sweeps import _run_specs
+    from .sweeps import _check_peers_available, _peer_names, _run_specs
 
     check_walk_options(ctx)
     popsize = walk.WALK_POPSIZE if popsize is None else popsize
@@ -48,10 +49,13 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
         plan = walk.make_plan(walk_common, forearm_common, budget, popsize, collocation=beyond)
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    for spec in plan.all_specs():
+    peer_methods = _peer_methods(_peer_names(peers), walk.on_samples(walk_common))
+    for spec in plan.all_specs() + [m.spec for m in peer_methods]:
         _validated(spec)
+    if peer_methods:
+        _check_peers_available()
     _warn_opensim(conditions["model_name"], kinematics, quiet)  # the import's notes before the work, not after it
-    runs = _run_specs(plan.all_specs(), db_path, db is None, executor, rerun, quiet)
+    runs = _run_specs(plan.all_specs() + [m.spec for m in peer_methods], db_path, db is None, executor, rerun, quiet)
     from ..store import open_store
 
     with open_store(db_path) as store:
@@ -60,26 +64,92 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
     spec = plan.walk[0].spec
     inverse = spec.reference()
     text = _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, executor.describe(), figures, output, quiet,
-                 getattr(executor, "jobs", 1))
+                 getattr(executor, "jobs", 1), _peers_found(peer_methods, runs, made))
     _emit(text, output)
     if output is not None and str(output) != "-":
         _say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
 
 
-def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures, output, quiet, processes=1) -> str:
+def _peer_methods(names: list, common: dict) -> list:
+    """The peers ``names`` as methods on the walk's settings ``common`` (its PD's gains); bad input
+    in one line."""
+    if not names:
+        return []
+    from ..peers.report import peer_methods
+
+    try:
+        return peer_methods(names, **common)
+    except ValueError as exc:
+        raise BadInput(str(exc)) from None
+
+
+def _peers_found(methods: list, runs: dict, made: dict):
+    """(methods, their report rows (table "peers")) of the peers run; None without peers."""
+    if not methods:
+        return None
+    from ..peers.report import peer_rows
+
+    return methods, peer_rows(methods, runs, made)
+
+
+def _beside(walk_rows) -> list:
+    """The walk's methods as report rows a peer stands beside (``peers.report.side_by_side``): PD
+    control as the paper report's control row, open loop (PD with zero gains) left out."""
+    from ..report import Row
+    from ..walk import OPEN_LOOP
+
+    return [Row(row.name, "control", None, {}, None, [row.record]) for row in walk_rows if row.key != OPEN_LOOP]
+
+
+def _peer_walk_rows(peer_rows) -> list:
+    """The peers' report rows as the walk's rows (for its CSV), keyed by the peer's name."""
+    from ..walk import WalkRow
+
+    return [WalkRow(row.records[0].get("peer"), row.name, row.records[0], row.specs[0], row.hashes[0],
+                    row.provenance[0] if row.provenance else {}) for row in peer_rows]
+
+
+def _peers_json(peer_rows, walk_rows) -> list:
+    """The peers for the JSON report: per peer its name, label, hash and record, and beside the
+    fdbench method it stands for ``vs_fdbench`` (and MocoTrack's ``vs_fdbench_solve``)."""
+    from ..files import finite_or_none
+    from ..peers.report import _plain, side_by_side
+
+    pairs = side_by_side(peer_rows, _beside(walk_rows))
+    out = []
+    for row in peer_rows:
+        rec = row.records[0]
+        entry = {"peer": rec.get("peer"), "method": row.name, "spec_hash": row.hashes[0],
+                 "run_id": row.provenance[0].get("id") if row.provenance else None,
+                 "record": {k: finite_or_none(v) for k, v in rec.items()}}
+        for pair in pairs:
+            if pair["peer"] == row.name:
+                entry["vs_fdbench_solve" if pair.get("solve_alone") else "vs_fdbench"] = _plain(pair)
+        out.append(entry)
+    return out
+
+
+def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures, output, quiet, processes=1,
+          peers_found=None) -> str:
     from .. import walk, walk_report
     from .common import _say
+
+    peer_methods, peer_rows = peers_found or ([], [])
 
     fields = walk.inverse_residuals(spec, inverse)
     settings = settings_table(plan, spec, jobs)
     if fmt == "csv":
         from ..files import csv_text
 
-        return csv_text(list(walk_report.CSV_COLUMNS), walk_report.csv_rows(walk_rows, forearm_rows))
+        return csv_text(list(walk_report.CSV_COLUMNS),
+                        walk_report.csv_rows(walk_rows + _peer_walk_rows(peer_rows), forearm_rows))
     duration, forearm_duration = float(inverse.t[-1]), walk_report._duration(forearm_rows)
     claim = walk_report.claim_lines(walk_rows, forearm_rows, duration, forearm_duration, True, fields)
     if fmt == "json":
-        return json.dumps(walk_report.json_report(plan, walk_rows, forearm_rows, fields, settings, claim), indent=2) + "\n"
+        report = walk_report.json_report(plan, walk_rows, forearm_rows, fields, settings, claim)
+        if peer_rows:
+            report["peers"] = _peers_json(peer_rows, walk_rows)
+        return json.dumps(report, indent=2) + "\n"
     links = None
     if figures is not None:
         from ..files import new_folder
@@ -91,8 +161,13 @@ def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures
                                        processes)
         _say(quiet, f"wrote {len(links)} figures to {figures}")
     names, kinds = walk.coordinates(spec)
+    section = None
+    if peer_rows:
+        from ..peers.report import peers_markdown
+
+        section = peers_markdown(peer_rows, peer_methods, _beside(walk_rows))
     return walk_report.markdown(plan, walk_rows, forearm_rows, inverse, fields, names, kinds, settings,
-                                _provenance(walk_rows + forearm_rows), links)
+                                _provenance(walk_rows + forearm_rows + _peer_walk_rows(peer_rows)), links, section)
 
 
 def _provenance(rows) -> list[str]:

@@ -98,8 +98,6 @@ def check_spec(spec) -> None:
     """ValueError (one line) for a peer spec's unknown peer or out-of-range option; no work done."""
     options = dict(spec.method_options)
     found = peer(str(options.get("peer")))
-    if spec.loads is not None:
-        raise ValueError(f"peer {found.name}: --loads (external loads) is not passed to OpenSim in this version")
     if set(options) - {"peer"} != set(found.defaults):
         raise ValueError(f"peer {found.name}: options {sorted(set(options) - {'peer'})}, expected "
                          f"{sorted(found.defaults)}")

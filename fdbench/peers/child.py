@@ -5,7 +5,7 @@ imported into fdbench's own process.
 
 Parent side: ``call(request)``. Child side: ``main()`` dispatches on ``request["peer"]`` to the
 peer module's ``solve(osim, request)``, and offers the helpers the peers share (``model_from``,
-``torque_driven``)."""
+``torque_driven``, and for external loads ``loads_file`` and ``with_loads``)."""
 
 from __future__ import annotations
 
@@ -99,6 +99,29 @@ def model_from(osim, content: str):
     for i in reversed(range(forces.getSize())):
         if osim.PrescribedForce.safeDownCast(forces.get(i)) is None:
             forces.remove(i)
+    return model
+
+
+def loads_file(loads: dict | None) -> str | None:
+    """The path of the external loads file (``common.loads_request``) written, with its data file,
+    into the working folder (the private one ``call`` gives the process); None without loads."""
+    if not loads:
+        return None
+    folder = os.getcwd()
+    with open(os.path.join(folder, loads["data_name"]), "w", encoding="utf-8") as handle:
+        handle.write(loads["data"])
+    path = os.path.join(folder, "external_loads.xml")
+    with open(path, "w", encoding="utf-8") as handle:
+        handle.write(loads["xml"])
+    return path
+
+
+def with_loads(osim, model, loads: dict | None):
+    """``model`` with the external loads of the request added as OpenSim's users add them (its
+    ``ExternalLoads`` read from the file, a component of the model); the model itself."""
+    path = loads_file(loads)
+    if path is not None:
+        model.addModelComponent(osim.ExternalLoads(path, True))
     return model
 
 

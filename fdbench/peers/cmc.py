@@ -34,14 +34,14 @@ def run(spec):
     from ..models import joints
     from ..records import RunOutcome, base_record
     from .child import call
-    from .common import desired, grid, indicators, osim_texts, reference
+    from .common import desired, grid, indicators, loads_request, osim_texts, reference
 
     names = joints(spec.model_name)
     _, plant = osim_texts(spec)
     t = grid(spec)
     z, zd, _ = desired(spec, t)
     answer = call({"peer": "opensim-cmc", "plant": plant, "coordinates": list(names), "t": t.tolist(),
-                   "z": z.tolist(), "zd": zd.tolist()})
+                   "z": z.tolist(), "zd": zd.tolist(), "loads": loads_request(spec)})
     angles, torque = np.array(answer["z"], dtype=float), np.array(answer["torque"], dtype=float)
     fields, table = indicators(spec, t[: len(angles)], angles, torque, answer["t_end"])
     done = answer["t_end"] >= t[-1] - TIME_WINDOW - 1e-9  # CMC stops one window before the kinematics end
@@ -63,16 +63,19 @@ def run(spec):
 
 def solve(osim, request: dict) -> dict:
     """In OpenSim's process: CMCTool on the plant made torque-driven; angles (rad) and actuator
-    torques (N m) at the step times reached, shape (m, J), its integration steps and the run's
-    wall time (s)."""
+    torques (N m) at the step times reached, shape (m, J), the last time reached (s, on the
+    request's clock), its integration steps and the run's wall time (s). External loads are given
+    to CMCTool as its users give them (``setExternalLoadsFileName``), on their own clock (the
+    request's times shifted by theirs)."""
     import os
     import tempfile
 
-    from .child import coordinate_paths, model_from, torque_driven
+    from .child import coordinate_paths, loads_file, model_from, torque_driven
     from .opensim_pd import _hermite
 
     names = request["coordinates"]
-    t = np.array(request["t"])
+    shift = float((request.get("loads") or {}).get("shift_s", 0.0))
+    t = np.array(request["t"]) + shift
     z = np.array(request["z"], dtype=float)
     model = model_from(osim, request["plant"])
     for actuator in torque_driven(osim, model, names, "_torque"):
@@ -120,6 +123,9 @@ def solve(osim, request: dict) -> dict:
         tool.setLowpassCutoffFrequency(-1.0)
         tool.setResultsDir(os.path.join(folder, "results"))
         tool.setReplaceForceSet(False)
+        loads = loads_file(request.get("loads"))
+        if loads is not None:
+            tool.setExternalLoadsFileName(loads)
         failure = None
         began = time.perf_counter()
         try:
@@ -140,16 +146,20 @@ def solve(osim, request: dict) -> dict:
     reached = t[(t >= times[0] - 1e-12) & (t <= times[-1] + 1e-12)]
     angles, _ = _hermite(times, values, rates, reached)
     torque = np.stack([np.interp(reached, force_times, applied[:, j]) for j in range(len(names))], axis=-1)
-    return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1]), "run_s": run_s,
+    return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1] - shift), "run_s": run_s,
             "steps": int(len(times) - 1), "failure": failure}
 
 
 def _read(osim, path):
-    """(times (s), column(label) -> values) of a .sto file CMC wrote; None where it is missing."""
+    """(times (s), column(label) -> values) of a .sto file CMC wrote (a time may repeat where its
+    last window ends, which OpenSim's own TimeSeriesTable refuses); None where it is missing."""
     import os
 
     if not os.path.exists(path):
         return None
-    table = osim.TimeSeriesTable(path)
-    times = np.array(table.getIndependentColumn(), dtype=float)
-    return times, lambda label: table.getDependentColumn(label).to_numpy()
+    with open(path, encoding="utf-8") as handle:
+        lines = handle.read().splitlines()
+    start = next(k for k, line in enumerate(lines) if line.strip().lower() == "endheader") + 1
+    labels = lines[start].split()
+    values = np.loadtxt(lines[start + 1:], dtype=float, ndmin=2)
+    return values[:, 0], lambda label: values[:, labels.index(label)]

@@ -4,6 +4,8 @@ forward simulation, and the indicators of a trajectory computed elsewhere (OpenS
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ..models import joints
@@ -28,6 +30,37 @@ def osim_texts(spec) -> tuple[str, str]:
     nominal = to_osim(with_short_keys(model, tuple(spec.model)))
     plant = to_osim(with_short_keys(model, tuple(spec.model) + tuple(spec.plant))) if spec.plant else nominal
     return nominal, plant
+
+
+LOADS_DATA = "loads_data"  # the name (before its suffix) of the loads' data file in OpenSim's folder
+
+
+def loads_request(spec) -> dict | None:
+    """The spec's external loads (``--loads``) as OpenSim is given them, or None without: ``xml``,
+    the ExternalLoads element (as fdbench parsed it) in an OpenSimDocument whose ``<datafile>`` is
+    ``data_name``, the copy of the data file's text ``data`` that OpenSim's process writes beside
+    it; ``shift_s``, the motion's first time on the loads' clock (s), which OpenSim's times add.
+    Checked as fdbench's runs check them (unchanged, spanning the motion: files.BadFile)."""
+    if spec.loads is None:
+        return None
+    import xml.etree.ElementTree as ElementTree
+
+    from ..files import read_input_bytes
+    from ..multibody.loads import data_file
+    from ..multibody.runs import loads, motions
+
+    loads(spec)
+    root = ElementTree.fromstring(read_input_bytes(spec.loads, "--loads"))  # the bytes fdbench read and checked
+    element = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
+    source = data_file(spec.loads)
+    name = LOADS_DATA + (source.suffix.lower() if source.suffix.lower() in (".mot", ".sto") else ".mot")
+    element.find("datafile").text = name
+    version = root.get("Version", "40000") if root.tag == "OpenSimDocument" else "40000"
+    document = ElementTree.Element("OpenSimDocument", Version=version)
+    document.append(element)
+    data = read_input_bytes(source, f"--loads (the <datafile> of {Path(spec.loads).name})")
+    return {"xml": ElementTree.tostring(document, encoding="unicode"), "data_name": name,
+            "data": data.decode("utf-8", errors="replace"), "shift_s": float(getattr(motions(spec)[1], "start_s", 0.0))}
 
 
 def grid(spec) -> np.ndarray:
@@ -71,22 +104,31 @@ def replay(spec, torque) -> RunOutcome:
 
 def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_end: float) -> tuple[dict, tuple]:
     """The record's indicators of a trajectory simulated elsewhere (OpenSim's) on the grid ``t``
-    (s, shape (m,)): ``angles`` (rad) and applied ``torque`` (N m), shape (m, J), up to ``t_end``;
-    measured on the motion's samples reached, against the reference, as fdbench's runs are:
-    (fields, (CSV header, rows) of the trajectory)."""
+    (s, shape (m,)): ``angles`` (rad, m) and applied generalised forces ``torque`` (N m, N), shape
+    (m, J), up to ``t_end``; measured on the motion's samples reached, against the reference, as
+    fdbench's runs are (angles and translations apart, a floating base's residuals):
+    (fields, (CSV header, rows) of the trajectory in a motion file's units)."""
+    from types import SimpleNamespace
+
+    from ..multibody import runs
+    from ..multibody import simulation as sim
+
     inverse, truth, torque_ref, samples = reference(spec)
-    names = joints(spec.model_name)
+    names, kinds = joints(spec.model_name), runs.nominal(spec).coordinate_kinds
     z, tau = _on_samples(samples, t, angles), _on_samples(samples, t, torque)
     reached = samples <= t_end + 1e-12
-    rot = np.degrees(z - truth)[reached]
-    trq = (tau - torque_ref)[reached]
-    fields = {"rmse_rot_deg": float(np.sqrt(np.mean(rot**2))), "rmse_torque_nm": float(np.sqrt(np.mean(trq**2))),
-              "t_end": float(t_end)}
-    if len(names) > 1:
-        fields.update({f"rmse_rot_deg_{j}": float(v) for j, v in zip(names, np.sqrt(np.mean(rot**2, axis=0)))})
-        fields.update({f"rmse_torque_nm_{j}": float(v) for j, v in zip(names, np.sqrt(np.mean(trq**2, axis=0)))})
+    result = SimpleNamespace(angles=z, z=z, torque=tau, reached=reached)
+    rot, trans, per_coordinate = sim.rmse_coordinates(result, truth, kinds)
+    trq, force, per_force = sim.rmse_generalized_forces(result, torque_ref, kinds)
+    fields = {"rmse_rot_deg": rot, "rmse_torque_nm": trq, "t_end": float(t_end),
+              **runs._per_coordinate(("rmse_rot_deg", "rmse_trans_cm"), names, kinds, per_coordinate),
+              **runs._per_coordinate(("rmse_torque_nm", "rmse_force_n"), names, kinds, per_force)}
+    if "translation" in kinds:
+        fields.update(rmse_trans_cm=trans, rmse_force_n=force)
+    fields.update(runs.residual_fields(runs.nominal(spec), tau[reached]))
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
-    rows = np.column_stack([samples, np.degrees(z), np.degrees(truth), tau, torque_ref])[reached]
+    rows = np.column_stack([samples, runs._in_file_units(z, kinds), runs._in_file_units(truth, kinds), tau,
+                            torque_ref])[reached]
     return fields, (header, rows)
 
 

@@ -36,7 +36,7 @@ def run(spec):
     from ..collocation import CollocationResult
     from .child import call
     from ..models import joints
-    from .common import desired, osim_texts, replay, warm_up
+    from .common import desired, loads_request, osim_texts, replay, warm_up
 
     options = dict(spec.method_options)
     names = joints(spec.model_name)
@@ -46,7 +46,7 @@ def run(spec):
     request = {"peer": "moco", "nominal": nominal, "coordinates": list(names), "t": np.asarray(samples).tolist(),
                "z": z.tolist(), "zd": zd.tolist(), "nodes": options["nodes"],
                "effort_weight": options["regularization"] / DEG2, "tolerance": options["tolerance"],
-               "max_iter": options["max_iter"]}
+               "max_iter": options["max_iter"], "loads": loads_request(spec)}
     answer = call(request)
     warm_up(spec)
     times, controls = np.array(answer["t"]), np.array(answer["controls"]).reshape(len(answer["t"]), len(names))
@@ -99,11 +99,12 @@ def solve(osim, request: dict) -> dict:
     angles (rad) and speeds (rad/s) at the mesh points and midpoints, shape (m, J), status,
     iterations, objective, solve time (s: the wall time of ``solve``; Moco's own
     ``getSolverDuration`` beside it) and the whole run's (s: from MocoTrack's creation on, the
-    model's loading excluded)."""
+    model's loading excluded). External loads are added as Moco's users add them
+    (``ModOpAddExternalLoads``), on their own clock (the request's times shifted by theirs)."""
     import os
     import tempfile
 
-    from .child import coordinate_paths, model_from, torque_driven
+    from .child import coordinate_paths, loads_file, model_from, torque_driven
 
     names = request["coordinates"]
     model = model_from(osim, request["nominal"])
@@ -111,12 +112,17 @@ def solve(osim, request: dict) -> dict:
     model.finalizeConnections()
     model.initSystem()
     paths = coordinate_paths(model, names)
-    t = np.array(request["t"])
+    shift = float((request.get("loads") or {}).get("shift_s", 0.0))
+    t = np.array(request["t"]) + shift
     z, zd = np.array(request["z"]), np.array(request["zd"])
     run_began = time.perf_counter()  # the whole run: MocoTrack's set-up, initialize and solve
     track = osim.MocoTrack()
     track.setName("fdbench_peer")
-    track.setModel(osim.ModelProcessor(model))
+    processor = osim.ModelProcessor(model)
+    loads = loads_file(request.get("loads"))
+    if loads is not None:
+        processor.append(osim.ModOpAddExternalLoads(loads))
+    track.setModel(processor)
     folder = tempfile.TemporaryDirectory(prefix="fdbench-moco-")
     reference = os.path.join(folder.name, "states.sto")  # the desired states, as MocoTrack reads them
     osim.STOFileAdapter.write(_states_table(osim, paths, t, z, zd), reference)
@@ -159,7 +165,7 @@ def solve(osim, request: dict) -> dict:
     columns = lambda suffix: [labels.index(path + suffix) for path in paths]  # noqa: E731
     control_labels = list(solution.getControlNames())
     controls = solution.getControlsTrajectoryMat()[:, [control_labels.index(f"/forceset/{n}_torque") for n in names]]
-    return {"t": np.asarray(solution.getTimeMat()).tolist(), "controls": controls.tolist(),
+    return {"t": (np.asarray(solution.getTimeMat()) - shift).tolist(), "controls": controls.tolist(),
             "angles": states[:, columns("/value")].tolist(), "speeds": states[:, columns("/speed")].tolist(),
             "status": solution.getStatus(), "iterations": int(solution.getNumIterations()),
             "objective": float(solution.getObjective()), "solve_s": solve_s, "run_s": run_s,

@@ -11,7 +11,9 @@ is OpenSim's own inverse dynamics (its InverseDynamicsSolver on the nominal mode
 motion at the step times. The Manager integrates with Runge-Kutta-Merson at OpenSim's default
 accuracy ``ACCURACY`` over its own steps; the states are interpolated onto the step times by
 cubic Hermite interpolation (angle and rate at each of its steps). The gains are fdbench's PD's for
-the model (``fdbench.multibody.runs.pd_gains``; the forearm's 80 and 0.3).
+the model (``fdbench.multibody.runs.pd_gains``; the forearm's 80 and 0.3). With ``--loads`` both
+models are given the same ExternalLoads file and data as an OpenSim component of the model, and a
+floating base's coordinates get their CoordinateActuators (the residuals) under the same law.
 Runtime: the ``integrate`` call, best of ``REPEATS`` (start-up, model building and the
 inverse dynamics excluded, as fdbench excludes compilation; the inverse dynamics' time is
 recorded apart as ``opensim_inverse_s``)."""
@@ -43,7 +45,7 @@ def run(spec):
     from ..records import RunOutcome, base_record
     from .child import call
     from ..models import joints
-    from .common import desired, grid, indicators, osim_texts, reference
+    from .common import desired, grid, indicators, loads_request, osim_texts, reference
 
     names = joints(spec.model_name)
     kp, kd = gains(spec)
@@ -52,7 +54,7 @@ def run(spec):
     z, zd, zdd = desired(spec, t)
     request = {"peer": "opensim", "nominal": nominal, "plant": plant, "coordinates": list(names), "t": t.tolist(),
                "z": z.tolist(), "zd": zd.tolist(), "zdd": zdd.tolist(), "kp": kp.tolist(), "kd": kd.tolist(),
-               "accuracy": ACCURACY}
+               "accuracy": ACCURACY, "loads": loads_request(spec)}
     answer = call(request)
     record = base_record(spec)
     angles, torque = np.array(answer["z"], dtype=float), np.array(answer["torque"], dtype=float)
@@ -80,21 +82,26 @@ def run(spec):
 def solve(osim, request: dict) -> dict:
     """In OpenSim's process: inverse dynamics of the desired motion on the nominal model, then the
     plant's forward simulation under the PD law inside OpenSim, one integrate from the desired
-    initial state (timed ``REPEATS`` times); angles (rad) and applied torques (N m) at the step
-    times reached, shape (m, J), and the times taken (s)."""
-    from .child import coordinate_paths, model_from
+    initial state (timed ``REPEATS`` times), both models under the request's external loads (on
+    their own clock, the request's times shifted by theirs); angles (rad) and applied torques (N m)
+    at the step times reached, shape (m, J), the last time reached (s, on the request's clock) and
+    the times taken (s)."""
+    from .child import coordinate_paths, model_from, with_loads
 
     names = request["coordinates"]
-    t = np.array(request["t"])
+    shift = float((request.get("loads") or {}).get("shift_s", 0.0))
+    t = np.array(request["t"]) + shift
     z, zd, zdd = (np.array(request[key], dtype=float) for key in ("z", "zd", "zdd"))
     kp, kd = np.array(request["kp"], dtype=float), np.array(request["kd"], dtype=float)
     began = time.perf_counter()
-    feedforward = _inverse_dynamics(osim, model_from(osim, request["nominal"]), names, z, zd, zdd)
+    nominal = with_loads(osim, model_from(osim, request["nominal"]), request.get("loads"))
+    feedforward = _inverse_dynamics(osim, nominal, names, t, z, zd, zdd)
     id_s = time.perf_counter() - began
     drive = feedforward + kp * z + kd * zd  # the law's part of time alone, N m
-    model = model_from(osim, request["plant"])
+    model = with_loads(osim, model_from(osim, request["plant"]), request.get("loads"))
     _drive(osim, model, names, t, drive, kp, kd)
     initial = model.initSystem()
+    initial.setTime(float(t[0]))
     paths = coordinate_paths(model, names)
     for name, angle, rate in zip(names, z[0], zd[0]):
         coordinate = model.getCoordinateSet().get(name)
@@ -125,7 +132,7 @@ def solve(osim, request: dict) -> dict:
     reached = t[t <= times[-1] + 1e-12] if len(times) else t[:1]
     angles, speeds = _hermite(times, values, rates, reached) if len(times) > 1 else (z[:1], zd[:1])
     torque = drive[: len(reached)] - kp * angles - kd * speeds
-    return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1]), "id_s": id_s,
+    return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1] - shift), "id_s": id_s,
             "forward_s": forward_s, "steps": int(len(times) - 1), "failure": failure}
 
 
@@ -146,9 +153,10 @@ def _hermite(times, values, rates, at):
     return angle, rate
 
 
-def _inverse_dynamics(osim, model, names, z, zd, zdd) -> np.ndarray:
-    """OpenSim's generalised forces (N m) of the coordinates ``names`` at the states given (rad,
-    rad/s, rad/s^2, each (m, J)): its InverseDynamicsSolver, shape (m, J)."""
+def _inverse_dynamics(osim, model, names, t, z, zd, zdd) -> np.ndarray:
+    """OpenSim's generalised forces (N m) of the coordinates ``names`` at the times t (s, shape
+    (m,)) and states given (rad, rad/s, rad/s^2, each (m, J)), the model's applied forces (its
+    external loads) accounted for: its InverseDynamicsSolver, shape (m, J)."""
     state = model.initSystem()
     coordinates = [model.getCoordinateSet().get(name) for name in names]
     index = []
@@ -160,6 +168,7 @@ def _inverse_dynamics(osim, model, names, z, zd, zdd) -> np.ndarray:
     out = np.empty_like(z)
     udot = osim.Vector(state.getNU(), 0.0)
     for k in range(len(z)):
+        state.setTime(float(t[k]))
         for coordinate, i, angle, rate, acceleration in zip(coordinates, index, z[k], zd[k], zdd[k]):
             coordinate.setValue(state, float(angle), False)
             coordinate.setSpeedValue(state, float(rate))
