@@ -139,6 +139,12 @@ def test_cmc_and_moco_track_with_the_loads_and_apply_fdbench_s_inverse_dynamics(
     cmc = invoke("peer", "opensim-cmc", *common(paths))
     assert cmc["status"] == "success" and cmc["t_end"] == pytest.approx(DURATION - 0.01), cmc["message"]
     assert cmc["rmse_rot_deg"] < 0.5 and cmc["rmse_torque_nm"] < 1.0 and cmc["rmse_force_n"] < 1.0, cmc
+    # a step that does not divide CMC's window (as the walk report's 1/1020 s): its last step time before
+    # the window is reached, which is the end
+    steps = invoke("peer", "opensim-cmc", *common(paths, "--dt", "0.0007"))
+    grid = np.linspace(0, DURATION, round(DURATION / 0.0007) + 1)  # the steps of the motion's span
+    assert steps["status"] == "success", steps["message"]
+    assert steps["t_end"] == pytest.approx(grid[grid <= DURATION - 0.01][-1]) and steps["t_end"] < DURATION - 0.01
     moco = invoke("peer", "moco", *common(paths, "--nodes", "20"))
     assert moco["ipopt_status"] == "Solve_Succeeded" and moco["status"] == "success", moco["message"]
     assert moco["rmse_rot_deg"] < 2.0 and moco["rmse_trans_cm"] < 5.0, moco

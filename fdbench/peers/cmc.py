@@ -44,7 +44,8 @@ def run(spec):
                    "z": z.tolist(), "zd": zd.tolist(), "loads": loads_request(spec)})
     angles, torque = np.array(answer["z"], dtype=float), np.array(answer["torque"], dtype=float)
     fields, table = indicators(spec, t[: len(angles)], angles, torque, answer["t_end"])
-    done = answer["t_end"] >= t[-1] - TIME_WINDOW - 1e-9  # CMC stops one window before the kinematics end
+    last = t[t <= t[-1] - TIME_WINDOW + 1e-9][-1]  # the last step time before CMC's end, one window before the motion's
+    done = answer["t_end"] >= last - 1e-9
     message = (f"OpenSim {answer['version']} CMCTool, {answer['steps']} integration steps, time window "
                f"{TIME_WINDOW:g} s (CMC looks one window ahead and so ends at t = {answer['t_end']:.4g} s, the "
                "indicators taken over the samples it reached); runtime: its whole run")
