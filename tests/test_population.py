@@ -15,8 +15,8 @@ from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.population import set_threads
 from fdbench.problem import TrackingProblem
-from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
-                               restore_threads)
+from population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,  # noqa: F401
+                               assert_population_equals_one_by_one, restore_threads)
 
 
 CELLS = [("cs", False), ("cs", True), ("pf", False), ("pf", True), ("ann", False), ("ann", True)]
@@ -45,6 +45,13 @@ def test_population_equals_one_by_one_exactly(cell, problems):
     reached = [problem.simulate(x * problem.scale).success for x in X]
     assert any(reached) and not all(reached)  # both kinds present
     assert_population_equals_one_by_one(problem, X)
+
+
+@pytest.mark.parametrize("cell", [("cs", False), ("ann", True)], ids=str)
+def test_population_in_calls_of_one_step_equals_one_call_exactly(cell, problems, monkeypatch):
+    """Each candidate's simulation cut at every step (as Ctrl-C may stop it between two calls) and
+    resumed from its last state gives the numbers of one call, failing candidates included."""
+    assert_one_step_calls_change_nothing(problems[cell], population(problems[cell]), monkeypatch)
 
 
 @pytest.mark.parametrize("cell", CELLS, ids=str)
