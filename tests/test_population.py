@@ -93,6 +93,28 @@ def test_thread_count_does_not_change_a_run(torque, feedforward):
         assert records[0][name] == records[1][name]
 
 
+def test_cma_work_in_its_own_thread_does_not_change_a_run(monkeypatch):
+    """From IN_THREAD_FROM parameters (a 1000-body model's), cma's ask and tell run in a thread of
+    their own so that Ctrl-C is acted on during them: here from the forearm's few, the same run."""
+    from fdbench.optimizers import cmaes
+
+    spec = optimize_spec("cs", "cmaes", False, seed=2, budget=60)
+    here = run(spec)
+    real, calls = cmaes._interruptible, []
+
+    def counted(call, *args):
+        calls.append(call)
+        return real(call, *args)
+
+    monkeypatch.setattr(cmaes, "IN_THREAD_FROM", 0)
+    monkeypatch.setattr(cmaes, "_interruptible", counted)
+    apart = run(spec)
+    assert len(calls) > 10  # the constructor, then stop, ask and tell every generation
+    assert np.array_equal(apart.history, here.history) and np.array_equal(apart.params, here.params)
+    for name in ("rmse_rot_deg", "rmse_torque_nm", "best_objective", "evaluations", "stop_reason"):
+        assert apart.record[name] == here.record[name]
+
+
 def test_bad_thread_count_is_a_one_line_error():
     result = CliRunner().invoke(app, ["optimize", "--opt", "cmaes", "--threads", "0"])
     assert result.exit_code == 2
