@@ -856,7 +856,7 @@ def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_w
                             n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
                             n_mass, n_q_ext, states[step:step + n + 1], rates[step:step + n + 1],
                             applied[step:step + n + 1])
-        step, budget = step + done, budget - n
+        step, budget = step + done, budget - max(done, 1)  # steps run: a failing candidate costs few
         if code != OK or step == n_steps:
             objective[candidate] = tracking_objective(states, step, every, angles_ref, n_steps, penalty_weight,
                                                       body_int, body_float, mass.shape[0])
