@@ -1,6 +1,7 @@
-"""Population evaluation: the forward simulations of many candidates in one compiled call,
-spread over threads (a compiled kernel that releases the GIL, run by a small thread pool; each
-thread takes every T-th candidate).
+"""Population evaluation: the forward simulations of many candidates in compiled calls, spread
+over threads (a compiled kernel that releases the GIL, run by a small thread pool; each thread takes
+every T-th candidate). Each call runs about 0.1 s of steps, a candidate's simulation resuming where
+the call before stopped, so that Ctrl-C ends a large model's population within a fraction of a second.
 
 Each candidate runs the kernel of a plain simulation on its own torque history, in its thread's
 work buffers, and eq. 18 straight from its states (``multibody.kernels.rk4_candidates``). A single
@@ -14,6 +15,8 @@ from __future__ import annotations
 
 import math
 import os
+import threading
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -59,18 +62,38 @@ def workspace(n_steps: int, count: int, widths) -> tuple:
 
 
 def spread(kernel, args, buffers, objective) -> None:
-    """Run ``kernel(*args, *thread's buffers, objective, first, stride)`` over the ``len(objective)``
-    candidates, shared among ``threads()`` threads (at most as many as ``buffers`` holds, see
-    ``workspace``): thread k takes candidates k, k + T, ... in its own buffers. ``kernel`` must be
-    compiled with ``nogil=True`` and fill objective[c] for the candidates it runs."""
+    """Run ``kernel(*args, *thread's buffers, objective, candidate, stride, step, budget)`` over the
+    ``len(objective)`` candidates, shared among ``threads()`` threads (at most as many as ``buffers``
+    holds, see ``workspace``): thread k takes candidates k, k + T, ... in its own buffers, in calls of
+    ``budget`` steps (``_in_steps``). ``kernel`` must be compiled with ``nogil=True``, fill
+    objective[c] for the candidates it finishes and return the (candidate, step) to resume at.
+    Ctrl-C is acted on between two calls: the other threads stop after their call."""
     count = max(1, min(threads(), len(objective), buffers[0].shape[0]))
+    stop = threading.Event()
     if count == 1:
-        kernel(*args, *(buffer[0] for buffer in buffers), objective, 0, 1)
+        _in_steps(kernel, args, tuple(buffer[0] for buffer in buffers), objective, 0, 1, stop)
         return
-    jobs = [_threads["pool"].submit(kernel, *args, *(buffer[k] for buffer in buffers), objective, k, count)
-            for k in range(count)]
-    for job in jobs:
-        job.result()
+    jobs = [_threads["pool"].submit(_in_steps, kernel, args, tuple(buffer[k] for buffer in buffers), objective, k,
+                                    count, stop) for k in range(count)]
+    try:
+        for job in jobs:
+            job.result()
+    finally:
+        stop.set()
+
+
+def _in_steps(kernel, args, buffers, objective, first, stride, stop) -> None:
+    """``spread``'s kernel over candidates first, first + stride, ... in calls of about CHUNK_S
+    seconds each (the first of FIRST_CHUNK_VALUES state values), as ``Engine.simulate``'s RK4 runs,
+    until done or ``stop`` is set."""
+    from .multibody.engine import CHUNK_S, FIRST_CHUNK_VALUES
+
+    budget = max(1, FIRST_CHUNK_VALUES // buffers[0].shape[1])
+    candidate, step = first, 0
+    while candidate < len(objective) and not stop.is_set():
+        began = time.perf_counter()
+        candidate, step = kernel(*args, *buffers, objective, candidate, stride, step, budget)
+        budget = max(1, int(CHUNK_S * budget / max(time.perf_counter() - began, 1e-9)))
 
 
 class Population:

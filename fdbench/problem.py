@@ -175,8 +175,8 @@ class TrackingProblem(ShootingProblem):
 
     def objectives(self, P) -> np.ndarray:
         """Eq. 18 for every row of P, shape (lam, n_params) -> (lam,): the torque histories as array
-        operations (``torques_on_grid_batch``), the simulations and their objectives in one
-        compiled call spread over threads (``population.Population``). ``objective`` is this with a
+        operations (``torques_on_grid_batch``), the simulations and their objectives in
+        compiled calls spread over threads (``population.Population``). ``objective`` is this with a
         population of one, so the numbers equal those of the rows one by one, to the last bit,
         whatever the number of threads."""
         P = np.atleast_2d(np.asarray(P, dtype=float))

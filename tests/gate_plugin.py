@@ -69,3 +69,19 @@ class MarkedPD(PD):
         design = super().design(plan)
         open(os.environ["FDBENCH_MARK"], "w").close()
         return design
+
+
+if os.environ.get("FDBENCH_MARK_POPULATION"):
+    from fdbench.population import Population  # noqa: E402
+
+    _evaluate = Population.__call__
+
+    def _marked(self, count, args):
+        """Population evaluation that first creates the file $FDBENCH_MARK_POPULATION when a
+        population of more than one candidate begins (not the warm-up's, of two steps): a test then
+        knows that CMA-ES's simulations are under way."""
+        if count > 1 and self.n_steps > 2:
+            open(os.environ["FDBENCH_MARK_POPULATION"], "w").close()
+        return _evaluate(self, count, args)
+
+    Population.__call__ = _marked

@@ -5,7 +5,8 @@
   (tests/reference_dynamics.py) and the kinetic energy of the bodies' own velocities, on random
   trees of up to 40 bodies and on models with paths and free joints;
 - a 1000-body star and chain (MAX_BODIES) run through ``control``, ``inverse`` and ``models show``;
-- Ctrl-C in the middle of a long simulation ends the command with the usual line and exit 130;
+- Ctrl-C in the middle of a long simulation, or of CMA-ES's population, ends the command with the
+  usual line and exit 130;
 - a model motion too long for memory is refused before its grid is allocated, under a 4 GiB
   address-space limit; one too short to sample is refused where the model is checked;
 - a JSON model of 80,000 keys is read in linear time (its duplicate key named).
@@ -154,6 +155,34 @@ def test_ctrl_c_ends_a_long_simulation_within_seconds(tmp_path):
     assert proc.returncode == 130 and stdout == ""
     assert stderr.strip().splitlines() == ["fdbench: error: interrupted"]
     # 10,000 steps of 1000 bodies take 30 s on an idle core; a chunk of them a tenth of a second
+    assert ended < 10.0, f"the command went on for {ended:.1f} s after Ctrl-C"
+
+
+def test_ctrl_c_ends_cma_es_on_a_thousand_bodies_within_seconds(tmp_path):
+    """Ctrl-C while CMA-ES's first population (31 candidates of 1000 bodies, a second or two each)
+    is simulated on one thread: the candidates' simulations run in chunks, so the interrupt is acted
+    on at the next chunk, not after the population (it was one compiled call)."""
+    path, mark = tmp_path / "star.toml", tmp_path / "evaluating"
+    path.write_text(tree_model(1000, star=True))
+    env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_MARK_POPULATION=str(mark),
+               PYTHONPATH=python_path(HERE))
+    cmd = [sys.executable, "-m", "fdbench.cli", "optimize", "--model", str(path), "--opt", "cmaes", "--threads", "1",
+           "-f", "json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env,
+                            start_new_session=True)
+    try:
+        wait_until(mark.exists, "CMA-ES's first population is evaluated", proc, timeout_s=HANG_GUARD_S)
+        os.killpg(proc.pid, signal.SIGINT)
+        sent = time.monotonic()
+        stdout, stderr = proc.communicate(timeout=HANG_GUARD_S)
+        ended = time.monotonic() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130 and stdout == ""
+    assert stderr.strip().splitlines() == ["fdbench: error: interrupted"]
+    # the population takes half a minute or more on an idle core; a chunk of it a tenth of a second
     assert ended < 10.0, f"the command went on for {ended:.1f} s after Ctrl-C"
 
 

@@ -253,13 +253,14 @@ def test_computed_torque_through_another_nominal_model_follows_the_reference():
     assert error[[0, 3, 4]].max() < 1e-5 and error[1:3].max() < 1e-6, error
 
 
-def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulation(restore_threads):
+def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulation(restore_threads, monkeypatch):
     """CMA-ES's population of open-loop candidates (``kernels_general.rk4_candidates``) on the
     hopper: each candidate's number is eq. 18 of its own simulation by ``simulate`` (the angles' RMSE
     in deg plus the translations' in cm by numpy, the penalty of the part not reached), one
     candidate thrown off its motion included, and equals the rows one by one to the bit on 1 to 3
-    threads."""
-    from population_checks import assert_objectives_are, assert_population_equals_one_by_one
+    threads, and in calls of one step each."""
+    from population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,
+                                   assert_population_equals_one_by_one)
 
     from fdbench.multibody.description import MotionSpec
     from fdbench.multibody.motions import joint_motion
@@ -277,6 +278,7 @@ def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulat
     assert problem.simulate(X[0] * problem.scale).t_end == problem.duration
     assert_objectives_are(problem, X, lambda p: problem.objective_of(problem.simulate(p)))
     assert_population_equals_one_by_one(problem, X)
+    assert_one_step_calls_change_nothing(problem, X, monkeypatch)
 
 
 def test_control_runs_on_a_free_base_with_a_knee_path(tmp_path):

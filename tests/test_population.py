@@ -15,8 +15,8 @@ from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.population import set_threads
 from fdbench.problem import TrackingProblem
-from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
-                               restore_threads)
+from population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,  # noqa: F401
+                               assert_population_equals_one_by_one, restore_threads)
 
 
 CELLS = [("cs", False), ("cs", True), ("pf", False), ("pf", True), ("ann", False), ("ann", True)]
@@ -45,6 +45,13 @@ def test_population_equals_one_by_one_exactly(cell, problems):
     reached = [problem.simulate(x * problem.scale).success for x in X]
     assert any(reached) and not all(reached)  # both kinds present
     assert_population_equals_one_by_one(problem, X)
+
+
+@pytest.mark.parametrize("cell", [("cs", False), ("ann", True)], ids=str)
+def test_population_in_calls_of_one_step_equals_one_call_exactly(cell, problems, monkeypatch):
+    """Each candidate's simulation cut at every step (as Ctrl-C may stop it between two calls) and
+    resumed from its last state gives the numbers of one call, failing candidates included."""
+    assert_one_step_calls_change_nothing(problems[cell], population(problems[cell]), monkeypatch)
 
 
 @pytest.mark.parametrize("cell", CELLS, ids=str)
@@ -84,6 +91,28 @@ def test_thread_count_does_not_change_a_run(torque, feedforward):
         records.append(run(spec).record)
     for name in ("rmse_rot_deg", "rmse_torque_nm", "best_objective", "evaluations", "t_end"):
         assert records[0][name] == records[1][name]
+
+
+def test_cma_work_in_its_own_thread_does_not_change_a_run(monkeypatch):
+    """From IN_THREAD_FROM parameters (a 1000-body model's), cma's ask and tell run in a thread of
+    their own so that Ctrl-C is acted on during them: here from the forearm's few, the same run."""
+    from fdbench.optimizers import cmaes
+
+    spec = optimize_spec("cs", "cmaes", False, seed=2, budget=60)
+    here = run(spec)
+    real, calls = cmaes._interruptible, []
+
+    def counted(call, *args):
+        calls.append(call)
+        return real(call, *args)
+
+    monkeypatch.setattr(cmaes, "IN_THREAD_FROM", 0)
+    monkeypatch.setattr(cmaes, "_interruptible", counted)
+    apart = run(spec)
+    assert len(calls) > 10  # the constructor, then stop, ask and tell every generation
+    assert np.array_equal(apart.history, here.history) and np.array_equal(apart.params, here.params)
+    for name in ("rmse_rot_deg", "rmse_torque_nm", "best_objective", "evaluations", "stop_reason"):
+        assert apart.record[name] == here.record[name]
 
 
 def test_bad_thread_count_is_a_one_line_error():

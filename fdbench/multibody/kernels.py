@@ -705,20 +705,32 @@ def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight,
 def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, offset, pt_index, pt_fixed,
                    body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
                    n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states,
-                   rates, applied, objective, first_candidate, stride):
+                   rates, applied, objective, candidate, stride, step, budget):
     """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
-    candidates first_candidate, first_candidate + stride, ... of tau (N m, shape (lam, 2 n_steps + 1,
-    J)), for ``fdbench.population.Population``. ref, refd: the half-step references as for ``rk4``
-    (unused by an open loop but for the layout of its call); states (n+1, n_state), rates
-    (n+1, n_state), applied (n+1, J): this call's work buffers, reused candidate after candidate;
-    objective (lam,): filled for the candidates run. Runs without the GIL."""
+    candidates candidate, candidate + stride, ... of tau (N m, shape (lam, 2 n_steps + 1, J)), for
+    ``fdbench.population.Population``, at most ``budget`` steps in all: the first candidate resumes at
+    step ``step`` (its states up to there in the work buffers, from the call before), each chunk from
+    the last state of the one before at the same grid row, so the numbers are those of one call.
+    ref, refd: the half-step references as for ``rk4`` (unused by an open loop but for the layout of
+    its call); states (n+1, n_state), rates (n+1, n_state), applied (n+1, J): this thread's work
+    buffers, reused candidate after candidate; objective (lam,): filled for the candidates finished.
+    Returns the (candidate, step) to resume at (a candidate past the last: all done). Runs without
+    the GIL."""
     n_b = joint_parent.shape[0]
     zero, no_gains = np.zeros(n_b), np.zeros((1, n_b, 2 * n_b))
     n_p = base.shape[0]
-    for c in range(first_candidate, tau.shape[0], stride):
-        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, offset, pt_index, pt_fixed,
-                         body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
-                         n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext,
-                         states, rates, applied)
-        objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, offset,
-                                          joint_parent, n_p)
+    while candidate < tau.shape[0] and budget > 0:
+        n = min(budget, n_steps - step)
+        low, high = 2 * step, 2 * (step + n) + 1
+        y = y0 if step == 0 else states[step].copy()
+        code, done, _ = rk4(y, dt, n, tau[candidate, low:high], ref[low:high], refd[low:high], ref[low:high], zero,
+                            zero, PD, no_gains, offset, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx,
+                            lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent,
+                            n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states[step:step + n + 1],
+                            rates[step:step + n + 1], applied[step:step + n + 1])
+        step, budget = step + done, budget - max(done, 1)  # steps run: a failing candidate costs few
+        if code != OK or step == n_steps:
+            objective[candidate] = tracking_objective(states, step, every, angles_ref, n_steps, penalty_weight,
+                                                      offset, joint_parent, n_p)
+            candidate, step = candidate + stride, 0
+    return candidate, step

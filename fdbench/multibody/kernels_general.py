@@ -836,18 +836,29 @@ def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight,
 def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, loads, body_int, body_float,
                    path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params,
                    load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local,
-                   n_index, n_mass, n_q_ext, states, rates, applied, objective, first_candidate, stride):
+                   n_index, n_mass, n_q_ext, states, rates, applied, objective, candidate, stride, step, budget):
     """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
-    candidates first_candidate, first_candidate + stride, ... of tau (shape (lam, 2 n_steps + 1, J)),
-    for ``fdbench.population.Population``: ``kernels.rk4_candidates`` for the dense layout (ref,
-    refd without the joint offsets; loads (2 n_steps + 1, L, N_LOAD) the external loads on the
-    grid). Runs without the GIL."""
+    candidates candidate, candidate + stride, ... of tau (shape (lam, 2 n_steps + 1, J)), at most
+    ``budget`` steps in all, resuming at ``step``, for ``fdbench.population.Population``:
+    ``kernels.rk4_candidates`` for the dense layout (ref, refd without the joint offsets; loads
+    (2 n_steps + 1, L, N_LOAD) the external loads on the grid). Returns the (candidate, step) to
+    resume at. Runs without the GIL."""
     J = tau.shape[2]
     zero, no_gains = np.zeros(J), np.zeros((1, J, 2 * J))
-    for c in range(first_candidate, tau.shape[0], stride):
-        _, done, _ = rk4(y0, dt, n_steps, tau[c], ref, refd, ref, zero, zero, PD, no_gains, loads, loads, body_int,
-                         body_float, path_body, path_float, knots, spline_start, lin_idx, lin_coef, lin_const, mass,
-                         q_ext, params, load_int, first, n_body_int, n_body_float, n_knots, n_spline_start, n_load_int,
-                         n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied)
-        objective[c] = tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, body_int,
-                                          body_float, mass.shape[0])
+    while candidate < tau.shape[0] and budget > 0:
+        n = min(budget, n_steps - step)
+        low, high = 2 * step, 2 * (step + n) + 1
+        y = y0 if step == 0 else states[step].copy()
+        rows = loads[low:high]
+        code, done, _ = rk4(y, dt, n, tau[candidate, low:high], ref[low:high], refd[low:high], ref[low:high], zero,
+                            zero, PD, no_gains, rows, rows, body_int, body_float, path_body, path_float, knots,
+                            spline_start, lin_idx, lin_coef, lin_const, mass, q_ext, params, load_int, first,
+                            n_body_int, n_body_float, n_knots, n_spline_start, n_load_int, n_owner, n_local, n_index,
+                            n_mass, n_q_ext, states[step:step + n + 1], rates[step:step + n + 1],
+                            applied[step:step + n + 1])
+        step, budget = step + done, budget - max(done, 1)  # steps run: a failing candidate costs few
+        if code != OK or step == n_steps:
+            objective[candidate] = tracking_objective(states, step, every, angles_ref, n_steps, penalty_weight,
+                                                      body_int, body_float, mass.shape[0])
+            candidate, step = candidate + stride, 0
+    return candidate, step

@@ -3,12 +3,36 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 
 from .base import OPTIMIZERS, Budgeted, Optimizer
 
 MAX_POPSIZE = 10_000  # candidates per generation: more than any budget here can feed
+# parameters from which cma's own work runs in a thread of its own (``_interruptible``): its single
+# numpy operations on the N x N covariance take seconds at 11,000 (a 1000-body model's), ~1 ms at 1000
+IN_THREAD_FROM = 1000
+
+
+def _interruptible(call, *args):
+    """call(*args), run in a daemon thread while this one waits: Python acts on Ctrl-C in the main
+    thread only, between two operations, so a long numpy operation of cma's would hold it for
+    seconds; the abandoned call ends with the process."""
+    outcome = {}
+
+    def target():
+        try:
+            outcome["value"] = call(*args)
+        except BaseException as exc:  # noqa: BLE001 - raised again in the caller's thread
+            outcome["error"] = exc
+
+    thread = threading.Thread(target=target, name="cma", daemon=True)
+    thread.start()
+    thread.join()
+    if "error" in outcome:
+        raise outcome["error"]
+    return outcome["value"]
 
 
 @OPTIMIZERS.register("cmaes")
@@ -36,15 +60,19 @@ class CMAES(Optimizer):
             options["popsize"] = self.popsize
             if self.popsize == 2:  # two-point step-size adaptation needs room for its own two samples
                 options["AdaptSigma"] = cma.sigma_adaptation.CMAAdaptSigmaCSA
-        es = cma.CMAEvolutionStrategy(np.asarray(x0, dtype=float), self.sigma0, options)
+
+        def cma_work(call, *args):
+            return _interruptible(call, *args) if len(x0) >= IN_THREAD_FROM else call(*args)
+
+        es = cma_work(cma.CMAEvolutionStrategy, np.asarray(x0, dtype=float), self.sigma0, options)
         try:
-            while not es.stop():
-                candidates = es.ask()
+            while not cma_work(es.stop):
+                candidates = cma_work(es.ask)
                 if f.remaining < len(candidates):
                     f.many(candidates)  # the budget's last evaluations
                     break
-                es.tell(candidates, f.many(candidates))  # one generation, in one call where batched
+                cma_work(es.tell, candidates, f.many(candidates))  # one generation, in one call where batched
         except ValueError as exc:  # cma refusing its own state: the best point so far is the result
             return f"cma stopped: {' '.join(str(exc).split())}"
-        stop = es.stop()
+        stop = cma_work(es.stop)
         return ", ".join(f"{k} {v}" for k, v in stop.items()) if stop else "budget spent"
