@@ -132,19 +132,15 @@ def test_a_thousand_bodies_are_shown_inverted_and_controlled(tmp_path, star):
     assert record["rmse_rot_deg"] < 1e-3  # 0.01 rad = 0.57 deg tracked
 
 
-def test_ctrl_c_ends_a_long_simulation_within_seconds(tmp_path):
-    """Ctrl-C while the compiled RK4 runs 10,000 steps of a 1000-body star (tens of seconds): the
-    simulation runs in chunks, so the interrupt is acted on at the next chunk, not at the end."""
-    path, mark = tmp_path / "star.toml", tmp_path / "designed"
-    path.write_text(tree_model(1000, star=True))
-    env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_MARK=str(mark), PYTHONPATH=python_path(HERE))
-    cmd = [sys.executable, "-m", "fdbench.cli", "control", "--model", str(path), "--controller", "marked-pd",
-           "--dt", "1e-4", "-f", "json"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env,
+def interrupted_once(cmd, env, cwd, mark, what: str) -> float:
+    """Run ``cmd`` in a session of its own, send its process group SIGINT (a terminal's Ctrl-C)
+    once ``mark`` exists (``what`` has begun), check that it ends as an interrupted command does
+    (exit 130, nothing on stdout, one line); the seconds it went on after the signal."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=cwd, env=env,
                             start_new_session=True)
     try:
-        wait_until(mark.exists, "the controller was designed (the simulation begins)", proc, timeout_s=HANG_GUARD_S)
-        os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: to the command's process group
+        wait_until(mark.exists, what, proc, timeout_s=HANG_GUARD_S)
+        os.killpg(proc.pid, signal.SIGINT)
         sent = time.monotonic()
         stdout, stderr = proc.communicate(timeout=HANG_GUARD_S)
         ended = time.monotonic() - sent
@@ -154,6 +150,18 @@ def test_ctrl_c_ends_a_long_simulation_within_seconds(tmp_path):
             proc.wait()
     assert proc.returncode == 130 and stdout == ""
     assert stderr.strip().splitlines() == ["fdbench: error: interrupted"]
+    return ended
+
+
+def test_ctrl_c_ends_a_long_simulation_within_seconds(tmp_path):
+    """Ctrl-C while the compiled RK4 runs 10,000 steps of a 1000-body star (tens of seconds): the
+    simulation runs in chunks, so the interrupt is acted on at the next chunk, not at the end."""
+    path, mark = tmp_path / "star.toml", tmp_path / "designed"
+    path.write_text(tree_model(1000, star=True))
+    env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_MARK=str(mark), PYTHONPATH=python_path(HERE))
+    cmd = [sys.executable, "-m", "fdbench.cli", "control", "--model", str(path), "--controller", "marked-pd",
+           "--dt", "1e-4", "-f", "json"]
+    ended = interrupted_once(cmd, env, tmp_path, mark, "the controller was designed (the simulation begins)")
     # 10,000 steps of 1000 bodies take 30 s on an idle core; a chunk of them a tenth of a second
     assert ended < 10.0, f"the command went on for {ended:.1f} s after Ctrl-C"
 
@@ -168,20 +176,7 @@ def test_ctrl_c_ends_cma_es_on_a_thousand_bodies_within_seconds(tmp_path):
                PYTHONPATH=python_path(HERE))
     cmd = [sys.executable, "-m", "fdbench.cli", "optimize", "--model", str(path), "--opt", "cmaes", "--threads", "1",
            "-f", "json"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env,
-                            start_new_session=True)
-    try:
-        wait_until(mark.exists, "CMA-ES's first population is evaluated", proc, timeout_s=HANG_GUARD_S)
-        os.killpg(proc.pid, signal.SIGINT)
-        sent = time.monotonic()
-        stdout, stderr = proc.communicate(timeout=HANG_GUARD_S)
-        ended = time.monotonic() - sent
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-    assert proc.returncode == 130 and stdout == ""
-    assert stderr.strip().splitlines() == ["fdbench: error: interrupted"]
+    ended = interrupted_once(cmd, env, tmp_path, mark, "CMA-ES's first population is evaluated")
     # the population takes half a minute or more on an idle core; a chunk of it a tenth of a second
     assert ended < 10.0, f"the command went on for {ended:.1f} s after Ctrl-C"
 
