@@ -37,12 +37,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fdbench.multibody import engine as engine_module
+
 import reference_dynamics as ref
 from multibody_strategies import (arm2_model, forearm_model, models, models_and_motions, models_and_states,
                                   models_with_paths_and_free_joints)
-
-engine_module = pytest.importorskip("fdbench.multibody.engine",
-                                    reason="the multibody engine (fdbench.multibody.engine) is not there yet")
 
 BUILT_IN = {"forearm": forearm_model, "arm2": arm2_model}
 DT = 1e-4  # s, RK4's step: its error (O(dt^4)) is far below 1e-4 degrees at the models' frequencies
