@@ -48,6 +48,14 @@ def refused(*args, contains=()) -> str:
     return assert_one_line_error(invoke(*args, code=2), *contains)
 
 
+def sticky_folder(tmp_path: Path) -> Path:
+    """A folder like /tmp: everyone may write in it, only a file's owner remove it (mode 1777)."""
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    shared.chmod(0o1777)
+    return shared
+
+
 def listing(folder: Path) -> dict:
     """Every name in ``folder``: (owner, mode, size, mtime, link target) - what a refusal must not change."""
     out = {}
@@ -148,9 +156,7 @@ def test_a_dangling_link_as_db_creates_nothing_where_it_points(tmp_path):
 @needs_root
 def test_a_link_another_user_made_in_a_shared_folder_is_not_followed(tmp_path):
     """As the kernel's fs.protected_symlinks: in a sticky world-writable folder, a link of another user."""
-    shared = tmp_path / "shared"
-    shared.mkdir()
-    shared.chmod(0o1777)
+    shared = sticky_folder(tmp_path)
     filled(tmp_path / "mine.sqlite")
     link = shared / "db.sqlite"
     link.symlink_to(tmp_path / "mine.sqlite")
@@ -371,9 +377,7 @@ def test_changes_still_in_another_users_wal_are_named_as_not_shown(tmp_path):
 @needs_root
 def test_an_output_link_another_user_made_in_a_shared_folder_is_refused(tmp_path):
     """The shell's '>' is refused there by fs.protected_symlinks; a resolve-and-rename would get past it."""
-    shared = tmp_path / "shared"
-    shared.mkdir()
-    shared.chmod(0o1777)
+    shared = sticky_folder(tmp_path)
     target = tmp_path / "precious.txt"
     target.write_text("keep")
     link = shared / "out.json"
@@ -385,9 +389,7 @@ def test_an_output_link_another_user_made_in_a_shared_folder_is_refused(tmp_path
 
 @needs_root
 def test_an_output_file_of_another_user_in_a_shared_folder_is_refused(tmp_path):
-    shared = tmp_path / "shared"
-    shared.mkdir()
-    shared.chmod(0o1777)
+    shared = sticky_folder(tmp_path)
     theirs = shared / "out.json"
     theirs.write_text("theirs")
     os.chown(theirs, OTHER, -1)
@@ -396,9 +398,7 @@ def test_an_output_file_of_another_user_in_a_shared_folder_is_refused(tmp_path):
 
 
 def test_an_output_link_of_ours_in_a_shared_folder_is_written_through(tmp_path):
-    shared = tmp_path / "shared"
-    shared.mkdir()
-    shared.chmod(0o1777)
+    shared = sticky_folder(tmp_path)
     target = tmp_path / "out.json"
     target.write_text("old")
     link = shared / "out.json"
