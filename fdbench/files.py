@@ -85,6 +85,19 @@ def _shared(folder: Path) -> os.stat_result | None:
     return st if st.st_mode & stat.S_ISVTX and st.st_mode & stat.S_IWOTH else None
 
 
+def planted_link(path: Path, link: os.stat_result) -> str | None:
+    """Why the kernel's ``fs.protected_symlinks`` would not follow ``path`` (``link``, its lstat):
+    a symbolic link made by another user in a sticky folder writable by every user (/tmp) that is
+    not theirs; None where it would."""
+    if not stat.S_ISLNK(link.st_mode):
+        return None
+    folder = _shared(path.parent)
+    if folder is None or link.st_uid in (os.geteuid(), folder.st_uid):
+        return None
+    return (f"{path} is a symbolic link made by another user (uid {link.st_uid}) in the shared folder "
+            f"{path.parent}; fdbench does not follow it (as the kernel's protected_symlinks does not)")
+
+
 def check_shared_folder(path: Path, option: str) -> None:
     """Refuse what the kernel's ``fs.protected_symlinks`` and ``fs.protected_regular`` refuse in a
     sticky folder writable by every user (/tmp), which the atomic writer's resolve-and-rename would
@@ -94,12 +107,9 @@ def check_shared_folder(path: Path, option: str) -> None:
         link = os.lstat(path)
     except OSError:
         return
-    if stat.S_ISLNK(link.st_mode):
-        folder = _shared(path.parent)
-        if folder is not None and link.st_uid not in (os.geteuid(), folder.st_uid):
-            raise BadFile(f"{option}: {path} is a symbolic link made by another user (uid {link.st_uid}) in the "
-                          f"shared folder {path.parent}; fdbench does not follow it (as the kernel's protected_symlinks "
-                          "does not): choose another name")
+    reason = planted_link(path, link)
+    if reason:
+        raise BadFile(f"{option}: {reason}: choose another name")
     target = Path(os.path.realpath(path))
     st = _stat(target, option)
     folder = _shared(target.parent)
@@ -176,7 +186,8 @@ def _append_only(folder: Path) -> bool:
         os.close(fd)
 
 
-def _umask() -> int:
+def umask() -> int:
+    """The process's umask (read without changing it)."""
     mask = os.umask(0o022)
     os.umask(mask)
     return mask
@@ -221,7 +232,7 @@ def _replace(target: Path, payload: bytes, st: os.stat_result | None) -> None:
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(payload)
-        os.chmod(tmp, stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~_umask())
+        os.chmod(tmp, stat.S_IMODE(st.st_mode) if st is not None else 0o666 & ~umask())
         if st is not None and hasattr(os, "chown") and (st.st_uid, st.st_gid) != (os.geteuid(), os.getegid()):
             try:
                 os.chown(tmp, st.st_uid, st.st_gid)

@@ -142,11 +142,11 @@ def resolve(path: Path) -> Path:
     if not os.path.exists(path):
         raise StoreError(f"{path} is a symbolic link to {os.readlink(path)}, which does not exist; fdbench makes a "
                          "new results database only under the name it is given, not where a link points")
-    folder = os.stat(path.parent)
-    shared = folder.st_mode & stat.S_ISVTX and folder.st_mode & stat.S_IWOTH
-    if shared and st.st_uid != os.geteuid() and st.st_uid != folder.st_uid:
-        raise StoreError(f"{path} is a symbolic link made by another user (uid {st.st_uid}) in the shared folder "
-                         f"{path.parent}; fdbench does not follow it (as the kernel's protected_symlinks does not)")
+    from .files import planted_link  # lazily, as the rest of files (numpy) is not needed here
+
+    reason = planted_link(path, st)
+    if reason:
+        raise StoreError(reason)
     return Path(os.path.realpath(path))
 
 
@@ -202,9 +202,9 @@ def _create_new(path: Path) -> None:
     temporary = Path(name)
     db = None
     try:
-        from .files import _umask
+        from .files import umask
 
-        os.chmod(temporary, 0o666 & ~_umask())  # as SQLite would create it
+        os.chmod(temporary, 0o666 & ~umask())  # as SQLite would create it
         db = sqlite3.connect(temporary, isolation_level=None)
         db.executescript("BEGIN IMMEDIATE;" + _SCHEMA)
         db.execute("INSERT INTO fdbench_meta VALUES ('schema', ?), ('version', ?)", (SCHEMA_NAME, SCHEMA_VERSION))
