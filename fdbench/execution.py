@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Iterator
 
 from . import __version__
+from .compile_guard import compiling, interrupts_end_compiling  # noqa: F401 (fdbench.execution's names before)
 from .registry import Registry
 
 DASK_INSTALL = "pip install '.[dask]' in fdbench's source folder (or pip install 'dask[distributed]' cryptography)"
@@ -807,36 +808,3 @@ def sigterm_as_interrupt():
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
-
-
-_COMMAND_LINE = {"pid": None}  # the command line's process (``interrupts_end_compiling``)
-
-
-def interrupts_end_compiling() -> None:
-    """Called by the command line: in this process, Ctrl-C within ``compiling`` ends it at once."""
-    _COMMAND_LINE["pid"] = os.getpid()
-
-
-@contextmanager
-def compiling():
-    """Within the block (kernels being loaded or compiled: numba and LLVM run compiled code and
-    callbacks that a KeyboardInterrupt cannot cross cleanly, and leave a half-built kernel that
-    fails later), Ctrl-C ends the command line's process at once with its usual line and exit code
-    130. numba writes a cache entry by renaming a complete file, and nothing else is written yet.
-    Elsewhere (the Python API, worker processes, other threads, a handler of the caller's own)
-    nothing changes."""
-    if (_COMMAND_LINE["pid"] != os.getpid() or threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
-        yield
-        return
-
-    def stop(signum, frame):
-        sys.stderr.write("fdbench: error: interrupted\n")
-        sys.stderr.flush()
-        os._exit(130)
-
-    previous = signal.signal(signal.SIGINT, stop)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)

@@ -1,6 +1,6 @@
 """fdbench's runs, by concern: a run's specification and identity (``fdbench.spec``), its checks
 (``fdbench.validation``), one runner per command (``fdbench.runners``, carried out by
-``fdbench.multibody.runs``) and its record (``fdbench.records``). This module gathers their
+``fdbench.method_runs``) and its record (``fdbench.records``). This module gathers their
 public names, the ones scripts and the command line import."""
 
 from __future__ import annotations

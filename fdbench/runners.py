@@ -1,9 +1,10 @@
 """The runs of a ``RunSpec``: ``run`` (control, optimize, collocate), ``run_simulation``,
 ``replay`` and ``inverse_run``, each carried out on the multibody engine by
-``fdbench.multibody.runs`` (one runner per command) and turned into a flat record."""
+``fdbench.method_runs`` (one runner per command) and turned into a flat record."""
 
 from __future__ import annotations
 
+from . import method_runs
 from .records import RunOutcome, explained
 from .spec import RunSpec
 
@@ -18,22 +19,22 @@ def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
         from .peers import run as run_peer
 
         return explained(run_peer(spec), spec)
-    return explained(spec._runs().run(spec, on_evaluation, on_start), spec)
+    return explained(method_runs.run(spec, on_evaluation, on_start), spec)
 
 
 def run_simulation(spec: RunSpec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
     """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history,
     saved optimisation parameters or ``torque`` (a function of t (s), shape (k,) -> N m, shape (k,)
     or (k, J)). Bad files raise ``files.BadFile``."""
-    return explained(spec._runs().run_simulation(spec, torque_file, params_file, torque), spec)
+    return explained(method_runs.run_simulation(spec, torque_file, params_file, torque), spec)
 
 
 def replay(spec: RunSpec, params):
     """The simulation of a stored optimisation run's best parameters (for figures)."""
-    return spec._runs().replay(spec, params)
+    return method_runs.replay(spec, params)
 
 
 def inverse_run(spec: RunSpec) -> tuple:
     """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows on
     the motion's samples), the columns of a motion file plus the torques."""
-    return spec._runs().inverse_run(spec)
+    return method_runs.inverse_run(spec)

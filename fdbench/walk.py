@@ -121,7 +121,7 @@ def on_samples(common: dict) -> dict:
     """``common`` (RunSpec fields) with an RK4 step lowered, where needed, to put the motion's
     samples on its grid (``simulation.dt_on_samples``: a 60 Hz recording at 1 ms runs at 1/1020 s),
     so that the shooting methods read eq. 18 from the kernel's states and BFGS has exact gradients."""
-    from .multibody.runs import motions
+    from .run_inputs import motions
     from .multibody.simulation import dt_on_samples
 
     if common.get("integrator", "rk4") != "rk4":
@@ -175,16 +175,17 @@ def rows(method_list: list[WalkMethod], runs: dict, provenance: dict | None = No
 
 
 def inverse_residuals(spec: RunSpec, inverse) -> dict:
-    """The residual fields (``multibody.runs.residual_fields``) of the inverse dynamics ``inverse``
+    """The residual fields (``outcomes.residual_fields``) of the inverse dynamics ``inverse``
     (``JointInverse``) of the spec's model: what open loop applies to the floating base."""
-    from .multibody.runs import nominal, residual_fields
+    from .outcomes import residual_fields
+    from .run_inputs import nominal
 
     return residual_fields(nominal(spec), inverse.torque)
 
 
 def coordinates(spec: RunSpec) -> tuple[tuple, tuple]:
     """(names, kinds) of the spec's model's coordinates ('angle' or 'translation')."""
-    from .multibody.runs import nominal
+    from .run_inputs import nominal
 
     model = nominal(spec)
     return tuple(model.coordinates), tuple(model.coordinate_kinds)

@@ -390,7 +390,7 @@ def write_walk_figures(spec, inverse, rows, runs: dict, directory: Path, base: P
     """Write the walk's figures into ``directory`` (created if missing) from the stored runs of
     ``rows`` (``walk.WalkRow``) re-simulated, ``jobs`` at once; return {title: path relative to
     ``base``}."""
-    from .multibody.runs import engine, nominal
+    from .run_inputs import engine, nominal
     from .walk import COLLOCATION, coordinates
 
     directory.mkdir(exist_ok=True)

@@ -30,7 +30,7 @@ from fdbench.files import BadFile
 from fdbench.multibody.description import GROUND, Body, Frame, Joint, Model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.loads import ExternalLoad, ExternalLoads, generalized_forces, read_external_loads
-from fdbench.multibody.runs import residual_fields
+from fdbench.outcomes import residual_fields
 
 G = 9.81
 

@@ -165,7 +165,7 @@ def test_a_run_whose_loads_changed_since_it_was_specified_is_refused(tmp_path, s
     """A spec made with the files' digests (as the command line makes it), then the data file
     changed: running it is refused naming the loads file; restored, it runs."""
     from fdbench.experiment import RunSpec, motion_digest
-    from fdbench.multibody import runs
+    from fdbench import run_inputs as runs
     from fdbench.multibody.loads import loads_digest
 
     loads = write(tmp_path)

@@ -189,7 +189,8 @@ def test_a_constraint_failure_far_off_the_motion_blames_the_torques_not_alpha(tm
 
 def test_a_drift_below_the_threshold_keeps_the_alpha_hint():
     from fdbench.integrate import Status
-    from fdbench.multibody.runs import DRIFT_DEG, _drift_hint
+    from fdbench.outcomes import DRIFT_DEG
+    from fdbench.outcomes import drift_hint as _drift_hint
     from fdbench.records import ALPHA_HINT
 
     class Result:

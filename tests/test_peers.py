@@ -21,7 +21,7 @@ from cli_checks import assert_one_line_error
 
 from fdbench.cli import app
 from fdbench.experiment import RunSpec, control_spec, run
-from fdbench.peers import peer_spec
+from fdbench.spec import peer_spec
 
 ARM26 = Path(__file__).resolve().parent.parent / "examples" / "opensim" / "arm26.osim"
 

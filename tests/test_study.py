@@ -42,7 +42,7 @@ def test_noise_sweep_has_one_spec_per_seed_and_level_and_pd_runs_once_without_no
 
 def test_mismatch_changes_the_plant_only():
     from fdbench.models import value_of
-    from fdbench.multibody.runs import nominal, plant
+    from fdbench.run_inputs import nominal, plant
 
     s = sweep("mismatch", (-10.0, 0.0, 10.0))
     for level in (-10.0, 10.0):

@@ -226,7 +226,7 @@ def test_recorded_curves_are_the_motion_files_columns(hop):
 def test_stick_figure_points_are_the_engines_point_positions(hop):
     """At each instant, the stick figure's segments run from each body's joint point to its end as
     ``Engine.point_positions`` gives them; an instant a simulation did not reach has none."""
-    from fdbench.multibody.runs import engine
+    from fdbench.run_inputs import engine
     from fdbench.walk_figures import instants, stick_frames
 
     spec = _spec(hop)
@@ -263,7 +263,7 @@ def test_a_fallen_runs_last_pose_is_shown_marked_and_held(hop):
     last sample it reached, beside the tracked motion's there, marked with its t_end; the animation
     shows its poses until then and holds that last pose after; a run that reached the end has none."""
     from fdbench.experiment import run
-    from fdbench.multibody.runs import engine
+    from fdbench.run_inputs import engine
     from fdbench.walk_figures import ANIMATION_FPS, animation_frames, stopped_poses
 
     spec = _spec(hop)
@@ -302,7 +302,7 @@ def test_collocations_own_solution_is_drawn_at_its_nodes(hop, tmp_path):
     figures are written with it."""
     from fdbench.collocation import collocate
     from fdbench.experiment import collocate_spec
-    from fdbench.multibody.runs import loads, motions, nominal
+    from fdbench.run_inputs import loads, motions, nominal
     from fdbench.walk import COLLOCATION, coordinates
     from fdbench.walk_figures import (OWN_SOLUTION, coordinate_curves, coordinates_figure, recording,
                                       residual_curves, residuals_figure, trajectories)
@@ -335,7 +335,7 @@ def test_residual_curves_are_the_base_coordinates_generalised_forces(hop):
     applied forces on them; a model without a floating base has none."""
     from fdbench.experiment import control_spec, run
     from fdbench.models import with_changes
-    from fdbench.multibody.runs import nominal
+    from fdbench.run_inputs import nominal
     from fdbench.walk_figures import residual_curves
 
     spec = _spec(hop)

@@ -325,9 +325,18 @@ def formats_of(command: str) -> tuple:
     return {"report": REPORT_FORMATS, "study": STUDY_FORMATS}.get(command, FORMATS)
 
 
+def _compile_spinner(notice):
+    """rich's live status line for the kernels' compilation notice (``fdbench.jit``)."""
+    from rich.console import Console  # lazy: off the start-up path
+
+    return Console(stderr=True).status(notice)
+
+
 def main() -> None:
     """Console-script entry point."""
     from ..execution import interrupts_end_compiling
+    from ..jit import spin_with
 
     interrupts_end_compiling()  # this process is the command's: Ctrl-C while kernels compile ends it
+    spin_with(_compile_spinner)
     typer.main.get_command(app).main(prog_name="fdbench")

@@ -40,7 +40,8 @@ def peer(
     conditions: dict = None,
 ):
     """Run one peer on fdbench's model, motion and indicators: 'fdbench peer opensim --model arm2 -f json'. OpenSim runs in a child process; needs pip install 'fdbench\\[opensim]'."""
-    from ..peers import check_available, parse_names, peer_spec
+    from ..peers import check_available, parse_names
+    from ..spec import peer_spec
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     try:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..spec import PAPER_KD, PAPER_KP
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, per_joint
 
+PAPER_KP, PAPER_KD = 80.0, 0.3  # N m/rad, N m s/rad: the paper's PD gains for the forearm (its defaults)
 REFERENCE_INERTIA = 0.04  # kg m^2: the paper's forearm about the elbow, for which Kp 80 and Kd 0.3 were tuned
 
 

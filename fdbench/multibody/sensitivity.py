@@ -89,7 +89,7 @@ def rk4_sensitivity_dense(y0, dt, n_steps, tau, ref, refd, G, param_col, every, 
 def warm_up() -> None:
     """Load (or compile) the sensitivity kernel on a small library model, so that later timings
     exclude it."""
-    from ..execution import compiling
+    from ..compile_guard import compiling
     from .description import find_model
     from .engine import Engine
 

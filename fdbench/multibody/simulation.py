@@ -372,7 +372,7 @@ def warm_up(adaptive: bool = False, dense: bool = False) -> None:
     ones, and with ``dense`` also the dense ones of free and path joints and loads) on a small
     library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
     integrators, so that later timings exclude it."""
-    from ..execution import compiling
+    from ..compile_guard import compiling
 
     with compiling():  # Ctrl-C while a kernel compiles ends the command at once
         _warm_up(adaptive, dense)

@@ -23,7 +23,8 @@ SAME_ACCURACY = 0.01  # ...at equal or better RMSE_rot: fdbench's at most 1 % ab
 def peer_methods(names, kp=None, kd=None, **common) -> list[Method]:
     """The report's peers ``names`` as methods (label, summary, spec) on the settings ``common``;
     the opensim peer takes the report's PD gains."""
-    from . import peer, peer_spec
+    from . import peer
+    from ..spec import peer_spec
 
     return [Method(peer(name).label, peer(name).summary, peer_spec(name, None, kp, kd, **common)) for name in names]
 
