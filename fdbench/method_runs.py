@@ -60,7 +60,7 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
         return metric.replace("torque", "force").replace("_nm", "_n") if kinds[j] == "translation" else metric
 
     unit = ["m" if kind == "translation" else "deg" for kind in kinds]
-    record = {"command": "inverse", "kinematics": spec.kinematics, **describe(spec),
+    record = {"command": "inverse", "kinematics": spec.motion, **describe(spec),
               **{f"{force(k, i)}_{j}": float(v)
                  for k, vals in (("torque_rms_nm", np.sqrt(np.mean(inv.torque**2, axis=0))),
                                  ("torque_max_nm", inv.torque.max(axis=0)), ("torque_min_nm", inv.torque.min(axis=0)))
@@ -150,8 +150,8 @@ def _saved_torque(spec, path):
     """(torque function, label, digest, spec) of a parameter file saved by ``optimize --save-params``;
     the spec follows the file's named motion. BadFile if it cannot be used."""
     saved = read_params(path, spec.model_name, motions(spec)[1].name, named_motions(spec.model_name))
-    if saved["kinematics"] is not None and saved["kinematics"] != spec.kinematics:
-        spec = replace(spec, kinematics=saved["kinematics"], inputs=tuple(p for p in spec.inputs if p[0] != "--motion"))
+    if saved["kinematics"] is not None and saved["kinematics"] != spec.motion:
+        spec = replace(spec, motion=saved["kinematics"], inputs=tuple(p for p in spec.inputs if p[0] != "--motion"))
     expected = make_saved_torque(saved).n_params * len(joints(spec))
     if saved["params"].shape != (expected,):
         raise BadFile(f"--params: {path}: expected {expected} parameters for {saved['torque']} on "

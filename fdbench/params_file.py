@@ -20,7 +20,7 @@ MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand 
 def params_json(spec, outcome) -> str:
     """JSON text describing the best torque of an optimisation run (its model, motion, torque
     parameterisation, feedforward and parameters)."""
-    motion = spec.kinematics if spec.kinematics in named_motions(spec.model_name) else spec.motions()[1].name
+    motion = spec.motion if spec.motion in named_motions(spec.model_name) else spec.motions()[1].name
     data = {
         "fdbench_version": __version__,
         "model": spec.model_name,

@@ -49,7 +49,7 @@ def noise_seed(spec) -> int | None:
 def base_record(spec) -> dict:
     record = dict.fromkeys(RECORD_FIELDS)
     record.update(
-        command=spec.command, kinematics=spec.kinematics, integrator=spec.integrator, dt=spec.dt,
+        command=spec.command, kinematics=spec.motion, integrator=spec.integrator, dt=spec.dt,
         feedforward=spec.feedforward, alpha=spec.alpha, xi=spec.xi, omega=spec.omega,
         spec_hash=spec.hash(), fdbench_version=__version__, seed=noise_seed(spec),
     )

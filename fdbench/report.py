@@ -118,7 +118,7 @@ def paper_conditions(plan: Plan) -> bool:
     """True when the plan's runs have the paper's conditions (its motion as printed, no noise, the
     exact model), so that the paper's figures can stand beside them."""
     spec = plan.control or (plan.all_specs() or [None])[0]
-    return spec is None or (spec.kinematics == "paper" and not spec.noise_deg and not spec.plant and not spec.model
+    return spec is None or (spec.motion == "paper" and not spec.noise_deg and not spec.plant and not spec.model
                             and spec.sample_dt is None)
 
 
@@ -822,7 +822,7 @@ def settings_table(plan: Plan, seeds: int, jobs: int) -> dict:
     table = {
         "model": f"{spec.model_name}: {summary(spec.model_name)}" + (f" ({spec.describe()['model_options']})"
                                                                     if spec.model else ""),
-        "kinematics": spec.kinematics,
+        "kinematics": spec.motion,
         **condition_settings(spec, plan.all_specs()),
         "integrator": integrator,
         "penalty formulation": f"alpha = {spec.alpha:g}, xi = {spec.xi:g}, omega = {spec.omega:g} rad/s",

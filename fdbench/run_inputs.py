@@ -103,7 +103,7 @@ def _motions(model_name, source, radians, cutoff_hz, smoothing, spline_lambda, s
 def motions(spec):
     """(desired, true) motions of a spec: the one given to every method (a noisy capture when
     ``noise_deg`` > 0) and the one its indicators are measured against."""
-    return _motions(spec.model_name, spec.kinematics, spec.radians, spec.cutoff_hz, spec.smoothing, spec.spline_lambda,
+    return _motions(spec.model_name, spec.motion, spec.radians, spec.cutoff_hz, spec.smoothing, spec.spline_lambda,
                     spec.sample_dt, spec.noise_deg, spec.seed or 0, spec.capture_hz, dict(spec.inputs).get("--motion"))
 
 

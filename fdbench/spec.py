@@ -7,7 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass, replace
+from dataclasses import InitVar, asdict, dataclass, replace
 
 from . import run_inputs
 from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION, check_model, check_options
@@ -39,7 +39,8 @@ class RunSpec:
     """Everything that determines a run's numbers (the seed included, the runtime excluded)."""
 
     command: str = "control"
-    kinematics: str = "paper"
+    motion: str = "paper"  # eq. 5's variant, a named motion of the model or a recorded motion's CSV file (named
+    # ``kinematics`` in records, stored settings and the hash, as on the command line)
     integrator: str = "rk4"
     dt: float = 1e-3
     rtol: float = 1e-6
@@ -60,7 +61,7 @@ class RunSpec:
     inputs: tuple = ()  # (option, SHA-256 of the file's content) of every input file, e.g. (("--torque-file", "ab12..."),)
     controller: str | None = None  # control: a registered controller; None is the paper's PD (kp, kd)
     method_options: tuple = ()  # sorted (name, value) pairs of the controller or of collocate
-    # the desired motion: ``kinematics`` names eq. 5's variant or a recorded motion's CSV file
+    # how the desired motion is read and estimated
     radians: bool = False  # the file's angles are in radians (else degrees)
     cutoff_hz: float = DEFAULT_CUTOFF_HZ  # derivative estimate: zero-lag Butterworth -3 dB frequency, Hz
     smoothing: str = "butterworth"  # or "spline" (a smoothing spline)
@@ -74,11 +75,14 @@ class RunSpec:
     model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
     loads: str | None = None  # external loads from data: an OpenSim ExternalLoads file (its content among inputs)
     residual_weight: float | None = None  # optimize on a floating base: eq. 18's residual term, deg per N (N m)
+    kinematics: InitVar[str | None] = None  # ``motion`` by its stored name (stored settings, the record's field)
 
-    def __post_init__(self):
-        if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
+    def __post_init__(self, kinematics):
+        if kinematics is not None:
+            object.__setattr__(self, "motion", kinematics)
+        if self.motion == "paper" and self.model_name != "forearm":  # the default motion is the model's own
             try:
-                object.__setattr__(self, "kinematics", default_motion(self.model_name))
+                object.__setattr__(self, "motion", default_motion(self.model_name))
             except ValueError:  # an unknown model, or one without motions, is for ``validate`` to refuse
                 pass
 
@@ -150,7 +154,8 @@ class RunSpec:
                   self.dt if self.integrator == "rk4" else None, population, hidden)
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The fields by name, ``motion`` under its stored name ``kinematics`` (in its place)."""
+        return {("kinematics" if name == "motion" else name): value for name, value in asdict(self).items()}
 
     def canonical(self) -> dict:
         """The settings that determine the numbers, normalised so that equivalent specs compare
@@ -198,9 +203,9 @@ def with_model_file(spec: "RunSpec") -> "RunSpec":
 
 def with_motion_file(spec: "RunSpec") -> "RunSpec":
     """The spec with its recorded motion's content digest among its inputs (none for eq. 5)."""
-    if spec.kinematics in named_motions(spec.model_name):
+    if spec.motion in named_motions(spec.model_name):
         return spec
-    inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.kinematics)),)
+    inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.motion)),)
     return replace(spec, inputs=tuple(sorted(inputs)))
 # fields a spec's hash leaves out while they hold these values (added after the first results schema)
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict
 
 import numpy as np
 import pytest
@@ -145,7 +144,7 @@ def test_lqr_tracks_exact_motion_and_beats_open_loop_on_paper_motion():
 def test_pd_spec_hash_is_that_of_the_first_release():
     """Fields added for new methods stay out of the hash at their defaults: stored PD runs are reused."""
     spec = control_spec(80.0, 0.3)
-    old = {k: v for k, v in asdict(spec).items() if k not in OMITTED_AT_DEFAULT}
+    old = {k: v for k, v in spec.as_dict().items() if k not in OMITTED_AT_DEFAULT}
     digest = hashlib.sha256(json.dumps(old, sort_keys=True, default=str).encode()).hexdigest()[:16]
     assert spec.hash() == digest
     assert control_spec(controller="lqr").hash() != control_spec(controller="computed-torque").hash()

@@ -41,7 +41,7 @@ class Plan:
     def feedforward(self):
         """The nominal model's inverse-dynamics torques on the desired motion, a torque function
         t (s), shape (k,) -> (k, J) N m."""
-        from ..multibody.simulation import feedforward
+        from ..multibody.simulation import feedforward  # lazy: numba off the CLI's start-up
 
         return feedforward(self.engine, self.motion)
 

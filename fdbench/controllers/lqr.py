@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive
+from ..multibody.lqr import lqr_gains, warm_up
 
 # The Riccati equation of J coordinates has 4 J^2 states and its CasADi expressions grow as J^3.
 # `fdbench control --controller lqr` on a chain of J forearms (tests/test_big_models.py's) took
@@ -41,12 +42,8 @@ class LQR(Controller):
                              "computed-torque")
 
     def warm_up(self, plan: Plan) -> None:
-        from ..multibody.lqr import warm_up
-
         warm_up(plan.model)
 
     def design(self, plan: Plan) -> Design:
-        from ..multibody.lqr import lqr_gains
-
         gains = lqr_gains(plan.model, plan.motion, self.q_angle, self.q_rate, self.r_torque)
         return Design(plan.feedforward(), gains=gains)

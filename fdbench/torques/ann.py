@@ -98,7 +98,7 @@ class AnnTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
 
-        from .kernels import warm_up
+        from .kernels import warm_up  # lazy: numba off the CLI's start-up
 
         warm_up()
 
@@ -122,7 +122,7 @@ class AnnTorque(TorqueParameterisation):
         return self.offset + self.span * network(np.asarray(p, dtype=float), 2 * t / self.duration - 1, self.hidden)
 
     def on_grid_batch(self, t):
-        from .kernels import affine_rows, own_weighted_sums
+        from .kernels import affine_rows, own_weighted_sums  # lazy: numba off the CLI's start-up
 
         x = np.ascontiguousarray(2 * np.asarray(t, dtype=float) / self.duration - 1)  # scaled input, shape (n,)
         n_h = self.hidden

@@ -39,7 +39,7 @@ class CubicSplineTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.interpolate  # noqa: F401  (its import is not part of a run's runtime)
 
-        from .kernels import warm_up
+        from .kernels import warm_up  # lazy: numba off the CLI's start-up
 
         warm_up()
 
@@ -64,7 +64,7 @@ class CubicSplineTorque(TorqueParameterisation):
     def on_grid_batch(self, t):
         # the spline is linear in the knot values: each torque history is the knot values'
         # weighted sum of the basis functions, summed knot by knot in a compiled kernel
-        from .kernels import weighted_sums
+        from .kernels import weighted_sums  # lazy: numba off the CLI's start-up
 
         rows = np.ascontiguousarray(self.basis(t).T)  # (knots, n)
 

@@ -36,7 +36,7 @@ class GaussianSumTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
 
-        from .kernels import warm_up
+        from .kernels import warm_up  # lazy: numba off the CLI's start-up
 
         warm_up()
 
@@ -73,7 +73,7 @@ class GaussianSumTorque(TorqueParameterisation):
             return np.exp(-p[:, 1] * (t[..., None] - p[:, 2]) ** 2) @ p[:, 0]
 
     def on_grid_batch(self, t):
-        from .kernels import gaussian_exponents, own_weighted_sums
+        from .kernels import gaussian_exponents, own_weighted_sums  # lazy: numba off the CLI's start-up
 
         t = np.ascontiguousarray(t, dtype=float)
         terms = self.terms
