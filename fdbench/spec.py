@@ -1,6 +1,7 @@
 """A run's full specification (``RunSpec``), its identity (the hash of its canonical settings,
 the digests of its input files) and the constructors of the commands' specs (``control_spec``,
-``optimize_spec``, ``collocate_spec``)."""
+``optimize_spec``, ``collocate_spec``, ``peer_spec``). The run layer's value: it imports the
+methods and the engine below it (to check a spec), never the runs above it (``method_runs``)."""
 
 from __future__ import annotations
 
