@@ -65,7 +65,7 @@ def test_the_arm_through_the_python_api():
     """model_name='arm2' takes the arm's own motion; a torque function of the arm's inverse
     dynamics (its closed form, tests/arm2_closed_form.py) gives the default open-loop run."""
     import fdbench
-    from arm2_closed_form import joint_torques, reach
+    from helpers.arm2_closed_form import joint_torques, reach
 
     default = fdbench.simulate(model_name="arm2")
     given = fdbench.simulate(lambda t: joint_torques(*reach(t)), model_name="arm2")

@@ -16,7 +16,7 @@ import fdbench
 from fdbench import files
 from fdbench.cli import app
 
-from cli_checks import assert_one_line_error
+from helpers.cli_checks import assert_one_line_error
 
 runner = CliRunner()
 

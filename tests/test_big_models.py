@@ -28,9 +28,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference_dynamics as ref
-from multibody_strategies import models, models_with_paths_and_free_joints
-from processes import HERE, python_path, wait_until
+from helpers import reference_dynamics as ref
+from helpers.multibody_strategies import models, models_with_paths_and_free_joints
+from helpers.processes import PLUGINS, python_path, wait_until
 
 from fdbench.multibody.engine import Engine
 
@@ -158,7 +158,7 @@ def test_ctrl_c_ends_a_long_simulation_within_seconds(tmp_path):
     simulation runs in chunks, so the interrupt is acted on at the next chunk, not at the end."""
     path, mark = tmp_path / "star.toml", tmp_path / "designed"
     path.write_text(tree_model(1000, star=True))
-    env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_MARK=str(mark), PYTHONPATH=python_path(HERE))
+    env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_MARK=str(mark), PYTHONPATH=python_path(PLUGINS))
     cmd = [sys.executable, "-m", "fdbench.cli", "control", "--model", str(path), "--controller", "marked-pd",
            "--dt", "1e-4", "-f", "json"]
     ended = interrupted_once(cmd, env, tmp_path, mark, "the controller was designed (the simulation begins)")
@@ -173,7 +173,7 @@ def test_ctrl_c_ends_cma_es_on_a_thousand_bodies_within_seconds(tmp_path):
     path, mark = tmp_path / "star.toml", tmp_path / "evaluating"
     path.write_text(tree_model(1000, star=True))
     env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_MARK_POPULATION=str(mark),
-               PYTHONPATH=python_path(HERE))
+               PYTHONPATH=python_path(PLUGINS))
     cmd = [sys.executable, "-m", "fdbench.cli", "optimize", "--model", str(path), "--opt", "cmaes", "--threads", "1",
            "-f", "json"]
     ended = interrupted_once(cmd, env, tmp_path, mark, "CMA-ES's first population is evaluated")

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-import forearm_closed_form as cf
+from helpers import forearm_closed_form as cf
 from fdbench.cli import app
 from fdbench.motion import desired_motion
 

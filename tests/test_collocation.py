@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-import forearm_closed_form as cf
+from helpers import forearm_closed_form as cf
 from fdbench.cli import app
 from fdbench.collocation import collocate
 from fdbench.motion import desired_motion
@@ -320,7 +320,7 @@ def test_a_floating_base_models_collocation_obeys_the_independent_reference(hopp
     linear acceleration (what Hermite-Simpson with the midpoint acceleration the nodes' mean
     imposes); it tracks the motion (angles in deg and translations in cm apart) to the price of
     the regularization (1e-6 on the base's forces too without loads)."""
-    import reference_dynamics as ref
+    from helpers import reference_dynamics as ref
 
     from fdbench.collocation import own_fields
 

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from scipy.linalg import expm, solve_continuous_are
 from typer.testing import CliRunner
 
-import forearm_closed_form as cf
+from helpers import forearm_closed_form as cf
 from fdbench.cli import app
 from fdbench.controllers import CONTROLLERS, Controller, make_controller
 from fdbench.controllers.base import Design, Plan
@@ -224,7 +224,7 @@ def test_pd_defaults_on_a_floating_base_are_critically_damped_on_each_coordinate
     """On a model with a floating base PD's default gains are kp = I_j w^2 and kd = 2 I_j w, with
     I_j = 1 / [M^-1]_jj of the independent reference's mass matrix at the motion's start and w the
     paper's sqrt(80 / 0.04) rad/s; given gains stay as given."""
-    import reference_dynamics as ref
+    from helpers import reference_dynamics as ref
     from test_multibody_reference import hopper_model
 
     from fdbench.controllers.base import Plan

@@ -21,7 +21,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from processes import GATED_OPTIMIZER, Gate, wait_until
+from helpers.processes import GATED_OPTIMIZER, Gate, wait_until
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 SMALL = ["report", "--torque", "cs", "--opt", "bfgs", "--seeds", "2", "--budget", "20"]

@@ -17,7 +17,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from processes import python_path
+from helpers.processes import python_path
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 SCIPY_INTEGRATORS = ("rk45", "dop853", "lsoda", "radau", "bdf")

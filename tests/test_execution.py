@@ -21,7 +21,7 @@ import pytest
 from fdbench.execution import Backend, LocalBackend, Outcome, execute_specs, failed_record, run_spec
 from fdbench.experiment import control_spec
 from fdbench.store import open_store
-from processes import GATED_OPTIMIZER, Gate, wait_until
+from helpers.processes import GATED_OPTIMIZER, Gate, wait_until
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 needs_proc = pytest.mark.skipif(not (sys.platform.startswith("linux") and Path("/proc/self/stat").exists()),

@@ -21,7 +21,7 @@ from fdbench.motion import KINEMATICS
 from fdbench.optimizers import OPTIMIZERS
 from fdbench.torques import TORQUES
 
-from processes import GATED_OPTIMIZER, Gate, python_path, wait_until
+from helpers.processes import GATED_OPTIMIZER, Gate, python_path, wait_until
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 COMMANDS = ("inverse", "simulate", "control", "optimize", "report", "methods")
@@ -102,7 +102,7 @@ def test_import_fdbench_is_cheap_and_the_entry_points_load_on_use():
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs a pseudo-terminal")
 def test_a_person_watching_sees_the_time_left_before_the_run_ends(tmp_path):
     """On a terminal the progress bar estimates the time left from the first evaluations on. The
-    run holds after 3 of its 8 evaluations (tests/gate_plugin.py) until a frame shows an estimate."""
+    run holds after 3 of its 8 evaluations (tests/helpers/plugins/gate_plugin.py) until a frame shows an estimate."""
     gate = Gate(tmp_path)
     master, slave = os.openpty()
     exe = Path(sys.executable).with_name("fdbench")

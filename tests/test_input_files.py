@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import forearm_closed_form as forearm
-from cli_checks import assert_one_line_error
+from helpers import forearm_closed_form as forearm
+from helpers.cli_checks import assert_one_line_error
 from fdbench.cli import app
 from fdbench.files import quoted, shown
 from fdbench.motion import A1, butterworth_design_hz, eq5, read_motion_csv

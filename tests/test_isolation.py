@@ -192,7 +192,7 @@ def test_a_module_planted_in_the_current_folder_is_not_imported_by_the_dask_clus
     import json
     import subprocess
 
-    from processes import python_path
+    from helpers.processes import python_path
 
     folder = planted_folder(tmp_path / "shared")
     script = tmp_path / "bin" / "cluster.py"

@@ -22,8 +22,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference_dynamics as ref
-from multibody_strategies import models_with_paths_and_free_joints
+from helpers import reference_dynamics as ref
+from helpers.multibody_strategies import models_with_paths_and_free_joints
 from test_multibody_general import leading_matrix
 
 from fdbench.files import BadFile

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from cli_checks import assert_one_line_error
+from helpers.cli_checks import assert_one_line_error
 
 from fdbench.cli import app
 from fdbench.files import BadFile

@@ -8,11 +8,11 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
+from helpers.processes import PLUGINS, python_path
 from fdbench.cli import app
 from fdbench.registry import parse_method
 
@@ -72,7 +72,7 @@ def test_parse_method():
 def test_a_plugin_optimiser_receives_its_option(tmp_path):
     """A plugin is one file; its option comes from the command line like any method's."""
     env = dict(os.environ, FDBENCH_PLUGINS="option_plugin",
-               PYTHONPATH=os.pathsep.join([str(Path(__file__).parent), os.environ.get("PYTHONPATH", "")]))
+               PYTHONPATH=python_path(PLUGINS))
 
     def optimize(opt):
         done = subprocess.run([sys.executable, "-c", "from fdbench.cli import main; main()", "optimize", "--torque", "pf", "--terms", "2",

@@ -19,8 +19,8 @@ from fdbench.cli import app
 from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, find_model,
                                            library, load_model, resolved_end, to_dict, to_toml, with_changes)
 
-from cli_checks import assert_one_line_error
-import forearm_closed_form as cf
+from helpers.cli_checks import assert_one_line_error
+from helpers import forearm_closed_form as cf
 
 runner = CliRunner()
 
@@ -66,7 +66,7 @@ def test_the_forearm_file_is_table_1():
 
 
 def test_the_arm2_file_is_the_two_segment_arm():
-    from arm2_closed_form import ARM2
+    from helpers.arm2_closed_form import ARM2
 
     model, c = find_model("arm2"), ARM2
     assert model.coordinates == ("shoulder", "elbow")
@@ -510,7 +510,7 @@ def test_free_and_path_joints_read_back_equal_and_show(tmp_path):
     """A model with a free base and a knee on a path: its TOML and JSON read back to an equal Model,
     its coordinates are the free joint's three then the pins', with their kinds, and ``models show``
     lists them."""
-    from multibody_strategies import models_with_paths_and_free_joints
+    from helpers.multibody_strategies import models_with_paths_and_free_joints
 
     data = copy.deepcopy(BASE)
     joint_with(0, **FREE_HIP)(data)

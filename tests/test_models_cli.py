@@ -19,7 +19,7 @@ from fdbench.multibody.description import find_model, with_short_keys
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 
-from arm2_closed_form import joint_torques, reach
+from helpers.arm2_closed_form import joint_torques, reach
 
 runner = CliRunner()
 ARM = Engine(find_model("arm2"))

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import forearm_closed_form as forearm
+from helpers import forearm_closed_form as forearm
 from fdbench.multibody import engine as mb
 from fdbench.multibody.kernels import CONSTRAINT, NONFINITE, OK
 from fdbench.multibody.engine import Engine
@@ -115,7 +115,7 @@ def test_forearm_inverse_dynamics_is_the_closed_form():
 
 
 def test_arm_inverse_dynamics_is_the_closed_form():
-    from arm2_closed_form import joint_torques
+    from helpers.arm2_closed_form import joint_torques
 
     engine, rng = Engine(arm2_model()), np.random.default_rng(4)
     z, zd, zdd = rng.uniform(-2, 2, (3, 40, 2))

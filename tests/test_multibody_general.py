@@ -25,9 +25,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference_dynamics as ref
-from multibody_strategies import models, models_with_paths_and_free_joints
-from population_checks import restore_threads  # noqa: F401 - a fixture
+from helpers import reference_dynamics as ref
+from helpers.multibody_strategies import models, models_with_paths_and_free_joints
+from helpers.population_checks import restore_threads  # noqa: F401 - a fixture
 from test_multibody_reference import hopper_model
 
 from fdbench.multibody import kernels_general as kg
@@ -259,7 +259,7 @@ def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulat
     in deg plus the translations' in cm by numpy, the penalty of the part not reached), one
     candidate thrown off its motion included, and equals the rows one by one to the bit on 1 to 3
     threads, and in calls of one step each."""
-    from population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,
+    from helpers.population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,
                                    assert_population_equals_one_by_one)
 
     from fdbench.multibody.description import MotionSpec

@@ -15,7 +15,7 @@ from fdbench.multibody.motions import joint_motion
 from fdbench.problem import TrackingProblem
 from fdbench.optimizers import make_optimizer
 from fdbench.population import set_threads
-from population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
+from helpers.population_checks import (assert_objectives_are, assert_population_equals_one_by_one,  # noqa: F401
                                restore_threads)
 
 ARM = Engine(find_model("arm2"))

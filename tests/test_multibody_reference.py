@@ -39,8 +39,8 @@ from hypothesis import strategies as st
 
 from fdbench.multibody import engine as engine_module
 
-import reference_dynamics as ref
-from multibody_strategies import (arm2_model, forearm_model, models, models_and_motions, models_and_states,
+from helpers import reference_dynamics as ref
+from helpers.multibody_strategies import (arm2_model, forearm_model, models, models_and_motions, models_and_states,
                                   models_with_paths_and_free_joints)
 
 BUILT_IN = {"forearm": forearm_model, "arm2": arm2_model}

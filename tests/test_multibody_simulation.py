@@ -20,8 +20,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference_dynamics as ref
-from multibody_strategies import models
+from helpers import reference_dynamics as ref
+from helpers.multibody_strategies import models
 
 from fdbench import population
 from fdbench.integrate import Status

@@ -21,8 +21,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference_dynamics as ref
-from multibody_strategies import models_and_states, models_with_paths_and_free_joints
+from helpers import reference_dynamics as ref
+from helpers.multibody_strategies import models_and_states, models_with_paths_and_free_joints
 
 from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.experiment import optimize_spec, run
-import forearm_closed_form as forearm
+from helpers import forearm_closed_form as forearm
 from fdbench.motion import eq5
 from fdbench.multibody import simulation as sim
 from fdbench.multibody.description import find_model

@@ -17,7 +17,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from cli_checks import assert_one_line_error
+from helpers.cli_checks import assert_one_line_error
 
 from fdbench.cli import app
 from fdbench.experiment import RunSpec, control_spec, run

@@ -7,7 +7,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-from processes import python_path
+from helpers.processes import python_path
 
 PLUGIN = textwrap.dedent('''
     import numpy as np

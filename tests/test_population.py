@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-import forearm_closed_form as forearm
+from helpers import forearm_closed_form as forearm
 from fdbench.experiment import optimize_spec, run
 from fdbench.motion import eq5
 from fdbench.multibody.description import find_model
@@ -15,7 +15,7 @@ from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.population import set_threads
 from fdbench.problem import TrackingProblem
-from population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,  # noqa: F401
+from helpers.population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,  # noqa: F401
                                assert_population_equals_one_by_one, restore_threads)
 
 

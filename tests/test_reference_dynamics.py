@@ -19,10 +19,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import reference_dynamics as ref
+from helpers import reference_dynamics as ref
 from fdbench.multibody import description as d
-from arm2_closed_form import joint_torques
-from multibody_strategies import arm2_model, forearm_model, models, models_and_states
+from helpers.arm2_closed_form import joint_torques
+from helpers.multibody_strategies import arm2_model, forearm_model, models, models_and_states
 
 GRAVITY = 9.81  # m/s^2, the built-in models'
 

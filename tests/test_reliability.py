@@ -28,7 +28,7 @@ from fdbench.cli import app
 from fdbench.experiment import control_spec
 from fdbench.store import Store, StoreError, open_store
 
-from processes import python_path
+from helpers.processes import python_path
 
 runner = CliRunner()
 PREFIX = "fdbench: error:"
@@ -454,7 +454,7 @@ def test_torque_file_enters_the_hash_by_content(tmp_path):
 @pytest.mark.parametrize("terms", [68, 100])
 def test_pf_fit_works_for_every_allowed_term_count(terms):
     """The fit of every allowed term count reproduces the forearm's closed-form inverse-dynamics torque."""
-    from forearm_closed_form import torque_along as elbow_torque
+    from helpers.forearm_closed_form import torque_along as elbow_torque
 
     from fdbench.motion import eq5
     from fdbench.multibody.description import find_model

@@ -25,7 +25,7 @@ import fdbench.execution
 from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
 from fdbench.cli import app
 from fdbench.report import CSV_COLUMNS
-from processes import GATED_OPTIMIZER, Gate, children, wait_until
+from helpers.processes import GATED_OPTIMIZER, Gate, children, wait_until
 
 # The paper's published figures, typed in from its text (section 5, Tables 2 and 3):
 # (RMSE_rot deg, RMSE_torque N m, runtime s).

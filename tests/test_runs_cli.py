@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 
-from cli_checks import assert_one_line_error
+from helpers.cli_checks import assert_one_line_error
 
 
 runner = CliRunner()

@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from multibody_strategies import models
+from helpers.multibody_strategies import models
 from test_multibody_general import hopper_loads
 from test_multibody_reference import hopper_model
 

@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import forearm_closed_form as cf
+from helpers import forearm_closed_form as cf
 from fdbench.integrate import Status
 from fdbench.models import with_changes
 from fdbench.motion import desired_motion, sample_times

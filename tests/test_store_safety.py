@@ -25,8 +25,8 @@ from fdbench.experiment import RunSpec, control_spec
 from fdbench.store import Store, StoreError, open_store
 from fdbench.store_queries import method_label
 
-from cli_checks import assert_one_line_error
-from processes import python_path
+from helpers.cli_checks import assert_one_line_error
+from helpers.processes import python_path
 
 PREFIX = "fdbench: error: "
 OTHER = 12345  # a uid that is not ours

@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import forearm_closed_form as cf
+from helpers import forearm_closed_form as cf
 from fdbench.motion import desired_motion, sample_times
 from fdbench.torques import TORQUES, make_torque
 from fdbench.torques.ann import AnnTorque, select_hidden

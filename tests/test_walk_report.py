@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from cli_checks import assert_one_line_error
+from helpers.cli_checks import assert_one_line_error
 from fdbench.cli import app
 from fdbench.problem import DEFAULT_RESIDUAL_WEIGHT
 from fdbench.walk import BFGS, CMAES, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, WALK_PENALTY, WalkRow

@@ -3,7 +3,7 @@ known state without timing anything.
 
 A test that interrupts or kills a running sweep needs it mid-way: some runs stored, workers busy,
 more runs to come. Waiting a while and hoping fails on a loaded machine (the sweep ends first, or
-has not started). Instead the sweep uses the optimiser ``gated-bfgs`` of ``gate_plugin.py`` (BFGS
+has not started). Instead the sweep uses the optimiser ``gated-bfgs`` of ``plugins/gate_plugin.py`` (BFGS
 whose runs from seed ``from_seed`` on wait for a file): it stores exactly the runs of the seeds
 below ``from_seed`` and then holds still until the test opens the gate.
 """
@@ -14,7 +14,7 @@ import os
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+PLUGINS = Path(__file__).resolve().parent / "plugins"  # the plugins the started commands load
 GATED_OPTIMIZER = "gated-bfgs"
 
 
@@ -32,7 +32,7 @@ class Gate:
     def __init__(self, folder: Path, from_seed: int = 2):
         self.path = Path(folder) / "gate-open"
         self.env = dict(os.environ, FDBENCH_PLUGINS="gate_plugin", FDBENCH_GATE=str(self.path),
-                        FDBENCH_GATE_FROM=str(from_seed), PYTHONPATH=python_path(HERE))
+                        FDBENCH_GATE_FROM=str(from_seed), PYTHONPATH=python_path(PLUGINS))
 
     def open(self) -> None:
         self.path.touch()

@@ -57,7 +57,7 @@ def arm2_model(**changes):
     constants changed (its inertias I0, I1 are about the joints)."""
     from types import SimpleNamespace
 
-    from arm2_closed_form import ARM2
+    from helpers.arm2_closed_form import ARM2
 
     arm = SimpleNamespace(**{**ARM2, **changes})
     upper = d.Body("upper_arm", mass=arm.m0, com=(arm.L0G, 0.0), inertia=arm.I0 - arm.m0 * arm.L0G**2)
