@@ -225,7 +225,7 @@ def test_pd_defaults_on_a_floating_base_are_critically_damped_on_each_coordinate
     I_j = 1 / [M^-1]_jj of the independent reference's mass matrix at the motion's start and w the
     paper's sqrt(80 / 0.04) rad/s; given gains stay as given."""
     from helpers import reference_dynamics as ref
-    from test_multibody_reference import hopper_model
+    from helpers.models import hopper_model
 
     from fdbench.controllers.base import Plan
     from fdbench.controllers.pd import PD

@@ -98,7 +98,7 @@ def test_the_fastest_capture_allowed_is_not_refused_for_its_clock_s_rounding():
 
 
 def test_a_load_of_1e300_n_is_refused_naming_the_load_and_time(tmp_path):
-    from test_loads_cli import storage as loads_storage, write
+    from helpers.loads_files import storage as loads_storage, write
 
     loads = write(tmp_path, data=loads_storage(value="1e300"))
     refused(tmp_path, "inverse", "--model", "leg3", "--loads", loads,
@@ -106,7 +106,7 @@ def test_a_load_of_1e300_n_is_refused_naming_the_load_and_time(tmp_path):
 
 
 def test_a_datafile_name_keeps_its_inner_spaces(tmp_path):
-    from test_loads_cli import loads_xml, storage as loads_storage
+    from helpers.loads_files import loads_xml, storage as loads_storage
 
     (tmp_path / "my  grf.mot").write_text(loads_storage())
     (tmp_path / "push.xml").write_text(loads_xml(datafile="  my  grf.mot "))  # outer spaces are not the name's

@@ -14,6 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.loads_files import COLUMNS, loads_xml, storage, write
 
 from fdbench.cli import app
 from fdbench.files import BadFile
@@ -24,34 +25,7 @@ WALK = next((where for where in (ROOT / "examples" / "opensim", ROOT.parent / "s
                                   ROOT.parent.parent / "shared" / "data" / "opensim")
              if (where / "subject01_walk_grf.xml").exists()), None)  # the walk's files: shipped, or beside the source
 COMMANDS = ("inverse", "control", "simulate")
-COLUMNS = ("f_vx", "f_vy", "f_vz", "f_px", "f_py", "f_pz", "f_tx", "f_ty", "f_tz")
 runner = CliRunner()
-
-
-def loads_xml(body: str = "shank", point_frame: str = "ground", datafile: str | None = "push.mot") -> str:
-    """OpenSim's ExternalLoads with one force on ``body``, its columns f_v*, f_p*, f_t*."""
-    data = "" if datafile is None else f"<datafile>{datafile}</datafile>"
-    return ('<?xml version="1.0" encoding="UTF-8" ?>\n'
-            '<OpenSimDocument Version="30000"><ExternalLoads name="l"><objects>'
-            f'<ExternalForce name="push"><applied_to_body>{body}</applied_to_body>'
-            "<force_expressed_in_body>ground</force_expressed_in_body>"
-            f"<point_expressed_in_body>{point_frame}</point_expressed_in_body><force_identifier>f_v</force_identifier>"
-            "<point_identifier>f_p</point_identifier><torque_identifier>f_t</torque_identifier></ExternalForce>"
-            f"</objects>{data}</ExternalLoads></OpenSimDocument>\n")
-
-
-def storage(t0: float = 0.0, t1: float = 1.0, columns=COLUMNS, value: str = "2.0") -> str:
-    """A storage file of 11 rows from t0 to t1 (s), every column ``value``."""
-    rows = ["push", "version=1", "endheader", "\t".join(("time",) + tuple(columns))]
-    rows += ["\t".join([repr(t0 + (t1 - t0) * k / 10)] + [value] * len(columns)) for k in range(11)]
-    return "\n".join(rows) + "\n"
-
-
-def write(folder: Path, xml: str | None = None, data: str | None = None, name: str = "push.xml",
-          data_name: str = "push.mot") -> Path:
-    (folder / name).write_text(loads_xml() if xml is None else xml)
-    (folder / data_name).write_text(storage() if data is None else data)
-    return folder / name
 
 
 def invoke(*args):

@@ -28,7 +28,7 @@ from hypothesis import strategies as st
 from helpers import reference_dynamics as ref
 from helpers.multibody_strategies import models, models_with_paths_and_free_joints
 from helpers.population_checks import restore_threads  # noqa: F401 - a fixture
-from test_multibody_reference import hopper_model
+from helpers.models import hopper_loads, hopper_model
 
 from fdbench.multibody import kernels_general as kg
 from fdbench.multibody.engine import Engine
@@ -133,19 +133,6 @@ def test_the_compiled_inverse_dynamics_equals_the_numpy_one(model, seed):
         expected = engine.inverse_dynamics(z, zd, zdd)
         np.testing.assert_allclose(engine.inverse_torques(z, zd, zdd), expected, rtol=0,
                                    atol=1e-10 * max(1.0, np.abs(expected).max()))
-
-
-def hopper_loads(seed):
-    """Three loads on the hopper, sampled at 50 times over [-0.1, 1] s: on the shank in ground's
-    axes, on the thigh with its force in the thigh's frame and its point in the shank's, on the
-    pelvis at a point of the thigh."""
-    from fdbench.multibody.loads import ExternalLoad, ExternalLoads
-
-    rng, n = np.random.default_rng(seed), 50
-    loads = (ExternalLoad("a", "shank"), ExternalLoad("b", "thigh", "thigh", "shank"),
-             ExternalLoad("c", "pelvis", "ground", "thigh"))
-    return ExternalLoads(loads, np.linspace(-0.1, 1.0, n), rng.normal(0, 50, (n, 3, 2)), rng.normal(0, 0.2, (n, 3, 2)),
-                         rng.normal(0, 5, (n, 3)))
 
 
 @pytest.mark.parametrize("seed", [0, 1])

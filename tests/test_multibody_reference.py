@@ -40,6 +40,7 @@ from hypothesis import strategies as st
 from fdbench.multibody import engine as engine_module
 
 from helpers import reference_dynamics as ref
+from helpers.models import hopper_model
 from helpers.multibody_strategies import (arm2_model, forearm_model, models, models_and_motions, models_and_states,
                                   models_with_paths_and_free_joints)
 
@@ -230,20 +231,6 @@ def test_free_and_path_joint_states_round_trip(model, seed):
     back = engine.joints_from_state(engine.state_from_joints(z, zd))
     np.testing.assert_allclose(back[0], z, rtol=0, atol=1e-12)
     np.testing.assert_allclose(back[1], zd, rtol=0, atol=1e-12)
-
-
-def hopper_model():
-    """A free pelvis (tilt, x, y), a thigh on a pin and a shank on a knee path (y with its own angles)."""
-    from fdbench.multibody import description as d
-
-    knee = d.JointPath((-2.0, -1.0, 0.0, 0.5), (0.0, 0.01, 0.02, 0.015), (-0.01, 0.0, 0.005), (-1.5, 0.0, 1.0))
-    return d.Model(name="hopper", gravity=(0.0, -9.81),
-                   bodies=(d.Body("pelvis", 10.0, (0.0, -0.05), 0.2), d.Body("thigh", 5.0, (0.02, -0.2), 0.08),
-                           d.Body("shank", 3.0, (0.0, -0.2), 0.05)),
-                   joints=(d.Joint("base", "free", "ground", "pelvis", (0.0, 1.0), (0.0, 0.0),
-                                   coordinates=("tilt", "tx", "ty")),
-                           d.Joint("hip", "pin", "pelvis", "thigh", (0.0, -0.1), (0.0, 0.0), offset=-1.5),
-                           d.Joint("knee", "pin", "thigh", "shank", (0.0, -0.4), (0.0, 0.0), path=knee)))
 
 
 def test_free_base_and_knee_path_pd_simulation_matches_the_reference():

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from test_multibody_reference import hopper_model
+from helpers.models import hopper_model
 
 from fdbench.multibody import simulation as sim
 

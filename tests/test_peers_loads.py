@@ -3,7 +3,7 @@ same ExternalLoads file and data as fdbench (its own reader: ``ExternalLoads`` i
 ``setExternalLoadsFileName``, Moco's ``ModOpAddExternalLoads``), and the floating base's residuals
 are CoordinateActuators driven like every coordinate.
 
-A small OpenSim model (``test_osim.path_knee_model``: a free planar pelvis, a knee whose shank
+A small OpenSim model (``helpers.osim_files.path_knee_model``: a free planar pelvis, a knee whose shank
 follows a spline) with a recorded motion (CSV) and one load on the shank (XML + .mot, its data file
 named relative to the XML, as OpenSim's examples do). Independent references: fdbench's own PD
 (the same law, its own integrator), fdbench's inverse dynamics with the loads (the torques the
@@ -22,6 +22,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
+from helpers.loads_files import push_files
 
 if importlib.util.find_spec("opensim") is None:
     pytest.skip("the opensim package is not installed (pip install 'fdbench[opensim]')", allow_module_level=True)
@@ -42,7 +43,7 @@ def files(folder: Path, start: float = 0.0) -> list[Path]:
     """The model, its motion (recorded from ``start`` s on) and a load on the shank (its data on
     the same clock): 40 N along x and 80 N up in ground's axes at a point below the knee, and a
     free moment of 2 N m."""
-    from test_osim import path_knee_model
+    from helpers.osim_files import path_knee_model
 
     folder.mkdir(parents=True, exist_ok=True)
     model = path_knee_model(folder / "knee.osim")
@@ -52,21 +53,8 @@ def files(folder: Path, start: float = 0.0) -> list[Path]:
         writer = csv.writer(handle)
         writer.writerow(("t",) + COORDINATES)
         writer.writerows(np.column_stack([t + start, _motion(t)]).tolist())
-    (folder / "data").mkdir(exist_ok=True)
-    data_t = np.arange(0, DURATION + 0.0501, 0.05) + start
-    rows = "\n".join("\t".join(f"{v:g}" for v in (ti, 40.0, 80.0, 0.0, 0.05, 0.4, 0.0, 0.0, 0.0, 2.0))
-                     for ti in data_t)
-    (folder / "data" / "push.mot").write_text(
-        f"push\nversion=1\nnRows={len(data_t)}\nnColumns=10\ninDegrees=yes\nendheader\n"
-        "time\tf_vx\tf_vy\tf_vz\tf_px\tf_py\tf_pz\tm_x\tm_y\tm_z\n" + rows + "\n")
-    loads = folder / "push.xml"
-    loads.write_text("""<?xml version="1.0" encoding="UTF-8" ?>
-<OpenSimDocument Version="30000"><ExternalLoads name="push"><objects>
-<ExternalForce name="push"><isDisabled>false</isDisabled><applied_to_body>shank</applied_to_body>
-<force_expressed_in_body>ground</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>
-<force_identifier>f_v</force_identifier><point_identifier>f_p</point_identifier><torque_identifier>m_</torque_identifier>
-</ExternalForce></objects><datafile>data/push.mot</datafile></ExternalLoads></OpenSimDocument>
-""")
+    loads = push_files(folder, np.arange(0, DURATION + 0.0501, 0.05) + start, (40.0, 80.0, 0.0), (0.05, 0.4, 0.0),
+                       (0.0, 0.0, 2.0), datafile="data/push.mot")
     return [model, motion, loads]
 
 

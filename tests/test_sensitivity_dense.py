@@ -22,8 +22,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from helpers.multibody_strategies import models
-from test_multibody_general import hopper_loads
-from test_multibody_reference import hopper_model
+from helpers.models import hopper_loads, hopper_model
 
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.sensitivity import rk4_sensitivity, rk4_sensitivity_dense

@@ -22,6 +22,7 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.loads_files import push_files
 from fdbench.cli import app
 from fdbench.problem import DEFAULT_RESIDUAL_WEIGHT
 from fdbench.walk import BFGS, CMAES, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, WALK_PENALTY, WalkRow
@@ -34,7 +35,7 @@ COORDINATES = ("tilt", "tx", "ty", "hip", "knee")
 
 def _hopper_file(folder: Path) -> Path:
     """The hopper model (free pelvis, hip, knee on a path) as a model file, without named motions."""
-    from test_multibody_reference import hopper_model
+    from helpers.models import hopper_model
 
     from fdbench.multibody.description import MotionSpec, to_toml
 
@@ -64,20 +65,7 @@ def _motion_file(folder: Path) -> Path:
 def _loads_file(folder: Path) -> Path:
     """An ExternalLoads file: a 20 N push along x and 60 N up on the shank, in ground's axes, at a
     point below the knee, with a free moment of 1 N m; its data in a .mot file."""
-    t = np.arange(0, DURATION + 0.0501, 0.05)
-    data = folder / "push.mot"
-    rows = "\n".join("\t".join(f"{v:g}" for v in (ti, 20.0, 60.0, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0)) for ti in t)
-    data.write_text(f"push\nversion=1\nnRows={len(t)}\nnColumns=10\ninDegrees=yes\nendheader\n"
-                    "time\tf_vx\tf_vy\tf_vz\tf_px\tf_py\tf_pz\tm_x\tm_y\tm_z\n" + rows + "\n")
-    xml = folder / "push.xml"
-    xml.write_text("""<?xml version="1.0" encoding="UTF-8" ?>
-<OpenSimDocument Version="30000"><ExternalLoads name="push"><objects>
-<ExternalForce name="push"><isDisabled>false</isDisabled><applied_to_body>shank</applied_to_body>
-<force_expressed_in_body>ground</force_expressed_in_body><point_expressed_in_body>ground</point_expressed_in_body>
-<force_identifier>f_v</force_identifier><point_identifier>f_p</point_identifier><torque_identifier>m_</torque_identifier>
-</ExternalForce></objects><datafile>push.mot</datafile></ExternalLoads></OpenSimDocument>
-""")
-    return xml
+    return push_files(folder, np.arange(0, DURATION + 0.0501, 0.05), (20.0, 60.0, 0.0), (0.0, 0.3, 0.0), (0.0, 0.0, 1.0))
 
 
 @pytest.fixture(scope="module")
@@ -520,7 +508,7 @@ def test_an_imported_models_warnings_are_said_once_before_the_work(tmp_path):
     wrote."""
     if importlib.util.find_spec("opensim") is None:
         pytest.skip("the opensim package is not installed")
-    from test_osim import path_knee_model
+    from helpers.osim_files import path_knee_model
 
     model = path_knee_model(tmp_path / "knee.osim")
     marker = ('<MarkerSet name="markerset"><objects><Marker name="m1"><socket_parent_frame>/bodyset/thigh'
