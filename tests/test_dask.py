@@ -13,7 +13,6 @@ import signal
 import sqlite3
 import subprocess
 import sys
-import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -21,7 +20,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from helpers.processes import GATED_OPTIMIZER, Gate, wait_until
+from helpers.processes import GATED_OPTIMIZER, Gate, scheduler_address, start_in_session, stop_session, wait_until
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 SMALL = ["report", "--torque", "cs", "--opt", "bfgs", "--seeds", "2", "--budget", "20"]
@@ -32,36 +31,6 @@ def _execution_field(name: str) -> bool:
 
 def _needs_dask():
     pytest.importorskip("distributed", reason="Dask distributed is not installed (pip install '.[dask]')")
-
-
-def _start(args, log: Path, cwd: Path) -> subprocess.Popen:
-    with open(log, "wb") as handle:  # the child keeps its own descriptor
-        return subprocess.Popen(args, stdout=handle, stderr=subprocess.STDOUT, cwd=cwd, start_new_session=True)
-
-
-def _stop(proc: subprocess.Popen) -> None:
-    """Kill a subprocess and everything it started (its own session)."""
-    if proc.poll() is None:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-
-
-def _scheduler_address(proc: subprocess.Popen, log: Path, timeout_s: float = 120) -> str:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        for line in log.read_text(errors="replace").splitlines():
-            if "Scheduler at:" in line:
-                return line.split("Scheduler at:")[1].strip()
-        if proc.poll() is not None:
-            break
-        time.sleep(0.05)
-    raise AssertionError(f"the scheduler did not start:\n{log.read_text(errors='replace')}")
 
 
 @contextmanager
@@ -75,10 +44,10 @@ def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
     procs = []
     try:
         log = tmp_path / "scheduler.log"
-        scheduler = _start([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+        scheduler = start_in_session([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                             "--port", "0", "--no-dashboard"], log, tmp_path)
         procs.append(scheduler)
-        address = _scheduler_address(scheduler, log)
+        address = scheduler_address(scheduler, log)
         assert address.startswith("tcp://127.0.0.1:")
         worker_procs = []
         for i in range(workers):
@@ -87,7 +56,7 @@ def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
                     "--local-directory", str(tmp_path / f"w{i}")]
             if preload is not None:
                 args += ["--preload", str(preload)]
-            worker_procs.append(_start(args, tmp_path / f"w{i}.log", tmp_path))
+            worker_procs.append(start_in_session(args, tmp_path / f"w{i}.log", tmp_path))
         procs.extend(worker_procs)
         if workers:
             with Client(address, timeout="30s", set_as_default=False) as client:
@@ -95,7 +64,7 @@ def dask_cluster(tmp_path: Path, workers: int = 2, preload: Path | None = None):
         yield address, worker_procs, scheduler
     finally:
         for proc in reversed(procs):
-            _stop(proc)
+            stop_session(proc)
 
 
 def _fdbench(*args, cwd, timeout=120) -> subprocess.CompletedProcess:

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from helpers.numerics import richardson
 from fdbench.cli import app
 from fdbench.experiment import optimize_spec
 from fdbench.multibody.description import find_model
@@ -20,13 +21,6 @@ PAPER = joint_motion("paper", find_model("forearm"))
 def ForearmProblem(torque, feedforward):
     """The paper's tracking problem: the forearm on eq. 5."""
     return TrackingProblem(torque, FOREARM, PAPER, feedforward)
-
-
-def richardson(f, x, h=1e-3):
-    """Central differences with one Richardson extrapolation (error O(h^4)), shape (n,)."""
-    def cd(step):
-        return np.array([(f(x + step * e) - f(x - step * e)) / (2 * step) for e in np.eye(len(x))])
-    return (4 * cd(h / 2) - cd(h)) / 3
 
 
 @pytest.mark.parametrize("torque", ["cs", "pf", "ann"])

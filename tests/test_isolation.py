@@ -290,7 +290,7 @@ def test_a_tls_scheduler_is_reached_with_the_files_of_dask_s_configuration(tmp_p
     from distributed.security import Security
 
     from fdbench.execution import BackendError, DaskBackend
-    from test_dask import _scheduler_address, _start, _stop
+    from helpers.processes import scheduler_address, start_in_session, stop_session
 
     ours, theirs = Security.temporary(), Security.temporary()
     files = {}
@@ -302,11 +302,11 @@ def test_a_tls_scheduler_is_reached_with_the_files_of_dask_s_configuration(tmp_p
     procs = []
     try:
         log = tmp_path / "scheduler.log"
-        procs.append(_start([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+        procs.append(start_in_session([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
                              "--port", "0", "--no-dashboard", *tls], log, tmp_path))
-        address = _scheduler_address(procs[0], log)
+        address = scheduler_address(procs[0], log)
         assert address.startswith("tls://127.0.0.1:")
-        procs.append(_start([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host", "127.0.0.1",
+        procs.append(start_in_session([sys.executable, "-m", "distributed.cli.dask_worker", address, "--host", "127.0.0.1",
                              "--nthreads", "1", "--no-dashboard", "--local-directory", tmp_path / "w", *tls],
                             tmp_path / "worker.log", tmp_path))
         client_files = {"distributed.comm.tls.ca-file": str(files["ca.pem"]),
@@ -328,4 +328,4 @@ def test_a_tls_scheduler_is_reached_with_the_files_of_dask_s_configuration(tmp_p
                 backend.connect()
     finally:
         for proc in reversed(procs):
-            _stop(proc)
+            stop_session(proc)

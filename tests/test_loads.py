@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 
 from helpers import reference_dynamics as ref
 from helpers.multibody_strategies import models_with_paths_and_free_joints
-from test_multibody_general import leading_matrix
+from helpers.dense_checks import leading_matrix
 
 from fdbench.files import BadFile
 from fdbench.multibody.description import GROUND, Body, Frame, Joint, Model

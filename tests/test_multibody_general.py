@@ -28,6 +28,7 @@ from hypothesis import strategies as st
 from helpers import reference_dynamics as ref
 from helpers.multibody_strategies import models, models_with_paths_and_free_joints
 from helpers.population_checks import restore_threads  # noqa: F401 - a fixture
+from helpers.dense_checks import leading_matrix, residuals
 from helpers.models import hopper_loads, hopper_model
 
 from fdbench.multibody import kernels_general as kg
@@ -39,29 +40,6 @@ def random_joint_state(engine, seed):
     rng = np.random.default_rng(seed)
     J = engine.n_joints
     return rng.uniform(-2.5, 2.5, J), rng.uniform(-3, 3, J), rng.uniform(-20, 20, J)
-
-
-def residuals(engine, y):
-    """(max |Phi|, Phi, J q') of the dense kernels at the state y."""
-    layout = engine.dense_layout
-    rows = kg.n_rows(layout[0], layout[2], engine.lin_const)
-    phi, jv = np.empty(rows), np.empty(rows)
-    worst = kg.constraint_residuals(y, *layout, phi, jv)
-    return worst, phi, jv
-
-
-def leading_matrix(engine, y):
-    """M + alpha J^T J of eq. 12 at the state y, J read column by column as J e_c (unit velocities)."""
-    columns = []
-    for c in range(engine.n_q):
-        unit = y.copy()
-        unit[engine.n_q:] = 0.0
-        unit[engine.n_q + c] = 1.0
-        columns.append(residuals(engine, unit)[2])
-    jacobian = np.array(columns).T
-    mass = np.zeros((engine.n_q, engine.n_q))
-    mass[:engine.n_p, :engine.n_p] = engine.mass
-    return mass + engine.params[0] * jacobian.T @ jacobian
 
 
 def dense_rates(engine, y, tau, mode=PD, kp=0.0, kd=0.0, ref_z=None):

@@ -10,19 +10,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from helpers.numerics import richardson
 from fdbench.cli import app
 from fdbench.multibody import description as d
 from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk, joint_motion
 from fdbench.problem import TrackingProblem
-
-
-def richardson(f, x, h=1e-3):
-    """Central differences with one Richardson extrapolation (error O(h^4)), shape (n,)."""
-    def cd(step):
-        return np.array([(f(x + step * e) - f(x - step * e)) / (2 * step) for e in np.eye(len(x))])
-    return (4 * cd(h / 2) - cd(h)) / 3
 
 
 def tree():

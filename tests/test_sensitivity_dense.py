@@ -124,7 +124,7 @@ def _hopper_problem(feedforward=True, residual_weight=0.05):
 
 
 def test_eq_18_and_its_exact_gradient_on_a_free_base_are_those_of_the_simulation():
-    from test_multibody_gradient import richardson
+    from helpers.numerics import richardson
 
     problem = _hopper_problem()
     x = problem.x0 + 0.05 * np.random.default_rng(3).standard_normal(problem.n_params)

@@ -1,5 +1,6 @@
-"""Helpers for tests that start fdbench commands: their Python path, and stopping a sweep in a
-known state without timing anything.
+"""Helpers for tests that start fdbench commands: their Python path, stopping a sweep in a known
+state without timing anything, and processes in sessions of their own (a Dask scheduler, its
+workers).
 
 A test that interrupts or kills a running sweep needs it mid-way: some runs stored, workers busy,
 more runs to come. Waiting a while and hoping fails on a loaded machine (the sweep ends first, or
@@ -11,6 +12,8 @@ below ``from_seed`` and then holds still until the test opens the gate.
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -62,3 +65,35 @@ def children(pid: int) -> list[int]:
         if int(ppid) == pid and state != "Z":
             found.append(int(stat.parent.name))
     return found
+
+
+def start_in_session(args, log: Path, cwd: Path) -> subprocess.Popen:
+    """Start ``args`` in ``cwd`` in a session of its own, its output (both streams) into ``log``."""
+    with open(log, "wb") as handle:  # the child keeps its own descriptor
+        return subprocess.Popen(args, stdout=handle, stderr=subprocess.STDOUT, cwd=cwd, start_new_session=True)
+
+
+def stop_session(proc: subprocess.Popen) -> None:
+    """Kill a subprocess and everything it started (its own session)."""
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+def scheduler_address(proc: subprocess.Popen, log: Path, timeout_s: float = 120) -> str:
+    """The address of the Dask scheduler ``proc`` as its ``log`` says it, once it does."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        for line in log.read_text(errors="replace").splitlines():
+            if "Scheduler at:" in line:
+                return line.split("Scheduler at:")[1].strip()
+        if proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    raise AssertionError(f"the scheduler did not start:\n{log.read_text(errors='replace')}")
