@@ -63,7 +63,7 @@ def test_load_report_equals_the_csv_report_and_load_runs_lists_every_stored_run(
 
 def test_the_arm_through_the_python_api():
     """model_name='arm2' takes the arm's own motion; a torque function of the arm's inverse
-    dynamics (its closed form, tests/arm2_closed_form.py) gives the default open-loop run."""
+    dynamics (its closed form, tests/helpers/arm2_closed_form.py) gives the default open-loop run."""
     import fdbench
     from helpers.arm2_closed_form import joint_torques, reach
 

@@ -2,7 +2,7 @@
 
 - M(z) by composite bodies (``Engine.mass_matrix``) and inverse dynamics without the (n, n_p, J)
   velocity transform, against the independent minimal-coordinate reference
-  (tests/reference_dynamics.py) and the kinetic energy of the bodies' own velocities, on random
+  (tests/helpers/reference_dynamics.py) and the kinetic energy of the bodies' own velocities, on random
   trees of up to 40 bodies and on models with paths and free joints;
 - a 1000-body star and chain (MAX_BODIES) run through ``control``, ``inverse`` and ``models show``;
 - Ctrl-C in the middle of a long simulation, or of CMA-ES's population, ends the command with the

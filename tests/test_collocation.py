@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from helpers import forearm_closed_form as cf
+from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.collocation import collocate
 from fdbench.motion import desired_motion
@@ -194,9 +195,7 @@ def test_fuzz_collocate_is_a_result_or_one_line(nodes, regularization, scheme, m
 def test_save_torque_covers_a_recorded_motions_span(tmp_path):
     """A recorded 2.5 s motion: the torque is saved on the RK4 half-step grid of the motion's
     span, and 'simulate --torque-file' on the same motion replays what collocate replayed."""
-    from pathlib import Path
-
-    motion, path = Path(__file__).parents[1] / "examples" / "elbow_flexion.csv", tmp_path / "torque.csv"
+    motion, path = ROOT / "examples" / "elbow_flexion.csv", tmp_path / "torque.csv"
     record = json.loads(invoke(["collocate", "--motion", motion, "--nodes", 50, "--save-torque", path, "-f", "json",
                                 "--quiet"]).stdout)
     t, span = np.loadtxt(path, delimiter=",", skiprows=1)[:, 0], np.loadtxt(motion, delimiter=",", skiprows=1)[-1, 0]

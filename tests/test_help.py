@@ -22,8 +22,9 @@ from fdbench.optimizers import OPTIMIZERS
 from fdbench.torques import TORQUES
 
 from helpers.processes import GATED_OPTIMIZER, Gate, python_path, wait_until
+from helpers.paths import ROOT
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = ROOT / "examples"
 COMMANDS = ("inverse", "simulate", "control", "optimize", "report", "methods")
 
 
@@ -192,11 +193,11 @@ def test_no_help_or_message_names_a_package_index_install():
 
     assert "pip install '.[dask]'" in DASK_INSTALL
     assert "fdbench[dask]" not in help_text("report") and "pip install '.[dask]'" in help_text("report")
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    readme = (ROOT / "README.md").read_text()
     assert "fdbench[dask]" not in readme and "pip install '.[dask]'" in readme
 
 
-BENCHMARKS = sorted((Path(__file__).resolve().parent.parent / "benchmarks").glob("bench_*.py"))
+BENCHMARKS = sorted((ROOT / "benchmarks").glob("bench_*.py"))
 
 
 @pytest.mark.parametrize("script", BENCHMARKS, ids=[path.name for path in BENCHMARKS])

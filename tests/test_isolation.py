@@ -21,9 +21,9 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from helpers.paths import ROOT
 from fdbench.cli import app
 
-ROOT = Path(__file__).resolve().parent.parent
 ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
 # modules that a child Python imports early (its bootstrap, multiprocessing's, fdbench's) and
 # fdbench itself: each planted copy leaves a file 'imported-<name>' beside it when imported

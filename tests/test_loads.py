@@ -7,7 +7,7 @@
   expressed in a body's or the frame's axes land where a hand computation puts them;
 - on random models with free and path joints, the loads' generalised forces are the virtual work
   of the force at the body's material point and of the free moment, by the independent
-  minimal-coordinates reference (tests/reference_dynamics.GeneralTree);
+  minimal-coordinates reference (tests/helpers/reference_dynamics.GeneralTree);
 - the simulation's mixed-coordinate loads (eq. 12) agree with inverse dynamics': under tau = ID
   with loads, the simulated accelerations are the motion's (to the penalty's 1/alpha);
 - the data are interpolated linearly, a time outside their span refused.

@@ -15,12 +15,12 @@ from typer.testing import CliRunner
 
 from helpers.cli_checks import assert_one_line_error
 from helpers.loads_files import COLUMNS, loads_xml, storage, write
+from helpers.paths import ROOT
 
 from fdbench.cli import app
 from fdbench.files import BadFile
 from fdbench.multibody.description import Frame, find_model, to_toml
 
-ROOT = Path(__file__).resolve().parent.parent
 WALK = next((where for where in (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",
                                   ROOT.parent.parent / "shared" / "data" / "opensim")
              if (where / "subject01_walk_grf.xml").exists()), None)  # the walk's files: shipped, or beside the source

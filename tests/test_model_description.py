@@ -21,6 +21,7 @@ from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Join
 
 from helpers.cli_checks import assert_one_line_error
 from helpers import forearm_closed_form as cf
+from helpers.paths import ROOT
 
 runner = CliRunner()
 
@@ -466,7 +467,7 @@ def test_a_bad_change_names_the_pair(pair, words):
 
 
 def readme_section() -> str:
-    text = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    text = (ROOT / "README.md").read_text()
     start = text.index("\n## Your own model (file format)\n")
     return text[start:text.index("\n## ", start + 1)]
 

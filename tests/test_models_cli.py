@@ -1,5 +1,5 @@
 """Models of the library through the command line, on the multibody engine: --model arm2 on every
-command against the arm's closed form (tests/arm2_closed_form.py), motion and torque files by joint
+command against the arm's closed form (tests/helpers/arm2_closed_form.py), motion and torque files by joint
 name, per-joint indicators, and bad input as one line with exit 2."""
 
 from __future__ import annotations

@@ -16,12 +16,13 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from helpers import forearm_closed_form as forearm
+from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.experiment import control_spec, optimize_spec, with_motion_file
 from fdbench.motion import as_motion, butterworth_design_hz, eq5, noisy, read_motion_csv, zero_lag_lowpass
 
 runner = CliRunner()
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "elbow_flexion.csv"
+EXAMPLE = ROOT / "examples" / "elbow_flexion.csv"
 
 
 def invoke(*args):

@@ -31,7 +31,7 @@ def forearm_model() -> Model:
 
 
 def arm2_model() -> Model:
-    """The two-segment arm (the constants of tests/arm2_closed_form.py)."""
+    """The two-segment arm (the constants of tests/helpers/arm2_closed_form.py)."""
     return Model("arm2", (0.0, -9.81),
                  (Body("upper_arm", 2.0, (0.13, 0.0), 0.06 - 2.0 * 0.13**2),
                   Body("forearm", 1.0, (0.11, 0.0), 0.04 - 1.0 * 0.11**2)),

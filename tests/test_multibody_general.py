@@ -5,7 +5,7 @@
   their rounding, 1e-14 times the dense leading matrix's condition number (relative);
 - on random models with free and path joints, the engine's state from joint values lies on the
   constraints (positions and velocities, to rounding), and eq. 12's accelerations there converge to
-  the reference's minimal forward dynamics (tests/reference_dynamics.GeneralTree) as 1/alpha;
+  the reference's minimal forward dynamics (tests/helpers/reference_dynamics.GeneralTree) as 1/alpha;
 - the compiled inverse dynamics equals the engine's numpy one (``Engine.inverse_dynamics``) to 1e-10;
 - external loads (``fdbench.multibody.loads``) in eq. 12 converge to the minimal forward dynamics
   under their generalised forces;

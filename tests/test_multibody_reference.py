@@ -1,7 +1,7 @@
 """The multibody engine (fdbench.multibody.engine, the paper's mixed coordinates and penalty
-formulation) against the independent minimal-coordinate reference (tests/reference_dynamics.py:
+formulation) against the independent minimal-coordinate reference (tests/helpers/reference_dynamics.py:
 recursive Newton-Euler and the kinetic energy's mass matrix, DOP853 at rtol = atol = 1e-12), on the
-built-in forearm and arm and on random chains and trees of 1 to 6 bodies (tests/multibody_strategies.py):
+built-in forearm and arm and on random chains and trees of 1 to 6 bodies (tests/helpers/multibody_strategies.py):
 
 - inverse dynamics, M(z) and h(z, z') to 1e-9 relative (of the RMS of the reference's values);
 - forward dynamics: the engine's compiled RK4 (dt 1e-4 s) under a per-joint PD law with feedforward
@@ -188,7 +188,7 @@ def test_pd_simulation_on_random_trees_matches_the_reference(case):
 
 def check_general_inverse_dynamics(model, seed):
     """Inverse dynamics, M(z) and h of a model with free and path joints against the reference's
-    jets (tests/reference_dynamics.GeneralTree), to 1e-9 relative."""
+    jets (tests/helpers/reference_dynamics.GeneralTree), to 1e-9 relative."""
     engine, t = engine_module.Engine(model), ref.GeneralTree(model)
     assert engine.joints == model.coordinates and engine.n_joints == t.n_joints
     rng = np.random.default_rng(seed)

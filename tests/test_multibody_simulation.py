@@ -1,7 +1,7 @@
 """The multibody engine's compiled feedback laws, adaptive integration and population
 (fdbench.multibody.kernels, fdbench.multibody.simulation) on library models and random trees:
 
-- the compiled inverse dynamics against the independent reference (tests/reference_dynamics.py);
+- the compiled inverse dynamics against the independent reference (tests/helpers/reference_dynamics.py);
 - a gain matrix [diag kp, diag kd] gives PD's numbers to the last bit;
 - computed torque on a plant equal to its nominal model: the joint error follows
   e'' + kd e' + kp e = 0 from a perturbed start, to the penalty formulation's accuracy;

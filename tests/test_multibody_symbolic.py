@@ -3,7 +3,7 @@ collocation (fdbench.collocation) and the time-varying LQR (fdbench.multibody.lq
 model description:
 
 - M(z), h(z, z') and the inverse dynamics against the engine's numpy ones and the independent
-  reference (tests/reference_dynamics.py) on random chains and trees, to 1e-9 relative;
+  reference (tests/helpers/reference_dynamics.py) on random chains and trees, to 1e-9 relative;
 - the arm's M and h against the closed form of Lagrange's equations (the values of arm2.toml);
 - the linearisation against central differences of the forward dynamics;
 - collocation of a minimum-jerk motion on the library's arm2 and leg3: solved, tracked;

@@ -21,6 +21,7 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers.osim_files import body, joint, osim_file, path_knee_model
+from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.multibody.description import MotionSpec, find_model, library, load_model
 from fdbench.multibody.engine import Engine
@@ -34,7 +35,6 @@ from fdbench.multibody.simulation import simulate
 if importlib.util.find_spec("opensim") is None:
     pytest.skip("the opensim package is not installed (pip install 'fdbench[opensim]')", allow_module_level=True)
 
-ROOT = Path(__file__).resolve().parent.parent
 ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
 SUBJECT01 = next((where for where in (folder / "shared" / "data" / "opensim" / "subject01.osim"
                                       for folder in (ROOT.parent, ROOT.parent.parent)) if where.exists()),

@@ -19,12 +19,12 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
+from helpers.paths import ROOT
 from fdbench.cli import app
 
 if importlib.util.find_spec("opensim") is None:
     pytest.skip("the opensim package is not installed (pip install '.[opensim]')", allow_module_level=True)
 
-ROOT = Path(__file__).resolve().parent.parent
 PLACES = (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",
           ROOT.parent.parent / "shared" / "data" / "opensim")  # the walk's files: shipped, or beside the source
 DATA = next((where for where in PLACES if (where / "subject01_walk_grf.xml").exists()), PLACES[0])

@@ -10,7 +10,6 @@ from __future__ import annotations
 import importlib.util
 import io
 import json
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -18,12 +17,13 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.paths import ROOT
 
 from fdbench.cli import app
 from fdbench.experiment import RunSpec, control_spec, run
 from fdbench.peers import peer_spec
 
-ARM26 = Path(__file__).resolve().parent.parent / "examples" / "opensim" / "arm26.osim"
+ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
 
 # OpenSim runs in child processes only (see fdbench.peers.child).
 if importlib.util.find_spec("opensim") is None:

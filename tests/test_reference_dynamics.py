@@ -1,8 +1,8 @@
-"""Self-checks of the minimal-coordinate reference (tests/reference_dynamics.py), independent of the
+"""Self-checks of the minimal-coordinate reference (tests/helpers/reference_dynamics.py), independent of the
 multibody engine, so that the engine's tests compare against something known to be right:
 
 - the forearm and the two-segment arm against their closed forms (Lagrange's equations written by
-  hand: the elbow torque of the paper, tests/arm2_closed_form.py);
+  hand: the elbow torque of the paper, tests/helpers/arm2_closed_form.py);
 - the two constructions of the reference against each other and against Lagrange's equations: the
   RNEA's torques equal M z'' + h with M from the kinetic energy, and d/dt dT/dz' - dT/dz + dV/dz
   (derivatives of the energies by central differences) on random trees;
@@ -107,7 +107,7 @@ def test_offsets_shift_the_coordinates(offsets, seed):
        seed=st.integers(0, 2**16))
 def test_arm_matches_the_closed_form_arm(m0, F_ext, g, L01, seed):
     """The RNEA's torques and M(z) equal those of the arm's closed form (Lagrange's equations written
-    by hand, tests/arm2_closed_form.py) at random states, batched, for changed constants."""
+    by hand, tests/helpers/arm2_closed_form.py) at random states, batched, for changed constants."""
     changes = dict(m0=m0, F_ext=F_ext, g=g, L01=L01)
     t = ref.tree(arm2_model(**changes))
     z, w, dw = random_states(2, seed=seed)

@@ -26,6 +26,7 @@ from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
 from fdbench.cli import app
 from fdbench.report import CSV_COLUMNS
 from helpers.processes import GATED_OPTIMIZER, Gate, children, wait_until
+from helpers.paths import ROOT
 
 # The paper's published figures, typed in from its text (section 5, Tables 2 and 3):
 # (RMSE_rot deg, RMSE_torque N m, runtime s).
@@ -858,7 +859,7 @@ def test_noise_and_plant_stand_in_the_settings_csv_and_json(tmp_path):
 def test_a_motion_file_stands_with_its_digest_convention_and_filtered_reference(tmp_path):
     import hashlib
 
-    motion = Path(__file__).parents[1] / "examples" / "elbow_flexion.csv"
+    motion = ROOT / "examples" / "elbow_flexion.csv"
     args = ["report", "--db", tmp_path / "file.sqlite", "--motion", motion, "--torque", "cs", "--opt", "bfgs",
             "--feedforward", "--no-control", "--no-beyond", "--seeds", 1, "--budget", 2, "--jobs", 1, "-q"]
     text = invoke(*args).stdout
@@ -876,7 +877,7 @@ def test_figure2_draws_a_recordings_raw_samples_and_says_what_rmse_is_against():
     from fdbench.experiment import RunSpec, with_motion_file
     from fdbench.figures import figure2_samples
 
-    motion = Path(__file__).parents[1] / "examples" / "elbow_flexion.csv"
+    motion = ROOT / "examples" / "elbow_flexion.csv"
     raw = np.loadtxt(motion, delimiter=",", skiprows=1)
     samples, note, reference = figure2_samples(with_motion_file(RunSpec(kinematics=str(motion))))
     assert np.allclose(samples[1][:, 0], np.radians(raw[:, 1])) and np.allclose(samples[0], raw[:, 0] - raw[0, 0])

@@ -18,6 +18,7 @@ from typer.testing import CliRunner
 from fdbench.cli import app
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.paths import ROOT
 
 
 runner = CliRunner()
@@ -387,7 +388,7 @@ def test_help_shows_formats_and_no_type_noise(command):
 def test_the_readme_commands_run_as_written(databases, tmp_path, monkeypatch):
     import shlex
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    readme = (ROOT / "README.md").read_text()
     block = readme.split("### Looking at stored runs\n", 1)[1].split("```")[1]
     lines = [line.split("#")[0] for line in block.splitlines() if line.startswith("fdbench runs ")]
     assert len(lines) == 4

@@ -27,6 +27,7 @@ from fdbench.store_queries import method_label
 
 from helpers.cli_checks import assert_one_line_error
 from helpers.processes import python_path
+from helpers.paths import ROOT
 
 PREFIX = "fdbench: error: "
 OTHER = 12345  # a uid that is not ours
@@ -238,7 +239,7 @@ def _with_file_size_limit(limit: int, args: list, cwd: Path) -> subprocess.Compl
     code = ("import resource, signal, sys, runpy; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
             f"resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit})); "
             "sys.argv = ['fdbench'] + sys.argv[1:]; runpy.run_module('fdbench.cli', run_name='__main__')")
-    env = dict(os.environ, PYTHONPATH=python_path(Path(__file__).parent.parent), PYTHONDONTWRITEBYTECODE="1")
+    env = dict(os.environ, PYTHONPATH=python_path(ROOT), PYTHONDONTWRITEBYTECODE="1")
     return subprocess.run([sys.executable, "-c", code, *args], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=120)
 
@@ -301,7 +302,7 @@ def test_a_full_stdout_is_one_line_and_exit_2_as_a_full_output_file(tmp_path, ar
     db = tmp_path / "a.sqlite"
     filled(db)
     args = [a.format(db=db) for a in args]
-    env = dict(os.environ, PYTHONPATH=python_path(Path(__file__).parent.parent))
+    env = dict(os.environ, PYTHONPATH=python_path(ROOT))
     with open("/dev/full", "w") as full:
         done = subprocess.run(FDBENCH + args, stdout=full, stderr=subprocess.PIPE, text=True, env=env, timeout=120)
     lines = done.stderr.splitlines()
@@ -346,7 +347,7 @@ def test_a_user_who_cannot_write_the_folder_reads_the_database(tmp_path):
     db = _foreign_wal_database(tmp_path)
     before = listing(db.parent)
     drop = ["setpriv", "--inh-caps=-dac_override,-dac_read_search", "--bounding-set=-dac_override,-dac_read_search"]
-    env = dict(os.environ, PYTHONPATH=python_path(Path(__file__).parent.parent))
+    env = dict(os.environ, PYTHONPATH=python_path(ROOT))
     done = subprocess.run(drop + FDBENCH + ["runs", "list", "--db", str(db), "-f", "csv"], capture_output=True,
                           text=True, env=env, timeout=120)
     assert done.returncode == 0, done.stderr

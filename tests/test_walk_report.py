@@ -23,12 +23,13 @@ from typer.testing import CliRunner
 
 from helpers.cli_checks import assert_one_line_error
 from helpers.loads_files import push_files
+from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.problem import DEFAULT_RESIDUAL_WEIGHT
 from fdbench.walk import BFGS, CMAES, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, WALK_PENALTY, WalkRow
 from fdbench.walk_report import claim_lines, ranking
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples" / "opensim"
+EXAMPLES = ROOT / "examples" / "opensim"
 DURATION = 0.3  # s: the small model's recorded motion
 COORDINATES = ("tilt", "tx", "ty", "hip", "knee")
 
