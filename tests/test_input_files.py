@@ -2,7 +2,7 @@
 1e300 N load, times in the wrong unit), duplicate and short columns, control characters and
 endless names in what a message quotes; each refused in one line (exit 2, nothing written). And
 the derivative estimate at a recording's ends against eq. 5's closed form. (OpenSim models' names:
-tests/test_osim.py, which imports opensim.)"""
+tests/engine/test_osim.py, which imports opensim.)"""
 
 from __future__ import annotations
 

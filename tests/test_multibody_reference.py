@@ -25,7 +25,7 @@ tree 9.5e-6, the worst of 30 draws 9.8e-6 and a 60-draw search steered to the la
 (hypothesis.target) 3.3e-6: a factor 10 under 1e-4 deg. The strategies keep their full ranges.
 
 The two share nothing but the model description: no points, constraints or penalties on the
-reference's side, and the reference is itself checked in tests/test_reference_dynamics.py.
+reference's side, and the reference is itself checked in tests/engine/test_reference_dynamics.py.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Population evaluation on the paper's forearm (a one-joint model of the engine): one compiled call
 for many candidates, the same numbers as one by one, whatever the thread count. The arm's are in
-tests/test_multibody_problem.py."""
+tests/methods/test_multibody_problem.py."""
 
 import numpy as np
 import pytest
