@@ -17,9 +17,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from processes import python_path
+from helpers.processes import python_path
+from helpers.paths import ROOT
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = ROOT / "examples"
 SCIPY_INTEGRATORS = ("rk45", "dop853", "lsoda", "radau", "bdf")
 
 pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="the shell examples need bash")
