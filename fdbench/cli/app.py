@@ -98,11 +98,12 @@ class FdbenchGroup(TyperGroup):
         sys.exit(_flush_stdout(code))
 
 
-    def get_command(self, ctx, cmd_name):
-        command = super().get_command(ctx, cmd_name)
+    def resolve_command(self, ctx, args):
+        # the command about to run (not each one listed by --help, which stays fast)
+        name, command, rest = super().resolve_command(ctx, args)
         if command is not None and getattr(self, "help_requested", False):
             _show_choices(command, ctx)
-        return command
+        return name, command, rest
 
     def format_help(self, ctx, formatter):
         _show_choices(self, ctx)
@@ -113,11 +114,11 @@ class SubcommandGroup(TyperGroup):
     """A group of subcommands (``runs``, ``models``) whose --help shows choices as the other
     commands' do (no type noise on flags)."""
 
-    def get_command(self, ctx, cmd_name):
-        command = super().get_command(ctx, cmd_name)
+    def resolve_command(self, ctx, args):
+        name, command, rest = super().resolve_command(ctx, args)
         if command is not None and getattr(ctx.find_root().command, "help_requested", False):
             _show_choices(command, ctx)
-        return command
+        return name, command, rest
 
 
 def _choices(name: str, command: str):
