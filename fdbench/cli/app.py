@@ -15,7 +15,7 @@ from .. import __version__
 from ..registry import PluginError
 
 
-_STARTED = time.perf_counter()
+STARTED = time.perf_counter()
 
 
 FORMATS = ("table", "json", "csv")
@@ -67,13 +67,13 @@ class FdbenchGroup(TyperGroup):
             returned = super().main(args=args, prog_name=prog_name or "fdbench", standalone_mode=False, **extra)
             code = returned if isinstance(returned, int) else 0
             if code == 130:
-                _error("interrupted")
+                error("interrupted")
         except BadInput as exc:
-            code = _error(str(exc), 2)
+            code = error(str(exc), 2)
         except PluginError as exc:
-            code = _error(str(exc), 2)
+            code = error(str(exc), 2)
         except KeyboardInterrupt:
-            code = _error("interrupted", 130)
+            code = error("interrupted", 130)
         except (BrokenPipeError, _StdoutClosed):
             code = _closed_stdout()
         except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback
@@ -83,18 +83,18 @@ class FdbenchGroup(TyperGroup):
                     sys.exit(exc.exit_code)
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
-                code = _error(where + message, exc.exit_code)
+                code = error(where + message, exc.exit_code)
             elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
-                code = _error(f"--db: {exc}", 2)
+                code = error(f"--db: {exc}", 2)
             elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
-                code = _error(str(exc), 2)
+                code = error(str(exc), 2)
             elif _output_full(exc):  # help text into '> /dev/full': as any full output
                 _closed_stdout()
-                code = _error(f"standard output: cannot write: {exc.strerror}", 2)
+                code = error(f"standard output: cannot write: {exc.strerror}", 2)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:
-                code = _error(f"{type(exc).__name__}: {exc}", 1)
+                code = error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(_flush_stdout(code))
 
 
@@ -182,17 +182,14 @@ def _show_choices(command, ctx) -> None:
     """Help only: show registered names as an option's choices ('[ann|cs|pf]') and no type for
     on/off flags (computed when help is asked for, so plugins appear and other commands stay fast);
     texts in brackets shown as written (``_escape_help``)."""
+    params = list(command.get_params(ctx) if hasattr(command, "get_params") else [])  # method options made
     _escape_help(command)
-    params = list(getattr(command, "params", []))
     help_option = command.get_help_option(ctx) if hasattr(command, "get_help_option") else None
     for param in params + ([help_option] if help_option is not None else []):
         if getattr(param, "is_flag", False) and getattr(param, "metavar", None) is None:
             param.metavar = ""
             continue
         if getattr(param, "param_type_name", None) != "option" or param.metavar is not None:
-            continue
-        if param.name == "hidden":
-            param.metavar = "<int>|auto"
             continue
         try:
             choices = _choices(param.name, command.name)
@@ -252,7 +249,7 @@ def _flush_stdout(code: int) -> int:
         return _closed_stdout()
     except OSError as exc:  # a full disk under '> file': the results are not all there
         _closed_stdout()
-        return _error(f"standard output: cannot write the results: {exc.strerror or exc}", 2)
+        return error(f"standard output: cannot write the results: {exc.strerror or exc}", 2)
     return code
 
 
@@ -279,7 +276,7 @@ def _closed_stdout() -> int:
     return SIGPIPE_EXIT
 
 
-def _error(message: str, code: int = 1) -> int:
+def error(message: str, code: int = 1) -> int:
     message = " ".join(message.split())  # one line, whatever a path or a library put in it
     sys.stderr.write(f"fdbench: error: {message}\n")
     sys.stderr.flush()
