@@ -121,41 +121,25 @@ class SubcommandGroup(TyperGroup):
         return name, command, rest
 
 
+# options whose valid values are registered names: (module, name of its registry), read for --help
+REGISTERED = {"torque": ("torques", "TORQUES"), "opt": ("optimizers", "OPTIMIZERS"),
+              "integrator": ("integrate", "INTEGRATORS"), "smoothing": ("motion", "SMOOTHING"),
+              "backend": ("execution", "BACKENDS"), "controller": ("controllers", "CONTROLLERS"),
+              "scheme": ("collocation", "SCHEMES")}
+
+
 def _choices(name: str, command: str):
     """The valid values of an option, from the registries (plugins included), for --help."""
-    if name == "torque":
-        from ..torques import TORQUES
+    import importlib
 
-        return list(TORQUES)
-    if name == "opt":
-        from ..optimizers import OPTIMIZERS
-
-        return list(OPTIMIZERS)
-    if name == "integrator":
-        from ..integrate import INTEGRATORS
-
-        return list(INTEGRATORS)
-    if name == "smoothing":
-        from ..motion import SMOOTHING
-
-        return list(SMOOTHING)
+    if name in REGISTERED:
+        module, registry = REGISTERED[name]
+        return list(getattr(importlib.import_module(f"fdbench.{module}"), registry))
     if name == "kinematics":
         from ..models import named_motions, names
 
         found = [motion for model in names() for motion in named_motions(model)]  # the library's, in order
         return list(dict.fromkeys(found)) + ["FILE"]
-    if name == "backend":
-        from ..execution import BACKENDS
-
-        return list(BACKENDS)
-    if name == "controller":
-        from ..controllers import CONTROLLERS
-
-        return list(CONTROLLERS)
-    if name == "scheme":
-        from ..collocation import SCHEMES
-
-        return list(SCHEMES)
     if name == "fmt":
         return list(formats_of(command))
     return None

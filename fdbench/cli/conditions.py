@@ -218,46 +218,37 @@ def _fields(conditions: dict) -> dict:
 
 
 def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions: dict | None = None) -> dict:
-    """RunSpec fields shared by every command that simulates (a motion file enters by its digest)."""
+    """RunSpec fields shared by every command that simulates (a motion file, a model file and a
+    loads file enter by their digests)."""
+    import os
+
+    from ..experiment import model_digest, motion_digest
+    from ..files import BadFile
+    from ..models import is_file, named_motions
+
     fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
                   omega=omega, **_fields(conditions or {}))
-    from ..models import named_motions
-
     model = fields.get("model_name", "forearm")
+    files = []  # (option, digest of its file, the file)
     if kinematics not in named_motions(model):
-        import os
-
-        from ..experiment import motion_digest
-        from ..files import BadFile
-
         if model != "forearm" and not os.path.exists(kinematics):
             from ..registry import unknown_name_message
 
             raise BadInput(f"--motion: {unknown_name_message(f'{model} motion', kinematics, list(named_motions(model)))}"
                            f", and no file {kinematics} exists")
-
-        try:
-            fields["inputs"] = (("--motion", motion_digest(kinematics)),)
-        except BadFile as exc:
-            raise BadInput(str(exc)) from None
-    from ..models import is_file
-
+        files.append(("--motion", motion_digest, kinematics))
     if is_file(model):
-        from ..experiment import model_digest
-        from ..files import BadFile
-
-        try:
-            fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--model", model_digest(model)),)))
-        except BadFile as exc:
-            raise BadInput(str(exc)) from None
+        files.append(("--model", model_digest, model))
     if fields.get("loads") is not None:
-        from ..files import BadFile
-        from ..multibody.loads import loads_digest
+        from ..multibody.loads import loads_digest  # only with loads: it imports the engine
 
-        try:
-            fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--loads", loads_digest(fields["loads"])),)))
-        except BadFile as exc:
-            raise BadInput(str(exc)) from None
+        files.append(("--loads", loads_digest, fields["loads"]))
+    try:
+        digests = [(option, digest(path)) for option, digest, path in files]
+    except BadFile as exc:
+        raise BadInput(str(exc)) from None
+    if digests:
+        fields["inputs"] = tuple(sorted(digests))
     return fields
 
 

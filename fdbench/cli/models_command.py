@@ -11,7 +11,7 @@ import typer
 
 from .app import BadInput, SubcommandGroup, app
 from .common import check_outputs, emit, say
-from .options import Output
+from .options import Output, format_option
 
 
 models_app = typer.Typer(
@@ -26,14 +26,10 @@ LIST_FORMATS = ("table", "json", "csv")
 SHOW_FORMATS = ("table", "json", "toml")
 
 
-def _format(choices, help_text: str):
-    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
-
-
 @models_app.callback()
 def list_models(
     ctx: typer.Context,
-    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per library model: its name, bodies, joints (its coordinates), total mass and what it is."""
@@ -63,7 +59,7 @@ def list_models(
 @models_app.command("show")
 def show_model(
     model: Annotated[str, typer.Argument(metavar="NAME|FILE", help="A library model's name or a model file (.toml, .json, or OpenSim's .osim).", show_default=False)],
-    fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
+    fmt: Annotated[str, format_option(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
     output: Output = None,
 ):
     """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads, named motions, short keys, the paths --model PATH=VALUE takes with their values, and the total mass. A file that cannot be used is refused in one line naming the key."""

@@ -27,8 +27,7 @@ from typer.core import TyperCommand
 
 from .app import BadInput, INTEGRATOR_HELP, KINEMATICS_HELP, MAX_THREADS
 from .common import check_outputs, check_store, finish, store_run, write_trajectory
-
-MOTION_PANEL = "Motion and model"
+from .conditions import MOTION_PANEL, run_fields
 
 
 Kinematics = Annotated[Optional[str], typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP, show_default=False,
@@ -43,6 +42,11 @@ SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--sav
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 NoiseSeed = Annotated[int, typer.Option("--seed", help="Seed of the --noise-deg noise; the same seed gives the same noisy motion.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
+def format_option(choices, help_text: str):
+    """--format of a command whose formats are fixed (its help lists them as choices)."""
+    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
+
+
 Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads evaluating a CMA-ES population at once, in [1, {MAX_THREADS}] (default: the cores available); the numbers do not depend on it.", show_default=False)]
 
 
@@ -130,8 +134,6 @@ class Simulation:
 
     def spec_fields(self, kinematics: str, conditions: dict | None) -> dict:
         """RunSpec fields of a run on ``kinematics`` under ``conditions`` (see ``run_fields``)."""
-        from .conditions import run_fields
-
         return run_fields(kinematics, **self.fields(), conditions=conditions)
 
 

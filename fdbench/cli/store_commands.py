@@ -11,7 +11,7 @@ import typer
 
 from .app import BadInput, SubcommandGroup, app
 from .common import check_outputs, emit, render, say
-from .options import Output
+from .options import Output, format_option
 
 
 runs_app = typer.Typer(
@@ -32,10 +32,6 @@ Torque = Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help=
 Opt = Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
 Controller = Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]
 Status = Annotated[Optional[str], typer.Option("--status", metavar="NAME", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)]
-
-
-def _format(choices, help_text: str):
-    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
 
 
 def _filters(command, model, torque, opt, controller, status) -> dict:
@@ -166,7 +162,7 @@ def list_runs(
     opt: Opt = None,
     controller: Controller = None,
     status: Status = None,
-    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per stored run: id, date, command, model, method, seed, the three indicators, t_end and status."""
@@ -190,7 +186,7 @@ def list_runs(
 def show_run(
     run: Annotated[str, typer.Argument(metavar="ID", help="The run's id (from 'fdbench runs list') or its settings hash.", show_default=False)],
     db: ReadDb = None,
-    fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person) or json (with the convergence history and the best parameters).")] = "table",
+    fmt: Annotated[str, format_option(SHOW_FORMATS, "Output: table (for a person) or json (with the convergence history and the best parameters).")] = "table",
     output: Output = None,
 ):
     """Everything stored about one run: its record, its settings and where, when and by what it was made."""
@@ -239,7 +235,7 @@ def export_runs(
     opt: Opt = None,
     controller: Controller = None,
     status: Status = None,
-    fmt: Annotated[str, _format(EXPORT_FORMATS, "csv, json, or parquet (needs pyarrow or fastparquet, and -o).")] = "csv",
+    fmt: Annotated[str, format_option(EXPORT_FORMATS, "csv, json, or parquet (needs pyarrow or fastparquet, and -o).")] = "csv",
     output: Output = None,
 ):
     """Every field of the stored records, one row per run, with its provenance and settings: for pandas, R or a spreadsheet."""
@@ -302,7 +298,7 @@ def compare_runs(
     opt: Opt = None,
     controller: Controller = None,
     status: Status = None,
-    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """The same cells of two databases side by side: per cell, the median RMSE_rot, RMSE_torque and runtime in A and in B and the ratio B/A.

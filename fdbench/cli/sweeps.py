@@ -74,7 +74,7 @@ def report(
     if not cells and not control and not beyond and not peers:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
     check_gradient(optim.gradient, opt)
-    peer_names = peer_list(peers)
+    peer_names = _peer_names(peers)
     plan = make_plan(
         cells, seeds, optim.budget, control, kp, kd, torque_options=torque_options,
         optimizer_options=optimizer_options, penalty_weight=optim.penalty_weight,
@@ -107,9 +107,9 @@ def report(
             raise BadInput(str(exc)) from None
         for method in peer_methods:
             validated(method.spec)
-        check_peers_available()
+        _check_peers_available()
     extra = ([m.spec for m in methods] if methods else []) + [m.spec for m in peer_methods]
-    runs = run_specs(plan.all_specs() + extra, db_path, run.db is None, executor, run.rerun, quiet)
+    runs = _run_specs(plan.all_specs() + extra, db_path, run.db is None, executor, run.rerun, quiet)
     from ..report import build_rows
 
     start = time.perf_counter()
@@ -178,7 +178,7 @@ def study(
 
         check_choice("--param", param, model_keys(conditions["model_name"]))
     if figures is not None:
-        _check_study_figures(figures, output, db_path, inputs)
+        _check_figures_dir(figures, output, db_path, inputs, studies.FIGURE_NAMES)
     torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, run, selection, flags, optim)
     executor = run.executor()
     control, (kp, kd) = selection.control, (flags["controllers"].get("kp"), flags["controllers"].get("kd"))
@@ -194,7 +194,7 @@ def study(
         raise BadInput(with_option(str(exc))) from None
     for key in sweep.specs:
         validated(sweep.specs[key][0])
-    runs = run_specs(sweep.all_specs(), db_path, run.db is None, executor, run.rerun, quiet)
+    runs = _run_specs(sweep.all_specs(), db_path, run.db is None, executor, run.rerun, quiet)
     rows = studies.summary(sweep, runs)
     if fmt == "csv":
         from ..files import csv_text
@@ -277,13 +277,6 @@ def _study_settings(sweep, seeds, budget, carried_out: str, kinematics, integrat
     }
 
 
-def _check_study_figures(directory: Path, output: Optional[Path], db: Path, inputs: dict) -> None:
-    """As for the report's --figures: refuse before the work a folder that cannot take them."""
-    from ..study import FIGURE_NAMES
-
-    _check_figures_dir(directory, output, db, inputs, FIGURE_NAMES)
-
-
 def _sweep_options(ctx, seeds, run: Execution, selection: Cells, flags: MethodValues, optim: Optimisation):
     """The checks shared by the commands that run many specs (report, study), before any work;
     returns the torque and optimiser names (their NAME[KEY=VALUE,...] options taken out) and the
@@ -306,7 +299,7 @@ def _sweep_options(ctx, seeds, run: Execution, selection: Cells, flags: MethodVa
     return torques, optimizers, torque_options, optimizer_options
 
 
-def run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:
+def _run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, quiet: bool) -> dict:
     """Make sure every spec is stored in the database (missing runs carried out by the backend,
     each stored as it finishes), with a progress bar; {spec hash: stored run}. An unusable
     database or backend is bad input; SIGTERM ends the command like Ctrl-C, exit 143. A new
@@ -325,8 +318,9 @@ def run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qui
             try:
                 with open_store(db_path) as store:
                     store.check_usable()
-                    if not existed:
-                        _say_creating(db_path, default_db, quiet)
+                    if not existed:  # say where it is, and how to choose another
+                        hint = " (choose another with --db or $FDBENCH_DB)" if default_db else ""
+                        say(quiet, f"creating results database {db_path}{hint}")
                     with Progress(quiet, "runs") as progress:
 
                         def on_done(done, total):
@@ -346,13 +340,7 @@ def run_specs(specs, db_path: Path, default_db: bool, executor, rerun: bool, qui
         raise typer.Exit(143) from None
 
 
-def _say_creating(db_path: Path, default: bool, quiet: bool) -> None:
-    """One line on stderr when a report has created its results database."""
-    hint = " (choose another with --db or $FDBENCH_DB)" if default else ""
-    say(quiet, f"creating results database {db_path}{hint}")
-
-
-def peer_list(text: Optional[str]) -> list:
+def _peer_names(text: Optional[str]) -> list:
     """The peers of --peers (none without it); an unknown one is bad input listing the valid."""
     if text is None:
         return []
@@ -364,7 +352,7 @@ def peer_list(text: Optional[str]) -> list:
         raise BadInput(str(exc)) from None
 
 
-def check_peers_available() -> None:
+def _check_peers_available() -> None:
     """Refuse --peers, before any run, where the opensim package cannot be imported."""
     from ..peers import check_available
 

@@ -39,7 +39,7 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
     from .. import walk
     from .common import emit as _emit, say as _say, validated as _validated
     from .conditions import run_fields as _common, warn_opensim as _warn_opensim
-    from .sweeps import check_peers_available as _check_peers_available, peer_list as _peer_names, run_specs as _run_specs
+    from .sweeps import _check_peers_available, _peer_names, _run_specs
 
     check_walk_options(ctx)
     popsize = walk.WALK_POPSIZE if popsize is None else popsize
