@@ -11,7 +11,6 @@ from typing import Annotated, Optional
 
 import typer
 
-from .. import __version__
 from .app import BadInput, MAX_JOBS, MAX_SEEDS, REPORT_FORMATS, STUDY_FORMATS, app, error
 from .common import (
     bracketed_all, check_choice, check_finite, check_gradient, check_method_ranges, check_names, check_outputs, emit,
@@ -201,8 +200,8 @@ def study(
 
         emit(csv_text(list(studies.CSV_COLUMNS), studies.csv_rows(sweep, rows)), output)
     elif fmt == "json":
-        settings = _study_settings(sweep, seeds, optim.budget, executor.describe(), kinematics, sim.integrator, sim.dt)
-        emit(_study_json(sweep, rows, settings), output)
+        settings = studies.settings(sweep, seeds, optim.budget, executor.describe(), kinematics, sim.integrator, sim.dt)
+        emit(studies.json_text(sweep, rows, settings), output)
     else:
         links = None
         if figures is not None:
@@ -213,7 +212,7 @@ def study(
             base = output.parent if output is not None else Path(".")
             links = {title: os.path.relpath(path, base) for title, path in written.items()}
             say(quiet, f"wrote {len(written)} figures to {figures}")
-        settings = _study_settings(sweep, seeds, optim.budget, executor.describe(), kinematics, sim.integrator, sim.dt)
+        settings = studies.settings(sweep, seeds, optim.budget, executor.describe(), kinematics, sim.integrator, sim.dt)
         emit(studies.markdown(sweep, rows, settings, links), output)
     if output is not None and str(output) != "-":
         say(quiet, f"wrote {output} ({len(sweep.all_specs())} runs, database {db_path})")
@@ -227,54 +226,6 @@ def _floating_base(conditions: dict) -> bool:
         return has_floating_base(conditions["model_name"], conditions.get("model", ()))
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-
-
-def _study_json(sweep, rows, settings: dict) -> str:
-    """The study as one JSON object: its settings and one object per method and level with the
-    CSV's columns (null for a statistic no run gave)."""
-    from .. import study as studies
-    from ..files import finite_or_none
-
-    table = [{name: finite_or_none(value.item() if hasattr(value, "item") else value)
-              for name, value in zip(studies.CSV_COLUMNS, row)} for row in studies.csv_rows(sweep, rows)]
-    return json.dumps({"settings": settings, "rows": table}, indent=2) + "\n"
-
-
-def _study_settings(sweep, seeds, budget, carried_out: str, kinematics, integrator, dt) -> dict:
-    """The study's settings table: what was swept, the conditions every run shares (model, its
-    changes, the plant's, the motion and its digest, the estimate, the noise), the run settings."""
-    from ..report import condition_settings
-    from ..store import machine
-
-    spec = sweep.all_specs()[0]
-    described = spec.describe()
-    shared = condition_settings(spec, sweep.all_specs())
-    shared.pop("RMSE_rot against", None)  # the study's introduction says it
-    if sweep.kind == "noise":
-        shared.pop("noise", None)  # the levels are the noise; the seeds are below
-    else:
-        from ..study import conditions
-
-        shared.pop("plant", None)  # the swept constant is the level; other plant changes stay
-        if conditions(sweep)["plant"]:
-            shared["plant"] = f"{conditions(sweep)['plant']} (the simulated body only), then {sweep.param} by each level"
-    return {
-        "study": sweep.kind + (f" of {sweep.param}" if sweep.param else ""),
-        "levels": ", ".join(f"{v:g}" for v in sweep.levels) + f" {'deg' if sweep.kind == 'noise' else '%'}",
-        "model": spec.model_name + (f" ({described['model_options']})" if described.get("model_options") else ""),
-        **shared,
-        "motion": f"{kinematics} ({described['duration_s']:g} s, {described['samples']} samples)"
-                  + (f", SHA-256 {dict(spec.inputs)['--motion'][:16]}" if dict(spec.inputs).get("--motion") else ""),
-        "derivative estimate": ("Butterworth zero-lag, then spline" if spec.smoothing == "butterworth"
-                                else "smoothing spline") + (f", cutoff {spec.cutoff_hz:g} Hz" if spec.smoothing == "butterworth" else ""),
-        "integrator": integrator + (f" (dt = {dt} s)" if integrator == "rk4" else ""),
-        "seeds": f"{seeds} per method and level (PD: one run where the runs would be identical)",
-        "budget": f"{budget} evaluations per optimisation",
-        "runs": str(len(sweep.all_specs())),
-        "parallel jobs": carried_out,
-        "fdbench": __version__,
-        "machine": machine(),
-    }
 
 
 def _sweep_options(ctx, seeds, run: Execution, selection: Cells, flags: MethodValues, optim: Optimisation):
