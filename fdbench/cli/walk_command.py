@@ -37,8 +37,8 @@ def walk_report(ctx, *, conditions: dict, kinematics: str, integrator: str, dt: 
     """Carry out the walk's report: check, plan, run (stored and resumed), write; with ``peers``
     (--peers) the peers on the walk too, in a section of their own."""
     from .. import walk
-    from .common import _emit, _say, _validated
-    from .options import _common, _warn_opensim
+    from .common import emit as _emit, say as _say, validated as _validated
+    from .conditions import run_fields as _common, warn_opensim as _warn_opensim
     from .sweeps import _check_peers_available, _peer_names, _run_specs
 
     check_walk_options(ctx)
@@ -132,7 +132,7 @@ def _peers_json(peer_rows, walk_rows) -> list:
 def _text(fmt, plan, walk_rows, forearm_rows, spec, inverse, runs, jobs, figures, output, quiet, processes=1,
           peers_found=None) -> str:
     from .. import walk, walk_report
-    from .common import _say
+    from .common import say as _say
 
     peer_methods, peer_rows = peers_found or ([], [])
 

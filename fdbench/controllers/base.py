@@ -71,6 +71,8 @@ class Controller(ABC):
 
     name: str = ""
     summary: str = ""
+    # the options offered as flags of their own (--kp): {option: fdbench.method_options.MethodOption}
+    command_line: dict = {}
 
     @abstractmethod
     def design(self, plan: Plan) -> Design:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from ..method_options import MethodOption
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive
 from ..multibody.lqr import lqr_gains, warm_up
 
@@ -27,6 +28,13 @@ class LQR(Controller):
     summary = ("time-varying linear-quadratic regulator about the desired trajectory, gains from the "
                "Riccati equation integrated backwards along it (as Drake's FiniteHorizonLinearQuadraticRegulator "
                "and python-control's lqr)")
+
+    command_line = {
+        "q_angle": MethodOption("weight of the squared angle error, rad^-2 (1e4: 0.01 rad costs as much as 1 N m).",
+                                default=1e4),
+        "q_rate": MethodOption("weight of the squared rate error, s^2 rad^-2.", default=1.0),
+        "r_torque": MethodOption("weight of the squared torque correction, (N m)^-2; positive.", default=1.0),
+    }
 
     def __init__(self, q_angle: float = 1e4, q_rate: float = 1.0, r_torque: float = 1.0):
         self.q_angle = check_positive("--q-angle", q_angle)  # rad^-2

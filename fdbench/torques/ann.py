@@ -11,6 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import TORQUES, TorqueParameterisation, check_count
 
 PRETRAIN_SEED = 0  # the pre-training's restarts are drawn from this fixed seed
@@ -82,6 +83,9 @@ class AnnTorque(TorqueParameterisation):
     # CMA-ES in the scaling of ``scale``: steps of 0.2 on the hidden layer, 0.06 on the output
     optimizer_defaults = {"cmaes": {"sigma0": 0.2, "popsize": 8}}
     summary = "neural network, one hidden layer of --hidden tanh neurons (default 4), 3N+1 parameters"
+
+    command_line = {"hidden": MethodOption("hidden neurons in [1, 50], or 'auto' to choose the smallest count that "
+                                           "fits the inverse-dynamics torque.", str, "4", metavar="<int>|auto")}
 
     def __init__(self, hidden: int = 4):
         self.hidden = check_count("--hidden", hidden, 1, 50)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import TORQUES, TorqueParameterisation, check_count
 
 
@@ -28,6 +29,10 @@ class CubicSplineTorque(TorqueParameterisation):
     # evaluations (median of 5 seeds, Table 2: 0.37 deg against 0.64 with cma's 0.1 and 11)
     optimizer_defaults = {"cmaes": {"sigma0": 0.05, "popsize": 8}}
     summary = "cubic spline through the torque at --knots equally spaced instants (default: one every 0.1 s)"
+
+    command_line = {"knots": MethodOption("knots in [4, 1000], equally spaced over the motion's span; default one every "
+                                          "0.1 s, as the paper's 11 over eq. 5's 1 s (26 for a 2.5 s recording).", int,
+                                          show_default=False)}
 
     def __init__(self, knots: int = DEFAULT_KNOTS):
         self.knots = check_count("--knots", knots, 4, 1000)

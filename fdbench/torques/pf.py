@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import TORQUES, TorqueParameterisation, check_count
 
 
@@ -18,6 +19,8 @@ class GaussianSumTorque(TorqueParameterisation):
     # CMA-ES: small steps, as sharpness and centres react strongly (Table 3: 0.54 deg against 1.73 with 0.1)
     optimizer_defaults = {"cmaes": {"sigma0": 0.03}}
     summary = "sum of --terms Gaussian bumps A exp(-C (t - T)^2), 3 parameters each (default 4)"
+
+    command_line = {"terms": MethodOption("terms (Gaussian bumps) in [1, 100], 3 parameters each.", int, 4)}
 
     def __init__(self, terms: int = 4):
         self.terms = check_count("--terms", terms, 1, 100)

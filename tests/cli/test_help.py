@@ -204,3 +204,14 @@ BENCHMARKS = sorted((ROOT / "benchmarks").glob("bench_*.py"))
 def test_every_benchmark_script_answers_help_without_running(script):
     out = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.startswith("usage:"), (script.name, out.stderr[-500:])
+
+
+def test_the_top_level_help_imports_no_numerics_nor_registry():
+    """``fdbench --help`` lists the commands without their choices, which need the registries."""
+    code = ("import sys; from fdbench.cli import main; sys.argv = ['fdbench', '--help']\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "print([m for m in ('numpy', 'fdbench.torques', 'fdbench.controllers', 'fdbench.models') if m in sys.modules],"
+            " file=sys.stderr)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and "Usage" in out.stdout, out.stderr
+    assert out.stderr.strip().splitlines()[-1] == "[]"
