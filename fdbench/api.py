@@ -6,18 +6,54 @@
     fdbench.simulate().record["rmse_rot_deg"]           # open loop, inverse-dynamics torque
     frame = fdbench.load_report("fdbench-results.sqlite")  # the report's table, a DataFrame
 
-Runs, specifications and records are those of the command line (``fdbench.experiment``); the
-registries ``TORQUES`` and ``OPTIMIZERS`` take new methods by decorator.
+Runs, specifications and records are those of the command line: ``run``, ``run_simulation``,
+``replay`` and ``inverse_run`` carry out a ``RunSpec`` (``fdbench.spec``) on the multibody engine
+(``fdbench.multibody.runs``, one runner per command) and return its flat record
+(``fdbench.records``); the registries ``TORQUES`` and ``OPTIMIZERS`` take new methods by decorator.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from .records import RunOutcome, explained
+from .spec import RunSpec
+
 
 # the method options of 'fdbench report' by default (its runs are stored under these settings)
 REPORT_TORQUE_OPTIONS = {"hidden": 4, "knots": None, "terms": 4}  # knots None: one every 0.1 s of the motion
 REPORT_OPTIMIZER_OPTIONS = {"sigma0": None, "popsize": None}  # None: each torque's default
+
+
+def run(spec: RunSpec, on_evaluation=None, on_start=None) -> RunOutcome:
+    """Carry out a control, optimisation or collocation run. ``on_evaluation(count, best)``
+    reports progress; ``on_start(budget)`` is called once compilation and imports are done."""
+    spec.validate()
+    if spec.command == "simulate":
+        raise ValueError("simulate runs are carried out by run_simulation")
+    if spec.command == "peer":  # OpenSim's and Moco's runs (fdbench.peers)
+        from .peers import run as run_peer
+
+        return explained(run_peer(spec), spec)
+    return explained(spec._runs().run(spec, on_evaluation, on_start), spec)
+
+
+def run_simulation(spec: RunSpec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
+    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history,
+    saved optimisation parameters or ``torque`` (a function of t (s), shape (k,) -> N m, shape (k,)
+    or (k, J)). Bad files raise ``files.BadFile``."""
+    return explained(spec._runs().run_simulation(spec, torque_file, params_file, torque), spec)
+
+
+def replay(spec: RunSpec, params):
+    """The simulation of a stored optimisation run's best parameters (for figures)."""
+    return spec._runs().replay(spec, params)
+
+
+def inverse_run(spec: RunSpec) -> tuple:
+    """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows on
+    the motion's samples), the columns of a motion file plus the torques."""
+    return spec._runs().inverse_run(spec)
 
 
 def simulate(torque=None, **settings):
@@ -30,8 +66,6 @@ def simulate(torque=None, **settings):
     torques, shape (n, 2)). ``settings``: the fields of ``RunSpec`` (``kinematics``,
     ``integrator``, ``dt``, ``rtol``, ``atol``, ``alpha``, ``xi``, ``omega``, ``model_name``...);
     a bad value raises ValueError."""
-    from .experiment import RunSpec, run_simulation
-
     spec = RunSpec(command="simulate", **settings).validate()
     if torque is not None and not callable(torque):
         raise TypeError("torque must be None or a function of time (s) returning N m")
@@ -42,8 +76,6 @@ def inverse_dynamics(**settings):
     """The nominal model's inverse dynamics on the motion's samples (``multibody.simulation.JointInverse``:
     ``t`` (s), ``angles`` (rad), ``velocities``, ``accelerations`` and ``torque`` (N m), each of
     shape (n, J)); ``settings``: the fields of ``RunSpec`` (``model_name``, ``kinematics``, ``model``...)."""
-    from .experiment import RunSpec
-
     return RunSpec(command="simulate", **settings).validate().reference()
 
 

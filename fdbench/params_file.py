@@ -82,7 +82,7 @@ def read_params(path, model: str, motion_name: str, named_motions, option: str =
 def make_saved_torque(saved: dict, option: str = "--params"):
     """The torque parameterisation a saved file names with its options (one the torque does not
     take is refused, as a misspelling would be)."""
-    from .experiment import check_method_options
+    from .method_options import check_method_options
     from .torques import TORQUES, make_torque
 
     try:

@@ -300,7 +300,7 @@ def export_rows(runs: list[dict], nested: bool = False) -> list[dict]:
 def cell_key(spec: dict) -> str:
     """The digest of a run's canonical settings without its seed (16 hex digits): the runs of one
     cell, one per seed, share it, in any database."""
-    from .experiment import RunSpec
+    from .spec import RunSpec
 
     try:
         canonical = RunSpec(**spec).canonical()

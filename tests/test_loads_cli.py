@@ -164,7 +164,7 @@ def test_the_loads_count_by_their_content_not_their_names(tmp_path, short_motion
 def test_a_run_whose_loads_changed_since_it_was_specified_is_refused(tmp_path, short_motion):
     """A spec made with the files' digests (as the command line makes it), then the data file
     changed: running it is refused naming the loads file; restored, it runs."""
-    from fdbench.experiment import RunSpec, motion_digest
+    from fdbench.spec import RunSpec, motion_digest
     from fdbench.multibody import runs
     from fdbench.multibody.loads import loads_digest
 

@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 import forearm_closed_form as forearm
 from fdbench.cli import app
-from fdbench.experiment import control_spec, optimize_spec, with_motion_file
+from fdbench.spec import control_spec, optimize_spec, with_motion_file
 from fdbench.motion import as_motion, butterworth_design_hz, eq5, noisy, read_motion_csv, zero_lag_lowpass
 
 runner = CliRunner()

@@ -14,7 +14,8 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.experiment import optimize_spec, run
+from fdbench.api import run
+from fdbench.spec import optimize_spec
 import forearm_closed_form as forearm
 from fdbench.motion import eq5
 from fdbench.multibody import simulation as sim

@@ -20,7 +20,8 @@ from typer.testing import CliRunner
 from cli_checks import assert_one_line_error
 
 from fdbench.cli import app
-from fdbench.experiment import RunSpec, control_spec, run
+from fdbench.api import run
+from fdbench.spec import RunSpec, control_spec
 from fdbench.peers import peer_spec
 
 ARM26 = Path(__file__).resolve().parent.parent / "examples" / "opensim" / "arm26.osim"

@@ -8,7 +8,8 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 import forearm_closed_form as forearm
-from fdbench.experiment import optimize_spec, run
+from fdbench.api import run
+from fdbench.spec import optimize_spec
 from fdbench.motion import eq5
 from fdbench.multibody.description import find_model
 from fdbench.multibody.engine import Engine

@@ -25,7 +25,7 @@ from typer.testing import CliRunner
 
 from fdbench import files
 from fdbench.cli import app
-from fdbench.experiment import control_spec
+from fdbench.spec import control_spec
 from fdbench.store import Store, StoreError, open_store
 
 from processes import python_path

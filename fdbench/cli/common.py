@@ -194,7 +194,7 @@ def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
 def _check_gradient(gradient: str, optimizers=None) -> None:
     """A valid --gradient; for the commands that select optimisers (``optimizers``: the names
     given, None for the default set), exact gradients need one that uses them."""
-    from ..experiment import GRADIENTS
+    from ..validation import GRADIENTS
 
     if gradient not in GRADIENTS:
         raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
@@ -236,7 +236,7 @@ def _bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) 
 
 def _bracket_options(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
     """(NAME, the options of its brackets) of ``NAME[KEY=VALUE,...]``, checked (see ``_bracketed``)."""
-    from ..experiment import check_method_options
+    from ..method_options import check_method_options
     from ..registry import parse_method
 
     try:

@@ -333,7 +333,7 @@ def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions
     if kinematics not in named_motions(model):
         import os
 
-        from ..experiment import motion_digest
+        from ..spec import motion_digest
         from ..files import BadFile
 
         if model != "forearm" and not os.path.exists(kinematics):
@@ -349,7 +349,7 @@ def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions
     from ..models import is_file
 
     if is_file(model):
-        from ..experiment import model_digest
+        from ..spec import model_digest
         from ..files import BadFile
 
         try:

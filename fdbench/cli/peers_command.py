@@ -66,7 +66,7 @@ def peer(
         check_available()
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    from ..experiment import run
+    from ..api import run
 
     outcome = run(spec)
     _store(outcome, spec, db, quiet)  # the run is stored before any output is written

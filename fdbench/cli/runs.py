@@ -33,7 +33,8 @@ def inverse(
     """Inverse dynamics (eq. 3): the joint torques that should produce the desired motion, with the nominal model.
 
     The table and JSON give a summary; --format csv gives the whole history on the motion's samples (eq. 5: 1001 rows) as a motion file that --motion and --torque-file read back: t (s), theta (deg), theta_vel (deg/s), theta_acc (deg/s^2), torque (N m); another model: t, then <joint>, <joint>_vel, <joint>_acc, <joint>_torque for each of its joints."""
-    from ..experiment import RunSpec, inverse_run
+    from ..api import inverse_run
+    from ..spec import RunSpec
 
     _check_outputs(fmt, output=output, inputs=_spec_inputs(conditions, kinematics))
     spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
@@ -67,7 +68,7 @@ def simulate(
     conditions: dict = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
-    from ..experiment import RunSpec
+    from ..spec import RunSpec
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db,
                    inputs=_spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
@@ -75,7 +76,7 @@ def simulate(
         raise BadInput("--torque-file and --params: give one of them, not both")
     spec = _validated(RunSpec(command="simulate", **_noise_seed(conditions, seed),
                               **_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)))
-    from ..experiment import run_simulation
+    from ..api import run_simulation
     from ..files import BadFile
 
     _check_store(db)
@@ -117,7 +118,8 @@ def control(
     conditions: dict = None,
 ):
     """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
-    from ..experiment import control_spec, run
+    from ..api import run
+    from ..spec import control_spec
 
     _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
     from ..controllers import CONTROLLERS
@@ -155,7 +157,7 @@ def _applicable(ctx: typer.Context, options: dict, registry, name: str, choice: 
     """Of a command's method options (parameter name: value), those the method ``name`` takes.
     One the user gave (on the command line or from the environment, not a default) that it does
     not take is bad input: ``--kp`` does not apply to ``--controller lqr``."""
-    from ..experiment import taken_options
+    from ..method_options import taken_options
 
     taken = taken_options(registry, name)
     for key in options:
@@ -216,7 +218,8 @@ def collocate(
     conditions: dict = None,
 ):
     """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and accelerations are the unknowns of one sparse problem solved by IPOPT, the torque their inverse dynamics (external loads of --loads included); the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
-    from ..experiment import collocate_spec, run
+    from ..api import run
+    from ..spec import collocate_spec
 
     _check_outputs(fmt, output=output, save_history=save_history, save_torque=save_torque, db=db,
                    inputs=_spec_inputs(conditions, kinematics))
@@ -298,7 +301,8 @@ def optimize(
     if list_methods:
         _emit(_methods_text(), None)
         return
-    from ..experiment import optimize_spec, run
+    from ..api import run
+    from ..spec import optimize_spec
 
     _check_outputs(fmt, output=output, save_history=save_history, history=history, save_params=save_params, db=db,
                    inputs=_spec_inputs(conditions, kinematics))

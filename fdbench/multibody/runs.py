@@ -1,4 +1,4 @@
-"""The runs of every model, from a ``RunSpec`` (``fdbench.runners`` hands them over): inverse
+"""The runs of every model, from a ``RunSpec`` (``fdbench.api`` hands them over): inverse
 dynamics, open-loop simulation, control (PD per joint with computed feedforward, computed torque,
 LQR, or a registered controller), optimisation and direct collocation, on the multibody engine
 (``fdbench.multibody``) built from the model's description (a library name or a model file), each
@@ -89,7 +89,7 @@ def joints(spec) -> tuple:
 @lru_cache(maxsize=32)
 def _motions(model_name, source, radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, seed, capture_hz,
              digest):
-    from ..experiment import motion_digest
+    from ..spec import motion_digest
     from ..models import description
     from .motions import Resampled, joint_motion, noisy_joints
 
@@ -263,7 +263,7 @@ def _drift_hint(message: str, result, desired, kinds) -> str:
 def _outcome(spec, record: dict, result, inverse, **more):
     """The RunOutcome of a finished simulation: indicators over every joint and per joint (angles
     and translations apart), the trajectory table."""
-    from ..experiment import RunOutcome
+    from ..records import RunOutcome
 
     names, kinds = joints(spec), nominal(spec).coordinate_kinds
     desired = inverse.angles
@@ -344,7 +344,7 @@ def plan(spec):
 
 def run(spec, on_evaluation=None, on_start=None):
     """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
-    from ..experiment import base_record
+    from ..records import base_record
     from ..method_options import options_text
 
     if spec.command == "optimize":
@@ -377,7 +377,7 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None):
     torques (N m), shape (k, J); BadFile for a file that cannot be used."""
     from dataclasses import replace
 
-    from ..experiment import base_record
+    from ..records import base_record
 
     names = joints(spec)
     desired, _ = motions(spec)
@@ -453,7 +453,7 @@ def replay(spec, params) -> sim.Simulation:
 # ---------------------------------------------------------------------- optimisation and collocation
 def _optimize(spec, on_evaluation, on_start):
     """Shooting optimisation of per-joint torque parameters (``fdbench.problem.TrackingProblem``)."""
-    from ..experiment import base_record
+    from ..records import base_record
     from ..method_options import options_text
     from ..optimizers import make_optimizer
     from ..optimizers.base import NO_ITERATION
@@ -509,7 +509,7 @@ def _collocate(spec):
     iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
     arrays of shape (N + 1, J))."""
     from ..collocation import collocate, own_fields, record_fields
-    from ..experiment import base_record
+    from ..records import base_record
 
     options = dict(spec.method_options)
     _warm_up(spec)
