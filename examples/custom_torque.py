@@ -17,7 +17,7 @@ import sys
 import numpy as np
 
 from fdbench.api import run
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.spec import optimize_spec

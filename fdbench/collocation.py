@@ -104,7 +104,7 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
 def check_model(model) -> None:
     """ValueError (one line) for a model (``multibody.description.Model``) whose transcription
     would take minutes to build (``MAX_PATH_PAIRS``)."""
-    from .multibody.description import path_pairs
+    from .multibody.model_changes import path_pairs
 
     pairs = path_pairs(model)
     if pairs > MAX_PATH_PAIRS:

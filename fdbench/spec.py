@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass
 
 from .integrate import check_integrator
 from .method_options import accepted_options, check_method_options, options_for
-from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
+from .multibody.motions import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
 
 
 COMMANDS = ("control", "optimize", "simulate", "collocate", "peer")  # peer: fdbench.peers
@@ -207,7 +207,7 @@ MAX_CAPTURE_HZ = 100_000.0
 def motion_digest(path) -> str:
     """SHA-256 of a recorded motion file's content."""
     from .files import read_input_text
-    from .motion import check_source
+    from .multibody.motions import check_source
 
     check_source(str(path))
     return hashlib.sha256(read_input_text(path, "--motion").encode()).hexdigest()

@@ -34,7 +34,7 @@ def check_gradient(gradient, optimizer, torque, integrator) -> None:
 
 def check_conditions(spec: "RunSpec") -> None:
     """The motion, noise and model options of a spec; ValueError with a one-line message."""
-    from .motion import check_estimate
+    from .multibody.motions import check_estimate
 
     check_estimate(spec.cutoff_hz, spec.smoothing, spec.spline_lambda)
     if not (math.isfinite(spec.noise_deg) and 0 <= spec.noise_deg <= MAX_NOISE_DEG):

@@ -7,7 +7,7 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.spec import optimize_spec
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.optimizers import make_optimizer

@@ -17,7 +17,9 @@ from cli_checks import assert_one_line_error
 
 from fdbench.cli import app
 from fdbench.files import BadFile
-from fdbench.multibody.description import Frame, find_model, to_toml
+from fdbench.models import find_model
+from fdbench.multibody.model import Frame
+from fdbench.multibody.model_files import to_toml
 
 ROOT = Path(__file__).resolve().parent.parent
 WALK = next((where for where in (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",

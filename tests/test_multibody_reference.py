@@ -234,7 +234,7 @@ def test_free_and_path_joint_states_round_trip(model, seed):
 
 def hopper_model():
     """A free pelvis (tilt, x, y), a thigh on a pin and a shank on a knee path (y with its own angles)."""
-    from fdbench.multibody import description as d
+    from fdbench.multibody import model as d
 
     knee = d.JointPath((-2.0, -1.0, 0.0, 0.5), (0.0, 0.01, 0.02, 0.015), (-0.01, 0.0, 0.005), (-1.5, 0.0, 1.0))
     return d.Model(name="hopper", gravity=(0.0, -9.81),

@@ -21,7 +21,9 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.multibody.description import MotionSpec, find_model, library, load_model
+from fdbench.models import find_model, library
+from fdbench.multibody.model import MotionSpec
+from fdbench.multibody.model_files import load_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk
 
@@ -693,7 +695,7 @@ def test_the_walk_s_mot_reads_angles_in_degrees_and_the_pelvis_translations_in_m
 def test_export_osim_refuses_free_and_path_joints_and_writes_nothing(tmp_path):
     model, _ = import_osim(path_knee_model(tmp_path / "knee.osim"))
     source = tmp_path / "knee.toml"
-    from fdbench.multibody.description import to_toml
+    from fdbench.multibody.model_files import to_toml
 
     source.write_text(to_toml(model))
     out = tmp_path / "out.osim"

@@ -10,8 +10,8 @@ from fdbench.cli import app
 import forearm_closed_form as forearm
 from fdbench.api import run
 from fdbench.spec import optimize_spec
-from fdbench.motion import eq5
-from fdbench.multibody.description import find_model
+from fdbench.multibody.motions import eq5
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.population import set_threads

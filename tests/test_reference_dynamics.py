@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import reference_dynamics as ref
-from fdbench.multibody import description as d
+from fdbench.multibody import model as d
 from arm2_closed_form import joint_torques
 from multibody_strategies import arm2_model, forearm_model, models, models_and_states
 

@@ -456,8 +456,8 @@ def test_pf_fit_works_for_every_allowed_term_count(terms):
     """The fit of every allowed term count reproduces the forearm's closed-form inverse-dynamics torque."""
     from forearm_closed_form import torque_along as elbow_torque
 
-    from fdbench.motion import eq5
-    from fdbench.multibody.description import find_model
+    from fdbench.multibody.motions import eq5
+    from fdbench.models import find_model
     from fdbench.multibody.engine import Engine
     from fdbench.multibody.motions import joint_motion
     from fdbench.problem import TrackingProblem

@@ -36,7 +36,8 @@ def _hopper_file(folder: Path) -> Path:
     """The hopper model (free pelvis, hip, knee on a path) as a model file, without named motions."""
     from test_multibody_reference import hopper_model
 
-    from fdbench.multibody.description import MotionSpec, to_toml
+    from fdbench.multibody.model import MotionSpec
+    from fdbench.multibody.model_files import to_toml
 
     model = hopper_model()
     rest = tuple((name, 0.0) for name in model.coordinates)

@@ -135,7 +135,7 @@ def _choices(name: str, command: str):
 
         return list(INTEGRATORS)
     if name == "smoothing":
-        from ..motion import SMOOTHING
+        from ..multibody.motions import SMOOTHING
 
         return list(SMOOTHING)
     if name == "kinematics":

@@ -70,7 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-from .description import Model, resolved_end
+from .model import Model, resolved_end
 from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
                       VIOLATION_TOL)
 

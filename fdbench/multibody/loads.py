@@ -61,7 +61,7 @@ class ExternalLoads:
             raise ValueError(f"loads: force and point must have shape ({n}, {L}, 2) and moment ({n}, {L})")
         if n < 2 or not np.all(np.diff(self.t) > 0):
             raise ValueError(f"{source}: the loads' times must be at least two and increasing")
-        from .description import MAX_MAGNITUDE
+        from .model import MAX_MAGNITUDE
 
         for name, unit, values in (("force", "N", self.force), ("point", "m", self.point), ("moment", "N m", self.moment)):
             bad = ~(np.abs(values) <= MAX_MAGNITUDE)  # NaN included

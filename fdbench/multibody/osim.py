@@ -74,7 +74,7 @@ CHILD_TIMEOUT_S = 300  # s: OpenSim's import of one model (its start-up included
 
 
 def _fail(source: str, problem: str):
-    from .description import ModelError
+    from .model import ModelError
 
     raise ModelError(source, "", problem)
 
@@ -105,7 +105,7 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
     import tempfile
 
     from ..isolation import python_command
-    from .description import ModelError, model_from_dict
+    from .model import ModelError, model_from_dict
 
     _model_element(content, source)  # a file that is not an OpenSim model is refused before a process starts
     import importlib.util
@@ -135,7 +135,7 @@ def _child() -> None:
     import json
     import sys
 
-    from .description import ModelError, to_dict
+    from .model import ModelError, to_dict
 
     request = json.loads(sys.stdin.read())
     content, source = base64.b64decode(request["content"]), request["source"]
@@ -196,7 +196,7 @@ def _built(osim, content: bytes, source: str):
 
 
 def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
-    from .description import GROUND, model_from_dict
+    from .model import GROUND, model_from_dict
 
     _refuse_constraints(model, source)
     joints = _joints_by_child(model, source)
@@ -267,7 +267,7 @@ def _joints_by_child(model, source: str) -> dict:
 
 def _tree_order(joints: dict, source: str) -> list:
     """The joints, each after the joint of its parent body (file order among those ready)."""
-    from .description import GROUND
+    from .model import GROUND
 
     order, placed = [], {GROUND}
     pending = list(joints.values())
@@ -631,7 +631,7 @@ def _body(name: str, parts: list) -> dict:
 def _with_ends(bodies: list, joints: list) -> list:
     """The bodies, with an explicit ``end`` where the default one (the first child joint's point)
     would be within 1 mm of the body's joint point: then the centre of mass, or 0.1 m along x."""
-    from .description import MIN_SEGMENT
+    from .model import MIN_SEGMENT
 
     for body in bodies:
         own = next(j for j in joints if j["child"] == body["name"])
@@ -810,7 +810,7 @@ def storage_note(path, joints) -> str:
 def toml_text(model, notes, source) -> str:
     """The imported model as a model file: a header of comments (the source, the notes) and the TOML."""
     from .. import __version__
-    from .description import to_toml
+    from .model_files import to_toml
 
     header = [f"# Imported from the OpenSim model {Path(str(source)).name} by fdbench {__version__} import-osim.",
               "# SI units, angles in radians; world axes x forward, y up; joints named by OpenSim's coordinates."]
@@ -826,7 +826,7 @@ DEFAULT_RANGE = (-math.pi, math.pi)  # rad: a coordinate's range in the file whe
 
 def check_exportable(model) -> None:
     """ModelError (one line) for a model ``to_osim`` cannot write yet: one with free or path joints."""
-    from .description import ModelError
+    from .model import ModelError
 
     odd = [j.name for j in model.joints if j.type == "free" or j.path is not None]
     if odd:
@@ -871,7 +871,7 @@ def _numbers(*values) -> str:
 
 
 def _frame_path(body: str) -> str:
-    from .description import GROUND
+    from .model import GROUND
 
     return "/ground" if body == GROUND else f"/bodyset/{body}"
 

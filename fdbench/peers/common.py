@@ -17,7 +17,7 @@ def osim_texts(spec) -> tuple[str, str]:
     no constant is changed, else the descriptions written by ``to_osim`` (one CoordinateActuator
     per joint, each load a PrescribedForce)."""
     from ..models import description, is_file
-    from ..multibody.description import with_short_keys
+    from ..multibody.model_changes import with_short_keys
     from ..multibody.osim import MAX_OSIM_BYTES, to_osim
 
     if is_file(spec.model_name) and str(spec.model_name).lower().endswith(".osim"):
