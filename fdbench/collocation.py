@@ -102,7 +102,7 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
 
 
 def check_model(model) -> None:
-    """ValueError (one line) for a model (``multibody.description.Model``) whose transcription
+    """ValueError (one line) for a model (``multibody.model.Model``) whose transcription
     would take minutes to build (``MAX_PATH_PAIRS``)."""
     from .multibody.model_changes import path_pairs
 

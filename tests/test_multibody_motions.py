@@ -1,5 +1,5 @@
 """Joint motions of any model (fdbench.multibody.motions) and the short keys of model files
-(fdbench.multibody.description.with_short_keys), checked against values worked out by hand."""
+(fdbench.multibody.model_changes.with_short_keys), checked against values worked out by hand."""
 
 from __future__ import annotations
 

@@ -210,22 +210,13 @@ def check_bounded(values: np.ndarray, t: np.ndarray, what: str, unit: str) -> No
 
 
 def noisy(motion: Motion, sigma_deg: float, seed: int, capture_hz: float = DEFAULT_CAPTURE_HZ,
-          cutoff_hz: float = DEFAULT_CUTOFF_HZ, smoothing: str = "butterworth", spline_lambda=None) -> SampledMotion:
-    """``motion``'s angle captured with white Gaussian noise of ``sigma_deg`` degrees (seeded) and
-    estimated like a recording. A recording keeps its own samples; an analytic motion is captured
-    every 1 / capture_hz s. The result reports on ``motion``'s samples."""
-    if isinstance(motion, SampledMotion):
-        t = np.array(motion._t)
-    else:
-        check_grid(motion.duration, 1 / capture_hz, "--capture-hz", values=VALUES_PER_CAPTURED_SAMPLE)
-        t = np.linspace(0.0, motion.duration, int(round(motion.duration * capture_hz)) + 1)
-    theta, _, _ = motion(t)
-    rng = np.random.default_rng(seed)
-    measured = theta + np.radians(sigma_deg) * rng.standard_normal(len(t))
-    where = "" if isinstance(motion, SampledMotion) else f" at {capture_hz:g} Hz"
-    return SampledMotion(t, measured, name=f"{motion.name}+noise {sigma_deg:g} deg{where} (seed {seed})",
-                         cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
-                         samples=motion.samples)
+          **estimate) -> SampledMotion:
+    """One coordinate's ``motion`` captured with noise and estimated like a recording: the one part
+    of ``noisy_joints``, named like its result."""
+    captured = noisy_joints(PerJoint([motion], ("theta",)), sigma_deg, seed, capture_hz, **estimate)
+    part = captured.parts[0]
+    part.name = captured.name
+    return part
 
 
 def rate_column_names(joint: str) -> tuple:
@@ -251,26 +242,12 @@ def given_rates(columns: dict, joint: str, path, option: str, radians: bool) -> 
 
 
 def read_motion_csv(path, option: str = "--motion", radians: bool = False, **estimate) -> SampledMotion:
-    """A recorded joint angle from a CSV file: columns ``t`` (s) and ``theta`` (degrees, or
-    radians with ``radians``), optionally ``theta_vel`` and ``theta_acc`` (deg/s, deg/s^2, or rad
-    units), any order, any sampling: the columns ``fdbench inverse --format csv`` and
-    ``--save-trajectory`` write; or an OpenSim storage file (.mot, .sto) with a theta column.
-    ``estimate``: options of ``SampledMotion``. Raises files.BadFile with a one-line message."""
-    path = Path(path)
-    if is_storage(path):  # OpenSim's .mot or .sto: the header's inDegrees gives the unit
-        columns, in_degrees, _ = read_storage(path, option, ("theta",))
-        radians = not in_degrees
-        if "theta" not in columns:
-            raise BadFile(f"{option}: {path} has no column for joint 'theta'; a motion file needs a time column and theta")
-    else:
-        columns = read_columns(path, option, required=("t", "theta"), optional=rate_column_names("theta"))
-    unit = 1.0 if radians else math.pi / 180
-    vel, acc = given_rates(columns, "theta", path, option, radians)
-    try:
-        return SampledMotion(columns["t"], columns["theta"] * unit, None if vel is None else vel * unit,
-                             None if acc is None else acc * unit, name=f"file:{path.name}", **estimate)
-    except ValueError as exc:
-        raise BadFile(f"{option}: {path}: {exc}") from None
+    """The recorded angle ``theta`` (the forearm's joint) of a motion file: the one part of
+    ``read_joint_motion_csv``, named like its result."""
+    motion = read_joint_motion_csv(path, ("theta",), option, radians, **estimate)
+    part = motion.parts[0]
+    part.name = motion.name
+    return part
 
 
 def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: float, kinds=None,
