@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .experiment import RunSpec, control_spec, gradient_for, optimize_spec
+from .spec import RunSpec, control_spec, gradient_for, optimize_spec
 
 # The paper's published figures: (RMSE_rot deg, RMSE_torque N m, runtime s).
 PAPER_INVERSE_RUNTIME_S = 0.12

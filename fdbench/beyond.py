@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .experiment import RunSpec, collocate_spec, control_spec
+from .spec import RunSpec, collocate_spec, control_spec
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ EXACT_GRADIENT_SUMMARY = ("the paper's cell with the gradient computed exactly, 
 def exact_gradient_methods(cells, budget, torque_options, optimizer_options, penalty_weight, **common) -> list[Method]:
     """A row per gradient-based cell of ``cells`` (benchmark.Cell) run with ``--gradient exact``
     (seed 0: one run, like the other rows of the table)."""
-    from .experiment import gradient_for, optimize_spec
+    from .spec import gradient_for, optimize_spec
 
     methods = []
     for cell in cells:

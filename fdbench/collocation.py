@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from .casadi_loader import casadi
-from .multibody.description import path_pairs
+from .multibody.model_changes import path_pairs
 from .multibody.symbolic import MinimalDynamics, load_parameters
 from .registry import unknown_name_message
 
@@ -104,7 +104,7 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
 
 
 def check_model(model) -> None:
-    """ValueError (one line) for a model (``multibody.description.Model``) whose transcription
+    """ValueError (one line) for a model (``multibody.model.Model``) whose transcription
     would take minutes to build (``MAX_PATH_PAIRS``)."""
     pairs = path_pairs(model)
     if pairs > MAX_PATH_PAIRS:

@@ -70,7 +70,7 @@ class Outcome:
 def run_spec(spec) -> Outcome:
     """Carry out one run, once this process is warm for its method (:func:`warm_up_for`); an
     exception becomes a failed run's outcome, never a lost run."""
-    from .experiment import run
+    from .method_runs import run
 
     warm_up_for(spec)
     try:
@@ -106,7 +106,7 @@ def warm_up_for(spec) -> None:
     if key in _WARM:
         return
     _WARM.add(key)
-    from .experiment import run
+    from .method_runs import run
 
     try:
         run(miniature)
@@ -124,7 +124,7 @@ def run_batch(specs, client_version: str | None = None) -> list[Outcome]:
 
 def failed_record(spec, exc: BaseException) -> dict:
     """The record of a run that raised: its settings, status 'error', the exception as message."""
-    from .experiment import base_record
+    from .records import base_record
 
     record = base_record(spec)
     if spec.command == "control":

@@ -314,7 +314,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
     runs ({hash: stored run}) and report rows; return {title: path relative to ``base``}, the
     directory of the report. Each tracking figure shows the run of median RMSE_rot of each cell; a
     model of several joints has a column per joint."""
-    from .experiment import replay, run
+    from .method_runs import replay, run
 
     directory.mkdir(exist_ok=True)
     written = {}

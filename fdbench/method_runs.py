@@ -35,7 +35,8 @@ from .outcomes import in_file_units, outcome, residual_fields
 from .params_file import make_saved_torque, read_params
 from .problem import TrackingProblem
 from .problem import residual_weight as problem_residual_weight
-from .records import base_record
+from .peers import run as run_peer
+from .records import RunOutcome, base_record, explained
 from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, reference,
                          simulate, warm_up)
 from .torques import TORQUES
@@ -78,7 +79,7 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     return record, header, rows
 
 
-def run(spec, on_evaluation=None, on_start=None):
+def _method_run(spec, on_evaluation=None, on_start=None):
     """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
     if spec.command == "optimize":
         return _optimize(spec, on_evaluation, on_start)
@@ -104,7 +105,7 @@ def run(spec, on_evaluation=None, on_start=None):
 
 
 # ---------------------------------------------------------------------- open loop
-def run_simulation(spec, torque_file=None, params_file=None, torque=None):
+def _open_loop(spec, torque_file=None, params_file=None, torque=None):
     """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
     (``t,<joint>...``), saved parameters, or ``torque``, a function t (s), shape (k,) -> joint
     torques (N m), shape (k, J); BadFile for a file that cannot be used."""
@@ -233,3 +234,23 @@ def _collocate(spec):
     own = own_fields(nominal(spec), solution, truth)
     record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
     return done
+
+
+# ---------------------------------------------------------------------- the runs of a spec
+def run(spec, on_evaluation=None, on_start=None) -> RunOutcome:
+    """Carry out a control, optimisation, collocation or peer run, checked first, as a flat record
+    with its explanation. ``on_evaluation(count, best)`` reports progress; ``on_start(budget)`` is
+    called once compilation and imports are done."""
+    spec.validate()
+    if spec.command == "simulate":
+        raise ValueError("simulate runs are carried out by run_simulation")
+    if spec.command == "peer":  # OpenSim's, its CMC's and Moco's runs
+        return explained(run_peer(spec), spec)
+    return explained(_method_run(spec, on_evaluation, on_start), spec)
+
+
+def run_simulation(spec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
+    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
+    (``t,<joint>...``), saved optimisation parameters or ``torque`` (a function of t (s), shape (k,)
+    -> N m, shape (k,) or (k, J)). Bad files raise ``files.BadFile``."""
+    return explained(_open_loop(spec, torque_file, params_file, torque), spec)

@@ -127,7 +127,7 @@ def run_conditions(specs: list, records: list) -> dict:
     the changes of its constants, the plant's changes (the simulated body only), the motion (its
     name; a file's SHA-256), the derivative estimate, the noise (deg) and the seeds that drew it.
     Without specs (runs stored by hand), what the first record says."""
-    from .experiment import noise_seed
+    from .records import noise_seed
 
     if not specs:
         rec = records[0] if records else {}
@@ -750,7 +750,7 @@ def condition_settings(spec, specs: list) -> dict:
     """The settings rows that say what the runs tracked and simulated: the motion (duration,
     samples, a file's SHA-256), the angle's convention for a file, what RMSE_rot is measured
     against, the derivative estimate, the noise and its seeds, the plant's changes."""
-    from .experiment import noise_seed
+    from .records import noise_seed
 
     described = spec.describe()
     _, truth = spec.motions()

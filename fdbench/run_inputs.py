@@ -19,7 +19,7 @@ from .files import BadFile, read_input_bytes, read_input_text
 from .integrate import check_settings, steps
 from .method_options import options_text
 from .models import description, with_changes
-from .motion import check_source
+from .multibody.motions import check_source
 from .multibody import simulation as sim
 from .multibody.engine import Engine
 from .multibody.loads import loads_digest, read_external_loads

@@ -18,7 +18,7 @@ from .integrate import check_integrator
 from .memory import check_run
 from .method_options import accepted_options, check_method_options, options_for
 from .models import default_motion, is_file, n_joints, named_motions
-from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
+from .multibody.motions import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
 from .optimizers import OPTIMIZERS, make_optimizer
 from .peers import check_spec as check_peer_spec
 from .peers import peer

@@ -7,7 +7,7 @@ import math
 
 from .files import BadFile
 from .models import check_name, with_changes
-from .motion import check_estimate
+from .multibody.motions import check_estimate
 from .optimizers import OPTIMIZERS
 from .run_inputs import model_digest
 from .torques.base import TorqueParameterisation

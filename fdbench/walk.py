@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .experiment import RunSpec, collocate_spec, control_spec, optimize_spec
+from .spec import RunSpec, collocate_spec, control_spec, optimize_spec
 
 # CMA-ES on the walk: the paper's budget of 200 simulations (each a forward simulation of the 2.5 s
 # walk, a population evaluated in one compiled call), in generations of 8

@@ -123,7 +123,7 @@ class SubcommandGroup(TyperGroup):
 
 # options whose valid values are registered names: (module, name of its registry), read for --help
 REGISTERED = {"torque": ("torques", "TORQUES"), "opt": ("optimizers", "OPTIMIZERS"),
-              "integrator": ("integrate", "INTEGRATORS"), "smoothing": ("motion", "SMOOTHING"),
+              "integrator": ("integrate", "INTEGRATORS"), "smoothing": ("multibody.motions", "SMOOTHING"),
               "backend": ("execution", "BACKENDS"), "controller": ("controllers", "CONTROLLERS"),
               "scheme": ("collocation", "SCHEMES")}
 

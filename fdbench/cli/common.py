@@ -194,7 +194,7 @@ def store_run(outcome, spec, db: Optional[Path], quiet: bool) -> None:
 def check_gradient(gradient: str, optimizers=None) -> None:
     """A valid --gradient; for the commands that select optimisers (``optimizers``: the names
     given, None for the default set), exact gradients need one that uses them."""
-    from ..experiment import GRADIENTS
+    from ..validation import GRADIENTS
 
     if gradient not in GRADIENTS:
         raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")

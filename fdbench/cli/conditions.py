@@ -222,7 +222,7 @@ def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditi
     loads file enter by their digests)."""
     import os
 
-    from ..experiment import model_digest, motion_digest
+    from ..run_inputs import model_digest, motion_digest
     from ..files import BadFile
     from ..models import is_file, named_motions
 

@@ -35,7 +35,7 @@ def list_models(
     """One line per library model: its name, bodies, joints (its coordinates), total mass and what it is."""
     if ctx.invoked_subcommand is not None:
         return
-    from ..multibody.description import library
+    from ..models import library
 
     check_outputs(fmt, LIST_FORMATS, output=output)
     rows = [_summary(_checked(name)) for name in library()]
@@ -63,13 +63,13 @@ def show_model(
     output: Output = None,
 ):
     """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads, named motions, short keys, the paths --model PATH=VALUE takes with their values, and the total mass. A file that cannot be used is refused in one line naming the key."""
-    from ..multibody.description import library
+    from ..models import library
 
     # a library model's file is an input too: an output may not write over it
     check_outputs(fmt, SHOW_FORMATS, inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
     found = _checked(model)
     if fmt == "toml":
-        from ..multibody.description import to_toml
+        from ..multibody.model_files import to_toml
 
         emit(to_toml(found, explicit_ends=True), output)
     elif fmt == "json":
@@ -80,7 +80,7 @@ def show_model(
 
 def _checked(name_or_path: str):
     from ..models import is_osim
-    from ..multibody.description import find_model
+    from ..models import find_model
 
     try:
         if is_osim(name_or_path):  # an OpenSim model: its import's notes as warnings
@@ -102,7 +102,8 @@ def _summary(model) -> dict:
 
 def _shown(model, source: str) -> dict:
     """The checked model (a model file's keys, end points explicit) and what follows from it."""
-    from ..multibody.description import short_key_values, to_dict
+    from ..multibody.model import to_dict
+    from ..multibody.model_changes import short_key_values
 
     return {"source": source, "total_mass_kg": model.total_mass, "coordinates": list(model.coordinates),
             "short_key_values": short_key_values(model), "paths": _path_values(model),
@@ -114,7 +115,7 @@ def _point(point) -> str:
 
 
 def _show_text(model, source: str) -> str:
-    from ..multibody.description import _end_of
+    from ..multibody.model import end_of
     from .common import render
     from .store_commands import text_table
 
@@ -123,7 +124,7 @@ def _show_text(model, source: str) -> str:
               "coordinates": ", ".join(model.coordinates)}
     bodies = []
     for body in model.bodies:
-        end, given_by = _end_of(model, body.name)
+        end, given_by = end_of(model, body.name)
         bodies.append({"name": body.name, "mass": f"{body.mass:.6g}", "com": _point(body.com),
                        "inertia": f"{body.inertia:.6g}", "joint": model.parent_joint(body.name).name,
                        "end": _point(end) + ("" if given_by == "end" else f" ({_END_ORIGIN[given_by.split()[0]]})")})
@@ -171,7 +172,8 @@ def _motions_text(model) -> str:
 def _path_values(model) -> dict:
     """{path: its value in this model (SI units, rad)}: every path --model PATH=VALUE, --plant and
     study mismatch --param take."""
-    from ..multibody.description import change_paths, path_value
+    from ..multibody.model import change_paths
+    from ..multibody.model_changes import path_value
 
     return {path: path_value(model, path) for path in change_paths(model)}
 
@@ -185,7 +187,7 @@ def _paths_text(model) -> str:
 
 def _keys_text(model) -> str:
     """The short keys of --model KEY=VALUE: the path each sets and its value in this model."""
-    from ..multibody.description import short_key_values
+    from ..multibody.model_changes import short_key_values
     from .store_commands import text_table
 
     values = short_key_values(model)

@@ -46,7 +46,7 @@ def export_osim_command(
     quiet: Quiet = False,
 ):
     """Write a model as an OpenSim model file (.osim, OpenSim 4): one Body, PinJoint (its coordinate named as the joint) and CoordinateActuator per body and joint, gravity, each load a constant PrescribedForce. OpenSim's inverse dynamics of the file equals fdbench's; 'fdbench import-osim' reads it back. Needs no OpenSim, except for an .osim input."""
-    from ..multibody.description import find_model, library
+    from ..models import find_model, library
 
     # a library model's file is an input too: the output may not write over it
     check_outputs("osim", ("osim",), inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)

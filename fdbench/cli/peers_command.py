@@ -64,7 +64,7 @@ def peer(
         check_available()
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    from ..experiment import run
+    from ..method_runs import run
 
     outcome = run(spec)
     out.deliver(outcome, spec, f"fdbench peer {name}")

@@ -32,7 +32,8 @@ def inverse(
     """Inverse dynamics (eq. 3): the joint torques that should produce the desired motion, with the nominal model.
 
     The table and JSON give a summary; --format csv gives the whole history on the motion's samples (eq. 5: 1001 rows) as a motion file that --motion and --torque-file read back: t (s), theta (deg), theta_vel (deg/s), theta_acc (deg/s^2), torque (N m); another model: t, then <joint>, <joint>_vel, <joint>_acc, <joint>_torque for each of its joints."""
-    from ..experiment import RunSpec, inverse_run
+    from ..method_runs import inverse_run
+    from ..spec import RunSpec
 
     check_outputs(fmt, output=output, inputs=spec_inputs(conditions, kinematics))
     spec = validated(RunSpec(command="simulate", **noise_seed(conditions, seed),
@@ -57,13 +58,13 @@ def simulate(
     conditions: dict = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
-    from ..experiment import RunSpec
+    from ..spec import RunSpec
 
     out.check(spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
     if torque_file is not None and params is not None:
         raise BadInput("--torque-file and --params: give one of them, not both")
     spec = validated(RunSpec(command="simulate", **noise_seed(conditions, seed), **sim.spec_fields(kinematics, conditions)))
-    from ..experiment import run_simulation
+    from ..method_runs import run_simulation
     from ..files import BadFile
 
     out.check_store()
@@ -89,7 +90,8 @@ def control(
 ):
     """Feedback control: PD with computed feedforward (eqs. 13-14, the default), computed-torque control or time-varying LQR about the desired motion."""
     from ..controllers import CONTROLLERS
-    from ..experiment import control_spec, run
+    from ..method_runs import run
+    from ..spec import control_spec
     from ..registry import UnknownName
 
     out.check(spec_inputs(conditions, kinematics))
@@ -141,7 +143,8 @@ def collocate(
     conditions: dict = None,
 ):
     """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and accelerations are the unknowns of one sparse problem solved by IPOPT, the torque their inverse dynamics (external loads of --loads included); the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
-    from ..experiment import collocate_spec, run
+    from ..method_runs import run
+    from ..spec import collocate_spec
 
     out.check(spec_inputs(conditions, kinematics), save_torque=save_torque)
     spec = validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
@@ -208,7 +211,8 @@ def optimize(
     if list_methods:
         emit(methods_text(), None)
         return
-    from ..experiment import optimize_spec, run
+    from ..method_runs import run
+    from ..spec import optimize_spec
     from ..optimizers import OPTIMIZERS
     from ..torques import TORQUES
 

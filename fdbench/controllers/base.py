@@ -27,7 +27,7 @@ from ..registry import Registry
 class Plan:
     """What a controller designs from: ``engine``, the nominal model's engine
     (``multibody.engine.Engine``: inverse dynamics, M(z), h); ``model``, its description
-    (``multibody.description.Model``); ``motion``, the desired motion of its J joints
+    (``multibody.model.Model``); ``motion``, the desired motion of its J joints
     (``multibody.motions.JointMotion``)."""
 
     engine: object
@@ -79,7 +79,7 @@ class Controller(ABC):
         """The feedforward torques and the feedback law towards ``plan.motion``."""
 
     def check_model(self, model) -> None:
-        """ValueError (one line) for a model (``multibody.description.Model``) whose design would
+        """ValueError (one line) for a model (``multibody.model.Model``) whose design would
         take more time or memory than a run is allowed; checked before any work."""
 
     def warm_up(self, plan: Plan) -> None:

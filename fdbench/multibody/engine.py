@@ -45,7 +45,7 @@ basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels take arr
 layout of indices and constants built once per Engine; they live in fdbench.multibody.kernels), so
 they are compiled once and cached for every model. Strict IEEE arithmetic.
 
-Free and path joints (``fdbench.multibody.description``). A free joint's body has its joint point
+Free and path joints (``fdbench.multibody.model``). A free joint's body has its joint point
 among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
 joint with a path gives its child a joint point of its own, held on the path by two constraints
 that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
@@ -70,7 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-from .description import Model, resolved_end
+from .model import Model, resolved_end
 from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
                       VIOLATION_TOL)
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..files import BadFile, quoted, read_input_bytes, shown
 from ..registry import unknown_name_message
-from .description import MAX_MAGNITUDE
+from .model import MAX_MAGNITUDE
 from .osim import read_storage
 
 GROUND = "ground"

@@ -63,7 +63,8 @@ import numpy as np
 from .. import __version__
 from ..files import BadFile, quoted, read_input_bytes, read_input_text, shown
 from ..isolation import python_command
-from .description import GROUND, MIN_SEGMENT, ModelError, model_from_dict, to_dict, to_toml
+from .model import GROUND, MIN_SEGMENT, ModelError, model_from_dict, to_dict
+from .model_files import to_toml
 from .spline import fit
 
 INSTALL_HINT = "pip install 'fdbench[opensim]'"

@@ -90,7 +90,7 @@ def warm_up() -> None:
     """Load (or compile) the sensitivity kernel on a small library model, so that later timings
     exclude it."""
     from ..compile_guard import compiling
-    from .description import find_model
+    from ..models import find_model
     from .engine import Engine
 
     engine = Engine(find_model("forearm"))

@@ -380,7 +380,7 @@ def warm_up(adaptive: bool = False, dense: bool = False) -> None:
 
 def _warm_up(adaptive: bool, dense: bool) -> None:
     from ..population import Population
-    from .description import find_model
+    from ..models import find_model
     from .loads import ExternalLoad, ExternalLoads
 
     model = find_model("forearm")

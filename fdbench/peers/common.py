@@ -13,7 +13,7 @@ from ..files import read_input_bytes
 from ..integrate import steps
 from ..models import description, is_file, joints
 from ..multibody import simulation as sim
-from ..multibody.description import with_short_keys
+from ..multibody.model_changes import with_short_keys
 from ..multibody.loads import data_file
 from ..multibody.osim import MAX_OSIM_BYTES, to_osim
 from ..outcomes import in_file_units, outcome, per_coordinate_fields, residual_fields

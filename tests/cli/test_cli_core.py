@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from helpers import forearm_closed_form as cf
 from fdbench.cli import app
-from fdbench.motion import desired_motion
+from fdbench.multibody.motions import desired_motion
 
 runner = CliRunner()
 

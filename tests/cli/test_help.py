@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 from fdbench.cli import app
 from fdbench.integrate import INTEGRATORS
 from fdbench.models import named_motions, names
-from fdbench.motion import KINEMATICS
+from fdbench.multibody.motions import KINEMATICS
 from fdbench.optimizers import OPTIMIZERS
 from fdbench.torques import TORQUES
 

@@ -18,7 +18,7 @@ from helpers import forearm_closed_form as forearm
 from helpers.cli_checks import assert_one_line_error
 from fdbench.cli import app
 from fdbench.files import quoted, shown
-from fdbench.motion import A1, butterworth_design_hz, eq5, read_motion_csv
+from fdbench.multibody.motions import A1, butterworth_design_hz, eq5, read_motion_csv
 
 runner = CliRunner()
 
@@ -90,7 +90,7 @@ def test_the_fastest_capture_allowed_is_not_refused_for_its_clock_s_rounding():
     """--capture-hz 100000 samples every 1e-5 s, the smallest interval a recording may have; the
     rounding of linspace's steps (1e-5 - 1e-21 s) must not refuse it, and it is still eq. 5 within
     what the filter removes (``filter_bound``)."""
-    from fdbench.motion import as_motion, noisy
+    from fdbench.multibody.motions import as_motion, noisy
 
     captured = noisy(as_motion("exact"), 0.0, 1, capture_hz=100_000.0)
     t = np.linspace(0.1, 0.9, 9)
@@ -216,14 +216,14 @@ def test_the_ends_of_a_noisy_recording_are_no_noisier_than_its_middle():
     """eq. 5 captured at 1 kHz with 0.1 deg of noise (10 seeds): the RMS error of the estimated
     acceleration at each end is at most the RMS error over the middle 80 % (the filter's own noise);
     an end estimate from a local fit of the noisy samples would be tens of times noisier."""
-    from fdbench.motion import SampledMotion
+    from fdbench.multibody.motions import SampledMotion
 
     t = np.linspace(0.0, 1.0, 1001)
     theta, _, acc = eq5(t, "exact")
     errors = []
     for seed in range(10):
         noisy = theta + np.radians(0.1) * np.random.default_rng(seed).standard_normal(len(t))
-        errors.append(SampledMotion(t, noisy, absolute=False)(t)[2] - acc)
+        errors.append(SampledMotion(t, noisy)(t)[2] - acc)
     rms = np.sqrt(np.mean(np.square(errors), axis=0))
     middle = np.sqrt(np.mean(rms[100:-100] ** 2))
     assert rms[0] <= middle and rms[-1] <= middle, (np.degrees(rms[[0, -1]]), np.degrees(middle))

@@ -19,7 +19,9 @@ from helpers.paths import ROOT
 
 from fdbench.cli import app
 from fdbench.files import BadFile
-from fdbench.multibody.description import Frame, find_model, to_toml
+from fdbench.models import find_model
+from fdbench.multibody.model import Frame
+from fdbench.multibody.model_files import to_toml
 
 WALK = next((where for where in (ROOT / "examples" / "opensim", ROOT.parent / "shared" / "data" / "opensim",
                                   ROOT.parent.parent / "shared" / "data" / "opensim")
@@ -138,7 +140,7 @@ def test_the_loads_count_by_their_content_not_their_names(tmp_path, short_motion
 def test_a_run_whose_loads_changed_since_it_was_specified_is_refused(tmp_path, short_motion):
     """A spec made with the files' digests (as the command line makes it), then the data file
     changed: running it is refused naming the loads file; restored, it runs."""
-    from fdbench.experiment import RunSpec, motion_digest
+    from fdbench.spec import RunSpec, motion_digest
     from fdbench import run_inputs as runs
     from fdbench.multibody.loads import loads_digest
 

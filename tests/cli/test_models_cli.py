@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model, with_short_keys
+from fdbench.models import find_model
+from fdbench.multibody.model_changes import with_short_keys
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 
@@ -361,7 +362,7 @@ def test_optimize_and_collocate_on_the_leg():
 def test_a_model_file_counts_by_its_content(tmp_path):
     """The same file under two names is the same model (one spec hash); a changed mass is another;
     the file is an input that no output may overwrite."""
-    from fdbench.multibody.description import library
+    from fdbench.models import library
 
     text = library()["leg3"].read_text()
     first, second = tmp_path / "a.toml", tmp_path / "b.toml"
@@ -434,7 +435,7 @@ def test_the_arms_beyond_the_paper_table_has_direct_collocation():
 def test_a_missing_model_file_and_one_without_motions_are_one_line_exit_2(tmp_path):
     missing = invoke("control", "--model", tmp_path / "none.toml", code=2).stderr.splitlines()
     assert len(missing) == 1 and missing[0].count("--model") == 1 and "does not exist" in missing[0]
-    from fdbench.multibody.description import library
+    from fdbench.models import library
 
     text = library()["leg3"].read_text()
     path = tmp_path / "still.toml"

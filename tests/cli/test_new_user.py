@@ -91,7 +91,7 @@ def test_motion_choices_list_every_named_motion_of_the_library():
 
 
 def test_models_show_lists_the_paths_the_readme_names_with_the_files_values():
-    from fdbench.multibody.description import library
+    from fdbench.models import library
 
     out = invoke(["models", "show", "leg3"])
     assert out.exit_code == 0, out.stderr

@@ -25,7 +25,7 @@ from typer.testing import CliRunner
 
 from fdbench import files
 from fdbench.cli import app
-from fdbench.experiment import control_spec
+from fdbench.spec import control_spec
 from fdbench.store import Store, StoreError, open_store
 
 from helpers.processes import python_path
@@ -456,8 +456,8 @@ def test_pf_fit_works_for_every_allowed_term_count(terms):
     """The fit of every allowed term count reproduces the forearm's closed-form inverse-dynamics torque."""
     from helpers.forearm_closed_form import torque_along as elbow_torque
 
-    from fdbench.motion import eq5
-    from fdbench.multibody.description import find_model
+    from fdbench.multibody.motions import eq5
+    from fdbench.models import find_model
     from fdbench.multibody.engine import Engine
     from fdbench.multibody.motions import joint_motion
     from fdbench.problem import TrackingProblem

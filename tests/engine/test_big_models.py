@@ -272,7 +272,8 @@ def test_the_memory_budget_is_at_most_a_quarter_of_ulimit_v(tmp_path):
 
 
 def test_path_pairs_count_each_coordinate_once_per_body_below_it():
-    from fdbench.multibody.description import find_model, path_pairs
+    from fdbench.models import find_model
+    from fdbench.multibody.model_changes import path_pairs
 
     assert [path_pairs(find_model(name)) for name in ("forearm", "arm2")] == [1, 1 + 2]
 

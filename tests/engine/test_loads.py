@@ -27,7 +27,7 @@ from helpers.multibody_strategies import models_with_paths_and_free_joints
 from helpers.dense_checks import leading_matrix
 
 from fdbench.files import BadFile
-from fdbench.multibody.description import GROUND, Body, Frame, Joint, Model
+from fdbench.multibody.model import GROUND, Body, Frame, Joint, Model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.loads import ExternalLoad, ExternalLoads, generalized_forces, read_external_loads
 from fdbench.outcomes import residual_fields

@@ -16,8 +16,11 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.multibody.description import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, find_model,
-                                           library, load_model, resolved_end, to_dict, to_toml, with_changes)
+from fdbench.models import find_model, library
+from fdbench.multibody.model import (GROUND, RESERVED_SUFFIXES, Body, Joint, Load, Model, ModelError, resolved_end,
+                                     to_dict)
+from fdbench.multibody.model_changes import with_changes
+from fdbench.multibody.model_files import load_model, to_toml
 
 from helpers.cli_checks import assert_one_line_error
 from helpers import forearm_closed_form as cf
@@ -288,6 +291,10 @@ BAD += [  # named motions and short keys
     ("two motions of one name", lambda data: data.update(motions=[SWING, SWING | {"name": "Swing"}]),
      ("motions[1].name", "already the name of motions[0]")),
     ("a motion's unknown key", with_motion("motions.0.speed", 1.0), ("motions[0].speed", "unknown key")),
+    ("eq. 5 on a three-joint leg", setting("motions", [{"name": "flex", "type": "eq5-paper"}]),
+     ("motions[0].type", "eq5-paper moves the one angle of a one-joint model", "3 coordinates")),
+    ("eq. 5 given a duration", setting("motions", [{"name": "flex", "type": "eq5-exact", "duration": 2.0}]),
+     ("motions[0].duration", "eq. 5 fixes it", "remove it")),
     ("a short key to an unknown path", setting("keys", {"m1": "thigh.mas"}),
      ("keys.m1", "unknown path 'thigh.mas'", "did you mean 'thigh.mass'")),
     ("a short key to a number", setting("keys", {"m1": 7.5}), ("keys.m1", "a path of the model as a text")),
@@ -418,7 +425,7 @@ def test_the_first_child_in_the_file_gives_the_default_end():
 
 
 def find_model_from(data: dict) -> Model:
-    from fdbench.multibody.description import model_from_dict
+    from fdbench.multibody.model import model_from_dict
 
     return model_from_dict(copy.deepcopy(data), "test")
 
@@ -479,7 +486,7 @@ def test_the_readme_file_is_the_library_forearm(tmp_path):
 
 
 def test_the_readme_table_names_every_key():
-    from fdbench.multibody.description import BODY_KEYS, FRAME_KEYS, JOINT_KEYS, LOAD_KEYS, MOTION_KEYS, TOP_KEYS
+    from fdbench.multibody.model import BODY_KEYS, FRAME_KEYS, JOINT_KEYS, LOAD_KEYS, MOTION_KEYS, TOP_KEYS
 
     documented = set(re.findall(r"^\| `([a-z_.]+)` \|", readme_section(), flags=re.MULTILINE))
     keys = set(TOP_KEYS) | {f"{section}.{key}" for section, keys in

@@ -13,9 +13,9 @@ from hypothesis import strategies as st
 
 from helpers import forearm_closed_form as cf
 from fdbench.models import with_changes
-from fdbench.motion import desired_motion, sample_times, warped_time
+from fdbench.multibody.motions import desired_motion, sample_times, warped_time
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 

@@ -18,8 +18,8 @@ from typer.testing import CliRunner
 from helpers import forearm_closed_form as forearm
 from helpers.paths import ROOT
 from fdbench.cli import app
-from fdbench.experiment import control_spec, optimize_spec, with_motion_file
-from fdbench.motion import as_motion, butterworth_design_hz, eq5, noisy, read_motion_csv, zero_lag_lowpass
+from fdbench.spec import control_spec, optimize_spec, with_motion_file
+from fdbench.multibody.motions import as_motion, butterworth_design_hz, eq5, noisy, read_motion_csv, zero_lag_lowpass
 
 runner = CliRunner()
 EXAMPLE = ROOT / "examples" / "elbow_flexion.csv"
@@ -350,7 +350,7 @@ def test_recorded_motion_of_2_5_s_runs_through_every_command(tmp_path):
 
 
 def test_torque_parameterisations_spread_over_the_motion():
-    from fdbench.multibody.description import find_model
+    from fdbench.models import find_model
     from fdbench.multibody.engine import Engine
     from fdbench.multibody.motions import joint_motion
     from fdbench.problem import TrackingProblem

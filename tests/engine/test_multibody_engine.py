@@ -20,7 +20,7 @@ from fdbench.multibody import engine as mb
 from fdbench.multibody.kernels import CONSTRAINT, NONFINITE, OK
 from fdbench.multibody.engine import Engine
 
-from fdbench.multibody.description import GROUND, Body, Joint, Load, Model
+from fdbench.multibody.model import GROUND, Body, Joint, Load, Model
 
 
 def forearm_model() -> Model:
@@ -191,7 +191,7 @@ def test_simulate_pd_agrees_with_dop853_on_the_forearm_s_minimal_equation(kinema
     by which the paper's kinematics (derivatives in t*) leave eq. 5's angle."""
     from scipy.integrate import solve_ivp
 
-    from fdbench.motion import eq5
+    from fdbench.multibody.motions import eq5
 
     n = 1000
     half = np.linspace(0.0, 1.0, 2 * n + 1)

@@ -227,7 +227,7 @@ def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulat
     from helpers.population_checks import (assert_objectives_are, assert_one_step_calls_change_nothing,
                                    assert_population_equals_one_by_one)
 
-    from fdbench.multibody.description import MotionSpec
+    from fdbench.multibody.model import MotionSpec
     from fdbench.multibody.motions import joint_motion
     from fdbench.problem import TrackingProblem
 
@@ -255,7 +255,8 @@ def test_control_runs_on_a_free_base_with_a_knee_path(tmp_path):
     from typer.testing import CliRunner
 
     from fdbench.cli import app
-    from fdbench.multibody.description import MotionSpec, to_toml
+    from fdbench.multibody.model import MotionSpec
+    from fdbench.multibody.model_files import to_toml
 
     model = hopper_model()
     start = dict(zip(model.coordinates, (0.0, 0.0, 0.0, 0.2, -0.3)))

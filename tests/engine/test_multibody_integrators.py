@@ -19,7 +19,7 @@ import fdbench
 from fdbench.cli import app
 from fdbench.integrate import SCIPY_METHODS, Status
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.lqr import lqr_gains
 from fdbench.multibody.motions import joint_motion

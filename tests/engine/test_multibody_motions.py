@@ -1,9 +1,10 @@
 """Joint motions of any model (fdbench.multibody.motions) and the short keys of model files
-(fdbench.multibody.description.with_short_keys), checked against values worked out by hand."""
+(fdbench.multibody.model_changes.with_short_keys), checked against values worked out by hand."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,9 +12,12 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.files import BadFile
-from fdbench.multibody.description import (ModelError, MotionSpec, find_model, short_key_values, with_changes,
-                                           with_short_keys)
-from fdbench.multibody.motions import MinimumJerk, PerJoint, joint_motion, noisy_joints, read_joint_motion_csv
+from fdbench.models import find_model
+from fdbench.multibody.model import ModelError, MotionSpec
+from fdbench.multibody.model_changes import short_key_values, with_changes, with_short_keys
+from fdbench.multibody.model_files import load_model, to_toml
+from fdbench.multibody.motions import (MinimumJerk, PerJoint, SampledMotion, joint_motion, noisy_joints,
+                                       read_joint_motion_csv)
 
 ARM = find_model("arm2")
 SPEC = MotionSpec("lift", "minimum-jerk", 2.0, (("a", 0.5), ("b", -1.0)), (("a", 1.5), ("b", 1.0)))
@@ -60,8 +64,68 @@ def test_an_unknown_motion_lists_the_models_motions_or_a_csv_file():
     for name in ("rech", "paper"):
         with pytest.raises(ValueError, match=r"--motion: unknown arm2 motion .*valid: reach.* or a CSV file"):
             joint_motion(name, ARM)
-    with pytest.raises(ValueError, match="no motion named 'swing'.*columns t, theta"):
+    with pytest.raises(ValueError, match="unknown forearm motion 'swing'; valid: paper, exact or a CSV file"):
         joint_motion("swing", find_model("forearm"))
+    with pytest.raises(ValueError, match="no motion named 'swing'.*columns t, theta"):
+        joint_motion("swing", replace(find_model("forearm"), motions=()))
+
+
+# ---- eq. 5, the forearm's named motions ------------------------------------------------------
+
+
+def eq5_by_hand(t, a1=0.05, amplitude=math.pi / 4):
+    """Eq. 5 written out: theta(t) from -45 deg to 0 along t* = a1 t + (1 - a1) t^2, and its first
+    two derivatives with respect to t* (as the paper prints them)."""
+    ts = a1 * t + (1 - a1) * t**2
+    theta = -amplitude + amplitude * (ts - np.sin(2 * np.pi * ts) / (2 * np.pi))
+    return theta, amplitude * (1 - np.cos(2 * np.pi * ts)), 2 * np.pi * amplitude * np.sin(2 * np.pi * ts)
+
+
+def test_the_forearm_names_eq_5_paper_first_and_exact_second():
+    forearm = find_model("forearm")
+    assert [(m.name, m.type) for m in forearm.motions] == [("paper", "eq5-paper"), ("exact", "eq5-exact")]
+    t = np.linspace(0.0, 1.0, 41)
+    paper, exact = joint_motion("paper", forearm), joint_motion("exact", forearm)
+    by_hand = eq5_by_hand(t)
+    for got, want in zip(paper(t), by_hand):
+        assert np.allclose(got[:, 0], want, rtol=0, atol=1e-12)
+    assert paper.duration == exact.duration == 1.0 and len(paper.samples) == 1001 and paper.name == "paper"
+    # 'exact' is the same angle, its rates those of theta(t): central differences of the angle
+    h = 1e-6
+    up, down = joint_motion("exact", forearm)(t[1:-1] + h), joint_motion("exact", forearm)(t[1:-1] - h)
+    z, zd, zdd = exact(t[1:-1])
+    assert np.allclose(z[:, 0], by_hand[0][1:-1], rtol=0, atol=1e-12)
+    assert np.allclose((up[0] - down[0]) / (2 * h), zd, rtol=0, atol=1e-7)
+    assert np.allclose((up[1] - down[1]) / (2 * h), zdd, rtol=0, atol=1e-5)
+
+
+def test_a_one_joint_model_file_may_name_eq_5_and_a_model_without_it_does_not_know_it(tmp_path):
+    forearm = find_model("forearm")
+    text = to_toml(replace(forearm, name="elbow", motions=()))
+    (tmp_path / "bare.toml").write_text(text)
+    bare = load_model(tmp_path / "bare.toml")
+    with pytest.raises(ValueError, match="declares no motion named 'paper'"):
+        joint_motion("paper", bare)
+    (tmp_path / "elbow.toml").write_text(text + '\n[[motions]]\nname = "flex"\ntype = "eq5-exact"\n')
+    elbow = load_model(tmp_path / "elbow.toml")
+    t = np.linspace(0.0, 1.0, 11)
+    for got, want in zip(joint_motion("flex", elbow)(t), joint_motion("exact", forearm)(t)):
+        assert np.array_equal(got, want)
+    assert load_model(tmp_path / "elbow.toml") == elbow and to_toml(elbow).count("[[motions]]") == 1
+
+
+def test_a_recorded_angle_may_pass_90_degrees():
+    """The engine's angle constraints are regular at any angle: a recording from 0 to 120 deg and
+    back is taken as any other, its rates given or estimated."""
+    t = np.linspace(0.0, 2.0, 201)
+    top, rate = math.radians(120), math.pi / 2
+    theta, vel, acc = top * np.sin(rate * t), top * rate * np.cos(rate * t), -top * rate**2 * np.sin(rate * t)
+    given = SampledMotion(t, theta, vel, acc)
+    for got, want in zip(given(t), (theta, vel, acc)):
+        assert np.allclose(got, want, rtol=0, atol=1e-12)
+    inner = (t > 0.3) & (t < 1.7)
+    estimated = SampledMotion(t, theta)(t)
+    assert np.allclose(estimated[1][inner], vel[inner], rtol=0, atol=1e-3 * top * rate)
 
 
 # ---- recorded motions by joint names ----------------------------------------------------------

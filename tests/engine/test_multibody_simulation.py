@@ -26,7 +26,7 @@ from helpers.multibody_strategies import models
 from fdbench import population
 from fdbench.integrate import Status
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import COMPUTED, GAINS, PD, Engine
 from fdbench.multibody.kernels import rk4_candidates
 

@@ -24,7 +24,7 @@ from hypothesis import strategies as st
 from helpers import reference_dynamics as ref
 from helpers.multibody_strategies import models_and_states, models_with_paths_and_free_joints
 
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.symbolic import MinimalDynamics
 

@@ -23,7 +23,9 @@ from typer.testing import CliRunner
 from helpers.osim_files import body, joint, osim_file, path_knee_model
 from helpers.paths import ROOT
 from fdbench.cli import app
-from fdbench.multibody.description import MotionSpec, find_model, library, load_model
+from fdbench.models import find_model, library
+from fdbench.multibody.model import MotionSpec
+from fdbench.multibody.model_files import load_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk
 
@@ -637,7 +639,7 @@ def test_the_walk_s_mot_reads_angles_in_degrees_and_the_pelvis_translations_in_m
 def test_export_osim_refuses_free_and_path_joints_and_writes_nothing(tmp_path):
     model, _ = import_osim(path_knee_model(tmp_path / "knee.osim"))
     source = tmp_path / "knee.toml"
-    from fdbench.multibody.description import to_toml
+    from fdbench.multibody.model_files import to_toml
 
     source.write_text(to_toml(model))
     out = tmp_path / "out.osim"

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from helpers import reference_dynamics as ref
-from fdbench.multibody import description as d
+from fdbench.multibody import model as d
 from helpers.arm2_closed_form import joint_torques
 from helpers.multibody_strategies import arm2_model, forearm_model, models, models_and_states
 
@@ -68,7 +68,7 @@ def test_forearm_matches_its_closed_form(theta, w, dw):
 def test_pendulum_matches_its_closed_form(at_child, com, at, force, offset, theta, w, dw):
     """One body on a pin at P = (0.1, -0.2), its frame at angle phi = theta + offset, the pin at
     at_child in it: tau = I_P theta'' - (R(phi)(com - at_child)) x m g - (R(phi)(at - at_child)) x F,
-    I_P = inertia + m |com - at_child|^2 (the frame conventions, offsets and loads of fdbench.multibody.description)."""
+    I_P = inertia + m |com - at_child|^2 (the frame conventions, offsets and loads of fdbench.multibody.model)."""
     m, inertia, g = 2.5, 0.07, (0.3, -9.81)
     model = d.Model(name="pendulum", gravity=g, bodies=(d.Body("b", mass=m, com=com, inertia=inertia),),
                     joints=(d.Joint("q", "pin", d.GROUND, "b", (0.1, -0.2), at_child, offset=offset),),

@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.kernels import COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, PD, VIOLATION
 from fdbench.multibody.motions import joint_motion

@@ -111,7 +111,7 @@ def test_the_sensitivities_on_a_free_base_with_a_knee_path_and_loads_are_the_der
 def _hopper_problem(feedforward=True, residual_weight=0.05):
     """The hopper tracking a minimum-jerk motion that moves every coordinate (the pelvis's x and y in
     m), under the loads, with cubic splines per coordinate and eq. 18's residual term."""
-    from fdbench.multibody.description import MotionSpec
+    from fdbench.multibody.model import MotionSpec
     from fdbench.multibody.motions import MinimumJerk
     from fdbench.problem import TrackingProblem
 
@@ -154,7 +154,8 @@ def test_optimize_with_exact_gradients_on_a_free_base_runs_and_improves(tmp_path
     """``optimize --gradient exact`` takes a model with a free base and a knee path, and BFGS lowers
     eq. 18 from its start."""
     from fdbench.cli import app
-    from fdbench.multibody.description import MotionSpec, to_toml
+    from fdbench.multibody.model import MotionSpec
+    from fdbench.multibody.model_files import to_toml
 
     model = hopper_model()
     start = tuple((name, 0.0) for name in model.coordinates)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fdbench.multibody import description as d
+from fdbench.multibody import model as d
 from fdbench.multibody.loads import ExternalLoad, ExternalLoads
 
 

@@ -22,7 +22,7 @@ import math
 import numpy as np
 from hypothesis import strategies as st
 
-from fdbench.multibody import description as d
+from fdbench.multibody import model as d
 
 ANGLE = st.floats(-math.pi, math.pi)
 

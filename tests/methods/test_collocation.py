@@ -17,9 +17,9 @@ from helpers import forearm_closed_form as cf
 from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.collocation import collocate
-from fdbench.motion import desired_motion
+from fdbench.multibody.motions import desired_motion
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 

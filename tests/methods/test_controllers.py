@@ -19,11 +19,11 @@ from helpers import forearm_closed_form as cf
 from fdbench.cli import app
 from fdbench.controllers import CONTROLLERS, Controller, make_controller
 from fdbench.controllers.base import Design, Plan
-from fdbench.experiment import OMITTED_AT_DEFAULT, control_spec
+from fdbench.spec import OMITTED_AT_DEFAULT, control_spec
 from fdbench.models import with_changes
-from fdbench.motion import desired_motion, sample_times
+from fdbench.multibody.motions import desired_motion, sample_times
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import PerJoint, joint_motion
 

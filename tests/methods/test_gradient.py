@@ -7,8 +7,8 @@ from typer.testing import CliRunner
 
 from helpers.numerics import richardson
 from fdbench.cli import app
-from fdbench.experiment import optimize_spec
-from fdbench.multibody.description import find_model
+from fdbench.spec import optimize_spec
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.optimizers import make_optimizer
@@ -67,7 +67,7 @@ def test_a_value_and_gradient_pass_counts_as_one_evaluation():
 
 
 def test_exact_gradient_beats_finite_differences_on_the_spline():
-    from fdbench.experiment import run
+    from fdbench.api import run
 
     exact = run(optimize_spec("cs", "bfgs", budget=200, gradient="exact")).record
     fd = run(optimize_spec("cs", "bfgs", budget=200)).record

@@ -11,7 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.experiment import RunSpec, optimize_spec
+from fdbench.spec import RunSpec, optimize_spec
 from fdbench.torques.cs import knots_for
 
 runner = CliRunner()

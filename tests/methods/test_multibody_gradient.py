@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 
 from helpers.numerics import richardson
 from fdbench.cli import app
-from fdbench.multibody import description as d
-from fdbench.multibody.description import find_model
+from fdbench.multibody import model as d
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk, joint_motion
 from fdbench.problem import TrackingProblem

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from fdbench.experiment import optimize_spec, run
+from fdbench.api import run
+from fdbench.spec import optimize_spec
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.problem import TrackingProblem

@@ -30,7 +30,7 @@ ANGLES, TRANSLATIONS = ("tilt", "hip", "knee"), ("tx", "ty")
 
 
 def hopper_with_step():
-    from fdbench.multibody.description import MotionSpec
+    from fdbench.multibody.model import MotionSpec
 
     model = hopper_model()
     step = MotionSpec("step", "minimum-jerk", DURATION, tuple(zip(model.coordinates, START)),
@@ -58,7 +58,7 @@ def cli(*args):
 @pytest.fixture(scope="module")
 def free_run(tmp_path_factory):
     """(record, trajectory columns) of PD control of the hopper's step on a plant with a heavier pelvis."""
-    from fdbench.multibody.description import to_toml
+    from fdbench.multibody.model_files import to_toml
 
     folder = tmp_path_factory.mktemp("units")
     (folder / "hopper.toml").write_text(to_toml(hopper_with_step()))
@@ -186,7 +186,7 @@ def test_the_inverse_summary_gives_translations_in_metres_and_their_forces_in_ne
     from typer.testing import CliRunner
 
     from fdbench.cli import app
-    from fdbench.multibody.description import to_toml
+    from fdbench.multibody.model_files import to_toml
 
     path = tmp_path / "hopper.toml"
     path.write_text(to_toml(hopper_with_step()))

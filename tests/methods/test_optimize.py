@@ -14,11 +14,12 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.experiment import optimize_spec, run
+from fdbench.api import run
+from fdbench.spec import optimize_spec
 from helpers import forearm_closed_form as forearm
-from fdbench.motion import eq5
+from fdbench.multibody.motions import eq5
 from fdbench.multibody import simulation as sim
-from fdbench.multibody.description import find_model
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.optimizers import OPTIMIZERS, Optimizer, make_optimizer

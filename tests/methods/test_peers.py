@@ -20,8 +20,8 @@ from helpers.cli_checks import assert_one_line_error
 from helpers.paths import ROOT
 
 from fdbench.cli import app
-from fdbench.experiment import RunSpec, control_spec, run
-from fdbench.spec import peer_spec
+from fdbench.api import run
+from fdbench.spec import RunSpec, control_spec, peer_spec
 
 ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
 

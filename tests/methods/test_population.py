@@ -8,9 +8,10 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from helpers import forearm_closed_form as forearm
-from fdbench.experiment import optimize_spec, run
-from fdbench.motion import eq5
-from fdbench.multibody.description import find_model
+from fdbench.api import run
+from fdbench.spec import optimize_spec
+from fdbench.multibody.motions import eq5
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
 from fdbench.population import set_threads

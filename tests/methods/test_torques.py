@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from helpers import forearm_closed_form as cf
-from fdbench.motion import desired_motion, sample_times
+from fdbench.multibody.motions import desired_motion, sample_times
 from fdbench.torques import TORQUES, make_torque
 from fdbench.torques.ann import AnnTorque, select_hidden
 from fdbench.torques.cs import CubicSplineTorque

@@ -874,7 +874,7 @@ def test_a_motion_file_stands_with_its_digest_convention_and_filtered_reference(
 
 
 def test_figure2_draws_a_recordings_raw_samples_and_says_what_rmse_is_against():
-    from fdbench.experiment import RunSpec, with_motion_file
+    from fdbench.spec import RunSpec, with_motion_file
     from fdbench.figures import figure2_samples
 
     motion = ROOT / "examples" / "elbow_flexion.csv"

@@ -38,7 +38,8 @@ def _hopper_file(folder: Path) -> Path:
     """The hopper model (free pelvis, hip, knee on a path) as a model file, without named motions."""
     from helpers.models import hopper_model
 
-    from fdbench.multibody.description import MotionSpec, to_toml
+    from fdbench.multibody.model import MotionSpec
+    from fdbench.multibody.model_files import to_toml
 
     model = hopper_model()
     rest = tuple((name, 0.0) for name in model.coordinates)
@@ -188,7 +189,7 @@ def _common(hop) -> dict:
 
 
 def _spec(hop, **more):
-    from fdbench.experiment import control_spec
+    from fdbench.spec import control_spec
 
     return control_spec(**_common(hop), **more)
 
@@ -196,7 +197,7 @@ def _spec(hop, **more):
 def test_recorded_curves_are_the_motion_files_columns(hop):
     """The coordinates figure's recorded curve of each coordinate is the file's column (deg for
     angles, m for translations); each simulated curve is the simulation's coordinates in those units."""
-    from fdbench.experiment import run
+    from fdbench.api import run
     from fdbench.walk import coordinates
     from fdbench.walk_figures import coordinate_curves, recording
 
@@ -251,7 +252,7 @@ def test_a_fallen_runs_last_pose_is_shown_marked_and_held(hop):
     """A run that stopped early: the stick figure's last pose is ``Engine.point_positions`` at the
     last sample it reached, beside the tracked motion's there, marked with its t_end; the animation
     shows its poses until then and holds that last pose after; a run that reached the end has none."""
-    from fdbench.experiment import run
+    from fdbench.api import run
     from fdbench.run_inputs import engine
     from fdbench.walk_figures import ANIMATION_FPS, animation_frames, stopped_poses
 
@@ -290,7 +291,7 @@ def test_collocations_own_solution_is_drawn_at_its_nodes(hop, tmp_path):
     motion and loads; the residuals figure's, the generalised forces on the base there; both
     figures are written with it."""
     from fdbench.collocation import collocate
-    from fdbench.experiment import collocate_spec
+    from fdbench.spec import collocate_spec
     from fdbench.run_inputs import loads, motions, nominal
     from fdbench.walk import COLLOCATION, coordinates
     from fdbench.walk_figures import (OWN_SOLUTION, coordinate_curves, coordinates_figure, recording,
@@ -322,7 +323,8 @@ def test_collocations_own_solution_is_drawn_at_its_nodes(hop, tmp_path):
 def test_residual_curves_are_the_base_coordinates_generalised_forces(hop):
     """FX, FY, MZ of the inverse dynamics are its forces on tx, ty and tilt; a simulation's are its
     applied forces on them; a model without a floating base has none."""
-    from fdbench.experiment import control_spec, run
+    from fdbench.api import run
+    from fdbench.spec import control_spec
     from fdbench.models import with_changes
     from fdbench.run_inputs import nominal
     from fdbench.walk_figures import residual_curves

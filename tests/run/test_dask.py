@@ -189,7 +189,7 @@ def test_a_run_that_raises_is_stored_as_failed_on_a_local_dask_cluster_as_on_the
     message, the same record on both backends."""
     _needs_dask()
     from fdbench.execution import DaskBackend, LocalBackend, execute_specs
-    from fdbench.experiment import control_spec, optimize_spec
+    from fdbench.spec import control_spec, optimize_spec
     from fdbench.store import open_store
 
     specs = [control_spec(80.0, 0.3), control_spec(40.0, 0.3), optimize_spec("no-such-torque", "bfgs", seed=0, budget=5)]

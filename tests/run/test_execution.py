@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from fdbench.execution import Backend, LocalBackend, Outcome, execute_specs, failed_record, run_spec
-from fdbench.experiment import control_spec
+from fdbench.spec import control_spec
 from fdbench.store import open_store
 from helpers.processes import GATED_OPTIMIZER, Gate, wait_until
 
@@ -299,10 +299,10 @@ def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_
 WARM_PROBE = textwrap.dedent("""
     import gc, json, sys
     from numba.core.registry import CPUDispatcher
-    import fdbench.experiment as experiment
+    import fdbench.api as experiment
     import fdbench.torques.ann as ann
     from fdbench.execution import LocalBackend, execute_specs
-    from fdbench.experiment import optimize_spec
+    from fdbench.spec import optimize_spec
     from fdbench.store import open_store
 
     def signatures():

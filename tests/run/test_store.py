@@ -17,12 +17,12 @@ from pathlib import Path
 
 import pytest
 
-from fdbench.experiment import OMITTED_AT_DEFAULT
+from fdbench.spec import OMITTED_AT_DEFAULT
 from typer.testing import CliRunner
 
 from fdbench import store as store_module
 from fdbench.cli import app
-from fdbench.experiment import RunSpec, control_spec, optimize_spec
+from fdbench.spec import RunSpec, control_spec, optimize_spec
 from fdbench.store import DEFAULT_DB, Store, StoreError, default_path, open_store
 
 SQLITE_MAGIC = b"SQLite format 3\x00"  # the first 16 bytes of every SQLite 3 file (sqlite.org/fileformat.html)
@@ -82,7 +82,7 @@ def test_new_store_creates_runs_and_meta_tables(tmp_path):
 
 
 def test_real_run_is_read_back_with_same_record_history_and_params(tmp_path):
-    from fdbench.experiment import run
+    from fdbench.api import run
 
     spec = optimize_spec("cs", "bfgs", False, seed=0, budget=6)
     outcome = run(spec)
@@ -127,7 +127,7 @@ def test_record_without_params_round_trips(tmp_path):
 
 
 HASH_SCRIPT = """
-from fdbench.experiment import control_spec, optimize_spec
+from fdbench.spec import control_spec, optimize_spec
 print(optimize_spec("ann", "cmaes", True, seed=3, budget=50, torque_options={"hidden": 4},
                     optimizer_options={"sigma0": 0.2}).hash())
 print(control_spec(80.0, 0.3).hash())
@@ -307,7 +307,7 @@ WRITER = textwrap.dedent("""
             def as_dict(self):
                 return {"command": self.command, "seed": self.seed}
     else:
-        from fdbench.experiment import RunSpec
+        from fdbench.spec import RunSpec
         Spec = lambda seed: RunSpec(command="optimize", torque="cs", optimizer="bfgs", seed=seed, budget=10)
     specs = [Spec(worker * 100000 + i) for i in range(n)]
     (go.parent / f"{go.name}.ready{worker}").touch()

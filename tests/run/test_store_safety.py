@@ -21,7 +21,7 @@ import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
-from fdbench.experiment import RunSpec, control_spec
+from fdbench.spec import RunSpec, control_spec
 from fdbench.store import Store, StoreError, open_store
 from fdbench.store_queries import method_label
 

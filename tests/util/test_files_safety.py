@@ -80,7 +80,7 @@ def test_figures_as_a_link_to_a_missing_folder_is_refused_before_work(tmp_path, 
 
 def _dropping_runs_table(monkeypatch, db: Path):
     """The database loses its runs table while the run is under way."""
-    import fdbench.experiment as experiment
+    import fdbench.api as experiment
 
     original = experiment.run
 

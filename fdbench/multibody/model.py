@@ -1,5 +1,7 @@
-"""A planar multibody model as data: bodies, joints and constant point loads, read from a TOML or
-JSON file (the same keys) and checked, in SI units with angles in radians and translations in m.
+"""A planar multibody model as data: bodies, joints and constant point loads, in SI units with
+angles in radians and translations in m, and its checks (``model_from_dict``: the keys of a TOML
+or JSON model file, read by ``fdbench.multibody.model_files``; changed by
+``fdbench.multibody.model_changes``; found by name or file by ``fdbench.models.find_model``).
 
 The model is a tree rooted at ``ground``: every body is the child of exactly one joint; a joint's
 parent is ground or a body. A joint's angle is the child frame's angle relative to its parent
@@ -38,16 +40,16 @@ Choices made here (documented in the README's "Your own model"):
   likely a mistyped joint position); a load or centre of mass that close is passed over for the
   next default.
 * ``[[motions]]`` (optional) names motions of the model, the first its default: ``name``,
-  ``type`` ('minimum-jerk', the only type: z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t /
-  duration, from rest to rest), ``duration`` (s, at least 0.01), ``start`` and ``goal`` (tables
-  {joint = angle}, rad, naming every joint and no other).
+  ``type`` ('minimum-jerk', the default: z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t /
+  duration, from rest to rest, with ``duration`` (s, at least 0.01), ``start`` and ``goal``
+  (tables {joint = angle}, rad, naming every joint and no other); or 'eq5-paper', 'eq5-exact':
+  the paper's eq. 5 of a one-angle model, its span fixed (``fdbench.multibody.motions.eq5``).
 * ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
   a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
   ``<body>.inertia`` an ``@<joint>`` of the body for the inertia about the joint's point (inertia +
   mass |com - point|^2), which stays when a short key changes the body's mass or centre of mass
   (``with_short_keys``).
 """
-
 from __future__ import annotations
 
 import heapq
@@ -55,6 +57,10 @@ import math
 import re
 from dataclasses import dataclass, replace
 from pathlib import Path
+
+from ..files import quoted
+from ..registry import unknown_name_message
+from .spline import fit
 
 GROUND = "ground"
 
@@ -68,7 +74,6 @@ ANGLE, TRANSLATION = "angle", "translation"  # the kinds of coordinates (rad, m)
 MAX_PATH_SAMPLES = 1000  # samples of a joint's path
 RESERVED_SUFFIXES = ("_vel", "_acc", "_torque", "_desired", "_inverse")  # columns made from a joint's name
 NAME_PATTERN = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,63}")
-LIBRARY = Path(__file__).resolve().parent.parent / "models" / "library"
 
 
 class ModelError(ValueError):
@@ -164,7 +169,8 @@ class Frame:
 class MotionSpec:
     """A named motion of a model: every joint from ``start`` to ``goal`` (rad, (joint, angle) pairs
     in the model's coordinate order) in ``duration`` s, from rest to rest, along ``type``
-    ('minimum-jerk': z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t / duration)."""
+    ('minimum-jerk': z0 + (z1 - z0)(10u^3 - 15u^4 + 6u^5), u = t / duration; 'eq5-paper',
+    'eq5-exact': the paper's eq. 5, -45 deg to 0 in 1 s)."""
 
     name: str
     type: str
@@ -278,10 +284,10 @@ def resolved_end(model: Model, body_name: str) -> tuple[float, float]:
     the at_parent point of its first child joint; else its farthest load's point; else its centre of
     mass; else its joint point + (1 m, 0). A load or centre of mass closer than 1 mm to the joint
     point is passed over."""
-    return _end_of(model, body_name)[0]
+    return end_of(model, body_name)[0]
 
 
-def _end_of(model: Model, body_name: str) -> tuple[tuple[float, float], str]:
+def end_of(model: Model, body_name: str) -> tuple[tuple[float, float], str]:
     """resolved_end and what gave it: 'end', 'joint <k>', 'load <i>', 'com' or 'default'."""
     body = model.body(body_name)
     if body.end is not None:
@@ -292,76 +298,16 @@ def _end_of(model: Model, body_name: str) -> tuple[tuple[float, float], str]:
     origin = model.parent_joint(body_name).at_child
     loads = [(i, load) for i, load in enumerate(model.loads) if load.body == body_name]
     if loads:
-        i, load = max(loads, key=lambda pair: _distance(pair[1].at, origin))
-        if _distance(load.at, origin) >= MIN_SEGMENT:
+        i, load = max(loads, key=lambda pair: distance(pair[1].at, origin))
+        if distance(load.at, origin) >= MIN_SEGMENT:
             return load.at, f"load {i}"
-    if _distance(body.com, origin) >= MIN_SEGMENT:
+    if distance(body.com, origin) >= MIN_SEGMENT:
         return body.com, "com"
     return (origin[0] + 1.0, origin[1]), "default"
 
 
-def _distance(a, b) -> float:
+def distance(a, b) -> float:
     return math.hypot(a[0] - b[0], a[1] - b[1])
-
-
-# ---------------------------------------------------------------- reading files
-
-
-def load_model(path, option: str = "model file") -> Model:
-    """The checked model of a TOML or JSON file (by its suffix; otherwise JSON if it starts with
-    '{'), or of an OpenSim model (.osim, ``fdbench.multibody.osim``). ModelError or BadFile (both
-    ValueError, one line naming the file) if it cannot be used."""
-    from ..files import read_input_text
-
-    source = str(path)
-    suffix = Path(source).suffix.lower()
-    if suffix == ".osim":
-        from .osim import import_osim
-
-        return import_osim(path, option=option)[0]
-    text = read_input_text(path, option, MAX_FILE_BYTES)
-    is_json = suffix == ".json" or (suffix != ".toml" and text.lstrip().startswith("{"))
-    data = _parse_json(text, source) if is_json else _parse_toml(text, source)
-    return model_from_dict(data, source, default_name=Path(source).stem)
-
-
-def _parse_toml(text: str, source: str):
-    try:
-        import tomllib
-    except ImportError:  # Python 3.10
-        try:
-            import tomli as tomllib
-        except ImportError:
-            raise ModelError(source, "", "reading TOML needs Python 3.11 or the tomli package; "
-                             "write the model as JSON (the same keys)") from None
-    try:
-        return tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ModelError(source, "", f"not valid TOML: {exc}") from None
-    except ValueError:  # an integer of thousands of digits, beyond Python's limit for reading one
-        raise ModelError(source, "", "not valid TOML: a number too long to read") from None
-    except RecursionError:
-        raise ModelError(source, "", "not valid TOML: nested too deeply") from None
-
-
-def _parse_json(text: str, source: str):
-    import json
-
-    def unique_keys(pairs):
-        found = dict(pairs)
-        if len(found) < len(pairs):  # linear: a set of the keys seen, not a count per key
-            seen = set()
-            key = next(key for key, _ in pairs if key in seen or seen.add(key))
-            raise ModelError(source, "", f"the key {key!r} appears twice in one object; give it once")
-        return found
-
-    try:
-        return json.loads(text, parse_int=float, object_pairs_hook=unique_keys)
-    except json.JSONDecodeError as exc:
-        raise ModelError(source, "", f"not valid JSON: {exc}") from None
-    except RecursionError:
-        raise ModelError(source, "", "not valid JSON: nested too deeply") from None
-
 
 # ---------------------------------------------------------------- checking values
 
@@ -373,8 +319,9 @@ JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_pa
 PATH_KEYS = {"angles": True, "x": True, "y": True, "y_angles": False}
 LOAD_KEYS = {"body": True, "at": True, "force": True}
 FRAME_KEYS = {"name": True, "body": True, "at": True, "angle": False}
-MOTION_KEYS = {"name": True, "type": False, "duration": True, "start": True, "goal": True}
-MOTION_TYPES = ("minimum-jerk",)
+MOTION_KEYS = {"name": True, "type": False, "duration": False, "start": False, "goal": False}
+MOTION_TYPES = ("minimum-jerk", "eq5-paper", "eq5-exact")
+EQ5 = {"duration": 1.0, "start": -math.pi / 4, "goal": 0.0}  # eq. 5's span (s) and angles (rad), fixed
 
 # what each key allows, said when it is missing or wrong
 ALLOWED = {
@@ -431,8 +378,6 @@ class _Checker:
             self.fail(key, f"must be a table of keys, got {_kind(value)}")
         for name in value:
             if name not in keys:
-                from ..registry import unknown_name_message
-
                 where = f"{key}." if key else ""
                 self.fail(f"{where}{name}", unknown_name_message("key", name, list(keys)))
         for name, required in keys.items():
@@ -473,8 +418,6 @@ class _Checker:
         if not isinstance(value, str):
             self.fail(key, f"must be {ALLOWED['name']}, got {_kind(value)}")
         if not NAME_PATTERN.fullmatch(value):
-            from ..files import quoted
-
             self.fail(key, f"{quoted(value)} is not a name fdbench accepts: a letter then letters, digits or '_', "
                            "at most 64 characters")
         if value.lower() == GROUND:
@@ -603,8 +546,6 @@ _SPLINES: dict = {}
 
 
 def _path_splines(path: JointPath):
-    from .spline import fit
-
     if path not in _SPLINES:
         _SPLINES[path] = (fit(path.angles, path.x), fit(path.angles_of_y, path.y))
     return _SPLINES[path]
@@ -617,8 +558,6 @@ def _load(check: _Checker, entry, key: str) -> Load:
 
 
 def _frame(check: _Checker, entry, key: str, model: Model, earlier: set) -> Frame:
-    from ..registry import unknown_name_message
-
     entry = check.table(entry, key, FRAME_KEYS)
     name = check.name(entry["name"], f"{key}.name")
     taken = {n.lower() for n in [b.name for b in model.bodies] + [j.name for j in model.joints]}
@@ -643,11 +582,24 @@ def _motion(check: _Checker, entry, key: str, joints: tuple, kinds: tuple = ()) 
     kind = entry.get("type", MOTION_TYPES[0])
     if kind not in MOTION_TYPES:
         check.fail(f"{key}.type", f"{_kind(kind)} is not a motion type fdbench knows; valid: {', '.join(MOTION_TYPES)}")
+    name = check.name(entry["name"], f"{key}.name")
+    if kind != "minimum-jerk":  # eq. 5: one angle from -45 deg to 0 in 1 s
+        for fixed in ("duration", "start", "goal"):
+            if fixed in entry:
+                check.fail(f"{key}.{fixed}", f"eq. 5 fixes it ({EQ5['duration']:g} s, from -45 deg to 0); remove it")
+        if len(joints) != 1 or (kinds and kinds[0] == TRANSLATION):
+            check.fail(f"{key}.type", f"{kind} moves the one angle of a one-joint model; this model has "
+                                      f"{len(joints)} coordinates")
+        return MotionSpec(name=name, type=kind, duration=EQ5["duration"], start=((joints[0], EQ5["start"]),),
+                          goal=((joints[0], EQ5["goal"]),))
+    for required in ("duration", "start", "goal"):
+        if required not in entry:
+            check.fail(f"{key}.{required}", f"missing; give {ALLOWED[required]}")
     duration = check.number(entry["duration"], f"{key}.duration", positive=True)
     if duration < MIN_MOTION_DURATION:
         check.fail(f"{key}.duration", f"must be at least {MIN_MOTION_DURATION:g} s (ten samples of the motion's "
                                       f"1 ms grid), got {duration:g}")
-    return MotionSpec(name=check.name(entry["name"], f"{key}.name"), type=kind, duration=duration,
+    return MotionSpec(name=name, type=kind, duration=duration,
                       start=_joint_angles(check, entry["start"], f"{key}.start", joints, kinds),
                       goal=_joint_angles(check, entry["goal"], f"{key}.goal", joints, kinds))
 
@@ -658,8 +610,6 @@ def _joint_angles(check: _Checker, value, key: str, joints: tuple, kinds: tuple 
         check.fail(key, f"must be {ALLOWED[key.rsplit('.', 1)[-1]]}, got {_kind(value)}")
     for name in value:
         if name not in joints:
-            from ..registry import unknown_name_message
-
             check.fail(f"{key}.{name}", unknown_name_message("joint", name, list(joints)))
     for joint in joints:
         if joint not in value:
@@ -688,8 +638,6 @@ def _short_keys(check: _Checker, value, model: Model) -> tuple[tuple[str, str], 
     for name, target in value.items():
         key = f"keys.{name}"
         if not NAME_PATTERN.fullmatch(name):
-            from ..files import quoted
-
             check.fail(key, f"{quoted(name)} is not a short key fdbench accepts: a letter then letters, digits or '_'")
         if not isinstance(target, str):
             check.fail(key, f"must be a path of the model as a text ('[-]path[@joint]'), got {_kind(target)}")
@@ -708,8 +656,6 @@ def parse_target(target: str) -> tuple[bool, str, str | None]:
 
 def _target_problem(model: Model, target: str) -> str:
     """Why ``target`` cannot be a short key's target of ``model`` ('' if it can)."""
-    from ..registry import unknown_name_message
-
     _, path, joint = parse_target(target)
     paths = change_paths(model)
     if path not in paths:
@@ -741,8 +687,6 @@ def _check_names(check: _Checker, bodies: list, joints: list) -> None:
 
 def _check_references(check: _Checker, bodies: list, joints: list, loads: list) -> None:
     """Parents, children and loaded bodies exist; every body is the child of exactly one joint."""
-    from ..registry import unknown_name_message
-
     names = [body.name for body in bodies]
     parent_of = {}
     for k, joint in enumerate(joints):
@@ -801,8 +745,8 @@ def _check_ends(check: _Checker, model: Model, bodies: list, order: list) -> Non
     """Each body's end point is at least 1 mm from its joint point (a segment has a length)."""
     for i, body in enumerate(bodies):
         joint = model.parent_joint(body.name)
-        end, given_by = _end_of(model, body.name)
-        if _distance(end, joint.at_child) >= MIN_SEGMENT:
+        end, given_by = end_of(model, body.name)
+        if distance(end, joint.at_child) >= MIN_SEGMENT:
             continue
         here = f"the joint point {list(joint.at_child)} of {body.name!r} (joints[{order[model.joints.index(joint)]}].at_child)"
         if given_by == "end":
@@ -812,8 +756,7 @@ def _check_ends(check: _Checker, model: Model, bodies: list, order: list) -> Non
         check.fail(f"joints[{k}].at_parent", f"is within 1 mm of {here}: a segment of zero length; move the joint "
                                              f"or give bodies[{i}].end, the body's second point")
 
-
-# ---------------------------------------------------------------- writing and changing
+# ---------------------------------------------------------------- as plain data
 
 
 def to_dict(model: Model, explicit_ends: bool = False) -> dict:
@@ -838,37 +781,13 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
     if model.loads:
         data["loads"] = [{"body": load.body, "at": list(load.at), "force": list(load.force)} for load in model.loads]
     if model.motions:
-        data["motions"] = [{"name": m.name, "type": m.type, "duration": m.duration, "start": dict(m.start),
-                            "goal": dict(m.goal)} for m in model.motions]
+        data["motions"] = [{"name": m.name, "type": m.type} | ({} if m.type != "minimum-jerk" else {
+            "duration": m.duration, "start": dict(m.start), "goal": dict(m.goal)}) for m in model.motions]
     if model.keys:
         data["keys"] = dict(model.keys)
     if model.frames:
         data["frames"] = [{"name": f.name, "body": f.body, "at": list(f.at), "angle": f.angle} for f in model.frames]
     return data
-
-
-def to_toml(model: Model, explicit_ends: bool = False) -> str:
-    """The model as a TOML file that load_model reads back to an equal Model."""
-    data = to_dict(model, explicit_ends)
-    lines = [f"{key} = {_toml_value(data[key])}" for key in ("name", "description", "gravity") if key in data]
-    for section in ("bodies", "joints", "loads", "motions", "frames"):
-        for entry in data.get(section, []):
-            lines += ["", f"[[{section}]]"] + [f"{key} = {_toml_value(value)}" for key, value in entry.items()]
-    if "keys" in data:
-        lines += ["", "[keys]"] + [f"{key} = {_toml_value(value)}" for key, value in data["keys"].items()]
-    return "\n".join(lines) + "\n"
-
-
-def _toml_value(value) -> str:
-    import json
-
-    if isinstance(value, str):
-        return json.dumps(value, ensure_ascii=False).replace("\x7f", "\\u007f")
-    if isinstance(value, list):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, dict):  # names of joints: bare keys
-        return "{ " + ", ".join(f"{key} = {_toml_value(v)}" for key, v in value.items()) + " }"
-    return repr(float(value))
 
 
 def change_paths(model: Model) -> list[str]:
@@ -883,224 +802,3 @@ def change_paths(model: Model) -> list[str]:
     for i in range(len(model.loads)):
         paths += [f"loads[{i}].{key}" for key in ("force.x", "force.y", "at.x", "at.y")]
     return paths + ["gravity.x", "gravity.y"]
-
-
-def with_changes(model: Model, pairs) -> Model:
-    """``model`` with scalar values changed by (path, value) pairs, checked as a file is. Paths:
-
-    * ``<body>.mass``, ``<body>.inertia``, ``<body>.com.x|y``, ``<body>.end.x|y`` (an end not
-      given starts from its resolved default);
-    * ``<joint>.offset``, ``<joint>.at_parent.x|y``, ``<joint>.at_child.x|y``;
-    * ``loads[<i>].force.x|y``, ``loads[<i>].at.x|y`` (i from 0 in file order), and
-      ``<body>.force.x|y`` for the one load of a body that carries exactly one;
-    * ``gravity.x|y``.
-
-    Values are numbers or their text. ModelError naming ``path=value`` otherwise."""
-    data = to_dict(model)
-    for path, value in pairs:
-        label = f"{path}={value}"
-        if path not in change_paths(model):
-            from ..registry import unknown_name_message
-
-            raise ModelError(label, "", unknown_name_message(f"path into model {model.name!r}", path, change_paths(model)))
-        key = _set(data, model, path, _float(value, label))
-        try:
-            model = model_from_dict(data, label, default_name=model.name)
-        except ModelError as exc:
-            raise ModelError(label, "" if exc.key == key else exc.key, exc.problem) from None
-    return model
-
-
-def _float(value, label: str) -> float:
-    if isinstance(value, bool):
-        raise ModelError(label, "", "must be a number")
-    try:
-        return float(value)
-    except OverflowError:  # an integer beyond the range of floats: refused as not finite
-        return math.inf if value > 0 else -math.inf
-    except (TypeError, ValueError):
-        raise ModelError(label, "", f"must be a number, got {value!r}") from None
-
-
-def _set(data: dict, model: Model, path: str, value: float) -> str:
-    """Write ``value`` at ``path`` into the description ``data``; the key path of the file it changed."""
-    axis = {"x": 0, "y": 1}
-    if path.startswith("gravity."):
-        data["gravity"][axis[path[-1]]] = value
-        return f"gravity[{axis[path[-1]]}]"
-    match = re.fullmatch(r"loads\[(\d+)\]\.(.+)", path)
-    if match:
-        index, rest = int(match.group(1)), match.group(2)
-    else:
-        name, rest = path.split(".", 1)
-        names = [b.name for b in model.bodies]
-        if name in names and rest.startswith("force."):
-            index = next(i for i, load in enumerate(model.loads) if load.body == name)
-        elif name in names:
-            entry, key = data["bodies"][names.index(name)], f"bodies[{names.index(name)}]"
-            return key + _set_field(entry, rest, value, lambda: list(resolved_end(model, name)))
-        else:
-            k = [j.name for j in model.joints].index(name)
-            return f"joints[{k}]" + _set_field(data["joints"][k], rest, value, None)
-    return f"loads[{index}]" + _set_field(data["loads"][index], rest, value, None)
-
-
-def _set_field(entry: dict, rest: str, value: float, default_end) -> str:
-    if "." not in rest:
-        entry[rest] = value
-        return f".{rest}"
-    field, component = rest.split(".")
-    if field == "end" and "end" not in entry:
-        entry["end"] = default_end()
-    i = {"x": 0, "y": 1}[component]
-    entry[field][i] = value
-    return f".{field}[{i}]"
-
-
-# ---------------------------------------------------------------- short keys
-
-
-def short_key_values(model: Model) -> dict[str, float]:
-    """{short key: the value it reads in ``model``} (SI units; an @<joint> inertia about the joint)."""
-    return {name: _target_value(model, target) for name, target in model.keys}
-
-
-def _target_value(model: Model, target: str) -> float:
-    negated, path, joint = parse_target(target)
-    if joint is not None:
-        value = inertia_about(model, path.rsplit(".", 1)[0], joint)
-    else:
-        value = path_value(model, path)
-    return -value if negated else value
-
-
-def path_pairs(model: Model) -> int:
-    """The pairs (coordinate, body) with the coordinate on the body's path from ground: the entries
-    of M(z) on and above its diagonal that are not zero, the size of the symbolic equations (a star
-    of B pin joints has B, a chain B (B + 1) / 2)."""
-    index, depth = {joint.child: k for k, joint in enumerate(model.joints)}, []
-    for joint in model.joints:  # topological order: the parent's depth is known
-        above = depth[index[joint.parent]] if joint.parent != GROUND else 0
-        depth.append(above + len(joint.coordinate_names))
-    return sum(depth)
-
-
-def inertia_about(model: Model, body_name: str, joint_name: str) -> float:
-    """kg m^2: the body's inertia about the point of joint ``joint_name`` (one of the body's joints):
-    inertia + mass |com - point|^2."""
-    body = model.body(body_name)
-    return body.inertia + body.mass * _distance(body.com, _joint_point(model, body_name, joint_name)) ** 2
-
-
-def _joint_point(model: Model, body_name: str, joint_name: str) -> tuple[float, float]:
-    """The joint's point in the body's frame (m): at_child if the body is its child, else at_parent."""
-    joint = model.joint_named(joint_name)
-    return joint.at_child if joint.child == body_name else joint.at_parent
-
-
-def path_value(model: Model, path: str) -> float:
-    """The value at one of ``change_paths(model)`` (an end not given reads its resolved default)."""
-    head, _, component = path.rpartition(".")
-    axis = {"x": 0, "y": 1}.get(component)
-    if axis is None:  # <body>.mass, <body>.inertia, <joint>.offset
-        name, field = path.split(".")
-        return getattr(model.body(name) if field != "offset" else model.joint_named(name), field)
-    if head == "gravity":
-        return model.gravity[axis]
-    owner, _, field = head.rpartition(".")
-    if owner.startswith("loads["):
-        return getattr(model.loads[int(owner[6:-1])], field)[axis]
-    if field == "force":
-        return next(load for load in model.loads if load.body == owner).force[axis]
-    if owner in [joint.name for joint in model.joints]:
-        return getattr(model.joint_named(owner), field)[axis]
-    return (resolved_end(model, owner) if field == "end" else model.body(owner).com)[axis]
-
-
-def with_short_keys(model: Model, pairs) -> Model:
-    """``model`` with values changed by (name, value) pairs, each name a short key of the model's
-    [keys] table or a path of ``with_changes``. A short key's target '[-]path[@joint]' sets the
-    path to the value (negated with '-'); '<body>.inertia@<joint>' sets the body's inertia about
-    the joint's point (kg m^2). When short keys change a body's mass, centre of mass or joint
-    point, its inertia about the joint of its @ key is what stays (as the built-in arm's I0 and I1
-    do); paths keep the description's meaning (the inertia about the centre of mass stays).
-    ModelError naming ``name=value`` for an unknown name (listing the short keys and paths) or a
-    bad value."""
-    short, paths = dict(model.keys), change_paths(model)
-    about = {target: (_target_value(model, target), None) for target in short.values() if parse_target(target)[2]}
-    inertia_paths = set()  # set by a path: kept as given
-    for name, value in pairs:
-        label = f"{name}={value}"
-        if name not in short and name not in paths:
-            from ..registry import unknown_name_message
-
-            listed = [f"{key} ({target})" for key, target in short.items()] + paths
-            raise ModelError(label, "", unknown_name_message(f"key of model {model.name!r}", name, listed))
-        negated, path, joint = parse_target(short[name]) if name in short else (False, name, None)
-        number = -_float(value, label) if negated else _float(value, label)
-        if joint is not None:
-            about[short[name]] = (number, label)
-            continue
-        before, model = model, _changed(model, path, number, label)
-        if name not in short:
-            inertia_paths |= {path} if path.endswith(".inertia") else set()
-            continue
-        for target, (held, held_label) in about.items():  # what this short key moved keeps its inertia
-            if held_label is None and _moved(before, model, *parse_target(target)[1:]):
-                about[target] = (held, label)
-    for target, (value, label) in about.items():
-        _, path, joint = parse_target(target)
-        if label is not None and path not in inertia_paths:
-            model = _inertia_about(model, path.rsplit(".", 1)[0], joint, value, label)
-    return model
-
-
-def _inertia_about(model: Model, body: str, joint: str, value: float, label: str) -> Model:
-    """``model`` with the body's inertia (kg m^2) about the joint's point set to ``value``."""
-    inertia = value - (inertia_about(model, body, joint) - model.body(body).inertia)
-    if not inertia > 0:
-        raise ModelError(label, f"{body}.inertia@{joint}",
-                         f"the inertia about {joint}, {value:g} kg m^2, must be more than mass * distance^2 of the "
-                         f"centre of mass from the joint ({value - inertia:g} kg m^2): the inertia about the centre "
-                         "of mass must be positive")
-    return _changed(model, f"{body}.inertia", inertia, label)
-
-
-def _moved(before: Model, after: Model, path: str, joint: str) -> bool:
-    """The mass, centre of mass of the body of ``path`` ('<body>.inertia') or the joint's point
-    differ between the two models."""
-    body = path.rsplit(".", 1)[0]
-    old, new = before.body(body), after.body(body)
-    return ((old.mass, old.com) != (new.mass, new.com)
-            or _joint_point(before, body, joint) != _joint_point(after, body, joint))
-
-
-def _changed(model: Model, path: str, value: float, label: str) -> Model:
-    """with_changes of one path, its ModelError naming ``label`` and the path."""
-    try:
-        return with_changes(model, [(path, value)])
-    except ModelError as exc:
-        raise ModelError(label, exc.key or path, exc.problem) from None
-
-
-# ---------------------------------------------------------------- the library
-
-
-def library() -> dict[str, Path]:
-    """The built-in models: name -> its TOML file, sorted by name."""
-    return {path.stem: path for path in sorted(LIBRARY.glob("*.toml"))}
-
-
-def find_model(name_or_path, option: str = "model file") -> Model:
-    """A library model by name, or the model of a TOML/JSON file. ModelError (listing the library's
-    names) for a name that is neither."""
-    text = str(name_or_path)
-    models = library()
-    if text in models:
-        return load_model(models[text], option)
-    if text and (Path(text).exists() or "/" in text or Path(text).suffix.lower() in (".toml", ".json", ".osim")):
-        return load_model(text, option)
-    from ..registry import unknown_name_message
-
-    raise ModelError(option, "", unknown_name_message("model", text, list(models))
-                     + "; or give a model file (.toml, .json or OpenSim's .osim)")
