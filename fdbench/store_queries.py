@@ -369,7 +369,7 @@ def _by_label(cells: dict, keys: list) -> dict:
 
 
 def _compare_row(a: list[dict], b: list[dict], found: str) -> dict:
-    from .benchmark import summarise
+    from .report.paper_methods import summarise
 
     first = (a or b)[0]
     row = {"method": first["method"], "conditions": conditions_text(first), "found": found,

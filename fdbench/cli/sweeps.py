@@ -69,24 +69,20 @@ def report(
     """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown, CSV or JSON.
 
     Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested."""
-    from ..benchmark import default_cells, make_plan
+    from ..report.paper_methods import default_cells, make_plan
     from ..store import default_path
 
     db_path = db if db is not None else default_path()
     inputs = _spec_inputs(conditions, kinematics)
     _check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=inputs)
-    if _floating_base(conditions):  # a recorded walk: its own comparison (fdbench.walk)
-        from ..walk_figures import FIGURE_FILES as WALK_FIGURES
-        from .walk_command import walk_report
-
-        if figures is not None:
-            _check_figures_dir(figures, output, db_path, inputs, WALK_FIGURES)
-        if jobs is not None and not 1 <= jobs <= MAX_JOBS:
-            raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {jobs}")
-        return walk_report(ctx, conditions=conditions, kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol,
-                           atol=atol, alpha=alpha, xi=xi, omega=omega, budget=budget, popsize=popsize, beyond=beyond,
-                           executor=_backend(backend, jobs, scheduler), db=db, db_path=db_path, rerun=rerun,
-                           figures=figures, fmt=fmt, output=output, quiet=quiet, peers=peers)
+    if _floating_base(conditions):  # compared with the forearm (report.comparison)
+        return _comparison_report(
+            ctx, conditions=conditions, torque=torque, opt=opt, feedforward=feedforward, control=control,
+            beyond=beyond, all_cells=all_cells, peers=peers, seeds=seeds, budget=budget, jobs=jobs, backend=backend,
+            scheduler=scheduler, db=db, db_path=db_path, inputs=inputs, rerun=rerun, figures=figures, kp=kp, kd=kd,
+            hidden=hidden, knots=knots, terms=terms, sigma0=sigma0, popsize=popsize, gradient=gradient,
+            penalty_weight=penalty_weight, kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol,
+            alpha=alpha, xi=xi, omega=omega, fmt=fmt, output=output, quiet=quiet)
     if figures is not None:
         _check_figures_dir(figures, output, db_path, inputs)
     torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, jobs, torque, opt, hidden, knots, terms,
@@ -108,11 +104,11 @@ def report(
 
     methods = None
     if beyond:
-        from ..beyond import beyond_methods
+        from ..report.methods import beyond_methods
 
         methods = beyond_methods(**_common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions))
     if gradient == "exact":
-        from ..beyond import exact_gradient_methods
+        from ..report.methods import exact_gradient_methods
 
         methods = (methods or []) + exact_gradient_methods(
             plan.cells, budget, torque_options, optimizer_options, penalty_weight,
@@ -143,9 +139,9 @@ def report(
     rows = build_rows(plan, runs, made)
     extra_rows = []
     if methods:
-        from ..beyond import beyond_rows
+        from ..report.methods import rows as method_rows
 
-        extra_rows = beyond_rows(methods, runs, made)
+        extra_rows = method_rows(methods, runs, made)
     peers_found = None
     if peer_methods:
         from ..peers.report import peer_rows
@@ -203,7 +199,7 @@ def study(
 
     Runs are stored and reused like a report's (resume, --jobs, --rerun); the table gives the median and IQR of each indicator per method and level."""
     from .. import study as studies
-    from ..benchmark import default_cells
+    from ..report.paper_methods import default_cells
     from ..store import default_path
 
     _check_choice("study", kind, studies.KINDS)
@@ -267,12 +263,84 @@ def study(
 
 def _floating_base(conditions: dict) -> bool:
     """Whether the report's model has a floating base (a free joint on ground)."""
-    from ..walk import has_floating_base
+    from ..report.comparison import has_floating_base
 
     try:
         return has_floating_base(conditions["model_name"], conditions.get("model", ()))
     except ValueError as exc:
         raise BadInput(str(exc)) from None
+
+
+def _given(ctx, name: str) -> bool:
+    """Whether the option ``name`` was given (on the command line or by an environment variable)."""
+    return getattr(ctx.get_parameter_source(name), "name", None) in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
+
+
+def _comparison_report(ctx, *, conditions, torque, opt, feedforward, control, beyond, all_cells, peers, seeds, budget,
+                       jobs, backend, scheduler, db, db_path, inputs, rerun, figures, kp, kd, hidden, knots, terms,
+                       sigma0, popsize, gradient, penalty_weight, kinematics, integrator, dt, rtol, atol, alpha, xi,
+                       omega, fmt, output, quiet) -> None:
+    """The report of a model with a floating base: the registered methods on it and on the
+    forearm (``report.comparison``); the paper's cells on it when --torque, --opt, --feedforward or
+    --all-cells select them; checked, planned, run (stored and resumed), written."""
+    from ..figures import MODEL_FIGURE_FILES
+    from ..report import comparison
+    from ..report.methods import FLOATING_BASE_PENALTY, SHOOTING_POPSIZE, Options, exact_gradient_methods
+    from ..report.paper_methods import default_cells, make_plan
+    from .options import _warn_opensim
+
+    if figures is not None:
+        _check_figures_dir(figures, output, db_path, inputs, MODEL_FIGURE_FILES)
+    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, jobs, torque, opt, hidden, knots, terms,
+                                                                    sigma0, popsize, penalty_weight)
+    _check_gradient(gradient, opt)
+    executor = _backend(backend, jobs, scheduler)
+    weight = penalty_weight if _given(ctx, "penalty_weight") else FLOATING_BASE_PENALTY
+    options = Options(budget, SHOOTING_POPSIZE if popsize is None else popsize, sigma0, knots, kp, kd)
+    studied = _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions)
+    forearm = _common("paper", integrator, dt, rtol, atol, alpha, xi, omega, None)
+    selected = any(_given(ctx, name) for name in ("torque", "opt", "feedforward", "all_cells"))
+    try:
+        plan = comparison.make_plan(studied, forearm, options, collocation=beyond, control=control,
+                                    penalty_weight=weight)
+        if selected:
+            cells = default_cells(torque, opt, feedforward, all_cells)
+            common = plan.datasets[0].common
+            plan.cells = make_plan(cells, seeds, budget, False, kp, kd, torque_options=torque_options,
+                                   optimizer_options=optimizer_options, penalty_weight=weight, **common)
+            if gradient == "exact":
+                plan.extra = exact_gradient_methods(cells, budget, torque_options, optimizer_options, weight, **common)
+        peer_methods = _peer_methods(_peer_names(peers), kp, kd, plan.datasets[0].common)
+    except ValueError as exc:
+        raise BadInput(_with_option(str(exc))) from None
+    for spec in plan.all_specs() + [m.spec for m in peer_methods]:
+        _validated(spec)
+    if peer_methods:
+        _check_peers_available()
+    _warn_opensim(conditions["model_name"], kinematics, quiet)  # the import's notes before the work, not after it
+    runs = _run_specs(plan.all_specs() + [m.spec for m in peer_methods], db_path, db is None, executor, rerun, quiet)
+    from ..store import open_store
+
+    with open_store(db_path) as store:
+        made = store.provenance(runs)
+    found = comparison.report_rows(plan, runs, made, peer_methods)
+    base = output.parent if output is not None and str(output) != "-" else Path(".")
+    text, written = comparison.text(fmt, plan, found, runs, executor.describe(), figures, base,
+                                    getattr(executor, "jobs", 1), peer_methods, seeds)
+    if figures is not None and fmt == "md":
+        _say(quiet, f"wrote {written} figures to {figures}")
+    _emit(text, output)
+    if output is not None and str(output) != "-":
+        _say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
+
+
+def _peer_methods(names: list, kp, kd, common: dict) -> list:
+    """The peers ``names`` as methods on the settings ``common`` with the report's PD gains."""
+    if not names:
+        return []
+    from ..peers.report import peer_methods
+
+    return peer_methods(names, kp, kd, **common)
 
 
 def _study_json(sweep, rows, settings: dict) -> str:
@@ -425,7 +493,7 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
 
     peer_methods, peer_rows = peers_found or ([], [])
     if fmt == "csv":
-        from ..beyond import beyond_csv_rows
+        from ..report.methods import beyond_csv_rows
         from ..files import csv_text
         from ..peers.report import peer_csv_rows
         from ..report import CSV_COLUMNS, csv_rows
@@ -440,7 +508,7 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
 
             with_peer_fields(report["cells"], peer_rows, rows + extra_rows)
         return json.dumps(report, indent=2) + "\n"
-    from ..beyond import beyond_markdown
+    from ..report.methods import beyond_markdown
     from ..report import markdown
 
     links = None

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import math
 
-from ..beyond import Method
-from ..benchmark import summarise
+from ..report.methods import Method, method_csv_rows, rows as method_rows
 
 # peer: the fdbench methods it stands beside, the first found among the report's rows: (command, controller, table)
 PAIRS = {"opensim": (("control", "pd", "control"),),
@@ -30,16 +29,7 @@ def peer_methods(names, kp=None, kd=None, **common) -> list[Method]:
 
 def peer_rows(methods: list[Method], runs: dict, provenance: dict | None = None) -> list:
     """The report rows (``report.Row``, table "peers") of the peers, from their stored runs."""
-    from ..report import Row
-
-    provenance = provenance or {}
-    rows = []
-    for method in methods:
-        key = method.spec.hash()
-        record = runs[key]["record"]
-        rows.append(Row(method.name, "peers", None, summarise([record]), None, [record],
-                        provenance=[provenance[key]] if key in provenance else [], hashes=[key], specs=[method.spec]))
-    return rows
+    return method_rows(methods, runs, provenance, "peers")
 
 
 def peers_markdown(rows: list, methods: list[Method], ours: list) -> list[str]:
@@ -155,7 +145,7 @@ def _model_name(row) -> str | None:
     return Path(str(row.specs[0].model_name)).name if row.specs else None
 
 
-def _plain(pair: dict) -> dict:
+def plain_pair(pair: dict) -> dict:
     """A pair for JSON: NaN as null, without the peer's name (the cell's)."""
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in pair.items()
             if k not in ("peer", "solve_alone")}
@@ -179,15 +169,7 @@ def _ratio(value) -> str:
 
 def peer_csv_rows(rows: list) -> list[list]:
     """CSV rows (the report's ``CSV_COLUMNS``) of the peers, the peer named in ``torque``."""
-    from ..report import CSV_COLUMNS, csv_rows
-
-    out = csv_rows(rows)
-    for values, row in zip(out, rows):
-        rec = row.records[0]
-        for column, value in {"torque": rec.get("peer"), "feedforward": rec.get("feedforward"),
-                              "in_paper": False, "optimizer": ""}.items():
-            values[CSV_COLUMNS.index(column)] = value
-    return out
+    return method_csv_rows(rows, named=lambda record: record.get("peer"))
 
 
 PEER_FIELDS = ("opensim_version", "solve_time_s", "moco_run_s", "ipopt_status", "ipopt_iterations",
@@ -211,7 +193,7 @@ def with_peer_fields(cells: list, rows: list, ours: list) -> list:
                     optimizer="", **{k: rec[k] for k in PEER_FIELDS if rec.get(k) is not None})
         pair = pairs.get(row.name)
         if pair is not None:
-            cell["vs_fdbench"] = _plain(pair)
+            cell["vs_fdbench"] = plain_pair(pair)
         if row.name in solves:
-            cell["vs_fdbench_solve"] = _plain(solves[row.name])
+            cell["vs_fdbench_solve"] = plain_pair(solves[row.name])
     return cells
