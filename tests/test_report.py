@@ -216,8 +216,11 @@ def test_markdown_sections_tables_and_figures(tmp_path):
         assert cells[-1] == "2/2, identical"
         assert "±" not in cells[1] and "±" not in cells[4] and "±" in cells[7]  # runtimes still vary
 
-    comparison = _section(text, "## Comparison")
-    assert "Most accurate of the 3 rows:" in comparison and "Fastest:" in comparison
+    facts = json.loads(invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+                              "-f", "json", "-q").stdout)["comparison"]
+    assert facts["rows"] == 3 and facts["most_accurate"]["name"] in _section(text, "## Comparison")
+    assert facts["fastest"]["name"] in _section(text, "## Comparison")
+    assert facts["best_per_table"].keys() == {"2", "3"} and facts["vs_paper_rmse_rot"] is not None
 
     # one link per figure, each to a non-empty PNG, relative to the report's directory
     links = re.findall(r"!\[([^\]]+)\]\(([^)]+)\)", _section(text, "## Figures"))

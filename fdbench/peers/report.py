@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 
 from ..report.methods import Method, method_csv_rows, rows as method_rows
+from ..report.paper import significant
 
 # peer: the fdbench methods it stands beside, the first found among the report's rows: (command, controller, table)
 PAIRS = {"opensim": (("control", "pd", "control"),),
@@ -55,14 +56,14 @@ def peers_markdown(rows: list, methods: list[Method], ours: list) -> list[str]:
                 "| fdbench | peer | RMSE_rot fdbench (deg) | RMSE_rot peer (deg) | time fdbench (s) | time peer (s) "
                 "| peer time / fdbench time | goal met |", "|---|---|---:|---:|---:|---:|---:|---|"]
         out += [f"| {p['fdbench']} | {p['peer']}{' (solve)' if p.get('solve_alone') else ''} "
-                f"| {_g(p['rmse_rot_deg_fdbench'])} | {_g(p['rmse_rot_deg_peer'])} "
-                f"| {_g(p['runtime_s_fdbench'])} | {_g(p['runtime_s_peer'])} | {_ratio(p['time_ratio'])} "
+                f"| {significant(p['rmse_rot_deg_fdbench'])} | {significant(p['rmse_rot_deg_peer'])} "
+                f"| {significant(p['runtime_s_fdbench'])} | {significant(p['runtime_s_peer'])} | {_ratio(p['time_ratio'])} "
                 f"| {_verdict(p)} |" for p in pairs]
         out += [""] + [goal_sentence(p) for p in pairs if not p.get("solve_alone")]
     records = [row.records[0] for row in rows]
     details = [f"MocoTrack: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, whole run "
-               f"{_g(rec.get('moco_run_s'))} s, solve {_g(rec.get('solve_time_s'))} s (tolerance {rec.get('tolerance')}, {rec.get('nodes')} mesh "
-               f"intervals); its own RMSE_rot at its mesh points {_g(rec.get('collocation_rmse_rot_deg'))} deg."
+               f"{significant(rec.get('moco_run_s'))} s, solve {significant(rec.get('solve_time_s'))} s (tolerance {rec.get('tolerance')}, {rec.get('nodes')} mesh "
+               f"intervals); its own RMSE_rot at its mesh points {significant(rec.get('collocation_rmse_rot_deg'))} deg."
                for rec in records if rec.get("peer") == "moco"]
     versions = sorted({str(rec["opensim_version"]) for rec in records if rec.get("opensim_version")})
     out += [""] + details + ([f"OpenSim {', '.join(versions)}."] if versions else [])
@@ -122,19 +123,19 @@ def goal_sentence(pair: dict) -> str:
     if not math.isfinite(ratio):
         speed = "no time to compare"
     elif ratio >= 1:
-        speed = f"fdbench {_g(ratio)}× faster"
+        speed = f"fdbench {significant(ratio)}× faster"
     else:
-        speed = f"fdbench {_g(1 / ratio)}× slower"
+        speed = f"fdbench {significant(1 / ratio)}× slower"
     ours, theirs = pair["rmse_rot_deg_fdbench"], pair["rmse_rot_deg_peer"]
     accurate = ours is not None and theirs is not None and ours <= theirs * (1 + SAME_ACCURACY)
     if pair["goal_met"]:
         verdict = "the goal is met"
     else:
-        missing = [f"{_g(ratio)}× is below {GOAL:g}×"] if not (math.isfinite(ratio) and ratio >= GOAL) else []
-        missing += [] if accurate else [f"its RMSE_rot {_g(ours)} deg is above the peer's {_g(theirs)} deg"]
+        missing = [f"{significant(ratio)}× is below {GOAL:g}×"] if not (math.isfinite(ratio) and ratio >= GOAL) else []
+        missing += [] if accurate else [f"its RMSE_rot {significant(ours)} deg is above the peer's {significant(theirs)} deg"]
         verdict = "the goal is not met: " + " and ".join(missing)
     where = f" on {pair['model']}" if pair.get("model") else ""
-    return (f"- {pair['fdbench']} against {pair['peer']}{where}: {speed} (RMSE_rot {_g(ours)} against {_g(theirs)} "
+    return (f"- {pair['fdbench']} against {pair['peer']}{where}: {speed} (RMSE_rot {significant(ours)} against {significant(theirs)} "
             f"deg); {verdict}.")
 
 
@@ -157,10 +158,6 @@ def _verdict(pair: dict) -> str:
 
 def _quotient(a, b) -> float:
     return a / b if a is not None and b else math.nan
-
-
-def _g(value) -> str:
-    return "-" if value is None or (isinstance(value, float) and not math.isfinite(value)) else f"{value:.3g}"
 
 
 def _ratio(value) -> str:

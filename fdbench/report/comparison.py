@@ -16,6 +16,7 @@ from .. import __version__
 from .methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, EVERY, FLOATING_BASE_PENALTY, LQR, OPEN_LOOP, PD,
                       SLOWEST_FIRST, Dataset, Options, methods, rows, select)
 from .paper import Row
+from .paper import significant as number
 
 # OpenSim RRA's average residuals for OpenSim's example walk, subject01 (FX, FY in N, MZ in N m),
 # shown beside any floating base's as a reference point, after RRA adjusted the model's masses and
@@ -123,13 +124,6 @@ CSV_COLUMNS = ("model", "method", "key", "command", "controller", "status", "t_e
                "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm", "evaluations", "budget", "n_params",
                "spec_hash", "run_id")
 RESIDUAL_MEANS = (("residual_fx_mean_n", "FX (N)"), ("residual_fy_mean_n", "FY (N)"), ("residual_mz_mean_nm", "MZ (N m)"))
-
-
-def number(value) -> str:
-    """Three significant digits ('-' for a missing or non-finite value)."""
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return f"{value:.3g}"
 
 
 def ended(row: Row, duration: float) -> str:

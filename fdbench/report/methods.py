@@ -218,7 +218,7 @@ def rows(methods: list[Method], runs: dict, provenance: dict | None = None, tabl
 
 def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     """The section's Markdown lines: one sentence per method, then the table (PD's columns)."""
-    from .paper import _table, failure_lines
+    from .paper import _table, failure_lines, significant
 
     if not rows:
         return []
@@ -233,17 +233,13 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     collocation = [r for r in rows if r.records[0].get("command") == "collocate"]
     if collocation:
         rec = collocation[0].records[0]
-        out += ["", f"Direct collocation's own RMSE_rot at its nodes: {_deg(rec.get('collocation_rmse_rot_deg'))} deg; "
+        out += ["", f"Direct collocation's own RMSE_rot at its nodes: {significant(rec.get('collocation_rmse_rot_deg'))} deg; "
                     f"IPOPT: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, "
-                    f"{_deg(rec.get('solve_time_s'))} s."]
+                    f"{significant(rec.get('solve_time_s'))} s."]
     failed = failure_lines(rows)
     if failed:
         out += ["", "Did not succeed (`status`, `t_end` and `message` in the CSV and JSON):", ""] + failed
     return out + [""]
-
-
-def _deg(value) -> str:
-    return "-" if value is None else f"{value:.3g}"
 
 
 def method_csv_rows(rows: list, named=None) -> list[list]:

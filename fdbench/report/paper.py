@@ -242,7 +242,7 @@ def joints(rows: list[Row]) -> list[str]:
     return list(dict.fromkeys(k[len("rmse_rot_deg_"):-len("_median")] for k in keys))
 
 
-def _significant(value) -> str:
+def significant(value) -> str:
     """Three significant digits (5.37e-07, 0.0413, 12.4): for tables without the paper's columns,
     where small errors are the point."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
@@ -456,9 +456,9 @@ def _table_without_paper(rows: list[Row], with_success: bool) -> list[str]:
     lines = [head, rule]
     for row in rows:
         star = "*" if row.cell is not None and not row.cell.in_paper else ""
-        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg', _significant)} |"
-                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}', _significant)} |" for name in names)
-                + f" {_spread(row, 'rmse_torque_nm', _significant)} | {_spread(row, 'runtime_s', _significant)} |")
+        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg', significant)} |"
+                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}', significant)} |" for name in names)
+                + f" {_spread(row, 'rmse_torque_nm', significant)} | {_spread(row, 'runtime_s', significant)} |")
         if with_success:
             line += f" {row.successes}/{len(row.records)}{', identical' if row.identical else ''} |"
         lines.append(line)
@@ -506,7 +506,7 @@ def comparison_facts(rows: list[Row]) -> dict:
 def _comparison(rows: list[Row]) -> list[str]:
     """A few sentences written from the numbers (``comparison_facts``), over every row (the
     paper's cells, PD control and the rows beyond the paper)."""
-    number = _num if any(row.paper for row in rows) else _significant
+    number = _num if any(row.paper for row in rows) else significant
     facts = comparison_facts(rows)
     lines = []
     if facts["most_accurate"]:
