@@ -764,8 +764,6 @@ def text(fmt: str, plan: ComparisonPlan, found: dict, runs: dict, jobs: str, fig
          processes: int = 1, peer_methods=(), seeds: int = 1) -> tuple[str, int]:
     """The report in ``fmt`` (md, csv or json) from its rows ``found`` (``report_rows``), and the
     count of figures written into ``figures`` (linked relative to ``base``)."""
-    from .paper_methods import summarise  # noqa: F401  (rows carry their summaries)
-
     spec = plan.walk[0].spec if plan.walk else plan.cells.all_specs()[0]
     inverse = spec.reference()
     walk, forearm, cells, extra, peer_rows = (found[k] for k in ("walk", "forearm", "cells", "extra", "peers"))
