@@ -472,9 +472,9 @@ def test_the_paper_reports_options_shape_the_runs_on_a_floating_base(hop):
     cells' exact-gradient rows; --no-control leaves PD out. Checked on the stored records."""
     out = hop["folder"] / "options.json"
     base = [arg for arg in hop["base"] if arg != "--no-beyond"]
-    result = CliRunner().invoke(app, base + ["--no-beyond", "--torque", "cs", "--opt", "cmaes,bfgs", "--feedforward",
+    result = CliRunner().invoke(app, base + ["--no-beyond", "--torque", "cs", "--opt", "cmaes", "--opt", "bfgs", "--feedforward",
                                              "--seeds", "2", "--kp", "50", "--kd", "0.5", "--penalty-weight", "7",
-                                             "--sigma0", "0.3", "--knots", "3", "--gradient", "exact", "-f", "json",
+                                             "--sigma0", "0.3", "--knots", "5", "--gradient", "exact", "-f", "json",
                                              "--output", str(out)])
     assert result.exit_code == 0, result.output
     report = json.loads(out.read_text())
@@ -483,14 +483,14 @@ def test_the_paper_reports_options_shape_the_runs_on_a_floating_base(hop):
     assert walk[PD]["kp"] == 50.0 and walk[PD]["kd"] == 0.5 and forearm[PD]["kp"] == 50.0
     assert walk[CMAES]["penalty_weight"] == 7.0 and forearm[CMAES]["penalty_weight"] == 1.0
     assert "sigma0" in str(walk[CMAES]["optimizer_options"]) and "0.3" in str(walk[CMAES]["optimizer_options"])
-    assert walk[CMAES]["n_params"] == len(COORDINATES) * 3  # --knots 3 on every coordinate
+    assert walk[CMAES]["n_params"] == len(COORDINATES) * 5  # --knots 5 on every coordinate
     cells = report["cells"]
     assert sorted((c["torque"], c["optimizer"], c["table"]) for c in cells) == [("cs", "bfgs", 3), ("cs", "cmaes", 3)]
     assert all(c["seeds"] == 2 and c["model"] == str(hop["files"]["model"]) for c in cells)
     assert any(key.endswith("-exact") and walk[key]["gradient"] == "exact" for key in walk)
     rows = list(csv.DictReader(io.StringIO(CliRunner().invoke(app, base + [
-        "--no-beyond", "--torque", "cs", "--opt", "cmaes,bfgs", "--feedforward", "--seeds", "2", "--kp", "50", "--kd",
-        "0.5", "--penalty-weight", "7", "--sigma0", "0.3", "--knots", "3", "--gradient", "exact", "-f", "csv"]).stdout)))
+        "--no-beyond", "--torque", "cs", "--opt", "cmaes", "--opt", "bfgs", "--feedforward", "--seeds", "2", "--kp", "50", "--kd",
+        "0.5", "--penalty-weight", "7", "--sigma0", "0.3", "--knots", "5", "--gradient", "exact", "-f", "csv"]).stdout)))
     assert sum(r["key"].startswith("table3-seed") for r in rows) == 4  # two cells, two seeds each
     result = CliRunner().invoke(app, base + ["--no-beyond", "--no-control", "-f", "json", "--output", str(out)])
     assert result.exit_code == 0, result.output
