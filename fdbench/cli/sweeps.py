@@ -68,7 +68,7 @@ def report(
 ):
     """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown, CSV or JSON.
 
-    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested."""
+    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested; --torque, --opt, --feedforward or --all-cells add the paper's cells on the model."""
     from ..report.paper_methods import default_cells, make_plan
     from ..store import default_path
 
