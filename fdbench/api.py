@@ -74,7 +74,7 @@ def load_report(db, seeds: int = 5, budget: int = 200, run_missing: bool = False
     ``run_missing``: then they are made (``jobs`` worker processes) and stored."""
     import pandas as pd
 
-    from .benchmark import default_cells, execute, make_plan
+    from .report.paper_methods import default_cells, execute, make_plan
     from .report import CSV_COLUMNS, build_rows, csv_rows
     from .store import open_store
 

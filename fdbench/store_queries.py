@@ -365,7 +365,7 @@ def _by_label(cells: dict, keys: list) -> dict:
 
 
 def _compare_row(a: list[dict], b: list[dict], found: str) -> dict:
-    from .benchmark import summarise  # lazy: as RunSpec above
+    from .report.paper_methods import summarise  # lazy: as RunSpec above
 
     first = (a or b)[0]
     row = {"method": first["method"], "conditions": conditions_text(first), "found": found,

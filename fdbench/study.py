@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .benchmark import INDICATORS, Cell, failure_message, outcome_text, succeeded
+from .report.paper_methods import INDICATORS, Cell, failure_message, outcome_text, succeeded
 from .spec import RunSpec, control_spec, gradient_for, optimize_spec
 
 KINDS = ("noise", "mismatch")

@@ -46,24 +46,16 @@ def report(
 ):
     """The paper's whole comparison: PD control, Table 2 and Table 3, with our figures beside the published ones, as Markdown, CSV or JSON.
 
-    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested."""
-    from ..benchmark import default_cells, make_plan
+    Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested; --torque, --opt, --feedforward or --all-cells add the paper's cells on the model."""
+    from ..report.paper_methods import default_cells, make_plan
 
     db_path = run.db_path
     inputs = spec_inputs(conditions, kinematics)
     check_outputs(fmt, REPORT_FORMATS, db=db_path, output=output, inputs=inputs)
-    if _floating_base(conditions):  # a recorded walk: its own comparison (fdbench.walk)
-        from ..walk_figures import FIGURE_FILES as WALK_FIGURES
-        from .walk_command import walk_report
-
-        if figures is not None:
-            _check_figures_dir(figures, output, db_path, inputs, WALK_FIGURES)
-        if run.jobs is not None and not 1 <= run.jobs <= MAX_JOBS:
-            raise BadInput(f"--jobs must be an integer in [1, {MAX_JOBS}], got {run.jobs}")
-        return walk_report(ctx, conditions=conditions, kinematics=kinematics, **sim.fields(), budget=optim.budget,
-                           popsize=flags["optimizers"].get("popsize"), beyond=beyond, executor=run.executor(),
-                           db=run.db, db_path=db_path, rerun=run.rerun, figures=figures, fmt=fmt, output=output,
-                           quiet=quiet, peers=peers)
+    if _floating_base(conditions):  # compared with the forearm (report.comparison)
+        return _comparison_report(ctx, conditions, kinematics, selection, optim, run, sim, flags, beyond=beyond,
+                                  peers=peers, seeds=seeds, figures=figures, fmt=fmt, output=output, quiet=quiet,
+                                  inputs=inputs)
     if figures is not None:
         _check_figures_dir(figures, output, db_path, inputs)
     torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, run, selection, flags, optim)
@@ -85,11 +77,11 @@ def report(
 
     methods = None
     if beyond:
-        from ..beyond import beyond_methods
+        from ..report.methods import beyond_methods
 
         methods = beyond_methods(**sim.spec_fields(kinematics, conditions))
     if optim.gradient == "exact":
-        from ..beyond import exact_gradient_methods
+        from ..report.methods import exact_gradient_methods
 
         methods = (methods or []) + exact_gradient_methods(
             plan.cells, optim.budget, torque_options, optimizer_options, optim.penalty_weight,
@@ -98,7 +90,7 @@ def report(
             validated(method.spec)
     peer_methods = []
     if peer_names:
-        from ..peers.report import peer_methods as make_peer_methods
+        from ..report.peers import peer_methods as make_peer_methods
 
         try:
             peer_methods = make_peer_methods(peer_names, kp, kd, **sim.spec_fields(kinematics, conditions))
@@ -119,12 +111,12 @@ def report(
     rows = build_rows(plan, runs, made)
     extra_rows = []
     if methods:
-        from ..beyond import beyond_rows
+        from ..report.methods import rows as method_rows
 
-        extra_rows = beyond_rows(methods, runs, made)
+        extra_rows = method_rows(methods, runs, made)
     peers_found = None
     if peer_methods:
-        from ..peers.report import peer_rows
+        from ..report.peers import peer_rows
 
         peers_found = (peer_methods, peer_rows(peer_methods, runs, made))
     emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
@@ -158,7 +150,7 @@ def study(
 
     Runs are stored and reused like a report's (resume, --jobs, --rerun); the table gives the median and IQR of each indicator per method and level."""
     from .. import study as studies
-    from ..benchmark import default_cells
+    from ..report.paper_methods import default_cells
 
     check_choice("study", kind, studies.KINDS)
     db_path = run.db_path
@@ -220,12 +212,86 @@ def study(
 
 def _floating_base(conditions: dict) -> bool:
     """Whether the report's model has a floating base (a free joint on ground)."""
-    from ..walk import has_floating_base
+    from ..report.comparison import has_floating_base
 
     try:
         return has_floating_base(conditions["model_name"], conditions.get("model", ()))
     except ValueError as exc:
         raise BadInput(str(exc)) from None
+
+
+def _given(ctx, name: str) -> bool:
+    """Whether the option ``name`` was given (on the command line or by an environment variable)."""
+    return getattr(ctx.get_parameter_source(name), "name", None) in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
+
+
+def _comparison_report(ctx, conditions: dict, kinematics: str, selection: Cells, optim: Optimisation, run: Execution,
+                       sim: Simulation, flags: MethodValues, *, beyond: bool, peers, seeds: int, figures, fmt: str,
+                       output, quiet: bool, inputs: dict) -> None:
+    """The report of a model with a floating base: the registered methods on it and on the
+    forearm (``report.comparison``); the paper's cells on it when --torque, --opt, --feedforward or
+    --all-cells select them; checked, planned, run (stored and resumed), written."""
+    from ..figures import MODEL_FIGURE_FILES
+    from ..report import comparison
+    from ..report.methods import FLOATING_BASE_PENALTY, SHOOTING_POPSIZE, Options, exact_gradient_methods
+    from ..report.paper_methods import default_cells, make_plan
+    from ..store import open_store
+    from .conditions import warn_opensim
+
+    db_path = run.db_path
+    if figures is not None:
+        _check_figures_dir(figures, output, db_path, inputs, MODEL_FIGURE_FILES)
+    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, run, selection, flags, optim)
+    check_gradient(optim.gradient, opt)
+    executor = run.executor()
+    (kp, kd), popsize = (flags["controllers"].get("kp"), flags["controllers"].get("kd")), flags["optimizers"].get("popsize")
+    weight = optim.penalty_weight if _given(ctx, "penalty_weight") else FLOATING_BASE_PENALTY
+    options = Options(optim.budget, SHOOTING_POPSIZE if popsize is None else popsize, flags["optimizers"].get("sigma0"),
+                      flags["torques"].get("knots"), kp, kd)
+    studied = sim.spec_fields(kinematics, conditions)
+    forearm = sim.spec_fields("paper", None)
+    selected = any(_given(ctx, name) for name in ("torque", "opt", "feedforward", "all_cells"))
+    try:
+        plan = comparison.make_plan(studied, forearm, options, collocation=beyond, control=selection.control,
+                                    penalty_weight=weight)
+        if selected:
+            cells = default_cells(torque, opt, selection.feedforward, selection.all_cells)
+            common = plan.datasets[0].common
+            plan.cells = make_plan(cells, seeds, optim.budget, False, kp, kd, torque_options=torque_options,
+                                   optimizer_options=optimizer_options, penalty_weight=weight, **common)
+            if optim.gradient == "exact":
+                plan.extra = exact_gradient_methods(cells, optim.budget, torque_options, optimizer_options, weight,
+                                                    **common)
+        peer_methods = _peer_methods(_peer_names(peers), kp, kd, plan.datasets[0].common)
+    except ValueError as exc:
+        raise BadInput(with_option(str(exc))) from None
+    for spec in plan.all_specs() + [m.spec for m in peer_methods]:
+        validated(spec)
+    if peer_methods:
+        _check_peers_available()
+    warn_opensim(conditions["model_name"], kinematics, quiet)  # the import's notes before the work, not after it
+    runs = _run_specs(plan.all_specs() + [m.spec for m in peer_methods], db_path, run.db is None, executor, run.rerun,
+                      quiet)
+    with open_store(db_path) as store:
+        made = store.provenance(runs)
+    found = comparison.report_rows(plan, runs, made, peer_methods)
+    base = output.parent if output is not None and str(output) != "-" else Path(".")
+    text, written = comparison.text(fmt, plan, found, runs, executor.describe(), figures, base,
+                                    getattr(executor, "jobs", 1), peer_methods, seeds)
+    if figures is not None and fmt == "md":
+        say(quiet, f"wrote {written} figures to {figures}")
+    emit(text, output)
+    if output is not None and str(output) != "-":
+        say(quiet, f"wrote {output} ({len(runs)} runs, database {db_path})")
+
+
+def _peer_methods(names: list, kp, kd, common: dict) -> list:
+    """The peers ``names`` as methods on the settings ``common`` with the report's PD gains."""
+    if not names:
+        return []
+    from ..report.peers import peer_methods
+
+    return peer_methods(names, kp, kd, **common)
 
 
 def _sweep_options(ctx, seeds, run: Execution, selection: Cells, flags: MethodValues, optim: Optimisation):
@@ -319,9 +385,9 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
 
     peer_methods, peer_rows = peers_found or ([], [])
     if fmt == "csv":
-        from ..beyond import beyond_csv_rows
+        from ..report.methods import beyond_csv_rows
         from ..files import csv_text
-        from ..peers.report import peer_csv_rows
+        from ..report.peers import peer_csv_rows
         from ..report import CSV_COLUMNS, csv_rows
 
         return csv_text(list(CSV_COLUMNS), csv_rows(rows) + beyond_csv_rows(extra_rows) + peer_csv_rows(peer_rows))
@@ -330,11 +396,11 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
 
         report = json_report(rows + extra_rows + peer_rows, settings_table(plan, seeds, jobs))
         if peer_rows:
-            from ..peers.report import with_peer_fields
+            from ..report.peers import with_peer_fields
 
             with_peer_fields(report["cells"], peer_rows, rows + extra_rows)
         return json.dumps(report, indent=2) + "\n"
-    from ..beyond import beyond_markdown
+    from ..report.methods import beyond_markdown
     from ..report import markdown
 
     links = None
@@ -349,7 +415,7 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
         say(quiet, f"wrote {len(links)} figures to {figures}")
     section = beyond_markdown(extra_rows, methods) if methods else None
     if peer_rows:
-        from ..peers.report import peers_markdown
+        from ..report.peers import peers_markdown
 
         section = (section or []) + peers_markdown(peer_rows, peer_methods, rows + extra_rows)
     return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section,

@@ -220,7 +220,7 @@ def test_without_opensim_the_peers_name_the_extra_to_install(tmp_path, monkeypat
 ])
 def test_the_goal_is_ten_times_faster_at_equal_or_better_accuracy_and_each_pair_says_so(ratio, ours, theirs, met,
                                                                                           says):
-    from fdbench.peers.report import goal_met, goal_sentence
+    from fdbench.report.peers import goal_met, goal_sentence
 
     pair = {"fdbench": "ours", "peer": "theirs", "model": "arm2", "rmse_rot_deg_fdbench": ours,
             "rmse_rot_deg_peer": theirs, "runtime_s_fdbench": 1.0, "runtime_s_peer": ratio, "time_ratio": ratio}

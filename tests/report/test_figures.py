@@ -16,7 +16,7 @@ import pytest
 from matplotlib.colors import to_rgba
 from PIL import Image
 
-from fdbench import figures, study, walk_figures
+from fdbench import figures, study
 
 T = np.linspace(0.0, 1.0, 201)
 
@@ -134,10 +134,10 @@ def test_convergence_lines_are_distinct_when_two_methods_share_a_style(drawn, tm
     assert len(keys) == 3 and len(set(keys)) == 3
 
 
-# ---- the walk's figures: legends beside the panels, the reference on top ----------------------------
+# ---- the figures of a model's coordinates: legends beside the panels, the reference on top ----------------------------
 
 
-def _walk_curves():
+def _coordinate_curves():
     recorded = np.column_stack([np.degrees(np.sin(2 * np.pi * T)), 0.8 * T])
     curves = {"recorded": (T, recorded), "desired": (T, recorded)}
     for k, key in enumerate(("open-loop", "pd", "lqr")):
@@ -156,9 +156,9 @@ def _assert_legends_beside_the_panels(fig) -> None:
                 assert not box.overlaps(ax.get_window_extent()), (legend, ax.get_title())
 
 
-def test_walk_coordinates_legend_covers_no_panel_and_the_tracked_motion_is_drawn_on_top(drawn, tmp_path):
+def test_coordinates_legend_covers_no_panel_and_the_tracked_motion_is_drawn_on_top(drawn, tmp_path):
     labels = {"open-loop": "open loop", "pd": "PD", "lqr": "LQR"}
-    walk_figures.coordinates_figure(_walk_curves(), ("pelvis_tilt", "pelvis_tx"), ("rotation", "translation"),
+    figures.coordinates_figure(_coordinate_curves(), ("pelvis_tilt", "pelvis_tx"), ("rotation", "translation"),
                                     labels, tmp_path / "c.png")
     fig = drawn[0]
     _assert_legends_beside_the_panels(fig)
@@ -168,11 +168,11 @@ def test_walk_coordinates_legend_covers_no_panel_and_the_tracked_motion_is_drawn
         assert all(tracked.get_zorder() > lines[name].get_zorder() for name in labels.values())
 
 
-def test_walk_residuals_legend_covers_no_panel_and_inverse_dynamics_is_drawn_on_top(drawn, tmp_path):
+def test_residuals_legend_covers_no_panel_and_inverse_dynamics_is_drawn_on_top(drawn, tmp_path):
     base = 50 * np.sin(2 * np.pi * T)
     curves = {name: {"inverse dynamics": (T, base), "pd": (T, base + 1), "lqr": (T, base - 1)}
               for name in ("FX", "FY", "MZ")}
-    walk_figures.residuals_figure(curves, {"pd": "PD", "lqr": "LQR"}, tmp_path / "r.png")
+    figures.residuals_figure(curves, {"pd": "PD", "lqr": "LQR"}, tmp_path / "r.png")
     fig = drawn[0]
     _assert_legends_beside_the_panels(fig)
     for ax in fig.axes:
@@ -197,10 +197,10 @@ def test_animation_tick_labels_are_at_least_ten_pixels_high_in_its_frames(tmp_pa
     recorded, simulated = _stick_frames(0.0), {"pd": _stick_frames(0.05), "lqr": _stick_frames(0.1)}
     held = {key: [False] * len(recorded) for key in simulated}
     path = tmp_path / "walk.gif"
-    walk_figures.animation((np.arange(len(recorded)), recorded, simulated, held), {"pd": "PD", "lqr": "LQR"},
+    figures.animation((np.arange(len(recorded)), recorded, simulated, held), {"pd": "PD", "lqr": "LQR"},
                            np.linspace(0, 0.35, len(recorded)), {}, path)
-    plt = walk_figures._pyplot()
-    fig, axes = walk_figures._animation_axes(plt, recorded, simulated)
+    plt = figures._pyplot()
+    fig, axes = figures._animation_axes(plt, recorded, simulated)
     width, height = Image.open(path).size
     dpi = fig.get_dpi()
     # the frames are the figure at its dpi, not rescaled: a point is dpi / 72 of the frame's pixels

@@ -20,9 +20,9 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-import fdbench.benchmark
+import fdbench.report.paper_methods
 import fdbench.execution
-from fdbench.benchmark import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
+from fdbench.report.paper_methods import PAPER_CELLS, PAPER_CONTROL, succeeded, summarise
 from fdbench.cli import app
 from fdbench.report import CSV_COLUMNS
 from helpers.processes import GATED_OPTIMIZER, Gate, children, wait_until
@@ -140,7 +140,7 @@ def test_csv_report_one_row_per_cell_with_the_papers_values(tmp_path):
 
 
 def test_every_paper_cell_of_the_default_matrix_carries_its_published_figures():
-    from fdbench.benchmark import default_cells
+    from fdbench.report.paper_methods import default_cells
 
     cells = default_cells()
     assert {c.key for c in cells} == {(t, o, False) for t, o in PAPER_TABLE2} | {(t, o, True) for t, o in PAPER_TABLE3}
@@ -217,8 +217,11 @@ def test_markdown_sections_tables_and_figures(tmp_path):
         assert cells[-1] == "2/2, identical"
         assert "±" not in cells[1] and "±" not in cells[4] and "±" in cells[7]  # runtimes still vary
 
-    comparison = _section(text, "## Comparison")
-    assert "Most accurate of the 3 rows:" in comparison and "Fastest:" in comparison
+    facts = json.loads(invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+                              "-f", "json", "-q").stdout)["comparison"]
+    assert facts["rows"] == 3 and facts["most_accurate"]["name"] in _section(text, "## Comparison")
+    assert facts["fastest"]["name"] in _section(text, "## Comparison")
+    assert facts["best_per_table"].keys() == {"2", "3"} and facts["vs_paper_rmse_rot"] is not None
 
     # one link per figure, each to a non-empty PNG, relative to the report's directory
     links = re.findall(r"!\[([^\]]+)\]\(([^)]+)\)", _section(text, "## Figures"))
@@ -896,7 +899,7 @@ def test_a_control_run_with_noise_records_its_seed():
 def _failing_cell() -> "fdbench.report.Row":
     """A cell of five runs: two singular, one non-finite, one that ended no better than its
     start, one success."""
-    from fdbench.benchmark import Cell
+    from fdbench.report.paper_methods import Cell
     from fdbench.report import Row
 
     singular = {"status": "singular", "t_end": 0.4, "message": "theta reached +-pi/2", "rmse_rot_deg": 9.0}
@@ -935,8 +938,8 @@ def test_markdown_has_no_legend_line_for_an_absent_column(tmp_path):
 
 
 def test_the_comparison_counts_every_row_and_every_cell():
-    from fdbench.benchmark import Cell
-    from fdbench.report import Row, _comparison
+    from fdbench.report.paper_methods import Cell
+    from fdbench.report import Row, _comparison, comparison_facts
 
     def row(name, table, rot, cell=None, status="success"):
         record = {"status": status, "rmse_rot_deg": rot, "runtime_s": 0.1, "t_end": 1.0}
@@ -946,7 +949,12 @@ def test_the_comparison_counts_every_row_and_every_cell():
     rows += [row(f"cell {i}", 2 + i % 2, 0.05 if i < 3 else 5.0, Cell("cs", "bfgs", bool(i % 2)),
                  "success" if i < 5 else "singular") for i in range(10)]
     rows.append(row("Direct collocation", "beyond", 0.00015))
-    text = "\n".join(_comparison(rows))
-    assert "Most accurate of the 12 rows: Direct collocation" in text
-    assert "3 of 10 optimisation cells track more accurately than PD control" in text
-    assert "5 without a successful run" in text
+    facts = comparison_facts(rows)
+    assert facts["rows"] == 12 and facts["most_accurate"]["name"] == "Direct collocation"
+    beat = facts["beat_pd_control"]
+    assert (len(beat["beaten"]), beat["cells"], len(beat["without_success"])) == (3, 10, 5)
+    assert beat["beaten"] == ["cell 0", "cell 1", "cell 2"] and beat["pd_rmse_rot_deg"] == 0.1
+    assert facts["left_out"] == [f"cell {i} (Table {2 + i % 2})" for i in range(5, 10)]
+    assert facts["best_per_table"]["2"]["name"] == "cell 0" and facts["best_per_table"]["3"]["name"] == "cell 1"
+    # the sentence that carries the count
+    assert "3 of 10 optimisation cells track more accurately than PD control" in "\n".join(_comparison(rows))

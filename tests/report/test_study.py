@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from fdbench.benchmark import Cell
+from fdbench.report.paper_methods import Cell
 from fdbench.cli import app
 from fdbench.study import make_sweep, parse_levels
 

@@ -421,8 +421,9 @@ def test_runs_export_says_what_it_wrote(tmp_path):
 
 
 def test_the_walks_open_loop_is_listed_as_open_loop():
-    """The walk's open loop is stored as PD with Kp = Kd = 0 (walk.methods); the PD with gains is PD."""
-    from fdbench import walk
+    """The walk's open loop is stored as PD with Kp = Kd = 0 (report.methods); the PD with gains is PD."""
+    from fdbench.report import methods
 
-    listed = {m.key: method_label(m.spec.as_dict()) for m in walk.methods(10, 4, collocation=False)}
-    assert listed[walk.OPEN_LOOP] == "open loop" and listed[walk.PD] == "pd" and listed[walk.LQR] == "lqr"
+    found = methods.methods((methods.OPEN_LOOP, methods.PD, methods.LQR), methods.Dataset("", {}))
+    listed = {m.key: method_label(m.spec.as_dict()) for m in found}
+    assert listed[methods.OPEN_LOOP] == "open loop" and listed[methods.PD] == "pd" and listed[methods.LQR] == "lqr"

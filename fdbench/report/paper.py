@@ -10,8 +10,8 @@ from datetime import datetime, timezone
 
 import numpy as np
 
-from . import __version__
-from .benchmark import (PAPER_CONTROL, PAPER_INVERSE_RUNTIME_S, Cell, Plan, failure_message, outcome_counts,
+from .. import __version__
+from .paper_methods import (PAPER_CONTROL, PAPER_INVERSE_RUNTIME_S, Cell, Plan, failure_message, outcome_counts,
                         outcome_text, succeeded, summarise)
 
 TORQUE_LABELS = {"ann": "ANN ({hidden} hidden neurons)", "cs": "CS ({knots} points)", "pf": "PF ({terms} terms)"}
@@ -55,6 +55,22 @@ class Row:
     provenance: list = field(default_factory=list)
     hashes: list = field(default_factory=list)
     specs: list = field(default_factory=list)
+    key: str = ""  # a registered method's key (``methods``), the same on every dataset; "" for a paper cell
+
+    @property
+    def record(self) -> dict:
+        """The first run's record (the only one of a one-run method)."""
+        return self.records[0] if self.records else {}
+
+    def get(self, name: str, default=None):
+        """The first run's value of ``name`` (``default`` when missing or None)."""
+        value = self.record.get(name)
+        return default if value is None else value
+
+    @property
+    def reached_end(self) -> bool:
+        """Whether the first run reached the motion's end."""
+        return self.record.get("status") == "success"
 
     @property
     def speedup(self) -> float:
@@ -127,7 +143,7 @@ def run_conditions(specs: list, records: list) -> dict:
     the changes of its constants, the plant's changes (the simulated body only), the motion (its
     name; a file's SHA-256), the derivative estimate, the noise (deg) and the seeds that drew it.
     Without specs (runs stored by hand), what the first record says."""
-    from .records import noise_seed
+    from ..records import noise_seed
 
     if not specs:
         rec = records[0] if records else {}
@@ -226,7 +242,7 @@ def joints(rows: list[Row]) -> list[str]:
     return list(dict.fromkeys(k[len("rmse_rot_deg_"):-len("_median")] for k in keys))
 
 
-def _significant(value) -> str:
+def significant(value) -> str:
     """Three significant digits (5.37e-07, 0.0413, 12.4): for tables without the paper's columns,
     where small errors are the point."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
@@ -440,60 +456,86 @@ def _table_without_paper(rows: list[Row], with_success: bool) -> list[str]:
     lines = [head, rule]
     for row in rows:
         star = "*" if row.cell is not None and not row.cell.in_paper else ""
-        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg', _significant)} |"
-                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}', _significant)} |" for name in names)
-                + f" {_spread(row, 'rmse_torque_nm', _significant)} | {_spread(row, 'runtime_s', _significant)} |")
+        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg', significant)} |"
+                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}', significant)} |" for name in names)
+                + f" {_spread(row, 'rmse_torque_nm', significant)} | {_spread(row, 'runtime_s', significant)} |")
         if with_success:
             line += f" {row.successes}/{len(row.records)}{', identical' if row.identical else ''} |"
         lines.append(line)
     return lines
 
 
-def _comparison(rows: list[Row]) -> list[str]:
-    """A few sentences written from the numbers, over every row (the paper's cells, PD control and
-    the rows beyond the paper)."""
-    number = _num if any(row.paper for row in rows) else _significant
+def comparison_facts(rows: list[Row]) -> dict:
+    """The facts of the section "Comparison" (``_comparison``'s sentences), over every row (the
+    paper's cells, PD control, the rows beyond the paper): the rows counted, the most accurate and
+    the fastest of those with a successful run, how many optimisation cells beat PD control, the
+    best cell per table, the verdicts against the paper's RMSE_rot, the rows left out (no
+    successful run) and the speed-ups' range."""
     # rows none of whose runs succeeded are left out: eq. 18 can score an early failure below a
     # complete run, and a rotation error over a few samples says nothing of tracking
     finite = [r for r in rows if math.isfinite(r.summary.get("rmse_rot_deg_median", math.nan))
               and r.successes > 0]
-    failed = [r.name + (f" (Table {r.table})" if r.cell else "") for r in rows if r not in finite]
-    lines = []
+    optimised = [r for r in rows if r.cell is not None]
+    facts = {"rows": len(rows), "most_accurate": None, "fastest": None,
+             "left_out": [r.name + (f" (Table {r.table})" if r.cell else "") for r in rows if r not in finite]}
     if finite:
         best = min(finite, key=lambda r: r.summary["rmse_rot_deg_median"])
         fastest = min(finite, key=lambda r: r.summary["runtime_s_median"])
-        lines += [
-            f"- Most accurate of the {len(rows)} rows: {best.name} (median RMSE_rot "
-            f"{number(best.summary['rmse_rot_deg_median'])} deg).",
-            f"- Fastest: {fastest.name} (median runtime {number(fastest.summary['runtime_s_median'])} s).",
-        ]
-    else:
-        lines.append(f"- None of the {len(rows)} rows has a successful run.")
-    optimised = [r for r in rows if r.cell is not None]
+        facts["most_accurate"] = {"name": best.name, "rmse_rot_deg": best.summary["rmse_rot_deg_median"]}
+        facts["fastest"] = {"name": fastest.name, "runtime_s": fastest.summary["runtime_s_median"]}
     control = [r for r in finite if r.table == "control"]
     if control and optimised:
         c = control[0].summary["rmse_rot_deg_median"]
-        beaten = [r for r in optimised if r in finite and r.summary["rmse_rot_deg_median"] < c]
-        unsuccessful = [r for r in optimised if r not in finite]
-        lines.append(f"- {len(beaten)} of {len(optimised)} optimisation cells track more accurately than PD control "
-                     f"({number(c)} deg) within their budget"
-                     + (f"; {len(unsuccessful)} without a successful run." if unsuccessful else "."))
+        facts["beat_pd_control"] = {
+            "pd_rmse_rot_deg": c, "cells": len(optimised),
+            "beaten": [r.name for r in optimised if r in finite and r.summary["rmse_rot_deg_median"] < c],
+            "without_success": [r.name for r in optimised if r not in finite]}
+    facts["best_per_table"] = {}
     for table in (2, 3):
         cells = [r for r in optimised if r.table == table and r in finite]
         if cells:
             top = min(cells, key=lambda r: r.summary["rmse_rot_deg_median"])
-            lines.append(f"- Table {table}: best {top.name}, {number(top.summary['rmse_rot_deg_median'])} deg.")
-    verdicts = [_row_judgements(r)["rmse_rot_deg"]["verdict"] for r in rows if r.paper]
-    judged = [v for v in verdicts if v]
-    if judged:
-        lines.append(f"- Against the paper's RMSE_rot: {judged.count('same')} of {len(judged)} reproduced (≈), "
-                     f"{judged.count('lower')} lower, {judged.count('higher')} higher.")
-    if failed:
-        lines.append(f"- Left out of this comparison, no successful run: {', '.join(failed)}.")
+            facts["best_per_table"][str(table)] = {"name": top.name, "rmse_rot_deg": top.summary["rmse_rot_deg_median"]}
+    judged = [v for v in (_row_judgements(r)["rmse_rot_deg"]["verdict"] for r in rows if r.paper) if v]
+    facts["vs_paper_rmse_rot"] = {v: judged.count(v) for v in ("same", "lower", "higher")} if judged else None
     speedups = [r.speedup for r in finite if math.isfinite(r.speedup)]
-    if speedups:
-        span = (f"{_factor(min(speedups))}×" if len(speedups) == 1
-                else f"from {_factor(min(speedups))}× to {_factor(max(speedups))}×")
+    facts["speedup"] = {"min": min(speedups), "max": max(speedups), "rows": len(speedups)} if speedups else None
+    return facts
+
+
+def _comparison(rows: list[Row]) -> list[str]:
+    """A few sentences written from the numbers (``comparison_facts``), over every row (the
+    paper's cells, PD control and the rows beyond the paper)."""
+    number = _num if any(row.paper for row in rows) else significant
+    facts = comparison_facts(rows)
+    lines = []
+    if facts["most_accurate"]:
+        best, fastest = facts["most_accurate"], facts["fastest"]
+        lines += [
+            f"- Most accurate of the {facts['rows']} rows: {best['name']} (median RMSE_rot "
+            f"{number(best['rmse_rot_deg'])} deg).",
+            f"- Fastest: {fastest['name']} (median runtime {number(fastest['runtime_s'])} s).",
+        ]
+    else:
+        lines.append(f"- None of the {facts['rows']} rows has a successful run.")
+    beat = facts.get("beat_pd_control")
+    if beat:
+        unsuccessful = beat["without_success"]
+        lines.append(f"- {len(beat['beaten'])} of {beat['cells']} optimisation cells track more accurately than PD "
+                     f"control ({number(beat['pd_rmse_rot_deg'])} deg) within their budget"
+                     + (f"; {len(unsuccessful)} without a successful run." if unsuccessful else "."))
+    for table, top in facts["best_per_table"].items():
+        lines.append(f"- Table {table}: best {top['name']}, {number(top['rmse_rot_deg'])} deg.")
+    verdicts = facts["vs_paper_rmse_rot"]
+    if verdicts:
+        lines.append(f"- Against the paper's RMSE_rot: {verdicts['same']} of {sum(verdicts.values())} reproduced (≈), "
+                     f"{verdicts['lower']} lower, {verdicts['higher']} higher.")
+    if facts["left_out"]:
+        lines.append(f"- Left out of this comparison, no successful run: {', '.join(facts['left_out'])}.")
+    speedup = facts["speedup"]
+    if speedup:
+        span = (f"{_factor(speedup['min'])}×" if speedup["rows"] == 1
+                else f"from {_factor(speedup['min'])}× to {_factor(speedup['max'])}×")
         lines.append(f"- Speed-up against the paper's runtimes: {span} "
                      "(different machines and languages: an order of magnitude, not a measurement).")
     return lines
@@ -712,7 +754,7 @@ def _flat(row: Row) -> dict:
 def _model_name(record: dict) -> str:
     """The record's model; runs stored before models had names kept their constant changes in
     ``model`` and are the forearm's."""
-    from .models import SUFFIXES, names
+    from ..models import SUFFIXES, names
 
     model = record.get("model")
     return model if model in names() or (isinstance(model, str) and model.lower().endswith(SUFFIXES)) \
@@ -743,14 +785,15 @@ def json_report(rows: list[Row], settings: dict) -> dict:
                    "jobs": p.get("jobs")} for p in row.provenance],
         )
         cells.append(entry)
-    return {"command": "report", "fdbench_version": __version__, "settings": settings, "cells": cells}
+    return {"command": "report", "fdbench_version": __version__, "settings": settings, "cells": cells,
+            "comparison": {k: _finite(v) if not isinstance(v, dict) else v for k, v in comparison_facts(rows).items()}}
 
 
 def condition_settings(spec, specs: list) -> dict:
     """The settings rows that say what the runs tracked and simulated: the motion (duration,
     samples, a file's SHA-256), the angle's convention for a file, what RMSE_rot is measured
     against, the derivative estimate, the noise and its seeds, the plant's changes."""
-    from .records import noise_seed
+    from ..records import noise_seed
 
     described = spec.describe()
     _, truth = spec.motions()
@@ -811,13 +854,13 @@ def rmse_reference(spec, derivatives: str | None) -> str | None:
 
 
 def settings_table(plan: Plan, seeds: int, jobs: int) -> dict:
-    from .store import dependency_versions, git_commit, machine
+    from ..store import dependency_versions, git_commit, machine
 
     spec = plan.control or next(iter(plan.specs.values()))[0]
     versions = dependency_versions()
     integrator = spec.integrator + (f" (dt = {spec.dt} s)" if spec.integrator == "rk4"
                                     else f" (rtol = {spec.rtol}, atol = {spec.atol})")
-    from .models import summary
+    from ..models import summary
 
     table = {
         "model": f"{spec.model_name}: {summary(spec.model_name)}" + (f" ({spec.describe()['model_options']})"

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import math
 
-from ..beyond import Method
-from ..benchmark import summarise
+from .methods import Method, method_csv_rows, rows as method_rows
+from .paper import significant
 
 # peer: the fdbench methods it stands beside, the first found among the report's rows: (command, controller, table)
 PAIRS = {"opensim": (("control", "pd", "control"),),
@@ -23,7 +23,7 @@ SAME_ACCURACY = 0.01  # ...at equal or better RMSE_rot: fdbench's at most 1 % ab
 def peer_methods(names, kp=None, kd=None, **common) -> list[Method]:
     """The report's peers ``names`` as methods (label, summary, spec) on the settings ``common``;
     the opensim peer takes the report's PD gains."""
-    from . import peer
+    from ..peers import peer
     from ..spec import peer_spec
 
     return [Method(peer(name).label, peer(name).summary, peer_spec(name, None, kp, kd, **common)) for name in names]
@@ -31,22 +31,13 @@ def peer_methods(names, kp=None, kd=None, **common) -> list[Method]:
 
 def peer_rows(methods: list[Method], runs: dict, provenance: dict | None = None) -> list:
     """The report rows (``report.Row``, table "peers") of the peers, from their stored runs."""
-    from ..report import Row
-
-    provenance = provenance or {}
-    rows = []
-    for method in methods:
-        key = method.spec.hash()
-        record = runs[key]["record"]
-        rows.append(Row(method.name, "peers", None, summarise([record]), None, [record],
-                        provenance=[provenance[key]] if key in provenance else [], hashes=[key], specs=[method.spec]))
-    return rows
+    return method_rows(methods, runs, provenance, "peers")
 
 
 def peers_markdown(rows: list, methods: list[Method], ours: list) -> list[str]:
     """The section's Markdown lines: a sentence per peer, the table (PD's columns), then each peer
     beside its fdbench method among ``ours`` (the report's other rows)."""
-    from ..report import _table, failure_lines
+    from .paper import _table, failure_lines
 
     if not rows:
         return []
@@ -66,14 +57,14 @@ def peers_markdown(rows: list, methods: list[Method], ours: list) -> list[str]:
                 "| fdbench | peer | RMSE_rot fdbench (deg) | RMSE_rot peer (deg) | time fdbench (s) | time peer (s) "
                 "| peer time / fdbench time | goal met |", "|---|---|---:|---:|---:|---:|---:|---|"]
         out += [f"| {p['fdbench']} | {p['peer']}{' (solve)' if p.get('solve_alone') else ''} "
-                f"| {_g(p['rmse_rot_deg_fdbench'])} | {_g(p['rmse_rot_deg_peer'])} "
-                f"| {_g(p['runtime_s_fdbench'])} | {_g(p['runtime_s_peer'])} | {_ratio(p['time_ratio'])} "
+                f"| {significant(p['rmse_rot_deg_fdbench'])} | {significant(p['rmse_rot_deg_peer'])} "
+                f"| {significant(p['runtime_s_fdbench'])} | {significant(p['runtime_s_peer'])} | {_ratio(p['time_ratio'])} "
                 f"| {_verdict(p)} |" for p in pairs]
         out += [""] + [goal_sentence(p) for p in pairs if not p.get("solve_alone")]
     records = [row.records[0] for row in rows]
     details = [f"MocoTrack: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, whole run "
-               f"{_g(rec.get('moco_run_s'))} s, solve {_g(rec.get('solve_time_s'))} s (tolerance {rec.get('tolerance')}, {rec.get('nodes')} mesh "
-               f"intervals); its own RMSE_rot at its mesh points {_g(rec.get('collocation_rmse_rot_deg'))} deg."
+               f"{significant(rec.get('moco_run_s'))} s, solve {significant(rec.get('solve_time_s'))} s (tolerance {rec.get('tolerance')}, {rec.get('nodes')} mesh "
+               f"intervals); its own RMSE_rot at its mesh points {significant(rec.get('collocation_rmse_rot_deg'))} deg."
                for rec in records if rec.get("peer") == "moco"]
     versions = sorted({str(rec["opensim_version"]) for rec in records if rec.get("opensim_version")})
     out += [""] + details + ([f"OpenSim {', '.join(versions)}."] if versions else [])
@@ -133,19 +124,19 @@ def goal_sentence(pair: dict) -> str:
     if not math.isfinite(ratio):
         speed = "no time to compare"
     elif ratio >= 1:
-        speed = f"fdbench {_g(ratio)}× faster"
+        speed = f"fdbench {significant(ratio)}× faster"
     else:
-        speed = f"fdbench {_g(1 / ratio)}× slower"
+        speed = f"fdbench {significant(1 / ratio)}× slower"
     ours, theirs = pair["rmse_rot_deg_fdbench"], pair["rmse_rot_deg_peer"]
     accurate = ours is not None and theirs is not None and ours <= theirs * (1 + SAME_ACCURACY)
     if pair["goal_met"]:
         verdict = "the goal is met"
     else:
-        missing = [f"{_g(ratio)}× is below {GOAL:g}×"] if not (math.isfinite(ratio) and ratio >= GOAL) else []
-        missing += [] if accurate else [f"its RMSE_rot {_g(ours)} deg is above the peer's {_g(theirs)} deg"]
+        missing = [f"{significant(ratio)}× is below {GOAL:g}×"] if not (math.isfinite(ratio) and ratio >= GOAL) else []
+        missing += [] if accurate else [f"its RMSE_rot {significant(ours)} deg is above the peer's {significant(theirs)} deg"]
         verdict = "the goal is not met: " + " and ".join(missing)
     where = f" on {pair['model']}" if pair.get("model") else ""
-    return (f"- {pair['fdbench']} against {pair['peer']}{where}: {speed} (RMSE_rot {_g(ours)} against {_g(theirs)} "
+    return (f"- {pair['fdbench']} against {pair['peer']}{where}: {speed} (RMSE_rot {significant(ours)} against {significant(theirs)} "
             f"deg); {verdict}.")
 
 
@@ -156,7 +147,7 @@ def _model_name(row) -> str | None:
     return Path(str(row.specs[0].model_name)).name if row.specs else None
 
 
-def _plain(pair: dict) -> dict:
+def plain_pair(pair: dict) -> dict:
     """A pair for JSON: NaN as null, without the peer's name (the cell's)."""
     return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in pair.items()
             if k not in ("peer", "solve_alone")}
@@ -170,25 +161,13 @@ def _quotient(a, b) -> float:
     return a / b if a is not None and b else math.nan
 
 
-def _g(value) -> str:
-    return "-" if value is None or (isinstance(value, float) and not math.isfinite(value)) else f"{value:.3g}"
-
-
 def _ratio(value) -> str:
     return "-" if not math.isfinite(value) else f"{value:.3g}×"
 
 
 def peer_csv_rows(rows: list) -> list[list]:
     """CSV rows (the report's ``CSV_COLUMNS``) of the peers, the peer named in ``torque``."""
-    from ..report import CSV_COLUMNS, csv_rows
-
-    out = csv_rows(rows)
-    for values, row in zip(out, rows):
-        rec = row.records[0]
-        for column, value in {"torque": rec.get("peer"), "feedforward": rec.get("feedforward"),
-                              "in_paper": False, "optimizer": ""}.items():
-            values[CSV_COLUMNS.index(column)] = value
-    return out
+    return method_csv_rows(rows, named=lambda record: record.get("peer"))
 
 
 PEER_FIELDS = ("opensim_version", "solve_time_s", "moco_run_s", "ipopt_status", "ipopt_iterations",
@@ -212,7 +191,7 @@ def with_peer_fields(cells: list, rows: list, ours: list) -> list:
                     optimizer="", **{k: rec[k] for k in PEER_FIELDS if rec.get(k) is not None})
         pair = pairs.get(row.name)
         if pair is not None:
-            cell["vs_fdbench"] = _plain(pair)
+            cell["vs_fdbench"] = plain_pair(pair)
         if row.name in solves:
-            cell["vs_fdbench_solve"] = _plain(solves[row.name])
+            cell["vs_fdbench_solve"] = plain_pair(solves[row.name])
     return cells

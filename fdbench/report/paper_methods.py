@@ -1,4 +1,4 @@
-"""The benchmark matrix of the paper (PD control, Tables 2 and 3), its execution (handed to an
+"""The paper's table of methods (PD control, Tables 2 and 3), its execution (handed to an
 execution backend, see ``execution``: stored runs are reused by settings hash, missing ones are
 computed by workers and stored one by one as they finish, so an interrupted benchmark resumes
 where it stopped) and its statistics."""
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .spec import RunSpec, control_spec, gradient_for, optimize_spec
+from ..spec import RunSpec, control_spec, gradient_for, optimize_spec
 
 # The paper's published figures: (RMSE_rot deg, RMSE_torque N m, runtime s).
 PAPER_INVERSE_RUNTIME_S = 0.12
@@ -110,7 +110,7 @@ def execute(plan: Plan, store, jobs: int | None = None, rerun: bool = False, on_
     ``backend`` (an ``execution.Backend``; default: local worker processes, ``jobs`` of them)
     carries out the missing runs; ``on_done(finished, total)`` reports progress. Runs already
     stored are reused unless ``rerun``; each new run is stored as soon as it finishes."""
-    from .execution import LocalBackend, execute_specs
+    from ..execution import LocalBackend, execute_specs
 
     if backend is None:
         backend = LocalBackend(jobs)

@@ -26,8 +26,10 @@ from helpers.loads_files import push_files
 from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.problem import DEFAULT_RESIDUAL_WEIGHT
-from fdbench.walk import BFGS, CMAES, COMPUTED_TORQUE, LQR, OPEN_LOOP, PD, WALK_PENALTY, WalkRow
-from fdbench.walk_report import claim_lines, ranking
+from fdbench.report import Row
+from fdbench.report.comparison import claim_facts, claim_lines, ranking
+from fdbench.report.methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, FLOATING_BASE_PENALTY, LQR, OPEN_LOOP,
+                                    PD)
 
 EXAMPLES = ROOT / "examples" / "opensim"
 DURATION = 0.3  # s: the small model's recorded motion
@@ -136,9 +138,9 @@ def test_open_loop_is_pd_with_zero_gains_and_residuals_only_on_the_free_base(hop
     assert set(report["inverse_residuals"]) >= {"residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm"}
     assert report["bfgs"] is None  # exact gradients on a free base, its step fitted to the recording's samples
     assert walk[BFGS]["gradient"] == "exact" and walk[BFGS]["optimizer"] == "bfgs" and walk[BFGS]["feedforward"]
-    # eq. 18 on the walk: a fall penalised by WALK_PENALTY, the residuals weighted (loads given); the paper's on the forearm
+    # eq. 18 on the walk: a fall penalised by FLOATING_BASE_PENALTY, the residuals weighted (loads given); the paper's on the forearm
     for key in (CMAES, BFGS):
-        assert walk[key]["penalty_weight"] == WALK_PENALTY and walk[key]["residual_weight"] == DEFAULT_RESIDUAL_WEIGHT
+        assert walk[key]["penalty_weight"] == FLOATING_BASE_PENALTY and walk[key]["residual_weight"] == DEFAULT_RESIDUAL_WEIGHT
         assert forearm[key]["penalty_weight"] == 1.0 and "residual_weight" not in forearm[key]
 
 
@@ -167,13 +169,13 @@ def test_markdown_tables_carry_every_method_and_coordinate(hop):
 
 
 def test_figures_are_written_and_linked(hop):
-    from fdbench.walk_figures import FIGURE_FILES
+    from fdbench.figures import MODEL_FIGURE_FILES as FIGURE_FILES
 
     figs = hop["folder"] / "figs"
     assert {p.name for p in figs.iterdir()} == set(FIGURE_FILES)
     for name in FIGURE_FILES:
         assert (figs / name).stat().st_size > 1000 and f"](figs/{name})" in hop["md"]
-    assert (figs / "walk_animation.gif").read_bytes()[:6] in (b"GIF87a", b"GIF89a")
+    assert (figs / "animation.gif").read_bytes()[:6] in (b"GIF87a", b"GIF89a")
 
 
 def _common(hop) -> dict:
@@ -198,8 +200,8 @@ def test_recorded_curves_are_the_motion_files_columns(hop):
     """The coordinates figure's recorded curve of each coordinate is the file's column (deg for
     angles, m for translations); each simulated curve is the simulation's coordinates in those units."""
     from fdbench.api import run
-    from fdbench.walk import coordinates
-    from fdbench.walk_figures import coordinate_curves, recording
+    from fdbench.report.comparison import coordinates
+    from fdbench.figures import coordinate_curves, recording
 
     spec = _spec(hop)
     names, kinds = coordinates(spec)
@@ -217,7 +219,7 @@ def test_stick_figure_points_are_the_engines_point_positions(hop):
     """At each instant, the stick figure's segments run from each body's joint point to its end as
     ``Engine.point_positions`` gives them; an instant a simulation did not reach has none."""
     from fdbench.run_inputs import engine
-    from fdbench.walk_figures import instants, stick_frames
+    from fdbench.figures import instants, stick_frames
 
     spec = _spec(hop)
     plant = engine(spec)
@@ -254,7 +256,7 @@ def test_a_fallen_runs_last_pose_is_shown_marked_and_held(hop):
     shows its poses until then and holds that last pose after; a run that reached the end has none."""
     from fdbench.api import run
     from fdbench.run_inputs import engine
-    from fdbench.walk_figures import ANIMATION_FPS, animation_frames, stopped_poses
+    from fdbench.figures import ANIMATION_FPS, animation_frames, stopped_poses
 
     spec = _spec(hop)
     plant, inverse, result = engine(spec), spec.reference(), run(spec).result
@@ -293,12 +295,12 @@ def test_collocations_own_solution_is_drawn_at_its_nodes(hop, tmp_path):
     from fdbench.collocation import collocate
     from fdbench.spec import collocate_spec
     from fdbench.run_inputs import loads, motions, nominal
-    from fdbench.walk import COLLOCATION, coordinates
-    from fdbench.walk_figures import (OWN_SOLUTION, coordinate_curves, coordinates_figure, recording,
+    from fdbench.report.comparison import coordinates
+    from fdbench.figures import (OWN_SOLUTION, coordinate_curves, coordinates_figure, recording,
                                       residual_curves, residuals_figure, trajectories)
 
     spec = collocate_spec(10, "hermite-simpson", **_common(hop))
-    row = WalkRow(COLLOCATION, "collocation + replay", {"command": "collocate"}, spec, spec.hash())
+    row = _row(COLLOCATION, "collocation + replay", {"command": "collocate"}, spec)
     sims, own = trajectories([row], {spec.hash(): {"params": None}})
     assert list(sims) == list(own) == [COLLOCATION]
     inverse = spec.reference()
@@ -327,7 +329,7 @@ def test_residual_curves_are_the_base_coordinates_generalised_forces(hop):
     from fdbench.spec import control_spec
     from fdbench.models import with_changes
     from fdbench.run_inputs import nominal
-    from fdbench.walk_figures import residual_curves
+    from fdbench.figures import residual_curves
 
     spec = _spec(hop)
     inverse = spec.reference()
@@ -343,9 +345,15 @@ def test_residual_curves_are_the_base_coordinates_generalised_forces(hop):
 # ---- the claim tested, from synthetic rows -------------------------------------------------------
 
 
-def _rows(values: dict) -> list[WalkRow]:
+def _row(key: str, name: str, record: dict, spec=None) -> Row:
+    """A report row of one run of the registered method ``key``."""
+    return Row(name, "walk", None, {}, None, [record], hashes=[spec.hash()] if spec else [],
+               specs=[spec] if spec else [], key=key)
+
+
+def _rows(values: dict) -> list[Row]:
     """Rows of methods {key: (status, t_end, rmse_rot_deg, residual force RMS or None)}."""
-    return [WalkRow(key, key.replace("-", " ").title(), {"status": status, "t_end": t_end, "rmse_rot_deg": rot,
+    return [_row(key, key.replace("-", " ").title(), {"status": status, "t_end": t_end, "rmse_rot_deg": rot,
                                                          "runtime_s": 1.0, "residual_force_rms_n": residual})
             for key, (status, t_end, rot, residual) in values.items()]
 
@@ -357,61 +365,66 @@ WALK = {OPEN_LOOP: ("constraint", 0.44, 30.0, 40.0), PD: ("success", 2.5, 0.02, 
 
 
 def test_claim_says_where_reaching_the_end_disagrees_and_why():
-    lines = claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0)
-    text = "\n".join(lines)
-    assert "3 of 4 methods behave alike" in text
-    assert "open loop reaches the end of the forearm's motion (1 s) but stops on the walk at t = 0.44 s" in text
-    assert "nothing holds the walk's floating base" in text
+    facts = claim_facts(_rows(WALK), _rows(FOREARM))
+    reach = facts["reach_the_end"]
+    assert reach["both"] == [PD, COMPUTED_TORQUE, LQR] and reach["forearm_only"] == [OPEN_LOOP]
+    assert reach["neither"] == reach["walk_only"] == []
     # open loop last on both, 50 times PD's error on the forearm (5 / 0.1) and 1,500 times on the walk (30 / 0.02)
-    assert "**Open loop** ranks 4 of 4 on the forearm" in text and "and 4 of 4 on the walk" in text
+    assert facts["ranking"]["forearm"][-1] == facts["ranking"]["walk"][-1] == OPEN_LOOP
+    assert facts["open_loop_over_pd"] == {"forearm": pytest.approx(50), "walk": pytest.approx(1500)}
+    text = "\n".join(claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0))
+    assert "nothing holds the walk's floating base" in text  # the reason, where open loop falls on the walk only
     assert "drift from the motion, 50 times (forearm) and 1,500 times (walk) PD's error" in text
     # the same numbers but open loop reaching the walk's end: the disagreement and its reason go
     walk = dict(WALK, **{OPEN_LOOP: ("success", 2.5, 30.0, 40.0)})
+    assert claim_facts(_rows(walk), _rows(FOREARM))["reach_the_end"]["both"] == list(WALK)
     text = "\n".join(claim_lines(_rows(walk), _rows(FOREARM), 2.5, 1.0))
-    assert "4 of 4 methods behave alike" in text and "floating base:" not in text and "Disagrees" not in text
+    assert "floating base:" not in text and "Disagrees" not in text
     # open loop as close to PD as a tie on the walk: no claim that it drifts on both
     walk = dict(WALK, **{OPEN_LOOP: ("success", 2.5, 0.021, 40.0)})
-    text = "\n".join(claim_lines(_rows(walk), _rows(FOREARM), 2.5, 1.0))
-    assert "drift from the motion" not in text and "its error is 50 times PD's on the forearm and 1.1 times" in text
+    assert claim_facts(_rows(walk), _rows(FOREARM))["open_loop_over_pd"]["walk"] == pytest.approx(1.05)
+    assert "drift from the motion" not in "\n".join(claim_lines(_rows(walk), _rows(FOREARM), 2.5, 1.0))
 
 
 def test_claim_ranking_follows_the_numbers():
     """The rankings' agreement is counted over pairs of methods and names the pairs ordered
-    differently; swapping RMSE values on the walk changes the sentence; close values tie."""
+    differently; swapping RMSE values on the walk changes it; close values tie."""
     assert ranking(_rows(WALK)) == [PD, LQR, COMPUTED_TORQUE, OPEN_LOOP]  # reaching the end first, then RMSE_rot
     assert ranking(_rows(FOREARM)) == [COMPUTED_TORQUE, LQR, PD, OPEN_LOOP]
-    text = "\n".join(claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0))
     # forearm CT < LQR < PD; walk PD < LQR < CT: all three pairs among them swap, the three with open loop agree
-    assert "Of the 6 pairs of methods, 3 are ordered alike on both models; 3 the other way: " in text
-    assert "computed torque above PD on the forearm, below it on the walk" in text
-    assert "The best is computed torque on the forearm and PD on the walk." in text
+    facts = claim_facts(_rows(WALK), _rows(FOREARM))["ranking"]
+    assert (facts["pairs"], facts["alike"], facts["ties"], facts["other_way_by_reaching_the_end"]) == (6, 3, 0, 0)
+    assert sorted(map(tuple, facts["other_way_by_rmse_rot"])) == [(COMPUTED_TORQUE, LQR), (COMPUTED_TORQUE, PD),
+                                                                  (LQR, PD)]  # (above on the forearm, below)
+    assert (facts["forearm"][0], facts["walk"][0]) == (COMPUTED_TORQUE, PD)
+    assert "The best is computed torque on the forearm and PD on the walk." in "\n".join(
+        claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0))
     same = dict(WALK, **{PD: ("success", 2.5, 0.5, 34.0), COMPUTED_TORQUE: ("success", 2.5, 0.01, 33.8),
                          LQR: ("success", 2.5, 0.05, 33.9)})
-    text = "\n".join(claim_lines(_rows(same), _rows(FOREARM), 2.5, 1.0))
-    assert "6 are ordered alike on both models; none is ordered the other way" in text
-    assert "Computed torque is the best on both" in text
+    facts = claim_facts(_rows(same), _rows(FOREARM))["ranking"]
+    assert facts["alike"] == 6 and facts["other_way_by_rmse_rot"] == [] and facts["walk"][0] == COMPUTED_TORQUE
     # PD and LQR within a factor 1.25 on the walk: a tie, neither agreeing nor swapped
     close = dict(WALK, **{PD: ("success", 2.5, 0.025, 34.0)})
-    text = "\n".join(claim_lines(_rows(close), _rows(FOREARM), 2.5, 1.0))
-    assert "3 are ordered alike on both models; 1 is a tie" in text and "; 2 the other way" in text
+    facts = claim_facts(_rows(close), _rows(FOREARM))["ranking"]
+    assert (facts["alike"], facts["ties"], len(facts["other_way_by_rmse_rot"])) == (3, 1, 2)
     # a swap caused by reaching the end is counted apart from those by RMSE_rot
     falls = dict(WALK, **{COMPUTED_TORQUE: ("constraint", 1.0, 0.06, 33.8)})
-    text = "\n".join(claim_lines(_rows(falls), _rows(FOREARM), 2.5, 1.0))
-    assert "; 3 the other way (2 because one of the two reaches the end on one model only, as above; 1 by RMSE_rot: " \
-           "LQR above PD on the forearm, below it on the walk)" in text
+    facts = claim_facts(_rows(falls), _rows(FOREARM))["ranking"]
+    assert facts["other_way_by_reaching_the_end"] == 2 and facts["other_way_by_rmse_rot"] == [[LQR, PD]]
 
 
 def test_claim_residual_sentence_follows_the_methods_that_reach_the_end():
-    text = "\n".join(claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0, inverse_fields={"residual_force_rms_n": 33.7}))
+    facts = claim_facts(_rows(WALK), _rows(FOREARM), {"residual_force_rms_n": 33.7})
     # 33.8, 33.9 and 34 N: within 1 %; open loop's 40 N is not a whole walk
-    assert "The 3 methods that reach the walk's end leave the same residual force RMS to within 1 %: 33.8 N " \
-           "(the inverse dynamics' own: 33.7 N)" in text
+    assert facts["residual_force_rms_n"] == {COMPUTED_TORQUE: 33.8, LQR: 33.9, PD: 34.0}
+    assert facts["residual_force_rms_n_inverse"] == 33.7
+    text = "\n".join(claim_lines(_rows(WALK), _rows(FOREARM), 2.5, 1.0, inverse_fields={"residual_force_rms_n": 33.7}))
+    assert "leave the same residual force RMS to within 1 %" in text
     walk = dict(WALK, **{PD: ("success", 2.5, 0.02, 40.0)})
-    text = "\n".join(claim_lines(_rows(walk), _rows(FOREARM), 2.5, 1.0))
-    assert "goes from 33.8 N (computed torque) to 40 N (PD)" in text
+    assert "goes from 33.8 N (computed torque) to 40 N (PD)" in "\n".join(claim_lines(_rows(walk), _rows(FOREARM),
+                                                                                       2.5, 1.0))
     walk = {key: (status if key == PD else "constraint", t_end, rot, res) for key, (status, t_end, rot, res) in WALK.items()}
-    text = "\n".join(claim_lines(_rows(walk), _rows(FOREARM), 2.5, 1.0))
-    assert "PD is the only method that reaches the walk's end: residual force RMS 34 N." in text
+    assert claim_facts(_rows(walk), _rows(FOREARM))["residual_force_rms_n"] == {PD: 34.0}
 
 
 def test_claim_says_when_an_optimisation_ended_worse_than_its_start():
@@ -419,21 +432,21 @@ def test_claim_says_when_an_optimisation_ended_worse_than_its_start():
     rows[-1].record.update(best_objective=29.9, initial_objective=31.4, evaluations=48, budget=48, n_params=260)
     forearm = _rows({**FOREARM, CMAES: ("success", 1.0, 1.0, None)})
     forearm[-1].record.update(n_params=11, budget=48)
-    text = "\n".join(claim_lines(rows, forearm, 2.5, 1.0))
-    assert "worse than" not in text and "spread over 260 spline parameters on the walk against 11" in text
+    assert claim_facts(rows, forearm)["worse_than_start"] == []
+    assert "spread over 260 spline parameters on the walk against 11" in "\n".join(claim_lines(rows, forearm, 2.5, 1.0))
     rows[-1].record.update(best_objective=38.0)
+    assert claim_facts(rows, forearm)["worse_than_start"] == [CMAES]
     text = "\n".join(claim_lines(rows, forearm, 2.5, 1.0))
     assert "Its best objective (eq. 18: 38) is worse than that of its initial guess (31.4" in text
-    assert "none of the 48 candidates" in text
 
 
 # ---- bad input -----------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("extra, word", [(["--torque", "cs"], "--torque"), (["--seeds", "3"], "--seeds"),
-                                         (["--kp", "10"], "--kp"),
-                                         (["--jobs", "0"], "--jobs"), (["--budget", "0"], "--budget")])
-def test_options_of_the_papers_tables_are_refused_in_one_line_before_any_work(tmp_path, extra, word):
+@pytest.mark.parametrize("extra, word", [(["--seeds", "0"], "--seeds"), (["--kp", "nan"], "--kp"),
+                                         (["--jobs", "0"], "--jobs"), (["--budget", "0"], "--budget"),
+                                         (["--torque", "xyz"], "--torque")])
+def test_bad_options_are_refused_in_one_line_before_any_work(tmp_path, extra, word):
     files = [_hopper_file(tmp_path), _motion_file(tmp_path), _loads_file(tmp_path)]
     before = set(tmp_path.iterdir())
     result = CliRunner().invoke(app, ["report", "--model", str(files[0]), "--motion", str(files[1]), "--loads",
@@ -441,6 +454,38 @@ def test_options_of_the_papers_tables_are_refused_in_one_line_before_any_work(tm
                                       "--output", str(tmp_path / "out.md"), "-q"] + extra)
     assert_one_line_error(result, word)
     assert set(tmp_path.iterdir()) == before  # no database, no report
+
+
+def test_the_paper_reports_options_shape_the_runs_on_a_floating_base(hop):
+    """The options of the paper's report work on a floating base too: --torque/--opt/--feedforward
+    select the paper's cells, run on the model with --seeds each; --kp/--kd set PD's gains on both
+    models; --penalty-weight, --sigma0 and --knots the shooting methods'; --gradient exact adds the
+    cells' exact-gradient rows; --no-control leaves PD out. Checked on the stored records."""
+    out = hop["folder"] / "options.json"
+    base = [arg for arg in hop["base"] if arg != "--no-beyond"]
+    result = CliRunner().invoke(app, base + ["--no-beyond", "--torque", "cs", "--opt", "cmaes", "--opt", "bfgs", "--feedforward",
+                                             "--seeds", "2", "--kp", "50", "--kd", "0.5", "--penalty-weight", "7",
+                                             "--sigma0", "0.3", "--knots", "5", "--gradient", "exact", "-f", "json",
+                                             "--output", str(out)])
+    assert result.exit_code == 0, result.output
+    report = json.loads(out.read_text())
+    walk = {e["key"]: e["record"] for e in report["walk"]}
+    forearm = {e["key"]: e["record"] for e in report["forearm"]}
+    assert walk[PD]["kp"] == 50.0 and walk[PD]["kd"] == 0.5 and forearm[PD]["kp"] == 50.0
+    assert walk[CMAES]["penalty_weight"] == 7.0 and forearm[CMAES]["penalty_weight"] == 1.0
+    assert "sigma0" in str(walk[CMAES]["optimizer_options"]) and "0.3" in str(walk[CMAES]["optimizer_options"])
+    assert walk[CMAES]["n_params"] == len(COORDINATES) * 5  # --knots 5 on every coordinate
+    cells = report["cells"]
+    assert sorted((c["torque"], c["optimizer"], c["table"]) for c in cells) == [("cs", "bfgs", 3), ("cs", "cmaes", 3)]
+    assert all(c["seeds"] == 2 and c["model"] == str(hop["files"]["model"]) for c in cells)
+    assert any(key.endswith("-exact") and walk[key]["gradient"] == "exact" for key in walk)
+    rows = list(csv.DictReader(io.StringIO(CliRunner().invoke(app, base + [
+        "--no-beyond", "--torque", "cs", "--opt", "cmaes", "--opt", "bfgs", "--feedforward", "--seeds", "2", "--kp", "50", "--kd",
+        "0.5", "--penalty-weight", "7", "--sigma0", "0.3", "--knots", "5", "--gradient", "exact", "-f", "csv"]).stdout)))
+    assert sum(r["key"].startswith("table3-seed") for r in rows) == 4  # two cells, two seeds each
+    result = CliRunner().invoke(app, base + ["--no-beyond", "--no-control", "-f", "json", "--output", str(out)])
+    assert result.exit_code == 0, result.output
+    assert PD not in {e["key"] for e in json.loads(out.read_text())["walk"]}
 
 
 # ---- the recorded walk, end to end ---------------------------------------------------------------
@@ -492,14 +537,13 @@ def test_walk_report_end_to_end_on_the_gait_model(tmp_path):
 def test_collocations_own_solution_is_named_beside_its_replay():
     """The sentence under the main table gives the collocation's own numbers from its record, and
     is left out without a collocation row."""
-    from fdbench.walk import COLLOCATION, WalkRow
-    from fdbench.walk_report import collocation_own_lines
+    from fdbench.report.comparison import collocation_own_lines
 
     record = {"status": "constraint", "t_end": 0.3, "collocation_rmse_rot_deg": 0.0421, "collocation_rmse_trans_cm": 0.128,
               "collocation_residual_force_rms_n": 8.61, "collocation_residual_moment_rms_nm": 9.52}
-    (text,) = [line for line in collocation_own_lines([WalkRow(COLLOCATION, "collocation", record)]) if line]
+    (text,) = [line for line in collocation_own_lines([_row(COLLOCATION, "collocation", record)]) if line]
     assert all(f"{value:.3g}" in text for key, value in record.items() if key.startswith("collocation_"))
-    assert collocation_own_lines([WalkRow(PD, "PD", {"status": "success"})]) == []
+    assert collocation_own_lines([_row(PD, "PD", {"status": "success"})]) == []
 
 
 # ---- the import's warnings: once, before the work ---------------------------------------------------
