@@ -54,6 +54,7 @@ class FdbenchGroup(TyperGroup):
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
         self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
+        self.help_for = set(sys.argv[1:] if args is None else args) if self.help_requested else set()
         if any(a in ("-q", "--quiet") for a in (sys.argv[1:] if args is None else args)):
             from ..jit import quiet
 
@@ -100,7 +101,7 @@ class FdbenchGroup(TyperGroup):
 
     def get_command(self, ctx, cmd_name):
         command = super().get_command(ctx, cmd_name)
-        if command is not None and getattr(self, "help_requested", False):
+        if command is not None and cmd_name in getattr(self, "help_for", ()):  # not every command listed by --help
             _show_choices(command, ctx)
         return command
 
