@@ -242,10 +242,27 @@ class LocalBackend(Backend):
 
 
 def _prepare_parent(specs) -> None:
-    """Compile/load the kernels (and import cma) once, before worker processes fork."""
-    warm_up_worker()
+    """Compile/load the kernels (and import cma) once, before worker processes fork: those of
+    every family the runs use (the banded kernels of pin joints; the dense ones of free joints,
+    paths and loads; scipy's integrators), so that the workers inherit them instead of each
+    compiling the same kernels at the same time (a first walk report compiled its dense RK4 and
+    population kernels in both workers: about 140 s of CPU twice)."""
+    from .multibody.simulation import warm_up
+
+    warm_up(any(getattr(s, "integrator", "rk4") != "rk4" for s in specs), dense=any(map(_dense, specs)))
     if any(getattr(s, "optimizer", None) == "cmaes" for s in specs):
         import cma  # noqa: F401
+
+
+def _dense(spec) -> bool:
+    """Whether the spec's model runs on the dense kernels (not a chain of pin joints); False where
+    its engine cannot be built (the run itself records why)."""
+    from .multibody.runs import engine
+
+    try:
+        return not engine(spec).compiled
+    except Exception:  # noqa: BLE001 - the run reports it
+        return False
 
 
 def _pool_outcomes(specs, workers: int):

@@ -431,7 +431,7 @@ def simulate_again(spec, params=None) -> tuple:
     """(Simulation, CollocationResult or None) of a stored run: a control run carried out again, an
     optimisation's best parameters (``params``) replayed, or a collocation solved again (its
     torque's replay and its own solution)."""
-    from .experiment import replay, run
+    from .method_runs import replay, run
 
     if params is not None:
         return replay(spec, params), None

@@ -352,3 +352,44 @@ def test_report_settings_say_what_was_carried_out_and_where(tmp_path):
     assert first.exit_code == again.exit_code == 0, first.stderr + again.stderr
     assert json.loads(first.stdout)["settings"]["parallel jobs"] == "2 runs on this machine, one at a time"
     assert json.loads(again.stdout)["settings"]["parallel jobs"] == "none: every run was stored"
+
+
+FLOATING = """
+name = "floating"
+
+[[bodies]]
+name = "trunk"
+mass = 10.0
+com = [0.0, 0.2]
+inertia = 0.5
+
+[[joints]]
+name = "base"
+type = "free"
+parent = "ground"
+child = "trunk"
+at_parent = [0.0, 0.0]
+at_child = [0.0, 0.0]
+coordinates = ["tilt", "tx", "ty"]
+"""
+
+
+def test_the_parent_warms_the_kernels_of_every_family_its_runs_use(tmp_path, monkeypatch):
+    """Before forking its workers the local backend loads the kernels once for them all: the dense
+    family too when a run's model has a free joint (else every worker would compile it at once),
+    and scipy's integrators when a run uses one."""
+    import fdbench.multibody.simulation as simulation
+    from fdbench import execution
+    from fdbench.experiment import with_model_file
+
+    asked = []
+    for owner in (simulation, execution):  # wherever execution finds it
+        if hasattr(owner, "warm_up"):
+            monkeypatch.setattr(owner, "warm_up", lambda adaptive=False, dense=False: asked.append((adaptive, dense)))
+    model = tmp_path / "floating.toml"
+    model.write_text(FLOATING)
+    floating = with_model_file(control_spec(model_name=str(model)))
+    execution._prepare_parent([control_spec(), control_spec(model_name="arm2")])
+    execution._prepare_parent([control_spec(), floating])
+    execution._prepare_parent([control_spec(integrator="rk45")])
+    assert asked == [(False, False), (False, True), (True, False)]
