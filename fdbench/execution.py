@@ -257,7 +257,7 @@ def _prepare_parent(specs) -> None:
 def _dense(spec) -> bool:
     """Whether the spec's model runs on the dense kernels (not a chain of pin joints); False where
     its engine cannot be built (the run itself records why)."""
-    from .multibody.runs import engine
+    from .run_inputs import engine
 
     try:
         return not engine(spec).compiled

@@ -380,7 +380,7 @@ def test_the_parent_warms_the_kernels_of_every_family_its_runs_use(tmp_path, mon
     and scipy's integrators when a run uses one."""
     import fdbench.multibody.simulation as simulation
     from fdbench import execution
-    from fdbench.experiment import with_model_file
+    from fdbench.spec import with_model_file
 
     asked = []
     for owner in (simulation, execution):  # wherever execution finds it
