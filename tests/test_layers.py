@@ -43,3 +43,24 @@ def test_an_import_pointing_up_breaks_the_contract(tmp_path):
     assert done.returncode != 0
     assert "fdbench.multibody.engine -> fdbench.spec" in done.stdout
     assert "layers point down: CLI, report, run, methods, engine, utilities BROKEN" in done.stdout
+
+
+def test_the_readme_architecture_names_modules_that_exist_and_every_layer_of_the_contract():
+    """The README's section "Architecture" agrees with the code: every module or package it names
+    (``name.py`` or ``name/``) exists in fdbench, and every top-level module of fdbench is named."""
+    import re
+    import tomllib
+
+    readme = (ROOT / "README.md").read_text()
+    start = readme.index("\n## Architecture\n")
+    text = readme[start:readme.index("\n## ", start + 1)]
+    named = set(re.findall(r"`([a-z_]+(?:\.py|/))`", text))
+    files = {p.relative_to(ROOT / "fdbench") for p in (ROOT / "fdbench").rglob("*") if "__pycache__" not in p.parts}
+    for name in named:
+        assert any(p.name == name.rstrip("/") for p in files), f"the README names {name}, which fdbench does not have"
+    top = {p.name if p.suffix == ".py" else p.name + "/" for p in (ROOT / "fdbench").iterdir()
+           if (p.suffix == ".py" and p.name != "__init__.py") or (p.is_dir() and (p / "__init__.py").exists())}
+    assert top <= named, f"modules of fdbench the README's architecture does not name: {sorted(top - named)}"
+    layers = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"][0]["layers"]
+    in_contract = {m.strip("() ") for layer in layers for m in re.split(r"[|:]", layer)}
+    assert {n.removesuffix(".py").rstrip("/") for n in top} == in_contract
