@@ -299,7 +299,7 @@ def test_killed_report_leaves_no_process_and_resumes_with_identical_numbers(tmp_
 WARM_PROBE = textwrap.dedent("""
     import gc, json, sys
     from numba.core.registry import CPUDispatcher
-    import fdbench.api as experiment
+    import fdbench.method_runs as runs
     import fdbench.torques.ann as ann
     from fdbench.execution import LocalBackend, execute_specs
     from fdbench.spec import optimize_spec
@@ -308,7 +308,7 @@ WARM_PROBE = textwrap.dedent("""
     def signatures():
         return sum(len(d.signatures) for d in gc.get_objects() if isinstance(d, CPUDispatcher))
 
-    pretrained, calls, run = [], [], experiment.run
+    pretrained, calls, run = [], [], runs.run
     pretrain = ann.pretrain
     ann.pretrain = lambda *a, **k: pretrained.append(1) or pretrain(*a, **k)
 
@@ -318,7 +318,7 @@ WARM_PROBE = textwrap.dedent("""
         calls.append({"budget": spec.budget, "compiled": signatures() - before, "pretrained": len(pretrained) - fits})
         return outcome
 
-    experiment.run = watched
+    runs.run = watched
     specs = [optimize_spec("ann", "cmaes", seed=s, budget=12) for s in (0, 1)]
     specs += [optimize_spec("cs", "bfgs", seed=0, budget=6)]
     with open_store(sys.argv[1]) as store:

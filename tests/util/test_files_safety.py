@@ -80,9 +80,9 @@ def test_figures_as_a_link_to_a_missing_folder_is_refused_before_work(tmp_path, 
 
 def _dropping_runs_table(monkeypatch, db: Path):
     """The database loses its runs table while the run is under way."""
-    import fdbench.api as experiment
+    import fdbench.method_runs as runs
 
-    original = experiment.run
+    original = runs.run
 
     def run(spec, *args, **kwargs):
         outcome = original(spec, *args, **kwargs)
@@ -92,7 +92,7 @@ def _dropping_runs_table(monkeypatch, db: Path):
         con.close()
         return outcome
 
-    monkeypatch.setattr(experiment, "run", run)
+    monkeypatch.setattr(runs, "run", run)
 
 
 @pytest.mark.parametrize("command", [
