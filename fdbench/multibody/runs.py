@@ -314,7 +314,7 @@ def _accelerations(spec, result) -> np.ndarray:
 def _warm_up(spec) -> None:
     """Load (or compile) the engine's kernels (and scipy's integrators for an adaptive one), so that
     runtimes exclude it."""
-    sim.warm_up(spec.integrator != "rk4", dense=not engine(spec).compiled)
+    sim.warm_up(spec.integrator != "rk4", engine=engine(spec))
 
 
 # ---------------------------------------------------------------------- control
