@@ -25,14 +25,14 @@ import time
 from pathlib import Path
 
 import fdbench
-from fdbench.benchmark import default_cells, make_plan
+from fdbench.report.paper_methods import default_cells, make_plan
 
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
 
 # A child process that runs the default plan on a LocalCluster of 2 workers with a fixed batch size.
 BATCHED = """
 import sys
-from fdbench.benchmark import default_cells, execute, make_plan
+from fdbench.report.paper_methods import default_cells, execute, make_plan
 from fdbench.execution import DaskBackend
 from fdbench.store import open_store
 batch = None if sys.argv[2] == "auto" else int(sys.argv[2])

@@ -35,7 +35,7 @@ import fdbench
 from fdbench.multibody import engine as mb
 from fdbench.multibody import kernels
 from fdbench.multibody.layout import COMPUTED, GAINS, OK, PD, Law
-from fdbench.multibody.description import GROUND, Body, Joint, Model
+from fdbench.multibody.model import GROUND, Body, Joint, Model
 from bench_speed_limit import c_loop_ms
 from kernel_call import gait_walk, half_step_grid, model_and_motion, rk4_call
 from timing import best_of
@@ -95,7 +95,7 @@ def leg_kernel(mode: int):
     (kp 300, kd 20 per joint), computed torque (kp 400 1/s^2, kd 40 1/s) and a constant gain matrix
     [diag kp, diag kd], on a slow swing of the thigh through -90 deg with the inverse-dynamics
     feedforward."""
-    from fdbench.multibody.description import find_model
+    from fdbench.models import find_model
 
     engine, n = mb.Engine(find_model("leg3")), 1000
     half = np.linspace(0.0, 1.0, 2 * n + 1)[:, None]
@@ -117,7 +117,7 @@ def leg_kernel(mode: int):
 def library_kernel(name: str):
     """The compiled RK4 of a library model under PD (kp 80, kd 0.3 per joint) plus the
     inverse-dynamics feedforward, on a slow sine of every joint about 0.2 rad."""
-    from fdbench.multibody.description import find_model
+    from fdbench.models import find_model
 
     engine, n = mb.Engine(find_model(name)), 1000
     J = engine.n_joints

@@ -25,8 +25,9 @@ import platform
 
 import numpy as np
 
-from fdbench.experiment import optimize_spec, run
-from fdbench.multibody import description as d
+from fdbench.api import run
+from fdbench.spec import optimize_spec
+from fdbench.multibody import model as d
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk
 from fdbench.problem import TrackingProblem

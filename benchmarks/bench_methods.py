@@ -13,7 +13,8 @@ import time
 import numpy as np
 
 import fdbench
-from fdbench.experiment import RunSpec, collocate_spec, control_spec, run, run_simulation
+from fdbench.api import run, run_simulation
+from fdbench.spec import RunSpec, collocate_spec, control_spec
 
 REPEATS = 5
 

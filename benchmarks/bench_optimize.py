@@ -30,7 +30,8 @@ import numpy as np
 import scipy
 
 import fdbench
-from fdbench.experiment import optimize_spec, run
+from fdbench.api import run
+from fdbench.spec import optimize_spec
 from fdbench.multibody.simulation import warm_up
 from fdbench.optimizers import make_optimizer
 from kernel_call import half_step_grid, model_and_motion, rk4_call

@@ -5,7 +5,7 @@ on 2 threads.
 Baseline, measured in the same run for each model: one call of the engine's compiled RK4 alone
 (``multibody.kernels.rk4``, open loop) on the inverse-dynamics torques of the model's default
 motion, buffers allocated once, steady state (the minimum over REPEATS rounds of CALLS calls). For
-cs and pf with feedforward and ann without, a CMA-ES run of BUDGET evaluations (``experiment.run``
+cs and pf with feedforward and ann without, a CMA-ES run of BUDGET evaluations (``fdbench.run``
 after a warm-up run) on 1 and on 2 threads: runtime_s / evaluations (the minimum over RUNS runs)
 against the baseline (the goal on the forearm: at most 1.5x). Beside it, the part that is CMA-ES's
 own bookkeeping (cma's ask and tell, the budget's records): the same optimiser with the same
@@ -25,7 +25,8 @@ import os
 
 import numpy as np
 
-from fdbench.experiment import optimize_spec, run
+from fdbench.api import run
+from fdbench.spec import optimize_spec
 from fdbench.models import default_motion, description
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion

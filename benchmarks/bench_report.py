@@ -43,8 +43,8 @@ def runs_in(db: Path) -> tuple[int, int, int]:
 
 def default_report_runs() -> int:
     """The runs the default report stores: PD, the paper's cells x seeds, the methods beyond the paper."""
-    from fdbench.benchmark import default_cells, make_plan
-    from fdbench.beyond import beyond_methods
+    from fdbench.report.paper_methods import default_cells, make_plan
+    from fdbench.report.methods import beyond_methods
 
     return len(make_plan(default_cells()).all_specs()) + len(beyond_methods())
 

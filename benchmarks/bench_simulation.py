@@ -18,7 +18,8 @@ import numpy as np
 import scipy
 
 import fdbench
-from fdbench.experiment import control_spec, run
+from fdbench.api import run
+from fdbench.spec import control_spec
 from fdbench.multibody import simulation as sim
 from kernel_call import model_and_motion
 from timing import best_of

@@ -39,12 +39,12 @@ def gait_walk():
     recorded walk, or None (with a line saying why) where OpenSim is not installed."""
     from pathlib import Path
 
-    from fdbench.multibody.description import load_model
+    from fdbench.models import find_model
     from fdbench.multibody.motions import joint_motion
 
     folder = Path(__file__).resolve().parent.parent / "examples" / "opensim"
     try:
-        model = load_model(folder / "subject01.osim")
+        model = find_model(folder / "subject01.osim")
     except Exception as exc:  # noqa: BLE001 - no OpenSim: the gait model is not measured
         print(f"subject01: not measured ({' '.join(str(exc).split())[:100]})")
         return None

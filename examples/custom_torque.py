@@ -4,7 +4,7 @@
 
 The new parameterisation is a piecewise-linear torque through the values at equally spaced
 knots. Registering it with ``@TORQUES.register("pwl")`` is all it takes to make it usable by
-``TrackingProblem``, by every optimiser of the registry and by ``fdbench.experiment.run``, the
+``TrackingProblem``, by every optimiser of the registry and by ``fdbench.run``, the
 function behind ``fdbench optimize``. The command line runs in a fresh process: to reach it, put
 the registration in a module and name it in ``FDBENCH_PLUGINS`` (see ``examples/my_methods.py``).
 """
@@ -16,10 +16,11 @@ import sys
 
 import numpy as np
 
-from fdbench.experiment import optimize_spec, run
-from fdbench.multibody.description import find_model
+from fdbench.api import run
+from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
+from fdbench.spec import optimize_spec
 from fdbench.optimizers import make_optimizer
 from fdbench.problem import TrackingProblem
 from fdbench.torques import TORQUES, TorqueParameterisation
@@ -90,10 +91,10 @@ def main(argv: list[str]) -> int:
         "status": best.status.code,
     })
 
-    # 2. the same torque through fdbench.experiment.run, which fills the command line's record
+    # 2. the same torque through fdbench.run, which fills the command line's record
     outcome = run(optimize_spec(torque="pwl", optimizer="bfgs", budget=budget, torque_options={"knots": 8}))
     record = outcome.record
-    show("pwl + bfgs through fdbench.experiment.run (the record of 'fdbench optimize'):",
+    show("pwl + bfgs through fdbench.run (the record of 'fdbench optimize'):",
          {key: record[key] for key in ("torque", "optimizer", "rmse_rot_deg", "rmse_torque_nm", "runtime_s",
                                        "evaluations", "t_end", "status")})
 

@@ -21,9 +21,8 @@ The entry points for a script (imported on first use, so ``import fdbench`` stay
 __version__ = "0.1.0"
 
 _ENTRY_POINTS = {
-    "RunSpec": "experiment", "RunOutcome": "experiment", "run": "experiment", "control_spec": "experiment",
-    "optimize_spec": "experiment", "inverse_dynamics": "api", "simulate": "api", "load_report": "api",
-    "load_runs": "api", "TORQUES": "torques", "OPTIMIZERS": "optimizers",
+    "RunSpec": "spec", "RunOutcome": "records", "run": "api", "control_spec": "spec", "optimize_spec": "spec",
+    "inverse_dynamics": "api", "simulate": "api", "load_report": "api", "load_runs": "api", "TORQUES": "torques", "OPTIMIZERS": "optimizers",
 }
 
 __all__ = ["__version__", *_ENTRY_POINTS]

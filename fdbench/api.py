@@ -6,13 +6,18 @@
     fdbench.simulate().record["rmse_rot_deg"]           # open loop, inverse-dynamics torque
     frame = fdbench.load_report("fdbench-results.sqlite")  # the report's table, a DataFrame
 
-Runs, specifications and records are those of the command line (``fdbench.experiment``); the
-registries ``TORQUES`` and ``OPTIMIZERS`` take new methods by decorator.
+Runs, specifications and records are those of the command line: ``run``, ``run_simulation``,
+``replay`` and ``inverse_run`` carry out a ``RunSpec`` (``fdbench.spec``) on the multibody engine
+(``fdbench.method_runs``, one runner per command) and return its flat record
+(``fdbench.records``); the registries ``TORQUES`` and ``OPTIMIZERS`` take new methods by decorator.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+
+from .method_runs import inverse_run, replay, run, run_simulation  # noqa: F401 (the API's names)
+from .spec import RunSpec  # noqa: F401
 
 
 # the method options of 'fdbench report' by default (its runs are stored under these settings)
@@ -30,8 +35,6 @@ def simulate(torque=None, **settings):
     torques, shape (n, 2)). ``settings``: the fields of ``RunSpec`` (``kinematics``,
     ``integrator``, ``dt``, ``rtol``, ``atol``, ``alpha``, ``xi``, ``omega``, ``model_name``...);
     a bad value raises ValueError."""
-    from .experiment import RunSpec, run_simulation
-
     spec = RunSpec(command="simulate", **settings).validate()
     if torque is not None and not callable(torque):
         raise TypeError("torque must be None or a function of time (s) returning N m")
@@ -42,8 +45,6 @@ def inverse_dynamics(**settings):
     """The nominal model's inverse dynamics on the motion's samples (``multibody.simulation.JointInverse``:
     ``t`` (s), ``angles`` (rad), ``velocities``, ``accelerations`` and ``torque`` (N m), each of
     shape (n, J)); ``settings``: the fields of ``RunSpec`` (``model_name``, ``kinematics``, ``model``...)."""
-    from .experiment import RunSpec
-
     return RunSpec(command="simulate", **settings).validate().reference()
 
 
@@ -73,7 +74,7 @@ def load_report(db, seeds: int = 5, budget: int = 200, run_missing: bool = False
     ``run_missing``: then they are made (``jobs`` worker processes) and stored."""
     import pandas as pd
 
-    from .benchmark import default_cells, execute, make_plan
+    from .report.paper_methods import default_cells, execute, make_plan
     from .report import CSV_COLUMNS, build_rows, csv_rows
     from .store import open_store
 

@@ -45,6 +45,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from .casadi_loader import casadi
+from .multibody.model_changes import path_pairs
+from .multibody.symbolic import MinimalDynamics, load_parameters
+from .registry import unknown_name_message
 
 
 SCHEMES = ("hermite-simpson", "trapezoidal")
@@ -85,8 +89,6 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not MIN_NODES <= nodes <= MAX_NODES:
         raise ValueError(f"--nodes must be an integer in [{MIN_NODES}, {MAX_NODES}], got {nodes}")
     if scheme not in SCHEMES:
-        from .registry import unknown_name_message
-
         raise ValueError("--scheme: " + unknown_name_message("scheme", scheme, list(SCHEMES)))
     for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
                           ("--residual-moment-weight", residual_moment_weight)):
@@ -102,10 +104,8 @@ def check_options(nodes: int, scheme: str, regularization: float, max_iter: int 
 
 
 def check_model(model) -> None:
-    """ValueError (one line) for a model (``multibody.description.Model``) whose transcription
+    """ValueError (one line) for a model (``multibody.model.Model``) whose transcription
     would take minutes to build (``MAX_PATH_PAIRS``)."""
-    from .multibody.description import path_pairs
-
     pairs = path_pairs(model)
     if pairs > MAX_PATH_PAIRS:
         raise ValueError(f"collocate: model {model.name!r} is too large for direct collocation: its equations couple "
@@ -324,8 +324,6 @@ def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray
     same model, mesh and options skips the transcription.
 
     Never raises on a solver failure: IPOPT's status says what happened."""
-    from .casadi_loader import casadi
-
     ca = casadi()
 
     began = time.perf_counter() if began is None else began
@@ -383,8 +381,6 @@ def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-
     the residual weights of a floating base: ``residual_weights`` (None: the default).
     ValueError (one line) for options out of range or a motion of other joints; never raises on a
     solver failure: IPOPT's status says what happened."""
-    from .multibody.symbolic import MinimalDynamics, load_parameters
-
     check_options(nodes, scheme, regularization, max_iter, max_time, residual_force_weight, residual_moment_weight)
     began = time.perf_counter()
     t = point_times(motion.duration, nodes, scheme)

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Iterator
 
 from . import __version__
+from .compile_guard import compiling, interrupts_end_compiling  # noqa: F401 (fdbench.execution's names before)
 from .registry import Registry
 
 DASK_INSTALL = "pip install '.[dask]' in fdbench's source folder (or pip install 'dask[distributed]' cryptography)"
@@ -69,7 +70,7 @@ class Outcome:
 def run_spec(spec) -> Outcome:
     """Carry out one run, once this process is warm for its method (:func:`warm_up_for`); an
     exception becomes a failed run's outcome, never a lost run."""
-    from .experiment import run
+    from .method_runs import run
 
     warm_up_for(spec)
     try:
@@ -105,7 +106,7 @@ def warm_up_for(spec) -> None:
     if key in _WARM:
         return
     _WARM.add(key)
-    from .experiment import run
+    from .method_runs import run
 
     try:
         run(miniature)
@@ -123,7 +124,7 @@ def run_batch(specs, client_version: str | None = None) -> list[Outcome]:
 
 def failed_record(spec, exc: BaseException) -> dict:
     """The record of a run that raised: its settings, status 'error', the exception as message."""
-    from .experiment import base_record
+    from .records import base_record
 
     record = base_record(spec)
     if spec.command == "control":
@@ -144,8 +145,9 @@ def worker_version() -> str:
 def warm_up_worker() -> None:
     """Compile or load the kernels once, before the first run (not counted in any runtime)."""
     from .multibody.simulation import warm_up
+    from .tracking import warm_up as warm_up_population
 
-    warm_up()
+    warm_up_population(warm_up())
 
 
 # ---- the backends ---------------------------------------------------------------------------------
@@ -241,10 +243,32 @@ class LocalBackend(Backend):
 
 
 def _prepare_parent(specs) -> None:
-    """Compile/load the kernels (and import cma) once, before worker processes fork."""
-    warm_up_worker()
+    """Compile/load the kernels (and import cma) once, before worker processes fork: those of
+    every kind of model the runs use (pin joints; paths, free joints, loads: the kernels compile
+    one variant per kind), the population kernel for optimisations, scipy's integrators, so that
+    the workers inherit them instead of each
+    compiling the same kernels at the same time (a first walk report compiled its dense RK4 and
+    population kernels in both workers: about 140 s of CPU twice)."""
+    from .multibody.simulation import warm_up
+    from .tracking import warm_up as warm_up_population
+
+    engines = warm_up(any(getattr(s, "integrator", "rk4") != "rk4" for s in specs),
+                      [e for e in map(_engine, specs) if e is not None])
+    if any(getattr(s, "command", None) == "optimize" for s in specs):
+        warm_up_population(engines)
     if any(getattr(s, "optimizer", None) == "cmaes" for s in specs):
         import cma  # noqa: F401
+
+
+def _engine(spec):
+    """The engine of the spec's model (the kernels compile one variant per kind of model: paths,
+    free joints, loads); None where it cannot be built (the run itself records why)."""
+    from .run_inputs import engine
+
+    try:
+        return engine(spec)
+    except Exception:  # noqa: BLE001 - the run reports it
+        return None
 
 
 def _pool_outcomes(specs, workers: int):
@@ -807,36 +831,3 @@ def sigterm_as_interrupt():
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
-
-
-_COMMAND_LINE = {"pid": None}  # the command line's process (``interrupts_end_compiling``)
-
-
-def interrupts_end_compiling() -> None:
-    """Called by the command line: in this process, Ctrl-C within ``compiling`` ends it at once."""
-    _COMMAND_LINE["pid"] = os.getpid()
-
-
-@contextmanager
-def compiling():
-    """Within the block (kernels being loaded or compiled: numba and LLVM run compiled code and
-    callbacks that a KeyboardInterrupt cannot cross cleanly, and leave a half-built kernel that
-    fails later), Ctrl-C ends the command line's process at once with its usual line and exit code
-    130. numba writes a cache entry by renaming a complete file, and nothing else is written yet.
-    Elsewhere (the Python API, worker processes, other threads, a handler of the caller's own)
-    nothing changes."""
-    if (_COMMAND_LINE["pid"] != os.getpid() or threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
-        yield
-        return
-
-    def stop(signum, frame):
-        sys.stderr.write("fdbench: error: interrupted\n")
-        sys.stderr.flush()
-        os._exit(130)
-
-    previous = signal.signal(signal.SIGINT, stop)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)

@@ -131,6 +131,7 @@ class _CompileNotice:  # state of the process, on the class
     spinner = True
     depth = compiled = 0
     started = status = None
+    make_status = None  # the spinner's maker (``spin_with``): the command line's; none, the line alone
 
     @classmethod
     def install(cls) -> None:
@@ -163,12 +164,10 @@ class _CompileNotice:  # state of the process, on the class
             sys.stderr.write(f"fdbench: compiling the kernels for this machine, once per fdbench version ({FIRST_RUN}; "
                              f"later runs load them from {CACHE_DIR or 'nowhere: no cache'})\n")
             sys.stderr.flush()
-        if not cls.spinner:
+        if not cls.spinner or cls.make_status is None:
             return
         try:
-            from rich.console import Console
-
-            cls.status = Console(stderr=True).status(cls())  # its text from __rich__ at every refresh
+            cls.status = cls.make_status(cls())  # its text from __rich__ at every refresh
             cls.status.start()
         except Exception:  # noqa: BLE001 - no spinner (another live display): the line above said it
             cls.status = None
@@ -196,6 +195,13 @@ def quiet() -> None:
     """No notice of compilation on stderr from now on in this process (``--quiet``, worker processes)."""
     _CompileNotice.enabled = False
     _CompileNotice.stop()
+
+
+def spin_with(make_status) -> None:
+    """The notice's spinner: ``make_status(notice)`` gives a live status (``start``, ``stop``) that
+    shows the notice's text (``__rich__``); the command line gives rich's. Without one, the notice
+    is its line alone."""
+    _CompileNotice.make_status = make_status
 
 
 def no_spinner() -> None:

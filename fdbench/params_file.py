@@ -10,6 +10,9 @@ import numpy as np
 
 from . import __version__
 from .files import BadFile, parse_json, read_input_text
+from .method_options import check_method_options
+from .models import n_joints, named_motions
+from .torques import TORQUES, make_torque
 
 MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand numbers
 
@@ -17,9 +20,7 @@ MAX_PARAMS_BYTES = 2**20  # a saved parameter file holds at most a few thousand 
 def params_json(spec, outcome) -> str:
     """JSON text describing the best torque of an optimisation run (its model, motion, torque
     parameterisation, feedforward and parameters)."""
-    from .models import named_motions
-
-    motion = spec.kinematics if spec.kinematics in named_motions(spec.model_name) else spec.motions()[1].name
+    motion = spec.motion if spec.motion in named_motions(spec.model_name) else spec.motions()[1].name
     data = {
         "fdbench_version": __version__,
         "model": spec.model_name,
@@ -32,7 +33,6 @@ def params_json(spec, outcome) -> str:
         "rmse_rot_deg": outcome.record["rmse_rot_deg"],
     }
     if data["torque_options"].get("hidden") == "auto":  # 3 n + 1 parameters per joint
-        from .models import n_joints
 
         joints = n_joints(spec.model_name)
         data["torque_options"]["hidden"] = (len(outcome.params) // joints - 1) // 3
@@ -82,9 +82,6 @@ def read_params(path, model: str, motion_name: str, named_motions, option: str =
 def make_saved_torque(saved: dict, option: str = "--params"):
     """The torque parameterisation a saved file names with its options (one the torque does not
     take is refused, as a misspelling would be)."""
-    from .experiment import check_method_options
-    from .torques import TORQUES, make_torque
-
     try:
         check_method_options(TORQUES, saved["torque"], saved["options"], "torque")
         torque = make_torque(saved["torque"], **saved["options"])

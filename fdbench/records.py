@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import __version__
-from .spec import RunSpec
+from .plausible import implausible
 
 
 # The keys of every record, in this order (JSON keys and CSV header).
@@ -38,7 +38,7 @@ class RunOutcome:
         return self.table
 
 
-def noise_seed(spec: RunSpec) -> int | None:
+def noise_seed(spec) -> int | None:
     """The seed a run uses: its own, or 0 for the noise of a run given none (as ``motions``
     draws it); None for a run that draws nothing."""
     if spec.seed is not None:
@@ -46,10 +46,10 @@ def noise_seed(spec: RunSpec) -> int | None:
     return 0 if spec.noise_deg else None
 
 
-def base_record(spec: RunSpec) -> dict:
+def base_record(spec) -> dict:
     record = dict.fromkeys(RECORD_FIELDS)
     record.update(
-        command=spec.command, kinematics=spec.kinematics, integrator=spec.integrator, dt=spec.dt,
+        command=spec.command, kinematics=spec.motion, integrator=spec.integrator, dt=spec.dt,
         feedforward=spec.feedforward, alpha=spec.alpha, xi=spec.xi, omega=spec.omega,
         spec_hash=spec.hash(), fdbench_version=__version__, seed=noise_seed(spec),
     )
@@ -61,11 +61,9 @@ def base_record(spec: RunSpec) -> dict:
 ALPHA_HINT = "; try a larger --alpha (or a smaller --dt with rk4)"
 
 
-def explained(outcome: RunOutcome, spec: RunSpec) -> RunOutcome:
+def explained(outcome: RunOutcome, spec) -> RunOutcome:
     """A failed run's message names the likely cause when a constant of the model or the plant
     is implausible (centimetres typed for metres), instead of the generic hint on --alpha."""
-    from .plausible import implausible
-
     causes = implausible(spec.model + spec.plant)
     record = outcome.record
     if causes and record.get("status") not in (None, "success"):

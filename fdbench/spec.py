@@ -1,22 +1,38 @@
 """A run's full specification (``RunSpec``), its identity (the hash of its canonical settings,
 the digests of its input files) and the constructors of the commands' specs (``control_spec``,
-``optimize_spec``, ``collocate_spec``)."""
+``optimize_spec``, ``collocate_spec``, ``peer_spec``). The run layer's value: it imports the
+methods and the engine below it (to check a spec), never the runs above it (``method_runs``)."""
 
 from __future__ import annotations
 
 import hashlib
 import json
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import InitVar, asdict, dataclass, replace
 
+from . import run_inputs
+from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION, check_model, check_options
+from .controllers import CONTROLLERS
+from .controllers.pd import PAPER_KD, PAPER_KP
 from .integrate import check_integrator
+from .memory import check_run
 from .method_options import accepted_options, check_method_options, options_for
-from .motion import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
-
+from .models import default_motion, is_file, n_joints, named_motions
+from .multibody.motions import DEFAULT_CAPTURE_HZ, DEFAULT_CUTOFF_HZ
+from .optimizers import OPTIMIZERS, make_optimizer
+from .peers import check_spec as check_peer_spec
+from .peers import peer
+from .run_inputs import model_digest, motion_digest
+from .torques import TORQUES, make_torque
+from .torques.ann import AUTO_MAX_HIDDEN
+from .torques.cs import DEFAULT_KNOTS, knots_for
+from .validation import MAX_CAPTURE_HZ, MAX_NOISE_DEG, MAX_SEED, check_conditions, check_gradient
 
 COMMANDS = ("control", "optimize", "simulate", "collocate", "peer")  # peer: fdbench.peers
-MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
 MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
+__all__ = ["COMMANDS", "MAX_BUDGET", "MAX_CAPTURE_HZ", "MAX_NOISE_DEG", "MAX_SEED", "OMITTED_AT_DEFAULT", "PAPER_KD",
+           "PAPER_KP", "RunSpec", "collocate_spec", "control_spec", "gradient_for", "model_digest", "motion_digest",
+           "optimize_spec", "peer_spec", "with_model_file", "with_motion_file", "with_motion_knots"]
 
 
 @dataclass(frozen=True)
@@ -24,7 +40,8 @@ class RunSpec:
     """Everything that determines a run's numbers (the seed included, the runtime excluded)."""
 
     command: str = "control"
-    kinematics: str = "paper"
+    motion: str = "paper"  # eq. 5's variant, a named motion of the model or a recorded motion's CSV file (named
+    # ``kinematics`` in records, stored settings and the hash, as on the command line)
     integrator: str = "rk4"
     dt: float = 1e-3
     rtol: float = 1e-6
@@ -45,7 +62,7 @@ class RunSpec:
     inputs: tuple = ()  # (option, SHA-256 of the file's content) of every input file, e.g. (("--torque-file", "ab12..."),)
     controller: str | None = None  # control: a registered controller; None is the paper's PD (kp, kd)
     method_options: tuple = ()  # sorted (name, value) pairs of the controller or of collocate
-    # the desired motion: ``kinematics`` names eq. 5's variant or a recorded motion's CSV file
+    # how the desired motion is read and estimated
     radians: bool = False  # the file's angles are in radians (else degrees)
     cutoff_hz: float = DEFAULT_CUTOFF_HZ  # derivative estimate: zero-lag Butterworth -3 dB frequency, Hz
     smoothing: str = "butterworth"  # or "spline" (a smoothing spline)
@@ -59,65 +76,49 @@ class RunSpec:
     model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
     loads: str | None = None  # external loads from data: an OpenSim ExternalLoads file (its content among inputs)
     residual_weight: float | None = None  # optimize on a floating base: eq. 18's residual term, deg per N (N m)
+    kinematics: InitVar[str | None] = None  # ``motion`` by its stored name (stored settings, the record's field)
 
-    def __post_init__(self):
-        if self.kinematics == "paper" and self.model_name != "forearm":  # the default motion is the model's own
-            from .models import default_motion
-
+    def __post_init__(self, kinematics):
+        if kinematics is not None:
+            object.__setattr__(self, "motion", kinematics)
+        if self.motion == "paper" and self.model_name != "forearm":  # the default motion is the model's own
             try:
-                object.__setattr__(self, "kinematics", default_motion(self.model_name))
+                object.__setattr__(self, "motion", default_motion(self.model_name))
             except ValueError:  # an unknown model, or one without motions, is for ``validate`` to refuse
                 pass
-
-    def _runs(self):
-        """The module carrying out this spec's runs (``fdbench.multibody.runs``, for every model)."""
-        from .multibody import runs
-
-        return runs
 
     def motions(self):
         """(desired, true) motions: the motion given to every method (a noisy capture when
         ``noise_deg`` > 0) and the one its indicators are measured against (``JointMotion``)."""
-        return self._runs().motions(self)
+        return run_inputs.motions(self)
 
     def reference(self):
         """The inverse dynamics of the nominal model on the true motion, on its samples: what the
         indicators are measured against (``multibody.simulation.JointInverse``)."""
-        return self._runs().reference(self)
+        return run_inputs.reference(self)
 
     def describe(self) -> dict:
         """The record's fields that say which motion, noise, filter, model and plant a run used."""
-        return self._runs().describe(self)
+        return run_inputs.describe(self)
 
     def validate(self) -> "RunSpec":
         """Raise ValueError with a one-line message for anything out of range; no work done."""
-        from .validation import check_conditions, check_gradient
-
         if self.command not in COMMANDS:
             raise ValueError(f"unknown command {self.command!r}; valid: {', '.join(COMMANDS)}")
         check_integrator(self.integrator)
         check_conditions(self)
-        self._runs().check(self)
+        run_inputs.check(self)
         if self.command == "control":
-            from .controllers import CONTROLLERS
-
             if self.controller not in (None, "pd"):
                 check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
-            law = self._runs().controller(self)  # a ValueError names a bad option or gain
-            law.check_model(self._runs().nominal(self))  # one it cannot design for in reasonable time
+            law = run_inputs.controller(self)  # a ValueError names a bad option or gain
+            law.check_model(run_inputs.nominal(self))  # one it cannot design for in reasonable time
         if self.command == "peer":
-            from .peers import check_spec
-
-            check_spec(self)
+            check_peer_spec(self)
         if self.command == "collocate":
-            from .collocation import check_model, check_options
-
             check_options(**dict(self.method_options))
-            check_model(self._runs().nominal(self))  # one whose equations take minutes to build
+            check_model(run_inputs.nominal(self))  # one whose equations take minutes to build
         if self.command == "optimize":
-            from .optimizers import make_optimizer
-            from .torques import make_torque
-
             if not isinstance(self.seed, int) or not 0 <= self.seed < MAX_SEED:
                 raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {self.seed}")
             if not isinstance(self.budget, int) or not 1 <= self.budget <= MAX_BUDGET:
@@ -127,9 +128,6 @@ class RunSpec:
             if self.residual_weight is not None and not (math.isfinite(self.residual_weight)
                                                          and self.residual_weight >= 0):
                 raise ValueError(f"--residual-weight must be a non-negative finite number, got {self.residual_weight}")
-            from .optimizers import OPTIMIZERS
-            from .torques import TORQUES
-
             options = dict(self.torque_options)
             check_method_options(TORQUES, self.torque, options, "torque")
             check_method_options(OPTIMIZERS, self.optimizer, dict(self.optimizer_options), "optimizer")
@@ -146,23 +144,19 @@ class RunSpec:
     def _check_memory(self) -> None:
         """ValueError (one line naming the option to change) if the run's arrays would not fit in
         the memory fdbench allows a run (see ``fdbench.memory``)."""
-        from .memory import check_run
-        from .models import n_joints
-
         truth = self.motions()[1]
         population, hidden = 1, 0
         if self.command == "optimize" and self.integrator == "rk4" and self.optimizer == "cmaes":
             population = dict(self.optimizer_options).get("popsize") or 16  # cma's default is smaller
             if self.torque == "ann":
-                from .torques.ann import AUTO_MAX_HIDDEN
-
                 hidden = dict(self.torque_options).get("hidden", 4)
                 hidden = AUTO_MAX_HIDDEN if hidden == "auto" else hidden
         check_run(truth.duration, len(truth.samples), n_joints(self.model_name),
                   self.dt if self.integrator == "rk4" else None, population, hidden)
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        """The fields by name, ``motion`` under its stored name ``kinematics`` (in its place)."""
+        return {("kinematics" if name == "motion" else name): value for name, value in asdict(self).items()}
 
     def canonical(self) -> dict:
         """The settings that determine the numbers, normalised so that equivalent specs compare
@@ -200,32 +194,8 @@ class RunSpec:
 
 FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight", "cutoff_hz",
                 "spline_lambda", "sample_dt", "noise_deg", "capture_hz", "residual_weight")
-MAX_NOISE_DEG = 45.0
-MAX_CAPTURE_HZ = 100_000.0
-
-
-def motion_digest(path) -> str:
-    """SHA-256 of a recorded motion file's content."""
-    from .files import read_input_text
-    from .motion import check_source
-
-    check_source(str(path))
-    return hashlib.sha256(read_input_text(path, "--motion").encode()).hexdigest()
-
-
-def model_digest(path) -> str:
-    """SHA-256 of a model file's content."""
-    from .files import read_input_bytes
-
-    return hashlib.sha256(read_input_bytes(path, "--model")).hexdigest()
-
-
 def with_model_file(spec: "RunSpec") -> "RunSpec":
     """The spec with its model file's content digest among its inputs (none for a library model)."""
-    from dataclasses import replace
-
-    from .models import is_file
-
     if not is_file(spec.model_name):
         return spec
     inputs = tuple(p for p in spec.inputs if p[0] != "--model") + (("--model", model_digest(spec.model_name)),)
@@ -234,13 +204,9 @@ def with_model_file(spec: "RunSpec") -> "RunSpec":
 
 def with_motion_file(spec: "RunSpec") -> "RunSpec":
     """The spec with its recorded motion's content digest among its inputs (none for eq. 5)."""
-    from dataclasses import replace
-
-    from .models import named_motions
-
-    if spec.kinematics in named_motions(spec.model_name):
+    if spec.motion in named_motions(spec.model_name):
         return spec
-    inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.kinematics)),)
+    inputs = tuple(p for p in spec.inputs if p[0] != "--motion") + (("--motion", motion_digest(spec.motion)),)
     return replace(spec, inputs=tuple(sorted(inputs)))
 # fields a spec's hash leaves out while they hold these values (added after the first results schema)
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
@@ -249,16 +215,11 @@ OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "r
                       "model_name": "forearm", "loads": None, "residual_weight": None}
 
 
-PAPER_KP, PAPER_KD = 80.0, 0.3  # N m/rad, N m s/rad: the paper's PD gains for the forearm
-
-
 def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **common) -> RunSpec:
     """A control spec: PD (kp, kd) or another registered controller with its options
     (``controller_options``: names its class takes; another name is a ValueError). Gains not given
     are the paper's (80, 0.3) for the forearm and, for every other model, None: each joint's scaled
-    to its inertia (``fdbench.multibody.runs.pd_gains``)."""
-    from .controllers import CONTROLLERS
-
+    to its inertia (``fdbench.run_inputs.pd_gains``)."""
     options = accepted_options(CONTROLLERS, controller or "pd", controller_options, "controller")
     if controller in (None, "pd"):
         kp, kd = dict(options).get("kp", kp), dict(options).get("kd", kd)
@@ -272,8 +233,6 @@ def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max
                    residual_force_weight=None, residual_moment_weight=None, **common) -> RunSpec:
     """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default (a
     residual weight's depends on the loads, so it is left out of the options)."""
-    from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION
-
     options = dict(nodes=nodes, scheme=scheme,
                    regularization=DEFAULT_REGULARIZATION if regularization is None else regularization,
                    max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,
@@ -285,6 +244,22 @@ def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max
     return RunSpec(command="collocate", method_options=tuple(sorted(options.items())), **common)
 
 
+def peer_spec(name: str, options: dict | None = None, kp=None, kd=None, **common):
+    """A peer run's spec on the settings ``common`` (as ``control_spec``'s): command "peer", its
+    name and options (the peer's defaults where not given) in ``method_options``; the opensim
+    peer's PD gains are ``control``'s (the forearm's 80 and 0.3, else scaled per joint)."""
+    found = peer(name)
+    unknown = sorted(set(options or {}) - set(found.defaults))
+    if unknown:
+        raise ValueError(f"peer {name}: unknown option {unknown[0]!r}"
+                         f" (it takes {', '.join(found.defaults) or 'no options'})")
+    values = {**found.defaults, **{k: v for k, v in (options or {}).items() if v is not None}, "peer": name}
+    if name == "opensim" and common.get("model_name", "forearm") == "forearm":
+        kp, kd = PAPER_KP if kp is None else kp, PAPER_KD if kd is None else kd
+    gains = {"kp": kp, "kd": kd, "feedforward": True} if name == "opensim" else {}
+    return RunSpec(command="peer", method_options=tuple(sorted(values.items())), **gains, **common)
+
+
 def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
                   torque_options=None, optimizer_options=None, gradient="fd", *, shared_options=False,
                   **common) -> RunSpec:
@@ -293,9 +268,6 @@ def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budg
     (a sweep handing one set to several methods), each keeps those it takes; so the same run has
     the same hash whichever command asks for it. ``gradient`` "exact" serves gradient-based
     optimisers only (see ``gradient_for``)."""
-    from .optimizers import OPTIMIZERS
-    from .torques import TORQUES
-
     if shared_options:
         torque_options = options_for(TORQUES, torque, torque_options)
         optimizer_options = options_for(OPTIMIZERS, optimizer, optimizer_options)
@@ -314,10 +286,6 @@ def with_motion_knots(spec: RunSpec, written_out: bool) -> RunSpec:
     ``written_out`` (the command line's and the report's knots=None) puts the count among the
     torque options whatever it is; else (the Python API's omitted knots) only where it differs from
     the class default, so that every stored run keeps its hash."""
-    from dataclasses import replace
-
-    from .torques.cs import DEFAULT_KNOTS, knots_for
-
     if spec.torque != "cs" or "knots" in dict(spec.torque_options):
         return spec
     try:
@@ -332,7 +300,5 @@ def with_motion_knots(spec: RunSpec, written_out: bool) -> RunSpec:
 def gradient_for(optimizer: str, gradient: str) -> str:
     """The gradient option a sweep gives ``optimizer``: ``gradient`` for a gradient-based
     optimiser, "fd" (the default, no gradient used) for the others."""
-    from .optimizers import OPTIMIZERS
-
     uses = optimizer in OPTIMIZERS and getattr(OPTIMIZERS[optimizer], "uses_gradient", False)
     return gradient if uses else "fd"

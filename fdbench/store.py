@@ -202,7 +202,7 @@ def _create_new(path: Path) -> None:
     temporary = Path(name)
     db = None
     try:
-        from .files import umask
+        from .files import umask  # lazy: as planted_link above
 
         os.chmod(temporary, 0o666 & ~umask())  # as SQLite would create it
         db = sqlite3.connect(temporary, isolation_level=None)

@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 from urllib.parse import quote
 
-from .store import (OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, DamagedRow, StoreError, _check_header,
+from .store import (OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, SUPERSEDED, DamagedRow, StoreError, _check_header,
                     companions, foreign, parse_stored, resolve)
 
 # the columns of ``fdbench runs list``, in order
@@ -135,8 +135,6 @@ def read_runs(path, superseded: bool = False, damaged: dict | None = None) -> li
     command, seed, settings (``spec``), record, when, where and by what it was made. With
     ``superseded``, the runs replaced by a ``--rerun`` follow (``run["superseded"]`` True).
     A damaged run is skipped: put in ``damaged`` ({id: why}) if given, else named in a warning."""
-    from .store import SUPERSEDED
-
     db = open_read_only(path)
     try:
         tables = ["runs"]
@@ -177,8 +175,6 @@ def _run(row: dict) -> dict:
 def read_run_data(path, run_id: int, superseded: bool = False) -> tuple[list, list | None]:
     """The convergence history (best objective per evaluation, deg) and the best parameters of
     stored run ``run_id`` (None for a run without parameters), from the superseded runs if asked."""
-    from .store import SUPERSEDED
-
     db = open_read_only(path, say_unseen=False)  # said when its runs were read
     try:
         table = SUPERSEDED if superseded else "runs"
@@ -300,7 +296,7 @@ def export_rows(runs: list[dict], nested: bool = False) -> list[dict]:
 def cell_key(spec: dict) -> str:
     """The digest of a run's canonical settings without its seed (16 hex digits): the runs of one
     cell, one per seed, share it, in any database."""
-    from .experiment import RunSpec
+    from .spec import RunSpec  # lazy: the spec brings the engine (numba); reading a store does not need it
 
     try:
         canonical = RunSpec(**spec).canonical()
@@ -369,7 +365,7 @@ def _by_label(cells: dict, keys: list) -> dict:
 
 
 def _compare_row(a: list[dict], b: list[dict], found: str) -> dict:
-    from .benchmark import summarise
+    from .report.paper_methods import summarise  # lazy: as RunSpec above
 
     first = (a or b)[0]
     row = {"method": first["method"], "conditions": conditions_text(first), "found": found,

@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .benchmark import INDICATORS, Cell, failure_message, outcome_text, succeeded
-from .experiment import RunSpec, control_spec, gradient_for, optimize_spec
+from .report.paper_methods import INDICATORS, Cell, failure_message, outcome_text, succeeded
+from .spec import RunSpec, control_spec, gradient_for, optimize_spec
 
 KINDS = ("noise", "mismatch")
 MAX_LEVELS = 50
@@ -281,3 +281,51 @@ def _styles(sweep: Sweep) -> dict:
 
 
 FIGURE_NAMES = tuple(f"study_{kind}_{name}.png" for kind in KINDS for name in INDICATORS)
+
+
+def json_text(sweep, rows, settings: dict) -> str:
+    """The study as one JSON object: its settings and one object per method and level with the
+    CSV's columns (null for a statistic no run gave)."""
+    import json
+
+    from .files import finite_or_none
+
+    table = [{name: finite_or_none(value.item() if hasattr(value, "item") else value)
+              for name, value in zip(CSV_COLUMNS, row)} for row in csv_rows(sweep, rows)]
+    return json.dumps({"settings": settings, "rows": table}, indent=2) + "\n"
+
+
+def settings(sweep, seeds, budget, carried_out: str, kinematics, integrator, dt) -> dict:
+    """The study's settings table: what was swept, the conditions every run shares (model, its
+    changes, the plant's, the motion and its digest, the estimate, the noise), the run settings."""
+    from . import __version__
+    from .report import condition_settings
+    from .store import machine
+
+    spec = sweep.all_specs()[0]
+    described = spec.describe()
+    shared = condition_settings(spec, sweep.all_specs())
+    shared.pop("RMSE_rot against", None)  # the study's introduction says it
+    if sweep.kind == "noise":
+        shared.pop("noise", None)  # the levels are the noise; the seeds are below
+    else:
+        shared.pop("plant", None)  # the swept constant is the level; other plant changes stay
+        if conditions(sweep)["plant"]:
+            shared["plant"] = f"{conditions(sweep)['plant']} (the simulated body only), then {sweep.param} by each level"
+    return {
+        "study": sweep.kind + (f" of {sweep.param}" if sweep.param else ""),
+        "levels": ", ".join(f"{v:g}" for v in sweep.levels) + f" {'deg' if sweep.kind == 'noise' else '%'}",
+        "model": spec.model_name + (f" ({described['model_options']})" if described.get("model_options") else ""),
+        **shared,
+        "motion": f"{kinematics} ({described['duration_s']:g} s, {described['samples']} samples)"
+                  + (f", SHA-256 {dict(spec.inputs)['--motion'][:16]}" if dict(spec.inputs).get("--motion") else ""),
+        "derivative estimate": ("Butterworth zero-lag, then spline" if spec.smoothing == "butterworth"
+                                else "smoothing spline") + (f", cutoff {spec.cutoff_hz:g} Hz" if spec.smoothing == "butterworth" else ""),
+        "integrator": integrator + (f" (dt = {dt} s)" if integrator == "rk4" else ""),
+        "seeds": f"{seeds} per method and level (PD: one run where the runs would be identical)",
+        "budget": f"{budget} evaluations per optimisation",
+        "runs": str(len(sweep.all_specs())),
+        "parallel jobs": carried_out,
+        "fdbench": __version__,
+        "machine": machine(),
+    }

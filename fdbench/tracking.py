@@ -11,7 +11,7 @@ import numpy as np
 from .jit import njit
 from .multibody.kernels import rk4
 from .multibody.layout import AT_PARENT_X, COLUMN, FREE, KI, OFFSET, OK, PARENT, PD, Law
-from .population import DEGREES_PER_RADIAN
+from .population import DEGREES_PER_RADIAN, Population
 
 from .multibody.simulation import CM_PER_M
 
@@ -78,3 +78,17 @@ def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_w
                                                       model)
             candidate, step = candidate + stride, 0
     return candidate, step
+
+
+def warm_up(engines) -> None:
+    """Load (or compile) the population kernel (``rk4_candidates`` over threads) on each engine
+    (one per kind of model: ``fdbench.multibody.simulation.warm_up`` returns them), so that later
+    timings exclude it."""
+    from .compile_guard import compiling
+
+    with compiling():  # Ctrl-C while a kernel compiles ends the command at once
+        for engine in engines:
+            J = engine.n_joints
+            y0, rows = engine.state_from_joints(np.zeros(J), np.zeros(J)), np.zeros((5, J))
+            Population(rk4_candidates, 2, engine.population_widths)(
+                2, engine.population_args(y0, 0.05, 2, np.zeros((2, 5, J)), rows, rows, 1, np.zeros((3, J)), 1.0))

@@ -5,10 +5,17 @@ from __future__ import annotations
 
 import math
 
-from .spec import MAX_CAPTURE_HZ, MAX_NOISE_DEG, MAX_SEED, RunSpec, model_digest
-
+from .files import BadFile
+from .models import check_name, with_changes
+from .multibody.motions import check_estimate
+from .optimizers import OPTIMIZERS
+from .run_inputs import model_digest
+from .torques.base import TorqueParameterisation
 
 GRADIENTS = ("fd", "exact")
+MAX_SEED = 2**32 - 2  # cma draws from numpy with seed + 1, which must stay below 2**32
+MAX_NOISE_DEG = 45.0
+MAX_CAPTURE_HZ = 100_000.0
 
 
 def check_gradient(gradient, optimizer, torque, integrator) -> None:
@@ -20,22 +27,16 @@ def check_gradient(gradient, optimizer, torque, integrator) -> None:
     if gradient == "fd":
         return
     if not optimizer.uses_gradient:
-        from .optimizers import OPTIMIZERS
-
         users = ", ".join(n for n, c in OPTIMIZERS.items() if getattr(c, "uses_gradient", False))
         raise ValueError(f"--gradient exact needs a gradient-based optimiser ({users}), got {optimizer.name}")
     if integrator != "rk4":
         raise ValueError(f"--gradient exact needs --integrator rk4, got {integrator}")
-    from .torques.base import TorqueParameterisation
-
     if type(torque).on_grid_jacobian is TorqueParameterisation.on_grid_jacobian:
         raise ValueError(f"--gradient exact: torque {torque.name!r} gives no d tau / d p")
 
 
-def check_conditions(spec: "RunSpec") -> None:
+def check_conditions(spec) -> None:
     """The motion, noise and model options of a spec; ValueError with a one-line message."""
-    from .motion import check_estimate
-
     check_estimate(spec.cutoff_hz, spec.smoothing, spec.spline_lambda)
     if not (math.isfinite(spec.noise_deg) and 0 <= spec.noise_deg <= MAX_NOISE_DEG):
         raise ValueError(f"--noise-deg must be in [0, {MAX_NOISE_DEG:g}] deg, got {spec.noise_deg}")
@@ -43,13 +44,9 @@ def check_conditions(spec: "RunSpec") -> None:
         raise ValueError(f"--capture-hz must be in [1, {MAX_CAPTURE_HZ:g}] Hz, got {spec.capture_hz}")
     if spec.noise_deg and spec.seed is not None and not (isinstance(spec.seed, int) and 0 <= spec.seed < MAX_SEED):
         raise ValueError(f"--seed must be an integer in [0, {MAX_SEED - 1}], got {spec.seed}")
-    from .models import check_name, with_changes
-
     check_name(spec.model_name)
     digest = dict(spec.inputs).get("--model")
     if digest is not None and digest != model_digest(spec.model_name):
-        from .files import BadFile
-
         raise BadFile(f"--model: {spec.model_name} has changed since this run was specified (or differs on this machine)")
     for option, changes in (("--model", spec.model), ("--plant", spec.model + spec.plant)):
         try:

@@ -1,3 +1,8 @@
+"""The suite's conditions, for every test under tests/ (its layers' folders: cli, report, run,
+methods, engine, util; the tests of the whole at the top). This file's folder is on sys.path
+(pytest puts a rootdir conftest's folder there), so every test imports what the tests share from
+the ``helpers`` package; test modules are imported by their base names, unique across folders."""
+
 import os
 import signal
 

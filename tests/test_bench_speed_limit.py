@@ -4,9 +4,10 @@ before any work."""
 import os
 import subprocess
 import sys
-from pathlib import Path
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_speed_limit.py"
+from helpers.paths import ROOT
+
+SCRIPT = ROOT / "benchmarks" / "bench_speed_limit.py"
 
 
 def bench(*args, env=None):

@@ -17,9 +17,10 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from processes import python_path
+from helpers.processes import python_path
+from helpers.paths import ROOT
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+EXAMPLES = ROOT / "examples"
 SCIPY_INTEGRATORS = ("rk45", "dop853", "lsoda", "radau", "bdf")
 
 pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="the shell examples need bash")
@@ -101,7 +102,7 @@ def test_compare_integrators(tmp_path):
 def test_custom_torque(tmp_path):
     out = run_example([sys.executable, EXAMPLES / "custom_torque.py", "20"], cwd=tmp_path)
     values = dict()
-    sections = out.stdout.split("through fdbench.experiment.run")
+    sections = out.stdout.split("through fdbench.run")
     assert len(sections) == 2, out.stdout
     for name, text in zip(("library", "experiment"), sections):
         values[name] = dict(re.findall(r"^\s+(\w+) = (\S+)$", text, flags=re.MULTILINE))

@@ -27,7 +27,8 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from helpers.paths import ROOT
+
 README = (ROOT / "README.md").read_text()
 
 pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="the README's commands need bash")

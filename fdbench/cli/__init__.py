@@ -1,6 +1,7 @@
 """The ``fdbench`` command line, one module per job: ``app`` (the typer app and the contract's
-error handling), ``options`` (options declared once and shared), ``common`` (checks, rendering,
-writing, the store), ``runs`` (the commands of one run), ``sweeps`` (report and study) and ``store_commands`` (``fdbench
+error handling), ``options`` (options declared once: single ones, groups handed to a command as
+one value, and the methods' options made from the registries), ``conditions`` (the motion's and
+the model's options, as RunSpec fields), ``common`` (checks, rendering, writing, the store), ``runs`` (the commands of one run), ``sweeps`` (report and study) and ``store_commands`` (``fdbench
 runs``: looking at stored runs), ``models_command`` (``fdbench models``: the model library) and
 ``osim_command`` (``fdbench import-osim``: an OpenSim model as a model file) and ``peers_command``
 (``fdbench peer``: OpenSim's and Moco's runs).

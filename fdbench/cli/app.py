@@ -15,7 +15,7 @@ from .. import __version__
 from ..registry import PluginError
 
 
-_STARTED = time.perf_counter()
+STARTED = time.perf_counter()
 
 
 FORMATS = ("table", "json", "csv")
@@ -67,13 +67,13 @@ class FdbenchGroup(TyperGroup):
             returned = super().main(args=args, prog_name=prog_name or "fdbench", standalone_mode=False, **extra)
             code = returned if isinstance(returned, int) else 0
             if code == 130:
-                _error("interrupted")
+                error("interrupted")
         except BadInput as exc:
-            code = _error(str(exc), 2)
+            code = error(str(exc), 2)
         except PluginError as exc:
-            code = _error(str(exc), 2)
+            code = error(str(exc), 2)
         except KeyboardInterrupt:
-            code = _error("interrupted", 130)
+            code = error("interrupted", 130)
         except (BrokenPipeError, _StdoutClosed):
             code = _closed_stdout()
         except Exception as exc:  # noqa: BLE001 - the contract: one line, never a traceback
@@ -83,26 +83,27 @@ class FdbenchGroup(TyperGroup):
                     sys.exit(exc.exit_code)
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
-                code = _error(where + message, exc.exit_code)
+                code = error(where + message, exc.exit_code)
             elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
-                code = _error(f"--db: {exc}", 2)
+                code = error(f"--db: {exc}", 2)
             elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
-                code = _error(str(exc), 2)
+                code = error(str(exc), 2)
             elif _output_full(exc):  # help text into '> /dev/full': as any full output
                 _closed_stdout()
-                code = _error(f"standard output: cannot write: {exc.strerror}", 2)
+                code = error(f"standard output: cannot write: {exc.strerror}", 2)
             elif os.environ.get("FDBENCH_DEBUG"):
                 raise
             else:
-                code = _error(f"{type(exc).__name__}: {exc}", 1)
+                code = error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(_flush_stdout(code))
 
 
-    def get_command(self, ctx, cmd_name):
-        command = super().get_command(ctx, cmd_name)
+    def resolve_command(self, ctx, args):
+        # the command about to run (not each one listed by --help, which stays fast)
+        name, command, rest = super().resolve_command(ctx, args)
         if command is not None and getattr(self, "help_requested", False):
             _show_choices(command, ctx)
-        return command
+        return name, command, rest
 
     def format_help(self, ctx, formatter):
         _show_choices(self, ctx)
@@ -113,48 +114,32 @@ class SubcommandGroup(TyperGroup):
     """A group of subcommands (``runs``, ``models``) whose --help shows choices as the other
     commands' do (no type noise on flags)."""
 
-    def get_command(self, ctx, cmd_name):
-        command = super().get_command(ctx, cmd_name)
+    def resolve_command(self, ctx, args):
+        name, command, rest = super().resolve_command(ctx, args)
         if command is not None and getattr(ctx.find_root().command, "help_requested", False):
             _show_choices(command, ctx)
-        return command
+        return name, command, rest
+
+
+# options whose valid values are registered names: (module, name of its registry), read for --help
+REGISTERED = {"torque": ("torques", "TORQUES"), "opt": ("optimizers", "OPTIMIZERS"),
+              "integrator": ("integrate", "INTEGRATORS"), "smoothing": ("multibody.motions", "SMOOTHING"),
+              "backend": ("execution", "BACKENDS"), "controller": ("controllers", "CONTROLLERS"),
+              "scheme": ("collocation", "SCHEMES")}
 
 
 def _choices(name: str, command: str):
     """The valid values of an option, from the registries (plugins included), for --help."""
-    if name == "torque":
-        from ..torques import TORQUES
+    import importlib
 
-        return list(TORQUES)
-    if name == "opt":
-        from ..optimizers import OPTIMIZERS
-
-        return list(OPTIMIZERS)
-    if name == "integrator":
-        from ..integrate import INTEGRATORS
-
-        return list(INTEGRATORS)
-    if name == "smoothing":
-        from ..motion import SMOOTHING
-
-        return list(SMOOTHING)
+    if name in REGISTERED:
+        module, registry = REGISTERED[name]
+        return list(getattr(importlib.import_module(f"fdbench.{module}"), registry))
     if name == "kinematics":
         from ..models import named_motions, names
 
         found = [motion for model in names() for motion in named_motions(model)]  # the library's, in order
         return list(dict.fromkeys(found)) + ["FILE"]
-    if name == "backend":
-        from ..execution import BACKENDS
-
-        return list(BACKENDS)
-    if name == "controller":
-        from ..controllers import CONTROLLERS
-
-        return list(CONTROLLERS)
-    if name == "scheme":
-        from ..collocation import SCHEMES
-
-        return list(SCHEMES)
     if name == "fmt":
         return list(formats_of(command))
     return None
@@ -181,17 +166,14 @@ def _show_choices(command, ctx) -> None:
     """Help only: show registered names as an option's choices ('[ann|cs|pf]') and no type for
     on/off flags (computed when help is asked for, so plugins appear and other commands stay fast);
     texts in brackets shown as written (``_escape_help``)."""
+    params = list(command.get_params(ctx) if hasattr(command, "get_params") else [])  # method options made
     _escape_help(command)
-    params = list(getattr(command, "params", []))
     help_option = command.get_help_option(ctx) if hasattr(command, "get_help_option") else None
     for param in params + ([help_option] if help_option is not None else []):
         if getattr(param, "is_flag", False) and getattr(param, "metavar", None) is None:
             param.metavar = ""
             continue
         if getattr(param, "param_type_name", None) != "option" or param.metavar is not None:
-            continue
-        if param.name == "hidden":
-            param.metavar = "<int>|auto"
             continue
         try:
             choices = _choices(param.name, command.name)
@@ -251,7 +233,7 @@ def _flush_stdout(code: int) -> int:
         return _closed_stdout()
     except OSError as exc:  # a full disk under '> file': the results are not all there
         _closed_stdout()
-        return _error(f"standard output: cannot write the results: {exc.strerror or exc}", 2)
+        return error(f"standard output: cannot write the results: {exc.strerror or exc}", 2)
     return code
 
 
@@ -278,7 +260,7 @@ def _closed_stdout() -> int:
     return SIGPIPE_EXIT
 
 
-def _error(message: str, code: int = 1) -> int:
+def error(message: str, code: int = 1) -> int:
     message = " ".join(message.split())  # one line, whatever a path or a library put in it
     sys.stderr.write(f"fdbench: error: {message}\n")
     sys.stderr.flush()
@@ -325,9 +307,18 @@ def formats_of(command: str) -> tuple:
     return {"report": REPORT_FORMATS, "study": STUDY_FORMATS}.get(command, FORMATS)
 
 
+def _compile_spinner(notice):
+    """rich's live status line for the kernels' compilation notice (``fdbench.jit``)."""
+    from rich.console import Console  # lazy: off the start-up path
+
+    return Console(stderr=True).status(notice)
+
+
 def main() -> None:
     """Console-script entry point."""
     from ..execution import interrupts_end_compiling
+    from ..jit import spin_with
 
     interrupts_end_compiling()  # this process is the command's: Ctrl-C while kernels compile ends it
+    spin_with(_compile_spinner)
     typer.main.get_command(app).main(prog_name="fdbench")

@@ -12,10 +12,10 @@ from pathlib import Path
 from typing import Optional
 
 
-from .app import BadInput, FORMATS, _STARTED, write_stdout
+from .app import BadInput, FORMATS, STARTED, write_stdout
 
 
-def _check_choice(option: str, value: str, valid) -> str:
+def check_choice(option: str, value: str, valid) -> str:
     if value not in valid:
         from ..registry import unknown_name_message
 
@@ -27,12 +27,12 @@ def _check_choice(option: str, value: str, valid) -> str:
 OUTPUT_LABELS = {"save_history": "--save-trajectory (--save-history)", "history": "--save-convergence (--history)"}
 
 
-def _check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None, **paths) -> None:
+def check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None, **paths) -> None:
     """Validate --format and every output path before any work starts: each can be written, and
     none names an input file, the results database ``db`` or another output."""
     from ..files import BadFile, check_distinct, check_writable
 
-    _check_choice("--format", fmt, valid)
+    check_choice("--format", fmt, valid)
     outputs = {OUTPUT_LABELS.get(option, "--" + option.replace("_", "-")): path for option, path in paths.items()
                if not (option == "output" and str(path) == "-")}  # '-o -' is stdout
     try:
@@ -44,14 +44,14 @@ def _check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None,
         raise BadInput(str(exc)) from None
 
 
-def _validated(spec):
+def validated(spec):
     try:
         return spec.validate()
     except ValueError as exc:
-        raise BadInput(_with_option(str(exc))) from None
+        raise BadInput(with_option(str(exc))) from None
 
 
-def _with_option(message: str) -> str:
+def with_option(message: str) -> str:
     """Messages from the library name parameters plainly (dt, kp); name them as options."""
     for name in ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd"):
         if message.startswith(name + " "):
@@ -69,7 +69,7 @@ def _console(stderr: bool = True):
     return Console(stderr=stderr, highlight=False)
 
 
-def _text_console():
+def text_console():
     """A console that renders results into text (``capture``) and never writes standard output:
     as wide as the terminal, with its colours, when stdout is one; otherwise plain text of
     $COLUMNS (default 80) columns, as a script reading a pipe or a file expects."""
@@ -85,7 +85,7 @@ def _text_console():
     return Console(file=io.StringIO(), width=width, color_system=None, highlight=False)
 
 
-def _say(quiet: bool, text: str) -> None:
+def say(quiet: bool, text: str) -> None:
     if not quiet:
         _console().print(text, soft_wrap=True)
 
@@ -96,7 +96,7 @@ def _jsonable(record: dict) -> dict:
     return {k: finite_or_none(float(v)) if isinstance(v, float) else v for k, v in record.items()}
 
 
-def _render(record: dict, fmt: str, title: str) -> str:
+def render(record: dict, fmt: str, title: str) -> str:
     if fmt == "json":
         return json.dumps(_jsonable(record), indent=2) + "\n"
     if fmt == "csv":
@@ -112,7 +112,7 @@ def _render(record: dict, fmt: str, title: str) -> str:
         if value is None or value == "":
             continue
         table.add_row(key, _format_value(value))
-    console = _text_console()
+    console = text_console()
     with console.capture() as capture:
         console.print(table)
     return capture.get()
@@ -124,7 +124,7 @@ def _format_value(value) -> str:
     return str(value)
 
 
-def _emit(text: str, output: Optional[Path]) -> None:
+def emit(text: str, output: Optional[Path]) -> None:
     if output is None or str(output) == "-":
         write_stdout(text)
     else:
@@ -133,16 +133,16 @@ def _emit(text: str, output: Optional[Path]) -> None:
         write_atomic(output, text)
 
 
-def _finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
-    record["command_time_s"] = time.perf_counter() - _STARTED
-    _emit(_render(record, fmt, title), output)
+def finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
+    record["command_time_s"] = time.perf_counter() - STARTED
+    emit(render(record, fmt, title), output)
     if output is not None and str(output) != "-":
-        _say(quiet, f"wrote {output}")
+        say(quiet, f"wrote {output}")
     if record.get("status") not in (None, "success"):
-        _say(quiet, f"[yellow]warning:[/] {record['message']}")
+        say(quiet, f"[yellow]warning:[/] {record['message']}")
 
 
-def _table_text(header, rows) -> str:
+def history_csv(header, rows) -> str:
     """CSV text of a history table: a header and rows of numbers, each written with the digits that
     read back as the same float (a written motion read back as ``--motion`` is the same motion)."""
     from ..files import csv_text
@@ -151,17 +151,17 @@ def _table_text(header, rows) -> str:
 
 
 def _history_text(outcome) -> str:
-    return _table_text(*outcome.trajectory())
+    return history_csv(*outcome.trajectory())
 
 
-def _save_history(outcome, path) -> None:
+def write_trajectory(outcome, path) -> None:
     if path is not None:
         from ..files import write_atomic
 
         write_atomic(path, _history_text(outcome), OUTPUT_LABELS["save_history"])
 
 
-def _check_store(db: Optional[Path]) -> None:
+def check_store(db: Optional[Path]) -> None:
     """Refuse an unusable --db before any work starts: not a database, damaged, read-only,
     locked, planted by another user. A new name is only checked: the database is made when the
     run is stored, so a command that fails leaves none behind."""
@@ -178,7 +178,7 @@ def _check_store(db: Optional[Path]) -> None:
             raise BadInput(f"--db: {exc}") from None
 
 
-def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
+def store_run(outcome, spec, db: Optional[Path], quiet: bool) -> None:
     if db is None:
         return
     from ..store import StoreError, open_store
@@ -188,13 +188,13 @@ def _store(outcome, spec, db: Optional[Path], quiet: bool) -> None:
             store.add(spec, outcome)
     except StoreError as exc:
         raise BadInput(f"--db: {exc}") from None
-    _say(quiet, f"stored in {db}")
+    say(quiet, f"stored in {db}")
 
 
-def _check_gradient(gradient: str, optimizers=None) -> None:
+def check_gradient(gradient: str, optimizers=None) -> None:
     """A valid --gradient; for the commands that select optimisers (``optimizers``: the names
     given, None for the default set), exact gradients need one that uses them."""
-    from ..experiment import GRADIENTS
+    from ..validation import GRADIENTS
 
     if gradient not in GRADIENTS:
         raise BadInput(f"--gradient must be one of {', '.join(GRADIENTS)}, got {gradient!r}")
@@ -207,7 +207,7 @@ def _check_gradient(gradient: str, optimizers=None) -> None:
                            f"none is selected by --opt {' --opt '.join(optimizers)}")
 
 
-def _bracketed(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
+def bracketed(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
     """``NAME[KEY=VALUE,...]`` of --torque, --opt or --controller: (NAME, ``flags`` (the command's
     own option flags of that kind) with the bracket's options on top), so that a method, a plugin's
     included, receives any option its class takes. A key it does not take, or one also given as its
@@ -216,8 +216,8 @@ def _bracketed(ctx, text: str, option: str, flags: dict, registry, kind: str) ->
     return name, {**flags, **given}
 
 
-def _bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
-    """``_bracketed`` for a repeatable selection (report, study): the names (None: the default
+def bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
+    """``bracketed`` for a repeatable selection (report, study): the names (None: the default
     selection) and one set of options for them all, each method keeping those it takes; one key
     given two values in two brackets is bad input."""
     if not entries:
@@ -235,8 +235,8 @@ def _bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) 
 
 
 def _bracket_options(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
-    """(NAME, the options of its brackets) of ``NAME[KEY=VALUE,...]``, checked (see ``_bracketed``)."""
-    from ..experiment import check_method_options
+    """(NAME, the options of its brackets) of ``NAME[KEY=VALUE,...]``, checked (see ``bracketed``)."""
+    from ..method_options import check_method_options
     from ..registry import parse_method
 
     try:
@@ -252,44 +252,44 @@ def _bracket_options(ctx, text: str, option: str, flags: dict, registry, kind: s
     return name, given
 
 
-def _check_method_options(torque_options: dict, optimizer_options: dict) -> None:
+def check_method_ranges(registry, options: dict) -> None:
     """Reject an out-of-range method option even when the chosen method does not use it
-    (``--terms 0`` with ``--torque cs``): every registered class that takes it checks it."""
-    import inspect
+    (``--terms 0`` with ``--torque cs``, ``--bandwidth -1`` with ``--controller pd``): every
+    registered class that takes it checks it."""
+    from ..method_options import taken_options
 
-    from ..optimizers import OPTIMIZERS
-    from ..torques import TORQUES
-
-    for registry, options in ((TORQUES, torque_options), (OPTIMIZERS, optimizer_options)):
-        for _, cls in registry.items():
-            accepted = inspect.signature(cls).parameters
-            given = {k: v for k, v in options.items() if k in accepted and v is not None and v != "auto"}
-            if given:
-                try:
-                    cls(**given)
-                except ValueError as exc:
-                    raise BadInput(str(exc)) from None
+    for name, cls in registry.items():
+        taken = taken_options(registry, name)
+        given = {k: v for k, v in options.items() if k in taken and v is not None and v != "auto"}
+        if given:
+            try:
+                cls(**given)
+            except ValueError as exc:
+                raise BadInput(str(exc)) from None
 
 
-def _check_finite(**values) -> None:
+def applicable_options(ctx, options: dict, registry, name: str, choice: str) -> dict:
+    """Of a command's method options (parameter name: value), those the method ``name`` takes.
+    One the user gave (on the command line or from the environment, not a default) that it does
+    not take is bad input: ``--kp`` does not apply to ``--controller lqr``."""
+    from ..method_options import taken_options
+
+    taken = taken_options(registry, name)
+    for key in options:
+        source = ctx.get_parameter_source(key)
+        if key not in taken and getattr(source, "name", None) in ("COMMANDLINE", "ENVIRONMENT"):
+            allowed = ", ".join("--" + k.replace("_", "-") for k in taken if k in options) or "no options"
+            raise BadInput(f"--{key.replace('_', '-')} does not apply to {choice} {name} (it takes {allowed})")
+    return {k: v for k, v in options.items() if k in taken}
+
+
+def check_finite(**values) -> None:
     for name, value in values.items():
         if not math.isfinite(value):
             raise BadInput(f"--{name.replace('_', '-')} must be a finite number, got {value}")
 
 
-def _parse_hidden(hidden: str):
-    if hidden == "auto":
-        return "auto"
-    try:
-        value = int(hidden)
-    except ValueError:
-        raise BadInput(f"--hidden must be an integer >= 1 or 'auto', got {hidden!r}") from None
-    if value < 1:
-        raise BadInput(f"--hidden must be an integer >= 1 or 'auto', got {value}")
-    return value
-
-
-def _methods_text() -> str:
+def methods_text() -> str:
     from ..optimizers import OPTIMIZERS
     from ..torques import TORQUES
 
@@ -307,7 +307,7 @@ def _methods_text() -> str:
     return "\n".join(lines) + "\n"
 
 
-def _check_names(torques, optimizers) -> None:
+def check_names(torques, optimizers) -> None:
     from ..optimizers import OPTIMIZERS
     from ..registry import UnknownName
     from ..torques import TORQUES
@@ -318,10 +318,10 @@ def _check_names(torques, optimizers) -> None:
         for name in optimizers or ():
             OPTIMIZERS[name]
     except UnknownName as exc:
-        raise BadInput(_with_option(str(exc))) from None
+        raise BadInput(with_option(str(exc))) from None
 
 
-class _progress:
+class Progress:
     """A rich progress bar on stderr: evaluations done and the best objective so far."""
 
     def __init__(self, quiet: bool, label: str):

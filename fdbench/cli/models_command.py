@@ -10,8 +10,8 @@ from typing import Annotated
 import typer
 
 from .app import BadInput, SubcommandGroup, app
-from .common import _check_outputs, _emit, _say
-from .options import Output
+from .common import check_outputs, emit, say
+from .options import Output, format_option
 
 
 models_app = typer.Typer(
@@ -26,22 +26,18 @@ LIST_FORMATS = ("table", "json", "csv")
 SHOW_FORMATS = ("table", "json", "toml")
 
 
-def _format(choices, help_text: str):
-    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
-
-
 @models_app.callback()
 def list_models(
     ctx: typer.Context,
-    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per library model: its name, bodies, joints (its coordinates), total mass and what it is."""
     if ctx.invoked_subcommand is not None:
         return
-    from ..multibody.description import library
+    from ..models import library
 
-    _check_outputs(fmt, LIST_FORMATS, output=output)
+    check_outputs(fmt, LIST_FORMATS, output=output)
     rows = [_summary(_checked(name)) for name in library()]
     if fmt == "json":
         text = json.dumps(rows, indent=2) + "\n"
@@ -50,41 +46,41 @@ def list_models(
 
         text = csv_text(list(rows[0]), [[" ".join(v) if isinstance(v, list) else v for v in row.values()] for row in rows])
     else:
-        from .store_commands import _table
+        from .store_commands import text_table
 
         columns = ("name", "bodies", "coordinates", "mass_kg", "description")
         shown = [{k: ", ".join(v) if isinstance(v, list) else v for k, v in row.items()} | {"mass_kg": f"{row['mass_kg']:.6g}"}
                  for row in rows]
-        text = _table(f"{len(rows)} models in the library ('fdbench models show NAME' for one)", shown, columns,
+        text = text_table(f"{len(rows)} models in the library ('fdbench models show NAME' for one)", shown, columns,
                       {"mass_kg": "mass (kg)", "coordinates": "joints (coordinates)"})
-    _emit(text, output)
+    emit(text, output)
 
 
 @models_app.command("show")
 def show_model(
     model: Annotated[str, typer.Argument(metavar="NAME|FILE", help="A library model's name or a model file (.toml, .json, or OpenSim's .osim).", show_default=False)],
-    fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
+    fmt: Annotated[str, format_option(SHOW_FORMATS, "Output: table (for a person), json (the checked model and what follows from it) or toml (a model file to start from, every end point explicit).")] = "table",
     output: Output = None,
 ):
     """Check a model and show it: bodies (with each end point of natural coordinates resolved), joints, loads, named motions, short keys, the paths --model PATH=VALUE takes with their values, and the total mass. A file that cannot be used is refused in one line naming the key."""
-    from ..multibody.description import library
+    from ..models import library
 
     # a library model's file is an input too: an output may not write over it
-    _check_outputs(fmt, SHOW_FORMATS, inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
+    check_outputs(fmt, SHOW_FORMATS, inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
     found = _checked(model)
     if fmt == "toml":
-        from ..multibody.description import to_toml
+        from ..multibody.model_files import to_toml
 
-        _emit(to_toml(found, explicit_ends=True), output)
+        emit(to_toml(found, explicit_ends=True), output)
     elif fmt == "json":
-        _emit(json.dumps(_shown(found, model), indent=2) + "\n", output)
+        emit(json.dumps(_shown(found, model), indent=2) + "\n", output)
     else:
-        _emit(_show_text(found, model), output)
+        emit(_show_text(found, model), output)
 
 
 def _checked(name_or_path: str):
     from ..models import is_osim
-    from ..multibody.description import find_model
+    from ..models import find_model
 
     try:
         if is_osim(name_or_path):  # an OpenSim model: its import's notes as warnings
@@ -92,7 +88,7 @@ def _checked(name_or_path: str):
 
             found, notes = import_osim(name_or_path, option="NAME|FILE")
             for note in notes:
-                _say(False, f"[yellow]warning:[/] {note}")
+                say(False, f"[yellow]warning:[/] {note}")
             return found
         return find_model(name_or_path, "NAME|FILE")
     except ValueError as exc:
@@ -106,7 +102,8 @@ def _summary(model) -> dict:
 
 def _shown(model, source: str) -> dict:
     """The checked model (a model file's keys, end points explicit) and what follows from it."""
-    from ..multibody.description import short_key_values, to_dict
+    from ..multibody.model import to_dict
+    from ..multibody.model_changes import short_key_values
 
     return {"source": source, "total_mass_kg": model.total_mass, "coordinates": list(model.coordinates),
             "short_key_values": short_key_values(model), "paths": _path_values(model),
@@ -118,16 +115,16 @@ def _point(point) -> str:
 
 
 def _show_text(model, source: str) -> str:
-    from ..multibody.description import _end_of
-    from .common import _render
-    from .store_commands import _table
+    from ..multibody.model import end_of
+    from .common import render
+    from .store_commands import text_table
 
     header = {"name": model.name, "description": model.description, "source": source,
               "gravity (m/s^2)": _point(model.gravity), "total mass (kg)": f"{model.total_mass:.6g}",
               "coordinates": ", ".join(model.coordinates)}
     bodies = []
     for body in model.bodies:
-        end, given_by = _end_of(model, body.name)
+        end, given_by = end_of(model, body.name)
         bodies.append({"name": body.name, "mass": f"{body.mass:.6g}", "com": _point(body.com),
                        "inertia": f"{body.inertia:.6g}", "joint": model.parent_joint(body.name).name,
                        "end": _point(end) + ("" if given_by == "end" else f" ({_END_ORIGIN[given_by.split()[0]]})")})
@@ -136,12 +133,12 @@ def _show_text(model, source: str) -> str:
                "limits": "" if j.limits is None else _point(j.limits)} for k, j in enumerate(model.joints)]
     loads = [{"#": str(i), "body": load.body, "at": _point(load.at), "force": _point(load.force)}
              for i, load in enumerate(model.loads)]
-    text = _render(header, "table", f"model {model.name}")
-    text += _table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)",
+    text = render(header, "table", f"model {model.name}")
+    text += text_table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)",
                    bodies, list(bodies[0]))
-    text += _table("joints in order (m, rad)", joints, list(joints[0]))
+    text += text_table("joints in order (m, rad)", joints, list(joints[0]))
     if loads:
-        text += _table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
+        text += text_table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
     return text + _motions_text(model) + _keys_text(model) + _paths_text(model)
 
 
@@ -157,7 +154,7 @@ def _motions_text(model) -> str:
     angle) or metres (a translation)."""
     import math
 
-    from .store_commands import _table
+    from .store_commands import text_table
 
     kinds = dict(zip(model.coordinates, model.coordinate_kinds))
 
@@ -169,32 +166,33 @@ def _motions_text(model) -> str:
     rows = [{"name": m.name + (" (default)" if i == 0 else ""), "type": m.type, "duration (s)": f"{m.duration:.6g}"}
             | {key: value for (joint, a), (_, b) in zip(m.start, m.goal) for key, value in span(joint, a, b).items()}
             for i, m in enumerate(model.motions)]
-    return _table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
+    return text_table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
 
 
 def _path_values(model) -> dict:
     """{path: its value in this model (SI units, rad)}: every path --model PATH=VALUE, --plant and
     study mismatch --param take."""
-    from ..multibody.description import change_paths, path_value
+    from ..multibody.model import change_paths
+    from ..multibody.model_changes import path_value
 
     return {path: path_value(model, path) for path in change_paths(model)}
 
 
 def _paths_text(model) -> str:
-    from .store_commands import _table
+    from .store_commands import text_table
 
     rows = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
-    return _table("paths (--model PATH=VALUE)", rows, ["path", "value"])
+    return text_table("paths (--model PATH=VALUE)", rows, ["path", "value"])
 
 
 def _keys_text(model) -> str:
     """The short keys of --model KEY=VALUE: the path each sets and its value in this model."""
-    from ..multibody.description import short_key_values
-    from .store_commands import _table
+    from ..multibody.model_changes import short_key_values
+    from .store_commands import text_table
 
     values = short_key_values(model)
     rows = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
-    return _table("short keys (--model KEY=VALUE)", rows, list(rows[0])) if rows else ""
+    return text_table("short keys (--model KEY=VALUE)", rows, list(rows[0])) if rows else ""
 
 
 _END_ORIGIN = {"joint": "first child joint", "load": "farthest load", "com": "centre of mass",

@@ -1,372 +1,292 @@
-"""Options shared by several commands, declared once: simulation settings, outputs, method
-options, execution, and the conditions (motion, noise, model) added by ``_with_conditions``."""
+"""Options declared once and shared by the commands.
+
+- Single options (``Kinematics``, ``Output``, ``Quiet``...): ``Annotated`` types a command's
+  parameter takes.
+- Option groups (``Simulation``, ``RunOutputs``, ``Execution``, ``Cells``, ``Optimisation``):
+  frozen dataclasses whose fields are options. A command takes one by a parameter annotated with
+  it; ``with_groups`` puts the group's options in the command's signature (typer reads
+  ``__signature__``), shown under the group's panel in --help, and hands the command one instance.
+- Method options (``--kp``, ``--knots``, ``--sigma0``...): generated from what the registered
+  methods declare (``fdbench.method_options.MethodOption``), by ``methods_command``, when the
+  command runs or shows its help: a method registered by a plugin gets its flags without a change
+  here, and ``fdbench --help`` imports no registry.
+"""
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import functools
+import inspect
+import typing
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
+from typer.core import TyperCommand
 
 from .app import BadInput, INTEGRATOR_HELP, KINEMATICS_HELP, MAX_THREADS
+from .common import check_outputs, check_store, finish, store_run, write_trajectory
+from .conditions import MOTION_PANEL, run_fields
 
 
-Kinematics = Annotated[Optional[str], typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP, show_default=False)]
-
-
-Integrator = Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)]
-
-
+Kinematics = Annotated[Optional[str], typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP, show_default=False,
+                                                   rich_help_panel=MOTION_PANEL)]
 Dt = Annotated[float, typer.Option("--dt", help="RK4 step, s, in [1e-6, 0.1].")]
-
-
-Rtol = Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [2.2e-14, 1).")]
-
-
-Atol = Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators), in [1e-30, 1].")]
-
-
 Alpha = Annotated[float, typer.Option("--alpha", help="Penalty factor of eq. 12, in [1, 1e15].")]
-
-
 Xi = Annotated[float, typer.Option("--xi", help="Penalty damping ratio of eq. 12.")]
-
-
 Omega = Annotated[float, typer.Option("--omega", help="Penalty natural frequency of eq. 12, rad/s.")]
-
-
 Format = Annotated[str, typer.Option("--format", "-f", help="Output: table (for a person), json or csv.")]
-
-
 Output = Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the result to FILE instead of stdout ('-': stdout). A regular file is replaced atomically, a symlink written through, a device written in place; a read-only file, an input of the command or the results database is refused.")]
-
-
 SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--save-history", help="Write the run's trajectory, its time history (one row per sample of the motion, 1001 for eq. 5), as CSV to FILE in a motion file's units, so that --motion reads back the simulated angle and --torque-file the applied torque: t (s), theta, theta_desired (deg), theta_vel, theta_vel_desired (deg/s), theta_acc, theta_acc_desired (deg/s^2), theta_torque, theta_torque_inverse (N m); another model: the same per joint, <joint>, <joint>_desired, <joint>_vel, <joint>_vel_desired, <joint>_acc, <joint>_acc_desired, <joint>_torque, <joint>_torque_inverse (a free joint's translations in m, m/s, m/s^2 and N). --save-history is an older name.")]
-
-
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
-
-
 NoiseSeed = Annotated[int, typer.Option("--seed", help="Seed of the --noise-deg noise; the same seed gives the same noisy motion.")]
-
-
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
-
-
-Budget = Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, in [1, 1000000], gradient evaluations included.")]
-
-
-Hidden = Annotated[str, typer.Option("--hidden", help="ANN hidden neurons in [1, 50], or 'auto' to choose the smallest count that fits the inverse-dynamics torque.")]
-
-
-Knots = Annotated[Optional[int], typer.Option("--knots", help="Cubic-spline knots in [4, 1000], equally spaced over the motion's span; default one every 0.1 s, as the paper's 11 over eq. 5's 1 s (26 for a 2.5 s recording).", show_default=False)]
-
-
-Terms = Annotated[int, typer.Option("--terms", help="Parametric-function terms (Gaussian bumps) in [1, 100], 3 parameters each.")]
-
-
-Sigma0 = Annotated[Optional[float], typer.Option("--sigma0", help="CMA-ES initial step size, in scaled parameter units (default: per torque, cs 0.05, ann 0.2, pf 0.03).", show_default=False)]
-
-
-Popsize = Annotated[Optional[int], typer.Option("--popsize", help="CMA-ES population size, in [2, 10000] (default: per torque, cs and ann 8, pf cma's 4 + 3 ln n).")]
+def format_option(choices, help_text: str):
+    """--format of a command whose formats are fixed (its help lists them as choices)."""
+    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
 
 
 Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads evaluating a CMA-ES population at once, in [1, {MAX_THREADS}] (default: the cores available); the numbers do not depend on it.", show_default=False)]
 
 
-Gradient = Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")]
+# ---- option groups ------------------------------------------------------------------------------
+
+def option_group(panel: str):
+    """Class decorator: a frozen dataclass whose fields are options (``Annotated[type,
+    typer.Option(...)] = default``), shown under ``panel`` in --help."""
+
+    def make(cls):
+        cls = dataclasses.dataclass(frozen=True)(cls)
+        cls.panel = panel
+        return cls
+
+    return make
 
 
-PenaltyWeight = Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")]
+def _group_parameters(group) -> list:
+    """The group's fields as keyword-only parameters, each option under the group's panel."""
+    hints = typing.get_type_hints(group, include_extras=True)
+    parameters = []
+    for field in dataclasses.fields(group):
+        kind, info = typing.get_args(hints[field.name])
+        info = copy.copy(info)  # an option shared with a command outside the group keeps its own panel
+        info.rich_help_panel = info.rich_help_panel or group.panel
+        parameters.append(inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, default=field.default,
+                                            annotation=Annotated[kind, info]))
+    return parameters
 
 
-# Execution of many runs (report, study): where they run and how many at once.
-BackendName = Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install '.[dask]' in fdbench's source folder).")]
+class MethodValues(dict):
+    """The values of a command's method options, {registry: {option: value}} (``methods_command``)."""
 
 
-Scheduler = Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version). Whoever reaches a tcp:// scheduler can run code on its workers: across a network or a shared machine use tls://HOST:PORT, with the client's files in Dask's configuration (DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY; see the README).", show_default=False)]
+METHOD_VALUES = "fdbench.method_values"
 
 
-Jobs = Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once, in [1, 256]: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)]
-
-
-# Options of the commands that run many specs (report, study)
-TorqueSelection = Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf. NAME[KEY=VALUE,...] passes options, e.g. 'cs[knots=21]'.")]
-
-
-OptSelection = Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs. NAME[KEY=VALUE,...] passes options, e.g. 'cmaes[sigma0=0.1]'.")]
-
-
-FeedforwardSelection = Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with feedforward (Table 3) or without (Table 2); default both.", show_default=False)]
-
-
-WithControl = Annotated[bool, typer.Option("--control/--no-control", help="Include PD control.")]
-
-
-AllCells = Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")]
-
-
-StoreDb = Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)]
-
-
-Rerun = Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")]
-
-
-Kp = Annotated[Optional[float], typer.Option("--kp", help="PD proportional gain, N m/rad, on every joint (default: the paper's 80 on the forearm; on another model 80 per 0.04 kg m^2 of each joint's inertia).", show_default=False)]
-
-
-Kd = Annotated[Optional[float], typer.Option("--kd", help="PD derivative gain, N m s/rad, on every joint (default: the paper's 0.3 on the forearm; on another model 0.3 per 0.04 kg m^2 of each joint's inertia).", show_default=False)]
-
-
-# Options of the motion, its noise and the model, shared by every command that simulates: declared once
-# here and added to a command by @_with_conditions, which hands them over as one dict ``conditions``
-# of RunSpec fields.
-CONDITIONS = {
-    "radians": (bool, False, typer.Option("--radians", help="The motion file's angles (and derivatives) are in radians, not degrees; also reads an older fdbench's files, whose <joint>_dot and <joint>_ddot columns are then the rates (rad/s, rad/s^2).")),
-    "cutoff_hz": (float, 6.0, typer.Option("--cutoff", help="Derivative estimate: -3 dB frequency (Hz) of the zero-lag 4th-order Butterworth low-pass (Winter's), applied to a recorded or noisy angle before an interpolating spline is differentiated.")),
-    "smoothing": (str, "butterworth", typer.Option("--smoothing", help="Derivative estimate: 'butterworth' (low-pass, then spline) or 'spline' (a smoothing spline, factor by generalised cross-validation or --spline-lambda).")),
-    "spline_lambda": (Optional[float], None, typer.Option("--spline-lambda", help="Smoothing factor of --smoothing spline (> 0; default: chosen by generalised cross-validation).", show_default=False)),
-    "sample_dt": (Optional[float], None, typer.Option("--sample-dt", help="Report the histories and indicators every SAMPLE_DT s (default: the motion's own samples; eq. 5: 1 ms).", show_default=False)),
-    "noise_deg": (float, 0.0, typer.Option("--noise-deg", help="White Gaussian noise (deg, in [0, 45], seeded by --seed) added to the captured angles (a free joint's translations stay noise-free) before the derivative estimate; indicators stay measured against the noise-free motion.")),
-    "capture_hz": (float, 100.0, typer.Option("--capture-hz", help="Capture rate (Hz) of the noisy samples of 'paper' or 'exact' (a file keeps its own samples).")),
-    "plant": (Optional[list[str]], None, typer.Option("--plant", metavar="KEY=VALUE", help="KEY=VALUE (repeatable): change the simulated body only (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; any model: a path such as thigh.mass; SI units); inverse dynamics and model-based controllers keep the nominal model.", show_default=False)),
-    "model": (Optional[list[str]], None, typer.Option("--model", metavar="NAME|FILE|KEY=VALUE", help="The model: forearm (Table 1, default), a library model (arm2: shoulder + elbow; leg3: hip, knee, ankle; see 'fdbench models') or your own model file (.toml or .json, see 'fdbench models show FILE'), whose motions are its named ones or a CSV file t,<joint>...; and KEY=VALUE (repeatable) changes of its constants for the nominal model and the simulated body (forearm: keys as --plant; arm2: L01, L0G, m0, I0 and the forearm's; any model: a path such as thigh.mass or knee.at_parent.x).", show_default=False)),
-    "loads": (Optional[Path], None, typer.Option("--loads", metavar="FILE.xml", help="External loads from data, e.g. a walk's measured ground reactions: OpenSim's ExternalLoads file (the body each force acts on, the frames of its force and point, the columns of its data file, a .mot or .sto), applied at every stage of the simulation and in inverse dynamics; its content and its data file's are part of the run's identity.", show_default=False)),
-    "model_file": (Optional[Path], None, typer.Option("--model-file", help="TOML or JSON file of KEY = VALUE pairs setting the nominal model (--model applies on top).", show_default=False)),
-}
-
-
-_SAID: set = set()  # the warnings of ``_warn_opensim`` said during the current command
-
-
-def _with_conditions(command):
-    """Add the CONDITIONS options to a command; it receives them as ``conditions`` (a dict of
-    RunSpec fields, the model's name among them), the motion and model files among
-    ``conditions['_inputs']``, and ``kinematics`` set to the model's default motion if not given."""
-    import functools
-    import inspect
-
-    signature = inspect.signature(command, eval_str=True)  # the annotations as objects, as typer reads them
-    added = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default,
-                               annotation=Annotated[kind, option])
-             for name, (kind, default, option) in CONDITIONS.items()]
-    kept = [p for p in signature.parameters.values() if p.name != "conditions"]
+def with_groups(command):
+    """A command whose parameters annotated with an option group take the group's options (each
+    handed over as one instance of the group) and whose ``MethodValues`` parameter receives its
+    method options (see ``methods_command``)."""
+    signature = inspect.signature(command, eval_str=True)  # annotations as objects, as typer reads them
+    flat, groups, methods, context = [], {}, None, None
+    for parameter in signature.parameters.values():
+        annotation = parameter.annotation
+        if isinstance(annotation, type) and hasattr(annotation, "panel") and dataclasses.is_dataclass(annotation):
+            fields = _group_parameters(annotation)
+            groups[parameter.name] = (annotation, [p.name for p in fields])
+            flat += fields
+            continue
+        if annotation is MethodValues:
+            methods = parameter.name
+            continue
+        if annotation is typer.Context:
+            context = parameter.name
+        flat.append(parameter.replace(kind=inspect.Parameter.KEYWORD_ONLY))
 
     @functools.wraps(command)
     def wrapper(**kwargs):
-        values = {name: kwargs.pop(name) for name in CONDITIONS}
-        _SAID.clear()
-        conditions = _conditions(**values)
-        _warn_implausible(conditions, kwargs.get("quiet", False))
-        if kwargs.get("kinematics") is None:
-            from ..models import default_motion
+        for name, (group, names) in groups.items():
+            kwargs[name] = group(**{field: kwargs.pop(field) for field in names})
+        if methods is not None:
+            kwargs[methods] = kwargs[context].meta.get(METHOD_VALUES, MethodValues())
+        return command(**kwargs)
 
-            try:
-                kwargs["kinematics"] = default_motion(conditions["model_name"])
-            except ValueError as exc:
-                raise BadInput(str(exc)) from None
-        returned = command(conditions=conditions, **kwargs)
-        _warn_opensim(conditions["model_name"], kwargs.get("kinematics"), kwargs.get("quiet", False))
-        return returned
-
-    wrapper.__signature__ = signature.replace(parameters=kept + added)
-    wrapper.__annotations__ = {p.name: p.annotation for p in kept + added}
+    wrapper.__signature__ = signature.replace(parameters=flat)
+    wrapper.__annotations__ = {p.name: p.annotation for p in flat}
     return wrapper
 
 
-def _warn_implausible(conditions: dict, quiet: bool) -> None:
-    """A warning on stderr for each constant a human arm cannot have (the run goes on); constants
-    that are refused outright (a negative mass) are left to the error that follows."""
-    from ..plausible import implausible
-    from ..models import with_changes
+@option_group("Simulation")
+class Simulation:
+    """How every run integrates: the integrator, its step and tolerances, and eq. 12's penalty."""
 
-    try:
-        with_changes(conditions["model_name"], conditions["model"] + conditions["plant"])
-    except ValueError:
-        return
+    integrator: Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)] = "rk4"
+    dt: Dt = 1e-3
+    rtol: Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [2.2e-14, 1).")] = 1e-6
+    atol: Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators), in [1e-30, 1].")] = 1e-9
+    alpha: Alpha = 1e7
+    xi: Xi = 1.0
+    omega: Omega = 10.0
 
-    import sys
+    def fields(self) -> dict:
+        return dataclasses.asdict(self)
 
-    for option, pairs in (("--model", conditions["model"]), ("--plant", conditions["plant"])):
-        for text in [] if quiet else implausible(pairs):
-            sys.stderr.write(f"fdbench: warning: {option}: {text}\n")
-
-
-def _warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
-    """Warnings on stderr once a command has run (a refused one says one line only): the notes of
-    an OpenSim model's import (--model X.osim) and the columns of an OpenSim motion file (.mot,
-    .sto) that the model lacks. Each is said once per command: a long command says them before its
-    work, once its input is checked (the walk's report), and not again at its end."""
-    import sys
-
-    from ..models import import_notes, joints
-    from ..multibody.osim import storage_note
-
-    notes = [f"--model: {note}" for note in import_notes(model_name)]
-    notes += [f"--motion: {note}" for note in [storage_note(kinematics, joints(model_name))] if note]
-    for note in [] if quiet else notes:
-        if note not in _SAID:
-            _SAID.add(note)
-            sys.stderr.write(f"fdbench: warning: {note}\n")
+    def spec_fields(self, kinematics: str, conditions: dict | None) -> dict:
+        """RunSpec fields of a run on ``kinematics`` under ``conditions`` (see ``run_fields``)."""
+        return run_fields(kinematics, **self.fields(), conditions=conditions)
 
 
-def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
-                loads, model_file) -> dict:
-    """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
-    names = [item.strip() for item in model or [] if "=" not in item]
-    pairs = _model_file(model_file) if model_file is not None else []
-    pairs += _key_values("--model", [item for item in model or [] if "=" in item])
-    name = _model_name(names)
-    return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
-                sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
-                plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file, **_model_input(name), **_loads_inputs(loads)}, model_name=name,
-                **({"loads": str(loads)} if loads is not None else {}))
+@option_group("Output")
+class RunOutputs:
+    """Where a command of one run writes: its record, the trajectory, the results database."""
+
+    fmt: Format = "table"
+    output: Output = None
+    save_history: SaveHistory = None
+    db: Db = None
+    quiet: Quiet = False
+
+    def check(self, inputs: dict, **paths) -> None:
+        """The format and every output checked before any work (see ``common.check_outputs``)."""
+        check_outputs(self.fmt, output=self.output, save_history=self.save_history, db=self.db, inputs=inputs, **paths)
+
+    def check_store(self) -> None:
+        check_store(self.db)
+
+    def deliver(self, outcome, spec, title: str, write_more=None) -> None:
+        """Store the run (before any output is written), write its trajectory, the command's own
+        files (``write_more()``), then its record."""
+        store_run(outcome, spec, self.db, self.quiet)
+        write_trajectory(outcome, self.save_history)
+        if write_more is not None:
+            write_more()
+        finish(outcome.record, self.fmt, self.output, title, self.quiet)
 
 
-def _loads_inputs(loads) -> dict:
-    """{'--loads': the file, '--loads data': its data file}: inputs the outputs must not overwrite."""
-    if loads is None:
+@option_group("Execution")
+class Execution:
+    """Where the runs of a report or a study are carried out and stored."""
+
+    jobs: Annotated[Optional[int], typer.Option("--jobs", "-j", help="Runs at once, in [1, 256]: worker processes of the local backend, or of a local Dask cluster (default: the number of cores).", show_default=False)] = None
+    backend: Annotated[str, typer.Option("--backend", help="Where runs are carried out: 'local' (worker processes on this machine, --jobs of them) or 'dask' (a Dask cluster: the scheduler at --scheduler, or a local cluster of --jobs workers; needs pip install '.[dask]' in fdbench's source folder).")] = "local"
+    scheduler: Annotated[Optional[str], typer.Option("--scheduler", metavar="ADDRESS", help="Address of a running Dask scheduler, e.g. tcp://10.0.0.5:8786 (with --backend dask; its workers need the same fdbench version). Whoever reaches a tcp:// scheduler can run code on its workers: across a network or a shared machine use tls://HOST:PORT, with the client's files in Dask's configuration (DASK_DISTRIBUTED__COMM__TLS__CA_FILE, __CLIENT__CERT, __CLIENT__KEY; see the README).", show_default=False)] = None
+    db: Annotated[Optional[Path], typer.Option("--db", help="Results database (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)] = None
+    rerun: Annotated[bool, typer.Option("--rerun", help="Run everything again instead of reusing stored runs.")] = False
+
+    @property
+    def db_path(self) -> Path:
+        from ..store import default_path
+
+        return self.db if self.db is not None else default_path()
+
+    def executor(self):
+        """The execution backend of --backend/--jobs/--scheduler, checked before any work."""
+        from ..execution import BackendError, make_backend
+
+        try:
+            return make_backend(self.backend, jobs=self.jobs, scheduler=self.scheduler)
+        except BackendError as exc:
+            raise BadInput(str(exc)) from None
+
+
+@option_group("Cells")
+class Cells:
+    """The cells of the paper's tables a report or a study runs."""
+
+    torque: Annotated[Optional[list[str]], typer.Option("--torque", help="Only these torques (repeat the option); default ann, cs, pf. NAME[KEY=VALUE,...] passes options, e.g. 'cs[knots=21]'.")] = None
+    opt: Annotated[Optional[list[str]], typer.Option("--opt", help="Only these optimisers (repeat the option); default cmaes, bfgs. NAME[KEY=VALUE,...] passes options, e.g. 'cmaes[sigma0=0.1]'.")] = None
+    feedforward: Annotated[Optional[bool], typer.Option("--feedforward/--no-feedforward", help="Only the cells with feedforward (Table 3) or without (Table 2); default both.", show_default=False)] = None
+    control: Annotated[bool, typer.Option("--control/--no-control", help="Include PD control.")] = True
+    all_cells: Annotated[bool, typer.Option("--all-cells", help="Also run the cells the paper left out (PF without feedforward).")] = False
+
+
+@option_group("Optimisation")
+class Optimisation:
+    """What every optimisation is given: its budget, its gradients and eq. 18's penalty."""
+
+    budget: Annotated[int, typer.Option("--budget", help="Objective evaluations (forward simulations) per optimisation, in [1, 1000000], gradient evaluations included.")] = 200
+    gradient: Annotated[str, typer.Option("--gradient", metavar="fd|exact", help="Gradients for gradient-based optimisers (bfgs, lbfgsb): fd, finite differences (the paper's method), or exact, forward sensitivities of the RK4 simulation (rk4 only; one simulation with its sensitivities counts as one evaluation).")] = "fd"
+    penalty_weight: Annotated[float, typer.Option("--penalty-weight", help="w_penal of eq. 18: objective = RMSE_rot_deg + w_penal (1 - t_end / T), T the motion's duration (eq. 5: 1 s).")] = 1.0
+
+
+# ---- method options from the registries ---------------------------------------------------------
+
+METHOD_PANEL = "Method options"
+
+
+def methods_command(*sources: str):
+    """The click command class of a command whose method options come from the registries:
+    ``sources`` name them, 'torques', 'optimizers', 'controllers', or 'controllers:pd' for one
+    method's. The options are made when the command is parsed or its help shown; the command
+    receives their values by its ``MethodValues`` parameter, {source registry: {option: value}}."""
+
+    class MethodsCommand(TyperCommand):
+        def get_params(self, ctx):
+            if not hasattr(self, "_method_options"):
+                self._method_options = _method_options(sources, {p.name for p in self.params})
+                self.params += [option for option, _ in self._method_options.values()]
+            return super().get_params(ctx)
+
+        def invoke(self, ctx):
+            self.get_params(ctx)
+            values = MethodValues()
+            for name, (option, registry) in self._method_options.items():
+                value = ctx.params.pop(name, None)
+                if isinstance(option.metavar, str) and option.metavar.endswith("|auto"):
+                    value = parse_count_or_auto(name, value)
+                values.setdefault(registry, {})[name] = value
+            for registry in (source.partition(":")[0] for source in sources):
+                values.setdefault(registry, {})
+            ctx.meta[METHOD_VALUES] = values
+            return super().invoke(ctx)
+
+    return MethodsCommand
+
+
+def _method_options(sources, taken: set) -> dict:
+    """{option: (click option, registry)} of the methods of ``sources``; an option named as one of
+    the command's own (``taken``) or as one already made is left to the brackets."""
+    import importlib
+
+    from ..method_options import command_line_options
+
+    made, parameters = {}, []
+    for source in sources:
+        module, _, only = source.partition(":")
+        registry = getattr(importlib.import_module(f"fdbench.{module}"), module.upper())
+        for name, (declared, methods) in command_line_options(registry, only.split(",") if only else None).items():
+            if name in taken or name in made:
+                continue
+            option = typer.Option("--" + name.replace("_", "-"), help=f"{', '.join(methods)}: {declared.help}",
+                                  show_default=declared.show_default, metavar=declared.metavar,
+                                  rich_help_panel=METHOD_PANEL)
+            kind = declared.type if declared.default is not None else Optional[declared.type]
+            parameters.append(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=declared.default,
+                                                annotation=Annotated[kind, option]))
+            made[name] = module
+    if not parameters:
         return {}
-    from ..files import BadFile
-    from ..multibody.loads import data_file
 
+    def stub(**kwargs):  # typer makes the click options from a signature, as for any command
+        """Method options."""
+
+    stub.__signature__ = inspect.Signature(parameters)
+    holder = typer.Typer(add_completion=False)
+    holder.command()(stub)
+    options = typer.main.get_command(holder).params
+    return {option.name: (option, made[option.name]) for option in options if option.name in made}
+
+
+def parse_count_or_auto(name: str, text):
+    """The value of a count that may be 'auto' (``--hidden``): an integer >= 1 or 'auto'."""
+    option = "--" + name.replace("_", "-")
+    if text is None or text == "auto":
+        return text
     try:
-        return {"--loads": Path(loads), "--loads (its data file)": data_file(loads)}
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
-
-
-def _model_name(names: list) -> str:
-    """The one model named by --model (default: forearm): a library name or a model file."""
-    from ..models import check_name
-
-    if len(set(names)) > 1:
-        raise BadInput(f"--model: name one model, got {', '.join(names)}")
-    name = names[0] if names else "forearm"
-    from ..models import names
-
-    try:
-        return check_name(name)
-    except ValueError as exc:
-        known = name in names() or not name or not any(c in name for c in "./")
-        message = str(exc) if str(exc).startswith("--model") else f"--model: {exc}"
-        raise BadInput(message + (" (or KEY=VALUE)" if known else "")) from None
-
-
-def _model_input(name: str) -> dict:
-    """{'--model': path} for a model file (an input the outputs must not overwrite), else {}."""
-    from ..models import is_file
-
-    return {"--model": Path(name)} if is_file(name) else {}
-
-
-def _key_values(option: str, items) -> list:
-    pairs = []
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise BadInput(f"{option}: expected KEY=VALUE (keys L12, L1G, m, I1, F_ext, g; arm2 also L01, L0G, m0, I0; "
-                           f"any model: a path such as thigh.mass, see 'fdbench models show'), got {item!r}")
-        try:
-            pairs.append((key.strip(), float(value)))
-        except ValueError:
-            raise BadInput(f"{option}: {key.strip()} must be a number, got {value!r}") from None
-    return pairs
-
-
-def _model_file(path: Path) -> list:
-    """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
-    from ..files import BadFile, parse_json, read_input_text
-
-    try:
-        text = read_input_text(path, "--model-file", 2**20)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
-    try:
-        if path.suffix.lower() == ".json":
-            data = parse_json(text)
-        else:
-            import tomllib
-
-            data = tomllib.loads(text)
-    except (ValueError, RecursionError) as exc:
-        raise BadInput(f"--model-file: cannot read {path} as {'JSON' if path.suffix.lower() == '.json' else 'TOML'}: "
-                       f"{' '.join(str(exc).split())[:200]}") from None
-    if isinstance(data, dict) and len(data) == 1 and isinstance(next(iter(data.values())), dict):
-        data = next(iter(data.values()))  # [forearm] L12 = 0.3 ...
-    if not isinstance(data, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                             for v in data.values()):
-        raise BadInput(f"--model-file: {path} must hold KEY = number pairs (the constants of the model, e.g. I1 = 0.045)")
-    return [(str(k), v if isinstance(v, float) else _float(k, v)) for k, v in data.items()]
-
-
-def _float(key, value: int) -> float:
-    """An integer of a model file as a float; one too large for a float is infinite (refused as such)."""
-    try:
-        return float(value)
-    except OverflowError:
-        return float("inf") if value > 0 else float("-inf")
-
-
-def _spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
-    """The input files of a command (for the output checks): the motion file, the model file, others."""
-    from ..models import named_motions
-
-    inputs = dict(conditions.get("_inputs", {}))
-    if kinematics not in named_motions(conditions.get("model_name", "forearm")):
-        inputs["--motion"] = Path(kinematics)
-    return {**inputs, **others}
-
-
-def _fields(conditions: dict) -> dict:
-    return {k: v for k, v in conditions.items() if not k.startswith("_")}
-
-
-def _common(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions: dict | None = None) -> dict:
-    """RunSpec fields shared by every command that simulates (a motion file enters by its digest)."""
-    fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
-                  omega=omega, **_fields(conditions or {}))
-    from ..models import named_motions
-
-    model = fields.get("model_name", "forearm")
-    if kinematics not in named_motions(model):
-        import os
-
-        from ..experiment import motion_digest
-        from ..files import BadFile
-
-        if model != "forearm" and not os.path.exists(kinematics):
-            from ..registry import unknown_name_message
-
-            raise BadInput(f"--motion: {unknown_name_message(f'{model} motion', kinematics, list(named_motions(model)))}"
-                           f", and no file {kinematics} exists")
-
-        try:
-            fields["inputs"] = (("--motion", motion_digest(kinematics)),)
-        except BadFile as exc:
-            raise BadInput(str(exc)) from None
-    from ..models import is_file
-
-    if is_file(model):
-        from ..experiment import model_digest
-        from ..files import BadFile
-
-        try:
-            fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--model", model_digest(model)),)))
-        except BadFile as exc:
-            raise BadInput(str(exc)) from None
-    if fields.get("loads") is not None:
-        from ..files import BadFile
-        from ..multibody.loads import loads_digest
-
-        try:
-            fields["inputs"] = tuple(sorted(fields.get("inputs", ()) + (("--loads", loads_digest(fields["loads"])),)))
-        except BadFile as exc:
-            raise BadInput(str(exc)) from None
-    return fields
-
-
-def _noise_seed(conditions: dict, seed: int) -> dict:
-    """The seed field of a command whose only randomness is the motion's noise (none without it)."""
-    return {"seed": seed} if conditions.get("noise_deg") else {}
+        value = int(text)
+    except ValueError:
+        raise BadInput(f"{option} must be an integer >= 1 or 'auto', got {text!r}") from None
+    if value < 1:
+        raise BadInput(f"{option} must be an integer >= 1 or 'auto', got {value}")
+    return value

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from .app import BadInput, app
-from .common import _check_outputs, _emit, _say
+from .common import check_outputs, emit, say
 from .options import Output, Quiet
 
 MAX_TILT_HELP = ("Largest angle (deg, in [0, 45]) by which a joint axis, a child frame or gravity may be off the "
@@ -23,7 +23,7 @@ def import_osim_command(
     quiet: Quiet = False,
 ):
     """Convert an OpenSim model into fdbench's model file (TOML, with the notes of the import as comments at the top): bodies, pin joints named by their coordinates, gravity, ranges as limits; welded bodies merged; muscles, markers, wrap objects, contact geometry and other forces dropped. Needs pip install 'fdbench\\[opensim]'. '--model MODEL.osim' on any command converts the model on the fly."""
-    _check_outputs("toml", ("toml",), inputs={"MODEL.osim": model}, output=output)
+    check_outputs("toml", ("toml",), inputs={"MODEL.osim": model}, output=output)
     if not 0 <= max_tilt <= 45:
         raise BadInput(f"--max-tilt: must be in [0, 45] deg, got {max_tilt:g}")
     from ..multibody.osim import import_osim, toml_text
@@ -32,11 +32,11 @@ def import_osim_command(
         found, notes = import_osim(model, max_tilt, option="MODEL.osim")
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    _emit(toml_text(found, notes, model), output)
+    emit(toml_text(found, notes, model), output)
     for note in notes:
-        _say(quiet, f"[yellow]warning:[/] {note}")
+        say(quiet, f"[yellow]warning:[/] {note}")
     if output is not None and str(output) != "-":
-        _say(quiet, f"wrote {output}")
+        say(quiet, f"wrote {output}")
 
 
 @app.command("export-osim")
@@ -46,10 +46,10 @@ def export_osim_command(
     quiet: Quiet = False,
 ):
     """Write a model as an OpenSim model file (.osim, OpenSim 4): one Body, PinJoint (its coordinate named as the joint) and CoordinateActuator per body and joint, gravity, each load a constant PrescribedForce. OpenSim's inverse dynamics of the file equals fdbench's; 'fdbench import-osim' reads it back. Needs no OpenSim, except for an .osim input."""
-    from ..multibody.description import find_model, library
+    from ..models import find_model, library
 
     # a library model's file is an input too: the output may not write over it
-    _check_outputs("osim", ("osim",), inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
+    check_outputs("osim", ("osim",), inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
     from ..multibody.osim import check_exportable, to_osim
 
     try:
@@ -57,6 +57,6 @@ def export_osim_command(
         check_exportable(found)
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    _emit(to_osim(found), output)
+    emit(to_osim(found), output)
     if output is not None and str(output) != "-":
-        _say(quiet, f"wrote {output}")
+        say(quiet, f"wrote {output}")

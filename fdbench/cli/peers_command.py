@@ -8,15 +8,16 @@ from typing import Annotated, Optional
 import typer
 
 from .app import BadInput, app
-from .common import _check_outputs, _check_store, _finish, _save_history, _store, _validated
-from .options import (Alpha, Db, Dt, Format, Kinematics, NoiseSeed, Omega, Output, Quiet, SaveHistory, Xi, _common,
-                      _noise_seed, _spec_inputs, _with_conditions)
+from .common import validated
+from .conditions import noise_seed, run_fields, spec_inputs, with_conditions
+from .options import Alpha, Dt, Kinematics, NoiseSeed, Omega, RunOutputs, Xi, with_groups
 
 PEER_OPTIONS = ("nodes", "regularization", "tolerance", "max_iter")  # moco's; kp and kd are opensim's
 
 
 @app.command()
-@_with_conditions
+@with_conditions
+@with_groups
 def peer(
     ctx: typer.Context,
     name: Annotated[str, typer.Argument(metavar="opensim|opensim-cmc|moco", help="opensim: OpenSim's forward simulation under fdbench's PD law with computed feedforward, one integrate (beside 'fdbench control'); opensim-cmc: OpenSim's CMCTool tracking the motion with the model made torque-driven (beside 'fdbench control'); moco: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation (beside 'fdbench collocate').", show_default=False)],
@@ -31,18 +32,15 @@ def peer(
     alpha: Alpha = 1e7,
     xi: Xi = 1.0,
     omega: Omega = 10.0,
-    fmt: Format = "table",
-    output: Output = None,
-    save_history: SaveHistory = None,
-    db: Db = None,
     seed: NoiseSeed = 0,
-    quiet: Quiet = False,
+    out: RunOutputs = None,
     conditions: dict = None,
 ):
     """Run one peer on fdbench's model, motion and indicators: 'fdbench peer opensim --model arm2 -f json'. OpenSim runs in a child process; needs pip install 'fdbench\\[opensim]'."""
-    from ..peers import check_available, parse_names, peer_spec
+    from ..peers import check_available, parse_names
+    from ..spec import peer_spec
 
-    _check_outputs(fmt, output=output, save_history=save_history, db=db, inputs=_spec_inputs(conditions, kinematics))
+    out.check(spec_inputs(conditions, kinematics))
     try:
         (name,) = parse_names(name, "PEER")
     except ValueError as exc:
@@ -56,19 +54,17 @@ def peer(
                        f"{', '.join('--' + k.replace('_', '-') for k in sorted(takes)) or 'none of the peer options'})")
     options = dict(nodes=nodes, regularization=regularization, tolerance=tolerance, max_iter=max_iter)
     try:
-        spec = peer_spec(name, options if name == "moco" else None, kp, kd, **_noise_seed(conditions, seed),
-                         **_common(kinematics, "rk4", dt, 1e-6, 1e-9, alpha, xi, omega, conditions))
+        spec = peer_spec(name, options if name == "moco" else None, kp, kd, **noise_seed(conditions, seed),
+                         **run_fields(kinematics, "rk4", dt, 1e-6, 1e-9, alpha, xi, omega, conditions))
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    spec = _validated(spec)
-    _check_store(db)
+    spec = validated(spec)
+    out.check_store()
     try:
         check_available()
     except ValueError as exc:
         raise BadInput(str(exc)) from None
-    from ..experiment import run
+    from ..method_runs import run
 
     outcome = run(spec)
-    _store(outcome, spec, db, quiet)  # the run is stored before any output is written
-    _save_history(outcome, save_history)
-    _finish(outcome.record, fmt, output, f"fdbench peer {name}", quiet)
+    out.deliver(outcome, spec, f"fdbench peer {name}")

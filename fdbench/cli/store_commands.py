@@ -10,8 +10,8 @@ from typing import Annotated, Optional
 import typer
 
 from .app import BadInput, SubcommandGroup, app
-from .common import _check_outputs, _emit, _render, _say
-from .options import Output
+from .common import check_outputs, emit, render, say
+from .options import Output, format_option
 
 
 runs_app = typer.Typer(
@@ -32,10 +32,6 @@ Torque = Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help=
 Opt = Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
 Controller = Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]
 Status = Annotated[Optional[str], typer.Option("--status", metavar="NAME", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)]
-
-
-def _format(choices, help_text: str):
-    return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
 
 
 def _filters(command, model, torque, opt, controller, status) -> dict:
@@ -89,14 +85,14 @@ def _cell(column: str, value) -> str:
     return _number(value)
 
 
-def _table(title: str, rows: list[dict], columns, headings=HEADINGS) -> str:
+def text_table(title: str, rows: list[dict], columns, headings=HEADINGS) -> str:
     """A person's table of ``rows`` as text, as wide as the terminal (off a terminal: $COLUMNS or
     80 columns): its words wrap within their columns (one longer than LONG_WORD is folded); a
     number is never cut, so a table that cannot fit is as wide as its numbers need."""
     from rich import box
     from rich.table import Table
 
-    from .common import _text_console
+    from .common import text_console
 
     titles = [headings.get(c, c) for c in columns]
     cells = [[_cell(c, row.get(c)) for c in columns] for row in rows]
@@ -111,7 +107,7 @@ def _table(title: str, rows: list[dict], columns, headings=HEADINGS) -> str:
         table.add_column(heading, overflow="fold")  # a word longer than LONG_WORD (a path) is folded
     for row in cells:
         table.add_row(*row)
-    console = _text_console()
+    console = text_console()
     target, console.width = console.width, 10_000  # measured without a bound
     room = target - (console.measure(table).maximum - sum(widest))  # less padding and rules
     for column, width in zip(table.columns, _fit(widest, narrowest, room)):
@@ -148,7 +144,7 @@ def _is_number(text: str) -> bool:
 def _wrote(output: Optional[Path], what: str) -> None:
     """One line on stderr once an output file is written, as every command says."""
     if output is not None and str(output) != "-":
-        _say(False, f"wrote {output} ({what})")
+        say(False, f"wrote {output} ({what})")
 
 
 def _csv(rows: list[dict], columns) -> str:
@@ -166,14 +162,14 @@ def list_runs(
     opt: Opt = None,
     controller: Controller = None,
     status: Status = None,
-    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per stored run: id, date, command, model, method, seed, the three indicators, t_end and status."""
     from ..store_queries import LIST_COLUMNS, list_row
 
     path, label = _database(db)
-    _check_outputs(fmt, LIST_FORMATS, db=path, output=output)
+    check_outputs(fmt, LIST_FORMATS, db=path, output=output)
     runs = _select(_read(path, label), _filters(command, model, torque, opt, controller, status))
     rows = [list_row(run) for run in runs]
     if fmt == "json":
@@ -181,8 +177,8 @@ def list_runs(
     elif fmt == "csv":
         text = _csv(rows, LIST_COLUMNS)
     else:
-        text = _table(f"{len(rows)} runs in {path}", rows, LIST_COLUMNS)
-    _emit(text, output)
+        text = text_table(f"{len(rows)} runs in {path}", rows, LIST_COLUMNS)
+    emit(text, output)
     _wrote(output, f"{len(rows)} runs")
 
 
@@ -190,7 +186,7 @@ def list_runs(
 def show_run(
     run: Annotated[str, typer.Argument(metavar="ID", help="The run's id (from 'fdbench runs list') or its settings hash.", show_default=False)],
     db: ReadDb = None,
-    fmt: Annotated[str, _format(SHOW_FORMATS, "Output: table (for a person) or json (with the convergence history and the best parameters).")] = "table",
+    fmt: Annotated[str, format_option(SHOW_FORMATS, "Output: table (for a person) or json (with the convergence history and the best parameters).")] = "table",
     output: Output = None,
 ):
     """Everything stored about one run: its record, its settings and where, when and by what it was made."""
@@ -198,7 +194,7 @@ def show_run(
     from ..store_queries import BadQuery, find_run, read_run_data, show
 
     path, label = _database(db)
-    _check_outputs(fmt, SHOW_FORMATS, db=path, output=output)
+    check_outputs(fmt, SHOW_FORMATS, db=path, output=output)
     damaged = {}
     runs = _read(path, label, superseded=True, damaged=damaged)  # an id a report cites may have been replaced since
     if run.strip() in {str(key) for key in damaged}:
@@ -211,7 +207,7 @@ def show_run(
     except StoreError as exc:
         raise BadInput(f"{label}: {exc}") from None
     shown = show(found, history, params)
-    _emit(json.dumps(shown, indent=2) + "\n" if fmt == "json" else _show_text(shown), output)
+    emit(json.dumps(shown, indent=2) + "\n" if fmt == "json" else _show_text(shown), output)
     _wrote(output, f"run {shown['id']}")
 
 
@@ -226,8 +222,8 @@ def _show_text(shown: dict) -> str:
                                      f"-> {history[-1]:.6g} deg")
     settings = {k: (json.dumps(v) if isinstance(v, (list, dict)) else v) for k, v in shown["settings"].items()}
     title = f"run {shown['id']}: {shown['method']}" + (" (replaced by a later --rerun)" if shown["superseded"] else "")
-    return (_render(shown["record"], "table", f"{title}, record") + _render(settings, "table", "settings")
-            + _render(provenance, "table", "provenance"))
+    return (render(shown["record"], "table", f"{title}, record") + render(settings, "table", "settings")
+            + render(provenance, "table", "provenance"))
 
 
 @runs_app.command("export")
@@ -239,12 +235,12 @@ def export_runs(
     opt: Opt = None,
     controller: Controller = None,
     status: Status = None,
-    fmt: Annotated[str, _format(EXPORT_FORMATS, "csv, json, or parquet (needs pyarrow or fastparquet, and -o).")] = "csv",
+    fmt: Annotated[str, format_option(EXPORT_FORMATS, "csv, json, or parquet (needs pyarrow or fastparquet, and -o).")] = "csv",
     output: Output = None,
 ):
     """Every field of the stored records, one row per run, with its provenance and settings: for pandas, R or a spreadsheet."""
     path, label = _database(db)
-    _check_outputs(fmt, EXPORT_FORMATS, db=path, output=output)
+    check_outputs(fmt, EXPORT_FORMATS, db=path, output=output)
     if fmt == "parquet":
         _check_parquet(output)
     runs = _select(_read(path, label), _filters(command, model, torque, opt, controller, status))
@@ -256,9 +252,9 @@ def export_runs(
 
         write_atomic(output, _parquet_bytes(rows))
     elif fmt == "json":
-        _emit(json.dumps(rows, indent=2) + "\n", output)
+        emit(json.dumps(rows, indent=2) + "\n", output)
     else:
-        _emit(_csv(rows, list(dict.fromkeys(k for row in rows for k in row))), output)
+        emit(_csv(rows, list(dict.fromkeys(k for row in rows for k in row))), output)
     _wrote(output, f"{len(rows)} runs")
 
 
@@ -302,7 +298,7 @@ def compare_runs(
     opt: Opt = None,
     controller: Controller = None,
     status: Status = None,
-    fmt: Annotated[str, _format(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """The same cells of two databases side by side: per cell, the median RMSE_rot, RMSE_torque and runtime in A and in B and the ratio B/A.
@@ -311,7 +307,7 @@ def compare_runs(
     from ..files import BadFile, check_distinct
     from ..store_queries import COMPARE_COLUMNS, compare
 
-    _check_outputs(fmt, LIST_FORMATS, db=database_a, output=output)
+    check_outputs(fmt, LIST_FORMATS, db=database_a, output=output)
     try:
         check_distinct({"--output": output} if output is not None and str(output) != "-" else {}, None, database_b)
     except BadFile as exc:
@@ -320,11 +316,11 @@ def compare_runs(
     filters = _filters(command, model, torque, opt, controller, status)
     rows = compare(_select(runs_a, filters, runs_a + runs_b), _select(runs_b, filters, runs_a + runs_b))
     if fmt == "json":
-        _emit(json.dumps({"a": str(database_a), "b": str(database_b), "cells": rows}, indent=2) + "\n", output)
+        emit(json.dumps({"a": str(database_a), "b": str(database_b), "cells": rows}, indent=2) + "\n", output)
     elif fmt == "csv":
-        _emit(_csv(rows, COMPARE_COLUMNS), output)
+        emit(_csv(rows, COMPARE_COLUMNS), output)
     else:
-        _emit(_table(f"A = {database_a}, B = {database_b}", [_side_by_side(row) for row in rows],
+        emit(text_table(f"A = {database_a}, B = {database_b}", [_side_by_side(row) for row in rows],
                      ("method", "conditions", "found", "runs", *INDICATOR_HEADINGS.values())), output)
     _wrote(output, f"{len(rows)} cells")
 

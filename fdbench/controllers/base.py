@@ -27,7 +27,7 @@ from ..registry import Registry
 class Plan:
     """What a controller designs from: ``engine``, the nominal model's engine
     (``multibody.engine.Engine``: inverse dynamics, M(z), h); ``model``, its description
-    (``multibody.description.Model``); ``motion``, the desired motion of its J joints
+    (``multibody.model.Model``); ``motion``, the desired motion of its J joints
     (``multibody.motions.JointMotion``)."""
 
     engine: object
@@ -41,7 +41,7 @@ class Plan:
     def feedforward(self):
         """The nominal model's inverse-dynamics torques on the desired motion, a torque function
         t (s), shape (k,) -> (k, J) N m."""
-        from ..multibody.simulation import feedforward
+        from ..multibody.simulation import feedforward  # lazy: numba off the CLI's start-up
 
         return feedforward(self.engine, self.motion)
 
@@ -71,13 +71,15 @@ class Controller(ABC):
 
     name: str = ""
     summary: str = ""
+    # the options offered as flags of their own (--kp): {option: fdbench.method_options.MethodOption}
+    command_line: dict = {}
 
     @abstractmethod
     def design(self, plan: Plan) -> Design:
         """The feedforward torques and the feedback law towards ``plan.motion``."""
 
     def check_model(self, model) -> None:
-        """ValueError (one line) for a model (``multibody.description.Model``) whose design would
+        """ValueError (one line) for a model (``multibody.model.Model``) whose design would
         take more time or memory than a run is allowed; checked before any work."""
 
     def warm_up(self, plan: Plan) -> None:

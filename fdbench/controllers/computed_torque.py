@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..method_options import MethodOption
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative
 
 
@@ -14,6 +15,11 @@ class ComputedTorque(Controller):
     name = "computed-torque"
     summary = ("cancels the model's dynamics and imposes second-order error dynamics of bandwidth omega_n "
                "(feedback linearisation, as in OpenSim's computed muscle control and Drake's InverseDynamicsController)")
+
+    command_line = {
+        "bandwidth": MethodOption("error-dynamics natural frequency omega_n, rad/s.", default=20.0),
+        "damping": MethodOption("error-dynamics damping ratio zeta.", default=1.0),
+    }
 
     def __init__(self, bandwidth: float = 20.0, damping: float = 1.0):
         self.bandwidth = check_non_negative("--bandwidth", bandwidth)  # omega_n, rad/s

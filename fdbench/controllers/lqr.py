@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+from ..method_options import MethodOption
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive
+from ..multibody.lqr import lqr_gains, warm_up
 
 # The Riccati equation of J coordinates has 4 J^2 states and its CasADi expressions grow as J^3.
 # `fdbench control --controller lqr` on a chain of J forearms (tests/test_big_models.py's) took
@@ -27,6 +29,13 @@ class LQR(Controller):
                "Riccati equation integrated backwards along it (as Drake's FiniteHorizonLinearQuadraticRegulator "
                "and python-control's lqr)")
 
+    command_line = {
+        "q_angle": MethodOption("weight of the squared angle error, rad^-2 (1e4: 0.01 rad costs as much as 1 N m).",
+                                default=1e4),
+        "q_rate": MethodOption("weight of the squared rate error, s^2 rad^-2.", default=1.0),
+        "r_torque": MethodOption("weight of the squared torque correction, (N m)^-2; positive.", default=1.0),
+    }
+
     def __init__(self, q_angle: float = 1e4, q_rate: float = 1.0, r_torque: float = 1.0):
         self.q_angle = check_positive("--q-angle", q_angle)  # rad^-2
         self.q_rate = check_non_negative("--q-rate", q_rate)  # s^2 rad^-2
@@ -41,12 +50,8 @@ class LQR(Controller):
                              "computed-torque")
 
     def warm_up(self, plan: Plan) -> None:
-        from ..multibody.lqr import warm_up
-
         warm_up(plan.model)
 
     def design(self, plan: Plan) -> Design:
-        from ..multibody.lqr import lqr_gains
-
         gains = lqr_gains(plan.model, plan.motion, self.q_angle, self.q_rate, self.r_torque)
         return Design(plan.feedforward(), gains=gains)

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..spec import PAPER_KD, PAPER_KP
+from ..method_options import MethodOption
 from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, per_joint
 
+PAPER_KP, PAPER_KD = 80.0, 0.3  # N m/rad, N m s/rad: the paper's PD gains for the forearm (its defaults)
 REFERENCE_INERTIA = 0.04  # kg m^2: the paper's forearm about the elbow, for which Kp 80 and Kd 0.3 were tuned
 
 
@@ -30,6 +31,13 @@ class PD(Controller):
     name = "pd"
     summary = ("the inverse-dynamics torque plus constant PD feedback per joint (the paper's eqs. 13-14; Drake's "
                "PidController with an inverse-dynamics feedforward)")
+
+    command_line = {
+        "kp": MethodOption("proportional gain, N m/rad, on every joint (default: the paper's 80 on the forearm; on another "
+                           "model 80 per 0.04 kg m^2 of each joint's inertia).", show_default=False),
+        "kd": MethodOption("derivative gain, N m s/rad, on every joint (default: the paper's 0.3 on the forearm; on another "
+                           "model 0.3 per 0.04 kg m^2 of each joint's inertia).", show_default=False),
+    }
 
     def __init__(self, kp: float | None = None, kd: float | None = None):
         self.kp = None if kp is None else check_non_negative("--kp", kp)  # N m/rad

@@ -1,11 +1,12 @@
-"""The models fdbench simulates, by name or file, all on the multibody engine (``fdbench.multibody``).
+"""The models fdbench simulates, by name or file, all on the multibody engine (``fdbench.multibody``),
+and the one dispatcher from a name or a file's suffix to its ``Model`` (``find_model``):
 
 * The library (``library/*.toml``): ``forearm`` (Table 1's 1-DOF forearm, the paper's model and the
-  default; its motions are eq. 5's ``paper`` and ``exact``, which serve any one-joint model),
-  ``arm2``, ``leg3``; and any model file (TOML or JSON, ``fdbench.multibody.description``), with the
-  motions the file declares (or a CSV file) and its short keys (``[keys]``) or paths into the
-  description for ``--model``/``--plant KEY=VALUE``.
-* An OpenSim model file (``.osim``): converted on the fly by ``fdbench.multibody.osim`` (cached by
+  default; its named motions are eq. 5's ``paper`` and ``exact``), ``arm2``, ``leg3``;
+* any model file, TOML or JSON (``fdbench.multibody.model_files``), with the motions the file
+  declares (or a CSV file) and its short keys (``[keys]``) or paths into the model for
+  ``--model``/``--plant KEY=VALUE`` (``fdbench.multibody.model_changes``);
+* an OpenSim model file (``.osim``): converted on the fly by ``fdbench.multibody.osim`` (cached by
   content), its notes given by ``import_notes``.
 """
 
@@ -13,15 +14,43 @@ from __future__ import annotations
 
 import os
 from functools import lru_cache
+from pathlib import Path
+
+from ..files import read_input_bytes
+from ..multibody.model import Model, ModelError
+from ..multibody.model_changes import change_paths, path_value, short_key_values, with_short_keys
+from ..multibody.model_files import load_model
+from ..multibody.osim import import_osim, import_osim_content
+from ..registry import unknown_name_message
 
 PAPER = "forearm"
 SUFFIXES = (".toml", ".json", ".osim")
+LIBRARY = Path(__file__).resolve().parent / "library"
+
+
+def library() -> dict[str, Path]:
+    """The built-in models: name -> its TOML file, sorted by name."""
+    return {path.stem: path for path in sorted(LIBRARY.glob("*.toml"))}
+
+
+def find_model(name_or_path, option: str = "model file") -> Model:
+    """A library model by name, or the model of a file by its suffix: OpenSim's .osim
+    (``fdbench.multibody.osim``), otherwise TOML or JSON (``model_files.load_model``). ModelError
+    (listing the library's names) for a name that is neither."""
+    text = str(name_or_path)
+    models = library()
+    if text in models:
+        return load_model(models[text], option)
+    if text and (Path(text).exists() or "/" in text or Path(text).suffix.lower() in SUFFIXES):
+        if Path(text).suffix.lower() == ".osim":
+            return import_osim(text, option=option)[0]
+        return load_model(text, option)
+    raise ModelError(option, "", unknown_name_message("model", text, list(models))
+                     + "; or give a model file (.toml, .json or OpenSim's .osim)")
 
 
 def names() -> list[str]:
     """The models known by name: the paper's forearm, then the library's other models."""
-    from ..multibody.description import library
-
     return [PAPER] + [name for name in library() if name != PAPER]
 
 
@@ -37,20 +66,14 @@ def check_name(name: str) -> str:
     if name and (os.path.exists(name) or name.lower().endswith(SUFFIXES) or "/" in name):
         description(name)  # a ModelError (a ValueError) names the file, the key and what is allowed
         return name
-    from ..registry import unknown_name_message
-
     raise ValueError(unknown_name_message("model", name, names()) + "; or give a model file (.toml, .json or .osim)")
 
 
 def description(name: str):
-    """The ``fdbench.multibody.description.Model`` of a library name or model file (a file is read
+    """The ``fdbench.multibody.model.Model`` of a library name or model file (a file is read
     again when its content changed). The forearm's is the library's forearm.toml."""
-    from ..multibody.description import library
-
     if name in library():
         return _described(name, None)
-    from ..files import read_input_bytes
-
     return _described(name, read_input_bytes(name, "--model"))
 
 
@@ -58,8 +81,6 @@ def description(name: str):
 def _described(name: str, content: bytes | None):
     if content is not None and is_osim(name):
         return _imported(name, content)[0]
-    from ..multibody.description import find_model
-
     return find_model(name, "--model")
 
 
@@ -73,16 +94,12 @@ def import_notes(name: str) -> tuple[str, ...]:
     each), none for other models."""
     if not is_osim(name):
         return ()
-    from ..files import read_input_bytes
-
     return _imported(name, read_input_bytes(name, "--model"))[1]
 
 
 @lru_cache(maxsize=8)
 def _imported(name: str, content: bytes):
     """(Model, notes) of an OpenSim model file's content (``name`` names it in messages)."""
-    from ..multibody.osim import import_osim_content
-
     return import_osim_content(content, name)
 
 
@@ -102,11 +119,7 @@ def n_joints(name: str) -> int:
 
 def named_motions(name: str) -> tuple:
     """The motions model ``name`` knows by name, its default first (any other is a CSV file)."""
-    from ..motion import KINEMATICS
-
-    model = description(name)
-    own = tuple(motion.name for motion in model.motions)
-    return own + (tuple(KINEMATICS) if len(model.coordinates) == 1 else ())  # eq. 5's serve any one joint
+    return tuple(motion.name for motion in description(name).motions)
 
 
 def default_motion(name: str) -> str:
@@ -120,8 +133,6 @@ def default_motion(name: str) -> str:
 
 def model_keys(name: str) -> tuple:
     """The constants of model ``name`` that --model and --plant KEY=VALUE may change."""
-    from ..multibody.description import change_paths
-
     model = description(name)
     return tuple(name for name, _ in model.keys) + tuple(change_paths(model))
 
@@ -129,15 +140,11 @@ def model_keys(name: str) -> tuple:
 def with_changes(name: str, pairs=()):
     """The description (``Model``) of model ``name`` with some constants changed ((key, value) pairs of
     short keys or paths); ValueError if out of range."""
-    from ..multibody.description import with_short_keys
-
     return with_short_keys(description(name), tuple(pairs))
 
 
 def value_of(name: str, model, key: str) -> float:
     """The value of constant ``key`` (a short key or a path) in ``model`` (from ``with_changes``)."""
-    from ..multibody.description import path_value, short_key_values
-
     values = short_key_values(model)
     return values[key] if key in values else path_value(model, key)
 

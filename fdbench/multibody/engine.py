@@ -46,7 +46,7 @@ take one data layout (``Engine.layout``, named tuples of arrays of fdbench.multi
 once per Engine), so they are compiled once and cached for every model of a kind. Strict IEEE
 arithmetic.
 
-Free and path joints (``fdbench.multibody.description``). A free joint's body has its joint point
+Free and path joints (``fdbench.multibody.model``). A free joint's body has its joint point
 among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
 joint with a path gives its child a joint point of its own, held on the path by two constraints
 that involve both bodies' angles. M(z) (numpy) takes both through the joints' velocity transform.
@@ -71,7 +71,7 @@ from dataclasses import dataclass
 import numpy as np
 
 
-from .description import Model, resolved_end
+from .model import Model, resolved_end
 from . import kernels
 from .layout import (ALPHA, AT_CHILD_X, AT_CHILD_Y, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA_F as BETA, COLUMN,
                      COMPUTED, FIXED, FIXED_X, FIXED_Y, FREE, GAINS, KI, KJ, L_11, L_12, L_21, L_22, LENGTH, N_BODY_FLOAT,

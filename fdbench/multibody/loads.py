@@ -17,7 +17,7 @@ Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F +
 (d_m: the direction of a path joint's point per radian) and F on a free joint's x and y, i.e.
 J_P(z)^T F with P taken as the body's material point at that instant (``generalized_forces``).
 In the mixed coordinates of eq. 12 the same load is F on the body's joint point i and the moment
-(P - r_i) x F + M on its angle (``fdbench.multibody.kernels_general``).
+(P - r_i) x F + M on its angle (``fdbench.multibody.kernels``).
 """
 
 from __future__ import annotations
@@ -29,7 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import quoted, shown
+from ..files import BadFile, quoted, read_input_bytes, shown
+from ..registry import unknown_name_message
+from .model import MAX_MAGNITUDE
+from .osim import read_storage
 
 GROUND = "ground"
 MAX_LOADS = 100
@@ -61,7 +64,6 @@ class ExternalLoads:
             raise ValueError(f"loads: force and point must have shape ({n}, {L}, 2) and moment ({n}, {L})")
         if n < 2 or not np.all(np.diff(self.t) > 0):
             raise ValueError(f"{source}: the loads' times must be at least two and increasing")
-        from .description import MAX_MAGNITUDE
 
         for name, unit, values in (("force", "N", self.force), ("point", "m", self.point), ("moment", "N m", self.moment)):
             bad = ~(np.abs(values) <= MAX_MAGNITUDE)  # NaN included
@@ -142,8 +144,6 @@ def generalized_forces(engine, loads: ExternalLoads, z, t) -> np.ndarray:
 
 # ---------------------------------------------------------------------- reading OpenSim's ExternalLoads
 def _fail(option: str, path, problem: str):
-    from ..files import BadFile
-
     raise BadFile(f"{option}: {path}: {problem}")
 
 
@@ -158,8 +158,6 @@ def _text(element, tag: str, default: str = "", collapse: bool = True) -> str:
 
 def _root_and_datafile(path: Path, option: str):
     """(the <ExternalLoads> element, the path of its data file)."""
-    from ..files import read_input_bytes
-
     try:
         root = ElementTree.fromstring(read_input_bytes(path, option))
     except ElementTree.ParseError as exc:
@@ -185,8 +183,6 @@ def loads_digest(path, option: str = "--loads") -> str:
     """SHA-256 of an external loads file's content and of its data file's (a run's identity)."""
     import hashlib
 
-    from ..files import read_input_bytes
-
     path = Path(path)
     _, data_path = _root_and_datafile(path, option)
     digest = hashlib.sha256(read_input_bytes(path, option))
@@ -202,8 +198,6 @@ def data_file(path, option: str = "--loads") -> Path:
 def read_external_loads(path, model, option: str = "--loads") -> ExternalLoads:
     """The loads of an OpenSim ExternalLoads file (XML) and the storage file it names, on ``model``
     (a ``Model``: bodies and welded frames resolved to its bodies). files.BadFile in one line."""
-    from .osim import read_storage
-
     path = Path(path)
     element, data_path = _root_and_datafile(path, option)
     forces = [f for f in element.iter("ExternalForce") if _text(f, "isDisabled", "false").lower() != "true"]
@@ -247,8 +241,6 @@ def _external_force(force, model, option: str, path) -> tuple[ExternalLoad, dict
             try:
                 model.frame(frame)
             except KeyError:
-                from ..registry import unknown_name_message
-
                 known = [b.name for b in model.bodies] + [f.name for f in model.frames]
                 _fail(option, path, f"ExternalForce {quoted(name)}: {what}: "
                                     + unknown_name_message("body", shown(frame), known + ([GROUND] if what != "applied_to_body" else [])))

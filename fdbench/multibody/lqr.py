@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .description import Model
+from .model import Model
 from .symbolic import MinimalDynamics, riccati_input_size
 
 

@@ -60,7 +60,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files import quoted, shown
+from .. import __version__
+from ..files import BadFile, quoted, read_input_bytes, read_input_text, shown
+from ..isolation import python_command
+from .model import GROUND, MIN_SEGMENT, ModelError, model_from_dict, to_dict
+from .model_files import to_toml
+from .spline import fit
 
 INSTALL_HINT = "pip install 'fdbench[opensim]'"
 MAX_OSIM_BYTES = 64 * 2**20
@@ -74,8 +79,6 @@ CHILD_TIMEOUT_S = 300  # s: OpenSim's import of one model (its start-up included
 
 
 def _fail(source: str, problem: str):
-    from .description import ModelError
-
     raise ModelError(source, "", problem)
 
 
@@ -87,8 +90,6 @@ def import_osim(path, max_tilt_deg: float = 5.0, option: str = "--model"):
     the import (what was dropped, welded or projected; one line each). ``max_tilt_deg``: the
     largest angle (deg) by which a joint axis may be off the plane's normal. ModelError or
     files.BadFile (ValueErrors, one line naming the file) when the model cannot be imported."""
-    from ..files import read_input_bytes
-
     source = str(path)
     content = read_input_bytes(path, option, MAX_OSIM_BYTES)
     return import_osim_content(content, source, max_tilt_deg)
@@ -103,9 +104,6 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
     import json
     import subprocess
     import tempfile
-
-    from ..isolation import python_command
-    from .description import ModelError, model_from_dict
 
     _model_element(content, source)  # a file that is not an OpenSim model is refused before a process starts
     import importlib.util
@@ -134,8 +132,6 @@ def _child() -> None:
     import io
     import json
     import sys
-
-    from .description import ModelError, to_dict
 
     request = json.loads(sys.stdin.read())
     content, source = base64.b64decode(request["content"]), request["source"]
@@ -196,8 +192,6 @@ def _built(osim, content: bytes, source: str):
 
 
 def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
-    from .description import GROUND, model_from_dict
-
     _refuse_constraints(model, source)
     joints = _joints_by_child(model, source)
     kept, welded, tilts, refused = [], [], [], []
@@ -267,8 +261,6 @@ def _joints_by_child(model, source: str) -> dict:
 
 def _tree_order(joints: dict, source: str) -> list:
     """The joints, each after the joint of its parent body (file order among those ready)."""
-    from .description import GROUND
-
     order, placed = [], {GROUND}
     pending = list(joints.values())
     while pending:
@@ -487,8 +479,6 @@ def _planar_path(varying: list, name: str) -> dict:
 
 def _check_path(model, state, joint, coordinate, X_hF, at_parent, path) -> None:
     """The child's point from at_parent + path against OpenSim's at PATH_CHECKS values."""
-    from .spline import fit
-
     try:
         x_of, y_of = fit(path["angles"], path["x"]), fit(path.get("y_angles", path["angles"]), path["y"])
     except ValueError:
@@ -631,8 +621,6 @@ def _body(name: str, parts: list) -> dict:
 def _with_ends(bodies: list, joints: list) -> list:
     """The bodies, with an explicit ``end`` where the default one (the first child joint's point)
     would be within 1 mm of the body's joint point: then the centre of mass, or 0.1 m along x."""
-    from .description import MIN_SEGMENT
-
     for body in bodies:
         own = next(j for j in joints if j["child"] == body["name"])
         first = next((j for j in joints if j["parent"] == body["name"]), None)
@@ -747,8 +735,6 @@ def read_storage(path, option: str, joints) -> tuple[dict, bool, list]:
     coordinate (or a state's path, ``/jointset/<joint>/<coordinate>/value``). Returns ({'t' and
     each of ``joints`` (lower case) present: arrays}, in_degrees, labels of the columns not used).
     Raises files.BadFile in one line."""
-    from ..files import BadFile, read_input_text
-
     path = Path(path)
     lines = read_input_text(path, option).splitlines()
     end = next((i for i, line in enumerate(lines) if line.strip().lower() == "endheader"), None)
@@ -796,8 +782,6 @@ def _column_name(label: str) -> str:
 def storage_note(path, joints) -> str:
     """One line naming the columns of an OpenSim storage file that are not the model's coordinates
     (ignored), or '' (also for a file that cannot be read: its error comes when it is used)."""
-    from ..files import BadFile
-
     if not is_storage(path):
         return ""
     try:
@@ -809,9 +793,6 @@ def storage_note(path, joints) -> str:
 
 def toml_text(model, notes, source) -> str:
     """The imported model as a model file: a header of comments (the source, the notes) and the TOML."""
-    from .. import __version__
-    from .description import to_toml
-
     header = [f"# Imported from the OpenSim model {Path(str(source)).name} by fdbench {__version__} import-osim.",
               "# SI units, angles in radians; world axes x forward, y up; joints named by OpenSim's coordinates."]
     header += [f"# note: {note}" for note in notes]
@@ -826,8 +807,6 @@ DEFAULT_RANGE = (-math.pi, math.pi)  # rad: a coordinate's range in the file whe
 
 def check_exportable(model) -> None:
     """ModelError (one line) for a model ``to_osim`` cannot write yet: one with free or path joints."""
-    from .description import ModelError
-
     odd = [j.name for j in model.joints if j.type == "free" or j.path is not None]
     if odd:
         raise ModelError(model.name, "", f"joints {', '.join(odd)} are free or on a path: export-osim writes pin "
@@ -842,8 +821,6 @@ def to_osim(model) -> str:
     ``at_child``, and a ``CoordinateActuator`` ``<joint>_actuator`` (optimal force 1 N m); per load
     a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body).
     Pin joints only (``check_exportable``)."""
-    from .. import __version__
-
     check_exportable(model)
 
     credits = _text(f"written by fdbench {__version__} export-osim from the model {model.name}"
@@ -871,8 +848,6 @@ def _numbers(*values) -> str:
 
 
 def _frame_path(body: str) -> str:
-    from .description import GROUND
-
     return "/ground" if body == GROUND else f"/bodyset/{body}"
 
 

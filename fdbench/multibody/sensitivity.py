@@ -38,8 +38,8 @@ __all__ = ["rk4_sensitivity", "warm_up"]
 def warm_up() -> None:
     """Load (or compile) the sensitivity kernel on a small library model, so that later timings
     exclude it."""
-    from ..execution import compiling
-    from .description import find_model
+    from ..compile_guard import compiling
+    from ..models import find_model
     from .engine import Engine
 
     engine = Engine(find_model("forearm"))

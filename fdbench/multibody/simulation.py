@@ -367,42 +367,39 @@ class _Still:
         return zero, zero, zero
 
 
-def warm_up(adaptive: bool = False, dense: bool = False, engine: Engine | None = None) -> None:
-    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population) on a small
-    library model of pin joints, and on ``engine`` where it is another kind (free or path joints,
-    loads: ``kernels`` compiles one variant per kind; ``dense``: the forearm with a zero load), and
-    with ``adaptive`` the adaptive integrators' right-hand side and scipy's integrators, so that
-    later timings exclude it."""
-    from ..execution import compiling
+def warm_up(adaptive: bool = False, engines=()) -> list:
+    """Load (or compile) the engine's kernels (RK4, inverse dynamics) on a small library model of
+    pin joints, and on each of ``engines`` of another kind (free or path joints, loads: the kernels
+    compile one variant per kind), and with ``adaptive`` the adaptive integrators' right-hand side
+    and scipy's integrators, so that later timings exclude it. Returns the engines warmed, one per
+    kind (the shooting problem warms its population kernel on them: ``fdbench.tracking.warm_up``)."""
+    from ..compile_guard import compiling
 
     with compiling():  # Ctrl-C while a kernel compiles ends the command at once
-        _warm_up(adaptive, dense, engine)
+        return _warm_up(adaptive, engines)
 
 
-def _warm_up(adaptive: bool, dense: bool, other: Engine | None) -> None:
-    from ..population import Population
-    from ..tracking import rk4_candidates  # the shooting problem's population kernel
-    from .description import find_model
-    from .loads import ExternalLoad, ExternalLoads
+def kind(engine: Engine) -> tuple:
+    """The variant of the kernels an engine's model takes: which of paths, free joints and loads it has."""
+    return engine.paths is None, engine.free is None, engine.loads is None
 
-    model = find_model("forearm")
-    engines = [Engine(model)]
-    if other is not None and not other.banded:
-        engines.append(other)
-    elif dense:
-        zero_load = ExternalLoads((ExternalLoad("none", model.joints[0].child),), [0.0, 1.0], np.zeros((2, 1, 2)),
-                                  np.zeros((2, 1, 2)), np.zeros((2, 1)))
-        engines.append(Engine(model, loads=zero_load))
-    for engine in engines:  # the banded kernels, then the dense ones
+
+def _warm_up(adaptive: bool, others) -> list:
+    from ..models import find_model
+
+    warmed = {}
+    for engine in (Engine(find_model("forearm")), *others):  # the banded kernels, then the others
+        if kind(engine) in warmed:
+            continue
+        warmed[kind(engine)] = engine
         motion = _Still(engine.joints)
         J = engine.n_joints
         simulate(None, engine, motion, dt=0.05)
         engine.inverse_torques(np.zeros(J), np.zeros(J), np.zeros(J), 0.0)
-        y0, rows = engine.state_from_joints(np.zeros(J), np.zeros(J)), np.zeros((5, J))
-        Population(rk4_candidates, 2, engine.population_widths)(
-            2, engine.population_args(y0, 0.05, 2, np.zeros((2, 5, J)), rows, rows, 1, np.zeros((3, J)), 1.0))
         if adaptive:
             import scipy.integrate  # noqa: F401
             import scipy.optimize  # noqa: F401
 
+            y0 = engine.state_from_joints(np.zeros(J), np.zeros(J))
             _rates(None, engine, motion, _law(engine, 0.0, 0.0, False, None, None), np.zeros(1), y0[None])
+    return list(warmed.values())

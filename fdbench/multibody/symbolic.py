@@ -45,7 +45,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .description import GROUND, Model
+from .model import GROUND, Model
 
 
 def _rotate(ca, angle, local):

@@ -110,6 +110,8 @@ class Optimizer(ABC):
     name: str = ""
     summary: str = ""
     uses_gradient: bool = False  # True: run() uses f.value_and_gradient when f.gradient is given
+    # the options offered as flags of their own (--sigma0): {option: fdbench.method_options.MethodOption}
+    command_line: dict = {}
 
     @abstractmethod
     def run(self, f: Budgeted, x0: np.ndarray, seed: int) -> str:

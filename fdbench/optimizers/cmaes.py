@@ -7,6 +7,7 @@ import threading
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import OPTIMIZERS, Budgeted, Optimizer
 
 MAX_POPSIZE = 10_000  # candidates per generation: more than any budget here can feed
@@ -39,6 +40,13 @@ def _interruptible(call, *args):
 class CMAES(Optimizer):
     name = "cmaes"
     summary = "CMA-ES evolution strategy (cma package); --sigma0 initial step, --popsize population"
+
+    command_line = {
+        "sigma0": MethodOption("initial step size, in scaled parameter units (default: per torque, cs 0.05, ann 0.2, "
+                               "pf 0.03).", show_default=False),
+        "popsize": MethodOption("population size, in [2, 10000] (default: per torque, cs and ann 8, pf cma's 4 + 3 ln "
+                                "n).", int),
+    }
 
     def __init__(self, sigma0: float = 0.1, popsize: int | None = None):
         if not (math.isfinite(sigma0) and sigma0 > 0):

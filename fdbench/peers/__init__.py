@@ -18,7 +18,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from ..collocation import check_options
+from ..controllers.pd import PD
 from ..registry import unknown_name_message
+from .child import opensim_version
+from .cmc import SUMMARY as CMC
+from .moco import DEFAULT_TOLERANCE
+from .moco import SUMMARY as MOCO
+from .opensim_pd import SUMMARY as OPENSIM
 
 
 @dataclass(frozen=True)
@@ -40,11 +47,6 @@ class Peer:
 
 
 def _peers() -> dict:
-    from .moco import DEFAULT_TOLERANCE
-    from .moco import SUMMARY as MOCO
-    from .cmc import SUMMARY as CMC
-    from .opensim_pd import SUMMARY as OPENSIM
-
     return {
         "opensim": Peer("opensim", "OpenSim forward simulation, PD + feedforward", OPENSIM, {},
                         "fdbench.peers.opensim_pd"),
@@ -76,24 +78,6 @@ def parse_names(text: str, option: str = "--peers") -> list[str]:
     return list(dict.fromkeys(names))
 
 
-def peer_spec(name: str, options: dict | None = None, kp=None, kd=None, **common):
-    """A peer run's spec on the settings ``common`` (as ``control_spec``'s): command "peer", its
-    name and options (the peer's defaults where not given) in ``method_options``; the opensim
-    peer's PD gains are ``control``'s (the forearm's 80 and 0.3, else scaled per joint)."""
-    from ..spec import PAPER_KD, PAPER_KP, RunSpec
-
-    found = peer(name)
-    unknown = sorted(set(options or {}) - set(found.defaults))
-    if unknown:
-        raise ValueError(f"peer {name}: unknown option {unknown[0]!r}"
-                         f" (it takes {', '.join(found.defaults) or 'no options'})")
-    values = {**found.defaults, **{k: v for k, v in (options or {}).items() if v is not None}, "peer": name}
-    if name == "opensim" and common.get("model_name", "forearm") == "forearm":
-        kp, kd = PAPER_KP if kp is None else kp, PAPER_KD if kd is None else kd
-    gains = {"kp": kp, "kd": kd, "feedforward": True} if name == "opensim" else {}
-    return RunSpec(command="peer", method_options=tuple(sorted(values.items())), **gains, **common)
-
-
 def check_spec(spec) -> None:
     """ValueError (one line) for a peer spec's unknown peer or out-of-range option; no work done."""
     options = dict(spec.method_options)
@@ -104,12 +88,8 @@ def check_spec(spec) -> None:
     if found.name == "opensim-cmc":
         return
     if found.name == "opensim":
-        from ..controllers.pd import PD
-
         PD(spec.kp, spec.kd)  # a ValueError names a bad gain
         return
-    from ..collocation import check_options
-
     check_options(options["nodes"], "hermite-simpson", options["regularization"], options["max_iter"])
     tolerance = options["tolerance"]
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not (
@@ -125,6 +105,4 @@ def run(spec):
 def check_available() -> str:
     """OpenSim's version where the peers run; ``child.PeerUnavailable`` (a ValueError, one line
     naming ``pip install 'fdbench[opensim]'``) without the opensim package."""
-    from .child import opensim_version
-
     return opensim_version()

@@ -19,6 +19,9 @@ import time
 
 import numpy as np
 
+from .child import call, coordinate_paths, loads_file, model_from, torque_driven
+from .opensim_pd import _hermite
+
 OPTIMAL_FORCE = 100.0  # N m per unit control
 CONTROL_BOUND = 1e3  # CMC's controls' bounds: 1e5 N m, never reached
 TASK_KP, TASK_KV = 100.0, 20.0  # CMC_Joint gains (1/s^2, 1/s), those of OpenSim's examples
@@ -31,9 +34,8 @@ SUMMARY = ("OpenSim's CMCTool (Computed Muscle Control, its fast target) on the 
 def run(spec):
     """The peer's run (``RunOutcome``): CMCTool in a child process, its indicators on the motion's
     samples against the same reference as fdbench's control."""
-    from ..models import joints
+    from ..models import joints  # lazy: OpenSim's child imports this module, not the engine
     from ..records import RunOutcome, base_record
-    from .child import call
     from .common import desired, grid, indicators, loads_request, osim_texts, reference
 
     names = joints(spec.model_name)
@@ -70,9 +72,6 @@ def solve(osim, request: dict) -> dict:
     request's times shifted by theirs)."""
     import os
     import tempfile
-
-    from .child import coordinate_paths, loads_file, model_from, torque_driven
-    from .opensim_pd import _hermite
 
     names = request["coordinates"]
     shift = float((request.get("loads") or {}).get("shift_s", 0.0))

@@ -8,21 +8,24 @@ from pathlib import Path
 
 import numpy as np
 
-from ..models import joints
+from .. import run_inputs
+from ..files import read_input_bytes
+from ..integrate import steps
+from ..models import description, is_file, joints
+from ..multibody import simulation as sim
+from ..multibody.model_changes import with_short_keys
+from ..multibody.loads import data_file
+from ..multibody.osim import MAX_OSIM_BYTES, to_osim
+from ..outcomes import in_file_units, outcome, per_coordinate_fields, residual_fields
 from ..records import RunOutcome, base_record
+from ..run_inputs import loads, motions
 
 
 def osim_texts(spec) -> tuple[str, str]:
     """(nominal, plant) as OpenSim model files: the user's own .osim where ``--model`` is one and
     no constant is changed, else the descriptions written by ``to_osim`` (one CoordinateActuator
     per joint, each load a PrescribedForce)."""
-    from ..models import description, is_file
-    from ..multibody.description import with_short_keys
-    from ..multibody.osim import MAX_OSIM_BYTES, to_osim
-
     if is_file(spec.model_name) and str(spec.model_name).lower().endswith(".osim"):
-        from ..files import read_input_bytes
-
         own = read_input_bytes(spec.model_name, "--model", MAX_OSIM_BYTES).decode("utf-8", errors="replace")
         if not spec.model and not spec.plant:
             return own, own
@@ -45,10 +48,6 @@ def loads_request(spec) -> dict | None:
         return None
     import xml.etree.ElementTree as ElementTree
 
-    from ..files import read_input_bytes
-    from ..multibody.loads import data_file
-    from ..multibody.runs import loads, motions
-
     loads(spec)
     root = ElementTree.fromstring(read_input_bytes(spec.loads, "--loads"))  # the bytes fdbench read and checked
     element = root if root.tag == "ExternalLoads" else root.find(".//ExternalLoads")
@@ -65,8 +64,6 @@ def loads_request(spec) -> dict | None:
 
 def grid(spec) -> np.ndarray:
     """The simulation's step times over the motion's span (s), shape (steps + 1,)."""
-    from ..integrate import steps
-
     duration = spec.motions()[0].duration
     return np.linspace(0.0, duration, steps(spec.dt, duration) + 1)
 
@@ -88,18 +85,14 @@ def reference(spec):
 
 def warm_up(spec) -> None:
     """Load (or compile) fdbench's simulation kernels, so that a replay's runtime excludes it."""
-    from ..multibody import runs
-
-    runs._warm_up(spec)
+    run_inputs.warm_up(spec)
 
 
 def replay(spec, torque) -> RunOutcome:
     """fdbench's forward simulation of the plant under ``torque``, a function t (s), shape (k,) ->
     N m, shape (k, J), open loop, as ``collocate`` replays its own solution: the run's outcome with
     the three indicators (the record of ``base_record`` with the replay's fields)."""
-    from ..multibody import runs
-
-    return runs._outcome(spec, base_record(spec), runs._simulate(spec, torque), runs.reference(spec))
+    return outcome(spec, base_record(spec), run_inputs.simulate(spec, torque), run_inputs.reference(spec))
 
 
 def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_end: float) -> tuple[dict, tuple]:
@@ -110,24 +103,21 @@ def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_en
     (fields, (CSV header, rows) of the trajectory in a motion file's units)."""
     from types import SimpleNamespace
 
-    from ..multibody import runs
-    from ..multibody import simulation as sim
-
     inverse, truth, torque_ref, samples = reference(spec)
-    names, kinds = joints(spec.model_name), runs.nominal(spec).coordinate_kinds
+    names, kinds = joints(spec.model_name), run_inputs.nominal(spec).coordinate_kinds
     z, tau = _on_samples(samples, t, angles), _on_samples(samples, t, torque)
     reached = samples <= t_end + 1e-12
     result = SimpleNamespace(angles=z, z=z, torque=tau, reached=reached)
     rot, trans, per_coordinate = sim.rmse_coordinates(result, truth, kinds)
     trq, force, per_force = sim.rmse_generalized_forces(result, torque_ref, kinds)
     fields = {"rmse_rot_deg": rot, "rmse_torque_nm": trq, "t_end": float(t_end),
-              **runs._per_coordinate(("rmse_rot_deg", "rmse_trans_cm"), names, kinds, per_coordinate),
-              **runs._per_coordinate(("rmse_torque_nm", "rmse_force_n"), names, kinds, per_force)}
+              **per_coordinate_fields(("rmse_rot_deg", "rmse_trans_cm"), names, kinds, per_coordinate),
+              **per_coordinate_fields(("rmse_torque_nm", "rmse_force_n"), names, kinds, per_force)}
     if "translation" in kinds:
         fields.update(rmse_trans_cm=trans, rmse_force_n=force)
-    fields.update(runs.residual_fields(runs.nominal(spec), tau[reached]))
+    fields.update(residual_fields(run_inputs.nominal(spec), tau[reached]))
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_torque", "_torque_inverse") for j in names]
-    rows = np.column_stack([samples, runs._in_file_units(z, kinds), runs._in_file_units(truth, kinds), tau,
+    rows = np.column_stack([samples, in_file_units(z, kinds), in_file_units(truth, kinds), tau,
                             torque_ref])[reached]
     return fields, (header, rows)
 

@@ -19,6 +19,8 @@ import time
 
 import numpy as np
 
+from .child import call, coordinate_paths, loads_file, model_from, torque_driven
+
 DEG2 = (180.0 / math.pi) ** 2
 DEFAULT_TOLERANCE = 1e-4  # IPOPT's convergence and constraint tolerance in MocoTrack (Moco's own default is 1e-2)
 STATE_BOUND = 20.0  # rad (and 10x that in rad/s): bounds loose enough never to bind
@@ -33,8 +35,7 @@ def run(spec):
     time and whole run's time (``moco_run_s``: set-up, initialize and solve) stand beside the
     replay's indicators. Runtime: the whole run and the replay, as collocate's is its
     transcription, solve and replay."""
-    from ..collocation import CollocationResult
-    from .child import call
+    from ..collocation import CollocationResult  # lazy: OpenSim's child imports this module, not the engine
     from ..models import joints
     from .common import desired, loads_request, osim_texts, replay, warm_up
 
@@ -103,8 +104,6 @@ def solve(osim, request: dict) -> dict:
     (``ModOpAddExternalLoads``), on their own clock (the request's times shifted by theirs)."""
     import os
     import tempfile
-
-    from .child import coordinate_paths, loads_file, model_from, torque_driven
 
     names = request["coordinates"]
     model = model_from(osim, request["nominal"])

@@ -11,7 +11,7 @@ is OpenSim's own inverse dynamics (its InverseDynamicsSolver on the nominal mode
 motion at the step times. The Manager integrates with Runge-Kutta-Merson at OpenSim's default
 accuracy ``ACCURACY`` over its own steps; the states are interpolated onto the step times by
 cubic Hermite interpolation (angle and rate at each of its steps). The gains are fdbench's PD's for
-the model (``fdbench.multibody.runs.pd_gains``; the forearm's 80 and 0.3). With ``--loads`` both
+the model (``fdbench.run_inputs.pd_gains``; the forearm's 80 and 0.3). With ``--loads`` both
 models are given the same ExternalLoads file and data as an OpenSim component of the model, and a
 floating base's coordinates get their CoordinateActuators (the residuals) under the same law.
 Runtime: the ``integrate`` call, best of ``REPEATS`` (start-up, model building and the
@@ -24,6 +24,8 @@ import time
 
 import numpy as np
 
+from .child import call, coordinate_paths, model_from, torque_driven, with_loads
+
 ACCURACY = 1e-5  # OpenSim's integrator accuracy: its default, as its users run it
 REPEATS = 3  # the integrate call is timed this many times (from the same initial state), the best kept
 SUMMARY = ("OpenSim's forward simulation of the same model (exported with CoordinateActuators, or the user's "
@@ -34,7 +36,7 @@ SUMMARY = ("OpenSim's forward simulation of the same model (exported with Coordi
 
 def gains(spec) -> tuple[np.ndarray, np.ndarray]:
     """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,): fdbench's PD's for this spec."""
-    from ..multibody.runs import pd_gains
+    from ..run_inputs import pd_gains  # lazy: OpenSim's child imports this module, not the engine
 
     return pd_gains(spec)
 
@@ -42,9 +44,8 @@ def gains(spec) -> tuple[np.ndarray, np.ndarray]:
 def run(spec):
     """The peer's run (``RunOutcome``): OpenSim's PD simulation in a child process, its indicators
     on the motion's samples against the same reference as fdbench's PD."""
+    from ..models import joints  # lazy: OpenSim's child imports this module, not the engine
     from ..records import RunOutcome, base_record
-    from .child import call
-    from ..models import joints
     from .common import desired, grid, indicators, loads_request, osim_texts, reference
 
     names = joints(spec.model_name)
@@ -86,8 +87,6 @@ def solve(osim, request: dict) -> dict:
     their own clock, the request's times shifted by theirs); angles (rad) and applied torques (N m)
     at the step times reached, shape (m, J), the last time reached (s, on the request's clock) and
     the times taken (s)."""
-    from .child import coordinate_paths, model_from, with_loads
-
     names = request["coordinates"]
     shift = float((request.get("loads") or {}).get("shift_s", 0.0))
     t = np.array(request["t"]) + shift
@@ -183,8 +182,6 @@ def _drive(osim, model, names, t, drive, kp, kd) -> None:
     """Add the law: a CoordinateActuator per coordinate under a PrescribedController whose control
     is ``drive`` (N m, shape (m, J), linear between the step times t), and a SpringGeneralizedForce
     per coordinate (stiffness kp, viscosity kd, rest length 0: -kp z - kd z')."""
-    from .child import torque_driven
-
     controller = osim.PrescribedController()
     controller.setName("fdbench_feedforward")
     for j, actuator in enumerate(torque_driven(osim, model, names, "_drive")):

@@ -11,6 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import TORQUES, TorqueParameterisation, check_count
 
 PRETRAIN_SEED = 0  # the pre-training's restarts are drawn from this fixed seed
@@ -83,6 +84,9 @@ class AnnTorque(TorqueParameterisation):
     optimizer_defaults = {"cmaes": {"sigma0": 0.2, "popsize": 8}}
     summary = "neural network, one hidden layer of --hidden tanh neurons (default 4), 3N+1 parameters"
 
+    command_line = {"hidden": MethodOption("hidden neurons in [1, 50], or 'auto' to choose the smallest count that "
+                                           "fits the inverse-dynamics torque.", str, "4", metavar="<int>|auto")}
+
     def __init__(self, hidden: int = 4):
         self.hidden = check_count("--hidden", hidden, 1, 50)
         self.n_params = 3 * self.hidden + 1
@@ -98,7 +102,7 @@ class AnnTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
 
-        from .kernels import warm_up
+        from .kernels import warm_up  # lazy: numba off the CLI's start-up
 
         warm_up()
 
@@ -122,7 +126,7 @@ class AnnTorque(TorqueParameterisation):
         return self.offset + self.span * network(np.asarray(p, dtype=float), 2 * t / self.duration - 1, self.hidden)
 
     def on_grid_batch(self, t):
-        from .kernels import affine_rows, own_weighted_sums
+        from .kernels import affine_rows, own_weighted_sums  # lazy: numba off the CLI's start-up
 
         x = np.ascontiguousarray(2 * np.asarray(t, dtype=float) / self.duration - 1)  # scaled input, shape (n,)
         n_h = self.hidden

@@ -24,6 +24,8 @@ class TorqueParameterisation(ABC):
     name: str = ""
     summary: str = ""
     n_params: int
+    # the options offered as flags of their own (--knots): {option: fdbench.method_options.MethodOption}
+    command_line: dict = {}
     # default options of optimisers on this parameterisation, {optimizer: {option: value}}
     # (in the scaled parameters of ``scale``); an option given by the user wins
     optimizer_defaults: dict = {}

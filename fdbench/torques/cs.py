@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import TORQUES, TorqueParameterisation, check_count
 
 
@@ -29,6 +30,10 @@ class CubicSplineTorque(TorqueParameterisation):
     optimizer_defaults = {"cmaes": {"sigma0": 0.05, "popsize": 8}}
     summary = "cubic spline through the torque at --knots equally spaced instants (default: one every 0.1 s)"
 
+    command_line = {"knots": MethodOption("knots in [4, 1000], equally spaced over the motion's span; default one every "
+                                          "0.1 s, as the paper's 11 over eq. 5's 1 s (26 for a 2.5 s recording).", int,
+                                          show_default=False)}
+
     def __init__(self, knots: int = DEFAULT_KNOTS):
         self.knots = check_count("--knots", knots, 4, 1000)
         self.n_params = self.knots
@@ -39,7 +44,7 @@ class CubicSplineTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.interpolate  # noqa: F401  (its import is not part of a run's runtime)
 
-        from .kernels import warm_up
+        from .kernels import warm_up  # lazy: numba off the CLI's start-up
 
         warm_up()
 
@@ -64,7 +69,7 @@ class CubicSplineTorque(TorqueParameterisation):
     def on_grid_batch(self, t):
         # the spline is linear in the knot values: each torque history is the knot values'
         # weighted sum of the basis functions, summed knot by knot in a compiled kernel
-        from .kernels import weighted_sums
+        from .kernels import weighted_sums  # lazy: numba off the CLI's start-up
 
         rows = np.ascontiguousarray(self.basis(t).T)  # (knots, n)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..method_options import MethodOption
 from .base import TORQUES, TorqueParameterisation, check_count
 
 
@@ -18,6 +19,8 @@ class GaussianSumTorque(TorqueParameterisation):
     # CMA-ES: small steps, as sharpness and centres react strongly (Table 3: 0.54 deg against 1.73 with 0.1)
     optimizer_defaults = {"cmaes": {"sigma0": 0.03}}
     summary = "sum of --terms Gaussian bumps A exp(-C (t - T)^2), 3 parameters each (default 4)"
+
+    command_line = {"terms": MethodOption("terms (Gaussian bumps) in [1, 100], 3 parameters each.", int, 4)}
 
     def __init__(self, terms: int = 4):
         self.terms = check_count("--terms", terms, 1, 100)
@@ -36,7 +39,7 @@ class GaussianSumTorque(TorqueParameterisation):
     def warm_up(cls):
         import scipy.optimize  # noqa: F401  (its import is not part of a run's runtime)
 
-        from .kernels import warm_up
+        from .kernels import warm_up  # lazy: numba off the CLI's start-up
 
         warm_up()
 
@@ -73,7 +76,7 @@ class GaussianSumTorque(TorqueParameterisation):
             return np.exp(-p[:, 1] * (t[..., None] - p[:, 2]) ** 2) @ p[:, 0]
 
     def on_grid_batch(self, t):
-        from .kernels import gaussian_exponents, own_weighted_sums
+        from .kernels import gaussian_exponents, own_weighted_sums  # lazy: numba off the CLI's start-up
 
         t = np.ascontiguousarray(t, dtype=float)
         terms = self.terms

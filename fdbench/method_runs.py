@@ -1,0 +1,256 @@
+"""The runs of a ``RunSpec`` on the multibody engine, one per command: inverse dynamics
+(``inverse_run``), open-loop simulation (``run_simulation``, ``replay``), control (the paper's PD
+per joint with computed feedforward, computed torque, LQR or a registered controller), shooting
+optimisation and direct collocation (``run``), each giving a flat record (``records.RECORD_FIELDS``
+plus the indicators of ``fdbench.outcomes``) and a trajectory table. What a spec stands for on the
+engine (its models, motions, loads, reference) is ``fdbench.run_inputs``.
+
+Files (CSV with a header, names case-insensitive, any order): a motion has ``t`` (s) and one angle
+column per joint (deg, or rad), with optional ``<joint>_vel`` and ``<joint>_acc``; a torque history
+has ``t`` (s) and one column per joint (N m), or ``<joint>_torque`` where the file has them (the
+history of ``inverse --format csv`` or ``--save-trajectory``, whose ``<joint>`` is an angle), and a
+one-joint model's may name its column ``torque``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from . import __version__
+from .casadi_loader import casadi
+from .collocation import collocate, own_fields, record_fields
+from .files import BadFile, read_history_csv
+from .method_options import options_text
+from .models import named_motions
+from .multibody import simulation as sim
+from .multibody.sensitivity import warm_up as warm_up_sensitivities
+from .optimizers import make_optimizer
+from .optimizers.base import NO_ITERATION
+from .outcomes import in_file_units, outcome, residual_fields
+from .params_file import make_saved_torque, read_params
+from .problem import TrackingProblem
+from .problem import residual_weight as problem_residual_weight
+from .peers import run as run_peer
+from .records import RunOutcome, base_record, explained
+from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, reference,
+                         simulate, warm_up)
+from .torques import TORQUES
+from .torques.ann import select_hidden
+
+
+def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
+    """Inverse dynamics of the desired motion with the nominal model: (record, CSV header, rows), the
+    columns of a motion file (t, <joint>, <joint>_vel, <joint>_acc in s, deg, deg/s, deg/s^2; a
+    translation's in m, m/s, m/s^2) and <joint>_torque (N m; N for a translation)."""
+    desired, _ = motions(spec)
+    names = joints(spec)
+    body = engine(spec, nominal(spec))
+    began = time.perf_counter()
+    inv = sim.inverse_dynamics(None, body, desired)
+    runtime = time.perf_counter() - began
+    kinds = nominal(spec).coordinate_kinds
+    angle = np.array([kind != "translation" for kind in kinds])
+    start_end = in_file_units(inv.angles[[0, -1]], kinds)
+
+    def force(metric: str, j: int) -> str:  # a translation's in N, never pooled with N m
+        return metric.replace("torque", "force").replace("_nm", "_n") if kinds[j] == "translation" else metric
+
+    unit = ["m" if kind == "translation" else "deg" for kind in kinds]
+    record = {"command": "inverse", "kinematics": spec.motion, **describe(spec),
+              **{f"{force(k, i)}_{j}": float(v)
+                 for k, vals in (("torque_rms_nm", np.sqrt(np.mean(inv.torque**2, axis=0))),
+                                 ("torque_max_nm", inv.torque.max(axis=0)), ("torque_min_nm", inv.torque.min(axis=0)))
+                 for i, (j, v) in enumerate(zip(names, vals))},
+              **{f"{j}_{end}_{unit[i]}": float(start_end[k, i]) for i, j in enumerate(names)
+                 for end, k in (("start", 0), ("end", 1))}}
+    record["torque_rms_nm"] = float(np.sqrt(np.mean(inv.torque[:, angle] ** 2))) if angle.any() else math.nan
+    if not angle.all():
+        record["force_rms_n"] = float(np.sqrt(np.mean(inv.torque[:, ~angle] ** 2)))
+    record.update(residual_fields(nominal(spec), inv.torque))
+    record.update(runtime_s=runtime, fdbench_version=__version__)
+    header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
+    rows = np.column_stack([inv.t, *(in_file_units(v, kinds) for v in (inv.angles, inv.velocities, inv.accelerations)),
+                            inv.torque])
+    return record, header, rows
+
+
+def _method_run(spec, on_evaluation=None, on_start=None):
+    """Carry out a control, optimisation or collocation run (``RunOutcome``)."""
+    if spec.command == "optimize":
+        return _optimize(spec, on_evaluation, on_start)
+    if spec.command == "collocate":
+        return _collocate(spec)
+    if spec.command != "control":
+        raise ValueError(f"{spec.command}: not available with --model {spec.model_name}")
+    warm_up(spec)
+    law, known = controller(spec), plan(spec)
+    law.warm_up(known)
+    began = time.perf_counter()
+    inverse = reference(spec)
+    design = law.design(known)
+    result = simulate(spec, design.feedforward, kp=design.kp, kd=design.kd, gains=design.gains,
+                       computed=design.computed, nominal=known.engine if design.computed else None)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    name = spec.controller or "pd"  # the name it is registered under
+    record.update(torque=design.label, evaluations=1, runtime_s=runtime, controller=name, **design.fields)
+    if name != "pd":
+        record["controller_options"] = options_text(spec.method_options)
+    return outcome(spec, record, result, inverse)
+
+
+# ---------------------------------------------------------------------- open loop
+def _open_loop(spec, torque_file=None, params_file=None, torque=None):
+    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
+    (``t,<joint>...``), saved parameters, or ``torque``, a function t (s), shape (k,) -> joint
+    torques (N m), shape (k, J); BadFile for a file that cannot be used."""
+    names = joints(spec)
+    desired, _ = motions(spec)
+    label, drive = "id", sim.feedforward(engine(spec, nominal(spec)), desired)
+    if params_file is not None:
+        drive, label, digest, spec = _saved_torque(spec, params_file)
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
+    elif torque is not None:
+        drive, label = torque, getattr(torque, "__name__", "function")
+    elif torque_file is not None:
+        preferred = (tuple(f"{joint}_torque" for joint in names),) + ((("torque",),) if len(names) == 1 else ())
+        t, values = read_history_csv(torque_file, "--torque-file", desired.duration, names, preferred)
+        drive = lambda s: np.stack([np.interp(s, t, values[:, j]) for j in range(len(names))], axis=-1)  # noqa: E731
+        label = f"file:{torque_file}"
+        digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
+    warm_up(spec)
+    began = time.perf_counter()
+    inverse = reference(spec)
+    result = simulate(spec, drive)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=label, evaluations=1, runtime_s=runtime)
+    done = outcome(spec, record, result, inverse)
+    done.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
+    return done
+
+
+def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):
+    return TrackingProblem(torque, engine(spec), motions(spec)[0], feedforward, penalty_weight,
+                           nominal=engine(spec, nominal(spec)), residual_weight=residual_weight(spec),
+                           **integration(spec), **options)
+
+
+def residual_weight(spec) -> float:
+    """The weight of an optimisation's residual term in eq. 18 (``problem.residual_weight``)."""
+    return problem_residual_weight(spec.residual_weight, engine(spec).model, loads(spec))
+
+
+def _saved_torque(spec, path):
+    """(torque function, label, digest, spec) of a parameter file saved by ``optimize --save-params``;
+    the spec follows the file's named motion. BadFile if it cannot be used."""
+    saved = read_params(path, spec.model_name, motions(spec)[1].name, named_motions(spec.model_name))
+    if saved["kinematics"] is not None and saved["kinematics"] != spec.motion:
+        spec = replace(spec, motion=saved["kinematics"], inputs=tuple(p for p in spec.inputs if p[0] != "--motion"))
+    expected = make_saved_torque(saved).n_params * len(joints(spec))
+    if saved["params"].shape != (expected,):
+        raise BadFile(f"--params: {path}: expected {expected} parameters for {saved['torque']} on "
+                      f"{len(joints(spec))} joints")
+    problem = _problem(spec, saved["torque"], saved["feedforward"], **saved["options"])
+    name = saved["torque"] + (" (feedforward)" if saved["feedforward"] else "")
+    return problem.torque_function(saved["params"]), f"{name} from {saved['path'].name}", saved["digest"], spec
+
+
+def replay(spec, params) -> sim.Simulation:
+    """The simulation of a stored optimisation run's best parameters (for figures)."""
+    options = dict(spec.torque_options)
+    if options.get("hidden") == "auto":  # 3 n + 1 parameters per joint
+        options["hidden"] = (len(params) // len(joints(spec)) - 1) // 3
+    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
+    return problem.simulate(np.asarray(params, dtype=float))
+
+
+# ---------------------------------------------------------------------- optimisation and collocation
+def _optimize(spec, on_evaluation, on_start):
+    """Shooting optimisation of per-joint torque parameters (``fdbench.problem.TrackingProblem``)."""
+    optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
+    warm_up(spec, population=True)  # the population kernel and its threads too
+    if spec.gradient == "exact":
+        warm_up_sensitivities()
+    optimizer.warm_up()
+    TORQUES[spec.torque].warm_up()
+    if on_start:
+        on_start(spec.budget)
+    desired, _ = motions(spec)
+    began = time.perf_counter()
+    options, extra = dict(spec.torque_options), {}
+    if options.get("hidden") == "auto":  # the count that fits every joint's inverse-dynamics torque
+        inv = sim.inverse_dynamics(None, engine(spec, nominal(spec)), desired)
+        fits = [select_hidden(inv.t, inv.torque[:, j]) for j in range(inv.torque.shape[1])]
+        options["hidden"] = max(n for n, _ in fits)
+        extra["hidden_fits"] = [(n, max(dict(tried).get(n, math.inf) for _, tried in fits))
+                                for n in range(1, options["hidden"] + 1)]
+    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
+    batch = problem.objectives_scaled if problem.batched else None
+    gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
+    found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
+                               batch)
+    params = np.asarray(found.x) * problem.scale
+    result = problem.simulate(params)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
+                  evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
+                  n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
+                  **({"residual_weight": problem.residual_weight} if problem.base_column is not None else {}),
+                  torque_options=options_text(sorted(options.items())),
+                  optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
+                  initial_objective=problem.objective(problem.p0))
+    done = outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+    if found.stop_reason.startswith(NO_ITERATION):  # "success" of a run that hardly moved: say why
+        done.record["message"] += f"; {spec.optimizer} completed no iteration within the budget (see stop_reason)"
+    return done
+
+
+def _collocate(spec):
+    """Direct collocation of the nominal model on the desired motion under the spec's external loads
+    (``collocation``), then its torque replayed by the plant's forward simulation: the indicators are
+    the replay's; the collocation's own RMSE at its nodes (against the true motion), IPOPT's status,
+    iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
+    arrays of shape (N + 1, J))."""
+    options = dict(spec.method_options)
+    warm_up(spec)
+    casadi()  # its import is not part of the runtime
+
+    desired, truth = motions(spec)
+    began = time.perf_counter()
+    inverse = reference(spec)
+    solution = collocate(nominal(spec), desired, **options, loads=loads(spec))
+    result = simulate(spec, solution.torque_function())
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    done = outcome(spec, record, result, inverse, extra={"collocation": solution})
+    own = own_fields(nominal(spec), solution, truth)
+    record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
+    return done
+
+
+# ---------------------------------------------------------------------- the runs of a spec
+def run(spec, on_evaluation=None, on_start=None) -> RunOutcome:
+    """Carry out a control, optimisation, collocation or peer run, checked first, as a flat record
+    with its explanation. ``on_evaluation(count, best)`` reports progress; ``on_start(budget)`` is
+    called once compilation and imports are done."""
+    spec.validate()
+    if spec.command == "simulate":
+        raise ValueError("simulate runs are carried out by run_simulation")
+    if spec.command == "peer":  # OpenSim's, its CMC's and Moco's runs
+        return explained(run_peer(spec), spec)
+    return explained(_method_run(spec, on_evaluation, on_start), spec)
+
+
+def run_simulation(spec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
+    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
+    (``t,<joint>...``), saved optimisation parameters or ``torque`` (a function of t (s), shape (k,)
+    -> N m, shape (k,) or (k, J)). Bad files raise ``files.BadFile``."""
+    return explained(_open_loop(spec, torque_file, params_file, torque), spec)

@@ -1,0 +1,119 @@
+"""The outcome of a simulated run (``records.RunOutcome``), as fdbench's runs and the peers' replays
+measure it: indicators over every coordinate and per coordinate, angles and translations apart,
+a floating base's residuals, the status's message and the trajectory table.
+
+Indicators for J joints: ``rmse_rot_deg`` is the root mean square over all angle coordinates and
+samples of the angle error (deg), ``rmse_torque_nm`` likewise of their torques (N m) against the
+inverse-dynamics torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint's.
+Units are never pooled: a model with translations (a free joint's x, y) has ``rmse_trans_cm`` (cm)
+and ``rmse_force_n`` (N) over them, and ``rmse_trans_cm_<x>``, ``rmse_force_n_<x>`` per translation.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .controllers.base import per_joint
+from .multibody import simulation as sim
+from .records import ALPHA_HINT, RunOutcome
+from .run_inputs import engine, joints, nominal
+
+RESIDUAL_FIELDS = ("residual_force_rms_n", "residual_moment_rms_nm", "residual_fx_rms_n", "residual_fy_rms_n",
+                   "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm")
+
+
+def residual_fields(model, forces: np.ndarray) -> dict:
+    """The residuals of a model with a floating base (a free joint on ground): the generalised
+    forces on its three coordinates, as OpenSim's RRA and CMC name them FX, FY (N, ground axes, at
+    the base's joint point) and MZ (N m), from the forces (n, J) on the samples reached. The fourth
+    indicator is their RMS, the force's magnitude and the moment apart (units never pooled); the
+    means are set beside RRA's averages. {} for a model without a floating base."""
+    base = model.floating_base
+    if base is None:
+        return {}
+    c = model.coordinates.index(base.coordinate_names[0])
+    mz, fx, fy = (forces[:, c + i] for i in range(3))
+    if not len(mz):
+        return dict.fromkeys(RESIDUAL_FIELDS, math.nan)
+    rms = lambda v: float(np.sqrt(np.mean(v**2)))  # noqa: E731
+    return {"residual_force_rms_n": float(np.sqrt(np.mean(fx**2 + fy**2))), "residual_moment_rms_nm": rms(mz),
+            "residual_fx_rms_n": rms(fx), "residual_fy_rms_n": rms(fy), "residual_fx_mean_n": float(np.mean(fx)),
+            "residual_fy_mean_n": float(np.mean(fy)), "residual_mz_mean_nm": float(np.mean(mz))}
+
+
+def _message(result) -> str:
+    text = result.status.value
+    if not result.success:
+        text += f" (stopped at t = {result.t_end:.4g} s)"
+    return text + (f": {result.detail}" if result.detail else "")
+
+
+DRIFT_DEG = 10.0  # an angle this far from its motion: the torques, not --alpha or --dt, made the run fail
+
+
+def drift_hint(message: str, result, desired, kinds) -> str:
+    """A constraint failure's message, its hint on --alpha and --dt replaced when an angle had
+    drifted more than DRIFT_DEG from its desired value (rad, shape (n, J)) by then: the penalty
+    then fails because the torques whirl the bodies far off the motion (an unstable open loop, or
+    a torque history made for another model or motion), which a larger --alpha does not cure."""
+    angle = np.array([kind == "angle" for kind in kinds])
+    reached = result.reached
+    if not angle.any() or not reached.any():
+        return message
+    drift = float(np.degrees(np.max(np.abs(result.angles[reached][:, angle] - desired[reached][:, angle]))))
+    if not drift > DRIFT_DEG:
+        return message
+    return message.replace(ALPHA_HINT, f"; by then an angle was {drift:.3g} deg off the desired motion: the torques "
+                                       "drive the model far from it (an unstable open loop, or a torque history made "
+                                       "for another model or motion?), which --alpha and --dt do not change")
+
+
+def outcome(spec, record: dict, result, inverse, **more) -> RunOutcome:
+    """The RunOutcome of a finished simulation: indicators over every joint and per joint (angles
+    and translations apart), the trajectory table."""
+    names, kinds = joints(spec), nominal(spec).coordinate_kinds
+    desired = inverse.angles
+    rot, trans, per_coordinate = sim.rmse_coordinates(result, desired, kinds)
+    trq, force, per_force = sim.rmse_generalized_forces(result, inverse.torque, kinds)
+    record.update(rmse_rot_deg=rot, rmse_torque_nm=trq, t_end=result.t_end, status=result.status.code,
+                  message=_message(result), max_violation=result.max_violation,
+                  **per_coordinate_fields(("rmse_rot_deg", "rmse_trans_cm"), names, kinds, per_coordinate),
+                  **per_coordinate_fields(("rmse_torque_nm", "rmse_force_n"), names, kinds, per_force))
+    if "translation" in kinds:
+        record.update(rmse_trans_cm=trans, rmse_force_n=force)
+    record.update(residual_fields(nominal(spec), result.torque[result.reached]))
+    if result.status is sim.Status.CONSTRAINT:
+        record["message"] = drift_hint(record["message"], result, desired, kinds)
+    header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_acc", "_acc_desired", "_torque",
+                                          "_torque_inverse") for j in names]
+    values = (result.angles, desired, result.zd, inverse.velocities, _accelerations(spec, result), inverse.accelerations)
+    rows = np.column_stack([result.t, *(in_file_units(v, kinds) for v in values), result.torque, inverse.torque])
+    return RunOutcome(record, result, inverse, table=(header, rows), **more)
+
+
+def per_coordinate_fields(prefixes: tuple[str, str], names, kinds, values) -> dict:
+    """Per-coordinate record fields ``<prefix>_<coordinate>``: the first prefix for angles, the
+    second for translations; none for a model of one coordinate (the overall value says it)."""
+    fields = per_joint(prefixes[0], names, values)
+    return {(key.replace(prefixes[0], prefixes[1], 1) if kind == "translation" else key): value
+            for (key, value), kind in zip(fields.items(), kinds)}
+
+
+def in_file_units(values: np.ndarray, kinds) -> np.ndarray:
+    """Coordinates or their rates (rad or m based, shape (n, J)) in a motion file's units: angles
+    in deg, translations as they are (m, m/s, m/s^2)."""
+    if "translation" not in kinds:
+        return np.degrees(values)
+    return np.where([kind == "translation" for kind in kinds], values, np.degrees(values))
+
+
+def _accelerations(spec, result) -> np.ndarray:
+    """The joint accelerations (rad/s^2, shape (n, J)) of a simulation's states under its applied
+    torques (NaN after t_end), so that its trajectory reads back as a motion with its own rates."""
+    plant = engine(spec)
+    zero = np.zeros_like(result.torque)
+    with np.errstate(invalid="ignore"):
+        rates, _ = plant.rates(result.states, result.torque, zero, zero, zero, 0.0, 0.0, t=result.t)
+    return plant.joints_from_state(rates)[1]

@@ -1,0 +1,32 @@
+"""Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
+it."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fdbench.multibody import model as d
+from fdbench.multibody.loads import ExternalLoad, ExternalLoads
+
+
+def hopper_model():
+    """A free pelvis (tilt, x, y), a thigh on a pin and a shank on a knee path (y with its own angles)."""
+    knee = d.JointPath((-2.0, -1.0, 0.0, 0.5), (0.0, 0.01, 0.02, 0.015), (-0.01, 0.0, 0.005), (-1.5, 0.0, 1.0))
+    return d.Model(name="hopper", gravity=(0.0, -9.81),
+                   bodies=(d.Body("pelvis", 10.0, (0.0, -0.05), 0.2), d.Body("thigh", 5.0, (0.02, -0.2), 0.08),
+                           d.Body("shank", 3.0, (0.0, -0.2), 0.05)),
+                   joints=(d.Joint("base", "free", "ground", "pelvis", (0.0, 1.0), (0.0, 0.0),
+                                   coordinates=("tilt", "tx", "ty")),
+                           d.Joint("hip", "pin", "pelvis", "thigh", (0.0, -0.1), (0.0, 0.0), offset=-1.5),
+                           d.Joint("knee", "pin", "thigh", "shank", (0.0, -0.4), (0.0, 0.0), path=knee)))
+
+
+def hopper_loads(seed):
+    """Three loads on the hopper, sampled at 50 times over [-0.1, 1] s: on the shank in ground's
+    axes, on the thigh with its force in the thigh's frame and its point in the shank's, on the
+    pelvis at a point of the thigh."""
+    rng, n = np.random.default_rng(seed), 50
+    loads = (ExternalLoad("a", "shank"), ExternalLoad("b", "thigh", "thigh", "shank"),
+             ExternalLoad("c", "pelvis", "ground", "thigh"))
+    return ExternalLoads(loads, np.linspace(-0.1, 1.0, n), rng.normal(0, 50, (n, 3, 2)), rng.normal(0, 0.2, (n, 3, 2)),
+                         rng.normal(0, 5, (n, 3)))
