@@ -164,10 +164,11 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
             if body_int[k, FREE] == 1:
                 force_rows[body_int[k, KI], col + 1] += 1.0
                 force_rows[body_int[k, KI] + 1, col + 2] += 1.0
-        for q in range(P):
-            torque_sign[param_col[q], q] = 1.0
-            if joint_parent[param_col[q]] >= 0:
-                torque_sign[joint_parent[param_col[q]], q] = -1.0
+        if paths is None and free is None and loads is None:  # the banded solve: a coordinate per body
+            for q in range(P):
+                torque_sign[param_col[q], q] = 1.0
+                if joint_parent[param_col[q]] >= 0:
+                    torque_sign[joint_parent[param_col[q]], q] = -1.0
 
     def point(b):
         """x, y, x', y' of body b's point i in the stage's state (fixed: its position, zero velocity)."""
