@@ -697,7 +697,8 @@ def derivatives(states, law, model, paths, free, loads, believed, believed_paths
     n, J = states.shape[1], law.tau.shape[1]
     state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, J))
     for i in range(states.shape[0]):
-        code, _, _ = _drive(states[i], 0.0, 0, i, law, model, paths, free, loads, believed, believed_paths,
+        # np.int64(0), not 0: a literal argument would make numba compile the whole driver again
+        code, _, _ = _drive(states[i], 0.0, np.int64(0), i, law, model, paths, free, loads, believed, believed_paths,
                             believed_loads, (state, rate, torque), None, None, None, 1, None)
         out[i] = rate[0]
         applied[i] = torque[0]
@@ -714,7 +715,8 @@ def constraint_violation(y, model, paths, free, loads, residuals):
     n, J = y.shape[0], model.joint_parent.shape[0] + 2 * (0 if free is None else free.shape[0])
     rows, gains = np.zeros((1, J)), np.zeros((1, J, 2 * J))
     law = Law(rows, rows, rows, rows, rows[0], rows[0], PD, gains)
-    _, _, worst = _drive(y, 0.0, -1, 0, law, model, paths, free, loads, model, paths, loads,
+    # np.int64, not literals: a literal argument would make numba compile the whole driver again
+    _, _, worst = _drive(y, 0.0, np.int64(-1), np.int64(0), law, model, paths, free, loads, model, paths, loads,
                          (np.empty((1, n)), np.empty((1, n)), np.empty((1, J))), residuals, None, None, 1, None)
     return worst
 
