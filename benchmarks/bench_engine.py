@@ -19,7 +19,7 @@ Last, OpenSim's gait model (examples/opensim/subject01.osim: 10 coordinates, a f
 knees on paths; imported through OpenSim, so only where it is installed) on its recorded walk
 (subject01_walk_IK.mot, 2.5 s, dt 1 ms) under PD (kp 300, kd 30) plus the feedforward and under
 computed torque (kp 400 1/s^2, kd 40 1/s), by ``Engine.simulate`` (the dense kernels of
-``multibody.kernels_general``), per step and against the forearm's step.
+``multibody.kernels``, the dense solve), per step and against the forearm's step.
 
 Run: python benchmarks/bench_engine.py
 """
@@ -34,6 +34,7 @@ import numpy as np
 import fdbench
 from fdbench.multibody import engine as mb
 from fdbench.multibody import kernels
+from fdbench.multibody.layout import COMPUTED, GAINS, OK, PD, Law
 from fdbench.multibody.model import GROUND, Body, Joint, Model
 from bench_speed_limit import c_loop_ms
 from kernel_call import gait_walk, half_step_grid, model_and_motion, rk4_call
@@ -63,6 +64,13 @@ def forearm_kernel():
     return grid.n, rk4_call(engine, grid, 80.0, 0.3)
 
 
+def _rk4(engine, y0, n, law, states, rates, applied):
+    """A function of no argument: the compiled RK4 of n steps of 1 / n s under the law, the model's
+    own as the believed one, no loads."""
+    args = (*engine.kernel_args(), None, engine.layout, engine.paths, None, states, rates, applied)
+    return lambda: kernels.rk4(y0, 1.0 / n, n, 0, law, *args)
+
+
 def chain_kernel(n_bodies: int):
     engine, n = mb.Engine(chain(n_bodies)), 1000
     half = np.linspace(0.0, 1.0, 2 * n + 1)[:, None]
@@ -77,10 +85,9 @@ def chain_kernel(n_bodies: int):
     y0 = engine.state_from_joints(z[0], zd[0])
     states, rates = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state))
     applied = np.empty((n + 1, n_bodies))
-    ref = np.ascontiguousarray(z + engine.joint_offset)
     no_gains = np.zeros((1, n_bodies, 2 * n_bodies))
-    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, kernels.PD, no_gains,
-                                  *engine.simulation_layout(), states, rates, applied)
+    return n, _rk4(engine, y0, n, Law(tau, np.ascontiguousarray(z), zd, zdd, kp, kd, PD, no_gains), states, rates,
+                   applied)
 
 
 def leg_kernel(mode: int):
@@ -95,17 +102,16 @@ def leg_kernel(mode: int):
     z = np.array([0.0, -0.4, 0.1]) + 0.3 * np.sin(2 * math.pi * half)
     zd, zdd = 0.6 * math.pi * np.cos(2 * math.pi * half), -1.2 * math.pi**2 * np.sin(2 * math.pi * half)
     zd, zdd = np.broadcast_to(zd, z.shape).copy(), np.broadcast_to(zdd, z.shape).copy()
-    tau = engine.inverse_dynamics(z, zd, zdd) if mode != kernels.COMPUTED else np.zeros_like(z)
-    computed = mode == kernels.COMPUTED
+    tau = engine.inverse_dynamics(z, zd, zdd) if mode != COMPUTED else np.zeros_like(z)
+    computed = mode == COMPUTED
     kp, kd = np.full(3, 400.0 if computed else 300.0), np.full(3, 40.0 if computed else 20.0)
     gains = np.broadcast_to(np.hstack([np.diag(kp), np.diag(kd)]), (2 * n + 1, 3, 6)).copy()
-    if mode != kernels.GAINS:
+    if mode != GAINS:
         gains = gains[:1]
     y0 = engine.state_from_joints(z[0], zd[0])
     states, rates, applied = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)), np.empty((n + 1, 3))
-    ref = np.ascontiguousarray(z + engine.joint_offset)
-    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, mode, gains, *engine.simulation_layout(),
-                                  states, rates, applied)
+    return n, _rk4(engine, y0, n, Law(tau, np.ascontiguousarray(z), zd, zdd, kp, kd, mode, gains), states, rates,
+                   applied)
 
 
 def library_kernel(name: str):
@@ -123,9 +129,8 @@ def library_kernel(name: str):
     kp, kd, no_gains = np.full(J, 80.0), np.full(J, 0.3), np.zeros((1, J, 2 * J))
     y0 = engine.state_from_joints(z[0], zd[0])
     states, rates, applied = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)), np.empty((n + 1, J))
-    ref = np.ascontiguousarray(z + engine.joint_offset)
-    return n, lambda: kernels.rk4(y0, 1.0 / n, n, tau, ref, zd, zdd, kp, kd, kernels.PD, no_gains,
-                                  *engine.simulation_layout(), states, rates, applied)
+    return n, _rk4(engine, y0, n, Law(tau, np.ascontiguousarray(z), zd, zdd, kp, kd, PD, no_gains), states, rates,
+                   applied)
 
 
 def gait_simulation(mode: int):
@@ -137,7 +142,7 @@ def gait_simulation(mode: int):
     model, motion, _ = walk
     engine = mb.Engine(model)
     grid = half_step_grid(engine, motion)
-    computed = mode == kernels.COMPUTED
+    computed = mode == COMPUTED
     tau = np.zeros_like(grid.tau) if computed else grid.tau
     kp, kd = (400.0, 40.0) if computed else (300.0, 30.0)
     return grid.n, lambda: engine.simulate(grid.y0, grid.dt, grid.n, tau, grid.ref, grid.refd, grid.refdd, kp, kd,
@@ -162,7 +167,7 @@ def main():
     for size in SIZES:
         n, fn = chain_kernel(size)
         code, done, _ = fn()
-        assert (code, done) == (kernels.OK, n), f"chain of {size}: status {code} at step {done}"
+        assert (code, done) == (OK, n), f"chain of {size}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         ratios.append(per_step / forearm)
         print(f"chain of {size:2d}: {per_step * 1e6:7.3f} us per step = {ratios[-1]:6.2f} x forearm "
@@ -170,25 +175,25 @@ def main():
     a, b = np.polyfit(np.array(SIZES, dtype=float), ratios, 1)[::-1]
     slope = np.polyfit(np.log(SIZES), np.log(ratios), 1)[0]
     print(f"growth: ratio = {a:.2f} + {b:.2f} N (least squares); log-log slope {slope:.2f}")
-    for name, mode in (("PD", kernels.PD), ("computed torque", kernels.COMPUTED), ("gain matrix", kernels.GAINS)):
+    for name, mode in (("PD", PD), ("computed torque", COMPUTED), ("gain matrix", GAINS)):
         n, fn = leg_kernel(mode)
         code, done, _ = fn()
-        assert (code, done) == (kernels.OK, n), f"leg3 {name}: status {code} at step {done}"
+        assert (code, done) == (OK, n), f"leg3 {name}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         print(f"leg3, {name:15s}: {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
     for name in ("forearm", "arm2", "leg3"):
         n, fn = library_kernel(name)
         code, done, _ = fn()
-        assert (code, done) == (kernels.OK, n), f"{name}: status {code} at step {done}"
+        assert (code, done) == (OK, n), f"{name}: status {code} at step {done}"
         per_step = best_per_call(fn) / n
         print(f"library {name:8s} (PD): {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm")
-    for name, mode in (("PD", kernels.PD), ("computed torque", kernels.COMPUTED)):
+    for name, mode in (("PD", PD), ("computed torque", COMPUTED)):
         gait = gait_simulation(mode)
         if gait is None:
             break
         n, fn = gait
         result = fn()
-        assert (result.status, result.steps_done) == (kernels.OK, n), f"subject01 {name}: status {result.status}"
+        assert (result.status, result.steps_done) == (OK, n), f"subject01 {name}: status {result.status}"
         per_step = best_of(fn, 3, 1) / n
         print(f"subject01 walk, {name:15s}: {per_step * 1e6:7.3f} us per step = {per_step / forearm:6.2f} x forearm "
               f"({per_step * n:.3f} s for the walk's {n} steps)")

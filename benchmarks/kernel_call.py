@@ -73,14 +73,15 @@ def rk4_call(engine, grid: HalfStepGrid, kp=0.0, kd=0.0, tau=None):
     J = engine.n_joints
     kp, kd = (np.array(np.broadcast_to(np.asarray(g, dtype=float), (J,))) for g in (kp, kd))
     tau = grid.tau if tau is None else np.ascontiguousarray(tau, dtype=float)
-    ref = np.ascontiguousarray(grid.ref + engine.joint_offset)
-    no_gains, layout = np.zeros((1, J, 2 * J)), engine.simulation_layout()
+    from fdbench.multibody.layout import PD, Law
+
+    law = Law(tau, grid.ref, grid.refd, grid.refdd, kp, kd, PD, np.zeros((1, J, 2 * J)))
+    args = (*engine.kernel_args(), None, engine.layout, engine.paths, None)
     states, rates = np.empty((grid.n + 1, engine.n_state)), np.empty((grid.n + 1, engine.n_state))
     applied = np.empty((grid.n + 1, J))
 
     def call():
-        return kernels.rk4(grid.y0, grid.dt, grid.n, tau, ref, grid.refd, grid.refdd, kp, kd, kernels.PD, no_gains,
-                           *layout, states, rates, applied)
+        return kernels.rk4(grid.y0, grid.dt, grid.n, 0, law, *args, states, rates, applied)
 
     call.states = states
     return call

@@ -145,8 +145,9 @@ def worker_version() -> str:
 def warm_up_worker() -> None:
     """Compile or load the kernels once, before the first run (not counted in any runtime)."""
     from .multibody.simulation import warm_up
+    from .tracking import warm_up as warm_up_population
 
-    warm_up()
+    warm_up_population(warm_up())
 
 
 # ---- the backends ---------------------------------------------------------------------------------
@@ -243,26 +244,31 @@ class LocalBackend(Backend):
 
 def _prepare_parent(specs) -> None:
     """Compile/load the kernels (and import cma) once, before worker processes fork: those of
-    every family the runs use (the banded kernels of pin joints; the dense ones of free joints,
-    paths and loads; scipy's integrators), so that the workers inherit them instead of each
+    every kind of model the runs use (pin joints; paths, free joints, loads: the kernels compile
+    one variant per kind), the population kernel for optimisations, scipy's integrators, so that
+    the workers inherit them instead of each
     compiling the same kernels at the same time (a first walk report compiled its dense RK4 and
     population kernels in both workers: about 140 s of CPU twice)."""
     from .multibody.simulation import warm_up
+    from .tracking import warm_up as warm_up_population
 
-    warm_up(any(getattr(s, "integrator", "rk4") != "rk4" for s in specs), dense=any(map(_dense, specs)))
+    engines = warm_up(any(getattr(s, "integrator", "rk4") != "rk4" for s in specs),
+                      [e for e in map(_engine, specs) if e is not None])
+    if any(getattr(s, "command", None) == "optimize" for s in specs):
+        warm_up_population(engines)
     if any(getattr(s, "optimizer", None) == "cmaes" for s in specs):
         import cma  # noqa: F401
 
 
-def _dense(spec) -> bool:
-    """Whether the spec's model runs on the dense kernels (not a chain of pin joints); False where
-    its engine cannot be built (the run itself records why)."""
+def _engine(spec):
+    """The engine of the spec's model (the kernels compile one variant per kind of model: paths,
+    free joints, loads); None where it cannot be built (the run itself records why)."""
     from .run_inputs import engine
 
     try:
-        return not engine(spec).compiled
+        return engine(spec)
     except Exception:  # noqa: BLE001 - the run reports it
-        return False
+        return None
 
 
 def _pool_outcomes(specs, workers: int):

@@ -175,7 +175,7 @@ def replay(spec, params) -> sim.Simulation:
 def _optimize(spec, on_evaluation, on_start):
     """Shooting optimisation of per-joint torque parameters (``fdbench.problem.TrackingProblem``)."""
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
-    warm_up(spec)  # the population kernel and its threads too
+    warm_up(spec, population=True)  # the population kernel and its threads too
     if spec.gradient == "exact":
         warm_up_sensitivities()
     optimizer.warm_up()

@@ -185,7 +185,9 @@ class TrackingProblem(ShootingProblem):
         if self._population is None:
             from .population import Population
 
-            self._population = Population(self.engine.population_kernel, self._n_steps, self.engine.population_widths)
+            from .tracking import rk4_candidates
+
+            self._population = Population(rk4_candidates, self._n_steps, self.engine.population_widths)
         tau = self.torques_on_grid_batch(P)
         args = self.engine.population_args(*self._kernel_start, tau, *self._kernel_rest)
         return self._population(len(P), args) + self._residual_costs(tau)
@@ -243,8 +245,7 @@ class TrackingProblem(ShootingProblem):
 
     def value_and_gradient(self, p) -> tuple[float, np.ndarray]:
         """Eq. 18 and its exact gradient with respect to p, shape (n_params,), from one RK4
-        simulation with forward sensitivities (``sensitivity.rk4_sensitivity``, or
-        ``rk4_sensitivity_dense`` for free or path joints and external loads). The value equals
+        simulation with forward sensitivities (``kernels.rk4_sensitivity``). The value equals
         ``objective(p)`` to the last bit (the same states and kernel). Over the m samples reached,
         eq. 18's tracking term is the RMSE of the angles (deg) plus, for a model with translations,
         that of the translations (cm); for each, with e its errors (m x J_kind, in its unit u per
@@ -260,22 +261,11 @@ class TrackingProblem(ShootingProblem):
         residual, residual_gradient = self._residual_costs(tau)[0], self._residual_gradient(tau[0], G, joint)
         states, rates = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state))
         applied, dz = np.empty((n + 1, engine.n_joints)), np.empty((n // every + 1, engine.n_joints, len(p)))
-        if engine.compiled:
-            from .multibody.kernels import tracking_objective
-            from .multibody.sensitivity import rk4_sensitivity
+        from .multibody.kernels import rk4_sensitivity
+        from .tracking import tracking_objective
 
-            _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates, applied,
-                                      dz)
-            value = tracking_objective(states, done, every, angles_ref, n, weight, engine.joint_offset,
-                                       engine.joint_parent, engine.n_p)
-        else:
-            from .multibody.kernels_general import tracking_objective
-            from .multibody.sensitivity import rk4_sensitivity_dense
-
-            loads, *layout = layout
-            _, done = rk4_sensitivity_dense(y0, dt, n, tau[0], ref, refd, G, joint, every, loads, *layout, states,
-                                            rates, applied, dz)
-            value = tracking_objective(states, done, every, angles_ref, n, weight, layout[0], layout[1], engine.n_p)
+        _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates, applied, dz)
+        value = tracking_objective(states, done, every, angles_ref, n, weight, engine.layout)
         m = done // every + 1
         error = engine.joints_from_state(states[: done + 1 : every])[0] - angles_ref[:m]
         gradient = np.zeros(len(p))

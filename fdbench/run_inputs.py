@@ -24,6 +24,7 @@ from .multibody import simulation as sim
 from .multibody.engine import Engine
 from .multibody.loads import loads_digest, read_external_loads
 from .multibody.motions import Resampled, joint_motion, noisy_joints
+from . import tracking
 
 
 # ---------------------------------------------------------------------- input files
@@ -160,10 +161,13 @@ def simulate(spec, drive, **law):
     return sim.simulate(drive, engine(spec), motions(spec)[0], **law, **integration(spec))
 
 
-def warm_up(spec) -> None:
-    """Load (or compile) the engine's kernels (and scipy's integrators for an adaptive one), so that
-    runtimes exclude it."""
-    sim.warm_up(spec.integrator != "rk4", dense=not engine(spec).compiled)
+def warm_up(spec, population: bool = False) -> None:
+    """Load (or compile) the engine's kernels for the spec's model (and scipy's integrators for an
+    adaptive one; with ``population`` the shooting problem's population kernel), so that runtimes
+    exclude it."""
+    engines = sim.warm_up(spec.integrator != "rk4", (engine(spec),))
+    if population:
+        tracking.warm_up(engines)
 
 
 # ---------------------------------------------------------------------- control

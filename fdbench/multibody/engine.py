@@ -41,19 +41,20 @@ only as a guard, a NaN pivot as NONFINITE.
 
 Mass matrix: each body's natural-coordinate mass matrix on its basic points (Garcia de Jalon and
 Bayo, ch. 3) from its mass, com and inertia; Q_ext: gravity at the com and the loads mapped to the
-basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels take arrays only (a data
-layout of indices and constants built once per Engine; they live in fdbench.multibody.kernels), so
-they are compiled once and cached for every model. Strict IEEE arithmetic.
+basic points by r_P = C_P q. For the forearm this is eq. 4. The kernels (fdbench.multibody.kernels)
+take one data layout (``Engine.layout``, named tuples of arrays of fdbench.multibody.layout, built
+once per Engine), so they are compiled once and cached for every model of a kind. Strict IEEE
+arithmetic.
 
 Free and path joints (``fdbench.multibody.model``). A free joint's body has its joint point
 among the free points, unconstrained, its x and y the point's coordinates minus at_parent; a
 joint with a path gives its child a joint point of its own, held on the path by two constraints
-that involve both bodies' angles. Inverse dynamics, M(z) and h (numpy) take both through the
-joints' velocity transform. Eq. 12 for such models, and for any model with external loads from
-data (``fdbench.multibody.loads``), runs on compiled dense kernels
-(``fdbench.multibody.kernels_general``: the same driver, feedback laws and status codes, a Cholesky
-factorisation of the whole leading matrix, a population of open-loop candidates, forward
-sensitivities) over the dense layout (``dense_layout``); ``compiled`` means the banded kernels above.
+that involve both bodies' angles. M(z) (numpy) takes both through the joints' velocity transform.
+The kernels take paths, free joints and external loads from data (``fdbench.multibody.loads``) as
+optional arguments (``Engine.paths``, ``free``, ``loads_at``; None when absent): a model of pin
+joints only without loads takes the banded solve above (``banded``), any other model a Cholesky
+factorisation of the whole leading matrix, with the same driver, feedback laws, status codes and
+sensitivities.
 
 Feedback laws. One compiled RK4 driver (``Engine.simulate``) serves PD, computed torque and gain
 matrices; computed torque evaluates eq. 3 (the believed model's inverse dynamics) from the joint
@@ -71,8 +72,12 @@ import numpy as np
 
 
 from .model import Model, resolved_end
-from .kernels import (ALPHA, COMPUTED, FIXED, GAINS, LENGTH, N_PARAMS, OMEGA2, PD, SWITCH_COS, TWO_XI_OMEGA, VIOLATION,
-                      VIOLATION_TOL)
+from . import kernels
+from .layout import (ALPHA, AT_CHILD_X, AT_CHILD_Y, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA_F as BETA, COLUMN,
+                     COMPUTED, FIXED, FIXED_X, FIXED_Y, FREE, GAINS, KI, KJ, L_11, L_12, L_21, L_22, LENGTH, N_BODY_FLOAT,
+                     N_BODY_INT, N_LOAD, N_LOAD_INT, N_PARAMS, N_PATH_FLOAT, OFFSET, OMEGA2, PARENT, PATH, PD, SWITCH_COS,
+                     TWO_XI_OMEGA, VIOLATION, VIOLATION_TOL, D, Law, Loads, Paths)
+from .layout import Model as Layout
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
 SAME_POINT_M = 1e-9  # m: a joint this close to a basic point of its parent sits on that point
@@ -150,7 +155,6 @@ class Engine:
             for load in loads.loads:
                 for name in {load.body, load.force_frame, load.point_frame} - {"ground"}:
                     model.body(name)  # KeyError for a body the model lacks
-        self.compiled = not model.has_path_or_free_joints and loads is None
         self.params = np.zeros(N_PARAMS)
         self.params[ALPHA], self.params[TWO_XI_OMEGA], self.params[OMEGA2] = alpha, 2 * xi * omega, omega**2
         self.params[SWITCH_COS], self.params[VIOLATION] = SIN_FORM_MIN_COS, VIOLATION_TOL
@@ -158,6 +162,7 @@ class Engine:
         self._build_matrices()
         self.n_q = self.n_p + self.n_bodies  # the points and one angle per body
         self.n_state = 2 * self.n_q
+        self._build_layout()
         self._last_start = None  # (z and zd as bytes, the state) of the last ``state_from_joints``
 
     # ------------------------------------------------------------------ layout
@@ -316,101 +321,91 @@ class Engine:
         return first
 
     @property
-    def _kernel_layout(self):
-        """The arrays every kernel takes, in order."""
-        return (self.pt_index, self.pt_fixed, self.body_pts, self.body_geom, self.joint_parent, self.lin_idx,
-                self.lin_coef, self.lin_const, self.first, self.base, self.q_ext, self.params)
+    def banded(self) -> bool:
+        """Whether the kernels take the banded, angle-eliminated solve: pin joints only and no
+        external loads (``kernels``' module docstring); any other model takes the dense one."""
+        return self.paths is None and self.free is None and self.loads is None
 
     @property
-    def dense_layout(self) -> tuple:
-        """The arrays ``kernels_general``'s eq. 12 takes (its dense layout), built once: for a model
-        with free or path joints (any model's numbers, pins only included)."""
-        if getattr(self, "_dense", None) is None:
-            self._dense = self._build_dense()
-        return self._dense
-
-    @property
-    def dense_inverse_layout(self) -> tuple:
-        """The arrays ``kernels_general.inverse_torques`` takes after (z, zd, zdd), in order."""
-        body_int, body_float, _, _, knots, spline_start, *_, load_int, _ = self.dense_layout
-        return (body_int, body_float, knots, spline_start, load_int, self.pt_owner, self.pt_local, self.pt_index,
-                self.mass, self.q_ext)
+    def compiled(self) -> bool:
+        """``banded`` under its former name (every model runs on the compiled kernels)."""
+        return self.banded
 
     def load_values(self, times) -> np.ndarray:
-        """The external loads' values at the times (s, shape (n,)) as ``kernels_general`` takes them:
-        shape (n, L, N_LOAD), force (N) and point (m) in their frames, free moment (N m); L = 0
-        without loads."""
-        from .kernels_general import N_LOAD
-
+        """The external loads' values at the times (s, shape (n,)) as the kernels take them
+        (``layout.Loads.values``): shape (n, L, N_LOAD), force (N) and point (m) in their frames,
+        free moment (N m); L = 0 without loads."""
         times = np.asarray(times, dtype=float)
         if self.loads is None:
             return np.zeros((len(times), 0, N_LOAD))
         force, point, moment = self.loads.at(times)
         return np.ascontiguousarray(np.concatenate([force, point, moment[..., None]], axis=2))
 
-    def _load_values_for(self, times, nominal: "Engine | None") -> tuple:
-        """``load_values`` of the plant and of the model computed torque believes, interpolated once
-        when both carry the same loads."""
-        own = self.load_values(times)
-        believed = own if nominal is None or nominal.loads is self.loads else nominal.load_values(times)
-        return own, believed
+    def loads_at(self, times) -> "Loads | None":
+        """The kernels' ``loads`` argument at the times (s) of a grid: None without loads."""
+        if self.loads is None:
+            return None
+        return Loads(self.load_frames, self.load_values(times))
 
-    def dense_simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
-        """The arrays ``kernels_general.rk4`` and ``derivatives`` take after the feedback law: the
-        dense layout, then the inverse layout of ``nominal`` (None: this engine)."""
-        self.check_nominal(nominal)
-        return (*self.dense_layout, *(self if nominal is None else nominal).dense_inverse_layout)
+    def kernel_args(self) -> tuple:
+        """(model, paths, free): the kernels' layout arguments of this model (``layout``)."""
+        return self.layout, self.paths, self.free
 
-    def _build_dense(self) -> tuple:
-        """The dense layout (``kernels_general``'s module docstring): per body its points, parent,
-        coordinate, kind and geometry; per path its point map and splines' pieces; per external load
-        its body and frames."""
-        from . import kernels_general as kg
-
+    def _build_layout(self) -> None:
+        """The kernels' layout (``fdbench.multibody.layout``), built once: ``layout`` (a ``Model``),
+        ``paths`` (a ``Paths`` or None), ``free`` (the free joints' bodies or None) and the loads'
+        frames: per body its points, parent, coordinate, kind and geometry; per path its point map
+        and splines' pieces; per external load its body and frames."""
         B = self.n_bodies
-        body_int, body_float = np.full((B, kg.N_BODY_INT), FIXED, dtype=np.int64), np.zeros((B, kg.N_BODY_FLOAT))
+        body_int, body_float = np.full((B, N_BODY_INT), FIXED, dtype=np.int64), np.zeros((B, N_BODY_FLOAT))
         path_body, path_float, pieces, spline_start = [], [], [], [0]
         for b, joint in enumerate(self.model.joints):
             p = self.joint_parent[b]
-            body_int[b, [kg.KI, kg.KJ]] = self.pt_index[self.body_pts[b]]
-            body_int[b, kg.PARENT], body_int[b, kg.COLUMN] = p, self.joint_column[b]
-            body_int[b, kg.FREE] = joint.type == "free"
-            body_float[b, [kg.D, kg.BETA]] = self.body_geom[b]
-            body_float[b, [kg.FIXED_X, kg.FIXED_Y]] = self.pt_fixed[self.body_pts[b, 0]]
-            body_float[b, kg.OFFSET] = joint.offset
-            body_float[b, [kg.AT_PARENT_X, kg.AT_PARENT_Y]] = joint.at_parent
-            body_float[b, [kg.AT_CHILD_X, kg.AT_CHILD_Y]] = joint.at_child
+            body_int[b, [KI, KJ]] = self.pt_index[self.body_pts[b]]
+            body_int[b, PARENT], body_int[b, COLUMN] = p, self.joint_column[b]
+            body_int[b, FREE] = joint.type == "free"
+            body_float[b, [D, BETA]] = self.body_geom[b]
+            body_float[b, [FIXED_X, FIXED_Y]] = self.pt_fixed[self.body_pts[b, 0]]
+            body_float[b, OFFSET] = joint.offset
+            body_float[b, [AT_PARENT_X, AT_PARENT_Y]] = joint.at_parent
+            body_float[b, [AT_CHILD_X, AT_CHILD_Y]] = joint.at_child
             if joint.path is None:
                 continue
-            body_int[b, kg.PATH] = len(path_body)
+            body_int[b, PATH] = len(path_body)
             path_body.append(b)
-            maps = np.zeros(kg.N_PATH_FLOAT)
+            maps = np.zeros(N_PATH_FLOAT)
             if p != FIXED:  # (c1, c2) = base + L s: the point map is linear in the path's offset s
                 at_child_p = np.asarray(self.model.joints[p].at_child, dtype=float)
                 u = self._local_end[p] - at_child_p
-                maps[[kg.BASE_1, kg.BASE_2]] = _point_map(np.asarray(joint.at_parent, dtype=float) - at_child_p, u)
-                (maps[kg.L_11], maps[kg.L_21]), (maps[kg.L_12], maps[kg.L_22]) = (_point_map((1.0, 0.0), u),
-                                                                                  _point_map((0.0, 1.0), u))
+                maps[[BASE_1, BASE_2]] = _point_map(np.asarray(joint.at_parent, dtype=float) - at_child_p, u)
+                (maps[L_11], maps[L_21]), (maps[L_12], maps[L_22]) = (_point_map((1.0, 0.0), u),
+                                                                      _point_map((0.0, 1.0), u))
             path_float.append(maps)
             for spline in joint.path.splines():
                 pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
                 spline_start.append(spline_start[-1] + len(spline.x))
         index = {name: b for b, name in enumerate(self.body_names)}
-        load_int = np.array([[index.get(name, FIXED) for name in (load.body, load.force_frame, load.point_frame)]
-                             for load in (self.loads.loads if self.loads is not None else ())],
-                            dtype=np.int64).reshape(-1, kg.N_LOAD_INT)
+        self.load_frames = np.array([[index.get(name, FIXED) for name in (load.body, load.force_frame, load.point_frame)]
+                                     for load in (self.loads.loads if self.loads is not None else ())],
+                                    dtype=np.int64).reshape(-1, N_LOAD_INT)
         path_body = np.array(path_body, dtype=np.int64)
-        return (body_int, body_float, path_body, np.array(path_float, dtype=float).reshape(-1, kg.N_PATH_FLOAT),
-                np.concatenate(pieces) if pieces else np.zeros((0, 5)), np.array(spline_start, dtype=np.int64),
-                self.lin_idx, self.lin_coef, self.lin_const, self.mass, self.q_ext, self.params, load_int,
-                self._dense_envelope(body_int, path_body))
+        self.paths = None if not len(path_body) else Paths(
+            path_body, np.array(path_float, dtype=float).reshape(-1, N_PATH_FLOAT), np.concatenate(pieces),
+            np.array(spline_start, dtype=np.int64))
+        free = np.flatnonzero(body_int[:, FREE]).astype(np.int64)
+        self.free = free if len(free) else None
+        self.layout = Layout(
+            pt_index=self.pt_index, pt_fixed=self.pt_fixed, body_pts=self.body_pts, body_geom=self.body_geom,
+            joint_parent=self.joint_parent, offset=self.joint_offset, at_parent=self.joint_at_parent,
+            at_child=self.joint_at_child, lin_idx=self.lin_idx, lin_coef=self.lin_coef, lin_const=self.lin_const,
+            first=self.first, base=self.base, mass=self.mass, q_ext=self.q_ext, params=self.params,
+            pt_owner=self.pt_owner, pt_local=self.pt_local, body_int=body_int, body_float=body_float,
+            dense_first=self._dense_envelope(body_int, path_body))
 
     def _dense_envelope(self, body_int, path_body) -> np.ndarray:
         """first[r]: the first column of row r inside the envelope of eq. 12's dense leading matrix
         (n_q, n_q): the entries of the points' mass matrix and, for every constraint row, those of
         its columns (both of a point's coordinates, whichever angle form is in force)."""
-        from . import kernels_general as kg
-
         n_p = self.n_p
         coupled = np.eye(self.n_q, dtype=bool)
         coupled[:n_p, :n_p] |= self.mass != 0.0
@@ -418,52 +413,31 @@ class Engine:
         def points(*indices):
             return [k + axis for k in indices if k != FIXED for axis in range(2)]
 
-        rows = [points(ki, kj) + [n_p + b] for b, (ki, kj) in enumerate(body_int[:, [kg.KI, kg.KJ]])]
+        rows = [points(ki, kj) + [n_p + b] for b, (ki, kj) in enumerate(body_int[:, [KI, KJ]])]
         rows += [[k for k in row if k != FIXED] for row in self.lin_idx]
         for k in path_body:
-            p = body_int[k, kg.PARENT]
-            rows.append(points(body_int[k, kg.KI]) + [n_p + k] + ([] if p == FIXED else (
-                points(body_int[p, kg.KI], body_int[p, kg.KJ]) + [n_p + p])))
+            p = body_int[k, PARENT]
+            rows.append(points(body_int[k, KI]) + [n_p + k] + ([] if p == FIXED else (
+                points(body_int[p, KI], body_int[p, KJ]) + [n_p + p])))
         for row in rows:
             coupled[np.ix_(row, row)] = True
         return np.array([np.flatnonzero(coupled[r, :r + 1])[0] for r in range(self.n_q)], dtype=np.int64)
 
     def check_nominal(self, nominal: "Engine | None") -> None:
         """ValueError (one line) unless ``nominal`` (None: this engine) can be the model computed-torque
-        control believes: the same coordinates, and compiled kernels where this engine has them."""
-        if nominal is None:
-            return
-        if nominal.joints != self.joints:
+        control believes: the same coordinates."""
+        if nominal is not None and nominal.joints != self.joints:
             raise ValueError(f"the nominal model's joints {nominal.joints} are not the plant's {self.joints}")
-        if self.compiled:
-            nominal.require_compiled("computed-torque control of a plant without them")
 
-    def require_compiled(self, what: str = "the compiled kernels") -> None:
-        """ValueError (one line) if the model has joints the compiled kernels do not take yet."""
-        if not self.compiled:
-            kinds = sorted({"free" if j.type == "free" else "path" for j in self.model.joints
-                            if j.type == "free" or j.path is not None})
-            if kinds:
-                raise ValueError(f"model {self.model.name!r} has {' and '.join(kinds)} joints, which {what} cannot "
-                                 "take in this version")
-            raise ValueError(f"{what} cannot take external loads (--loads) in this version")
-
-    @property
-    def inverse_torques_layout(self) -> tuple:
-        """The arrays ``kernels.inverse_torques`` takes after (z, zd, zdd), in order."""
-        return (self.joint_parent, self.joint_offset, self.joint_at_parent, self.joint_at_child, self.pt_owner,
-                self.pt_local, self.pt_index, self.mass, self.q_ext)
-
-    def simulation_layout(self, nominal: "Engine | None" = None) -> tuple:
-        """The arrays ``kernels.rk4``, ``derivatives`` and ``rk4_candidates`` take after the feedback
-        law: the joint offsets, the penalty layout, then the inverse-dynamics layout of ``nominal``
-        (the model computed-torque control believes; None: this one)."""
+    def believed_args(self, nominal: "Engine | None", times) -> tuple:
+        """(loads, believed, believed_paths, believed_loads): the kernels' plant loads and the model
+        computed-torque control believes (``nominal``; None: this one) on the grid of the times (s),
+        the loads interpolated once when both carry the same."""
+        self.check_nominal(nominal)
         believed = self if nominal is None else nominal
-        for engine in (self, believed):
-            engine.require_compiled()
-        if believed.joints != self.joints:
-            raise ValueError(f"the nominal model's joints {believed.joints} are not the plant's {self.joints}")
-        return (self.joint_offset, *self._kernel_layout, *believed.inverse_torques_layout)
+        own = self.loads_at(times)
+        theirs = own if believed.loads is self.loads else believed.loads_at(times)
+        return own, believed.layout, believed.paths, theirs
 
     # ------------------------------------------------------------------ kinematics (numpy)
     def _kinematics(self, z, zd, zdd):
@@ -560,7 +534,7 @@ class Engine:
         if y.shape[-1:] != (self.n_state,):
             raise ValueError(f"states must have shape ({self.n_state},) or (n, {self.n_state}), got {y.shape}")
         phi, w = y[..., self.n_p:self.n_q], y[..., self.n_q + self.n_p:]
-        if not self.compiled:
+        if not self.banded:
             return self._coordinates_from_state(y, phi, w)
         z, zd = np.empty(phi.shape), np.empty(w.shape)
         for k, parent in enumerate(self.joint_parent):  # column by column: no gathered copies
@@ -595,16 +569,8 @@ class Engine:
 
     def constraint_violation(self, y) -> float:
         """max |Phi_i| (m^2 and m) of the state y, the angle constraints in the form in force."""
-        from .kernels import constraint_violation
-
-        if not self.compiled:
-            from .kernels_general import constraint_residuals, n_rows
-
-            layout = self.dense_layout
-            rows = n_rows(layout[0], layout[2], self.lin_const)
-            return float(constraint_residuals(self._vector(y, self.n_state, "the state"), *layout, np.empty(rows),
-                                              np.empty(rows)))
-        return float(constraint_violation(self._vector(y, self.n_state, "the state"), *self.simulation_layout()))
+        return float(kernels.constraint_violation(self._vector(y, self.n_state, "the state"), *self.kernel_args(),
+                                                  self.loads_at(np.zeros(1)), None))
 
     def inverse_dynamics(self, z, zd, zdd, t=None) -> np.ndarray:
         """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
@@ -733,23 +699,16 @@ class Engine:
         return {key: value[0] if single else value for key, value in points.items()}
 
     def inverse_torques(self, z, zd, zdd, t=None) -> np.ndarray:
-        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``, or ``kernels_general``'s for
-        free or path joints and external loads, taken at the time t s): the joint torques (N m) of
-        one minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2), shape (J,)."""
-        from .kernels import inverse_torques
-
+        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``; external loads taken at the time
+        t s): the generalised forces (N m; N for a free joint's x and y) of one minimal motion
+        (z, zd, zdd) (rad, rad/s, rad/s^2; m for a free joint's x and y), shape (J,)."""
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
-        out = np.empty(self.n_joints)
-        if not self.compiled:  # free or path joints, external loads
-            from . import kernels_general
-
-            if self.loads is not None and t is None:
-                raise ValueError("a model with external loads needs the times of its inverse dynamics")
-            loads = self.load_values(np.zeros(1) if t is None else np.array([float(t)]))[0]
-            kernels_general.inverse_torques(z, zd, zdd, loads, *self.dense_inverse_layout, out)
-            return out
-        inverse_torques(z, zd, zdd, *self.inverse_torques_layout, out)
-        return out
+        if self.loads is not None and t is None:
+            raise ValueError("a model with external loads needs the times of its inverse dynamics")
+        out = np.empty((1, self.n_joints))
+        kernels.inverse_torques(z[None], zd[None], zdd[None], self.layout, self.paths,
+                                self.loads_at(np.zeros(1) if t is None else np.array([float(t)])), out)
+        return out[0]
 
     def simulate(self, y0, dt, n_steps, tau_half, ref_half, refd_half, refdd_half, kp, kd, mode=PD, gains=None,
                  nominal: "Engine | None" = None) -> SimResult:
@@ -761,8 +720,6 @@ class Engine:
         (2 n_steps + 1, J, 2J) (N m/rad, N m s/rad). tau_half (N m), ref_half (rad), refd_half
         (rad/s), refdd_half (rad/s^2): shape (2 n_steps + 1, J) on the half-step grid t_k = k dt / 2;
         kp, kd: shape (J,) or one number."""
-        from .kernels import rk4
-
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (math.isfinite(dt) and dt > 0):
@@ -773,22 +730,12 @@ class Engine:
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
         states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
         applied = np.empty((n_steps + 1, self.n_joints))
-        if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
-            from .kernels_general import rk4 as dense_rk4
+        law = Law(tau, ref, refd, refdd, kp, kd, mode, gains)
+        loads, *believed = self.believed_args(nominal, np.arange(2 * n_steps + 1) * (0.5 * dt))
 
-            layout = self.dense_simulation_layout(nominal)
-            times = np.arange(2 * n_steps + 1) * (0.5 * dt)
-            loads = self._load_values_for(times, nominal)
-
-            def run(y, n, rows, out):
-                return dense_rk4(y, float(dt), n, *(a[rows] for a in (tau, ref, refd, refdd)), kp, kd, mode,
-                                 gains[rows] if mode == GAINS else gains, *(a[rows] for a in loads), *layout, *out)
-        else:
-            layout, ref = self.simulation_layout(nominal), ref + self.joint_offset
-
-            def run(y, n, rows, out):
-                return rk4(y, float(dt), n, *(a[rows] for a in (tau, ref, refd, refdd)), kp, kd, mode,
-                           gains[rows] if mode == GAINS else gains, *layout, *out)
+        def run(y, n, rows, out):
+            return kernels.rk4(y, float(dt), n, rows.start, law, self.layout, self.paths, self.free, loads, *believed,
+                               *out)
         code, done, max_viol = self._in_chunks(run, y0, int(n_steps), (states, rates, applied))
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
             array[done + 1:] = np.nan
@@ -827,8 +774,6 @@ class Engine:
         (each (k, J)) and of gains ((k, J, 2J)): the adaptive integrators' right-hand side. The
         accelerations are NaN where the points' matrix is singular. t: the states' times (s, (k,)),
         needed with external loads."""
-        from .kernels import derivatives
-
         states = np.ascontiguousarray(states, dtype=float)
         if states.ndim != 2 or states.shape[1] != self.n_state:
             raise ValueError(f"states must have shape (k, {self.n_state}), got {states.shape}")
@@ -836,29 +781,22 @@ class Engine:
         tau, ref, refd, refdd = self._half_step_arrays(k, tau=tau, ref=ref, refd=refd, refdd=refdd)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, k)
         out, applied = np.empty((k, self.n_state)), np.empty((k, self.n_joints))
-        if not self.compiled:  # free or path joints: the dense kernels, references without the offsets
-            from . import kernels_general
-
-            layout = self.dense_simulation_layout(nominal)
-            if (self.loads is not None or (nominal is not None and nominal.loads is not None)) and t is None:
-                raise ValueError("a model with external loads needs the times of its states")
-            times = np.zeros(k) if t is None else np.asarray(t, dtype=float).reshape(k)
-            loads = self._load_values_for(times, nominal)
-            kernels_general.derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, *loads, *layout, out,
-                                        applied)
-            return out, applied
-        derivatives(states, tau, ref + self.joint_offset, refd, refdd, kp, kd, mode, gains,
-                    *self.simulation_layout(nominal), out, applied)
+        if (self.loads is not None or (nominal is not None and nominal.loads is not None)) and t is None:
+            raise ValueError("a model with external loads needs the times of its states")
+        times = np.zeros(k) if t is None else np.asarray(t, dtype=float).reshape(k)
+        loads, *believed = self.believed_args(nominal, times)
+        kernels.derivatives(states, Law(tau, ref, refd, refdd, kp, kd, mode, gains), self.layout, self.paths,
+                            self.free, loads, *believed, out, applied)
         return out, applied
 
     def population_args(self, y0, dt, n_steps, tau, ref_half, refd_half, every, angles_ref, penalty_weight) -> tuple:
-        """The arguments of ``kernels.rk4_candidates`` before its work buffers, for
+        """The arguments of ``fdbench.tracking.rk4_candidates`` before its work buffers, for
         ``fdbench.population.Population(rk4_candidates, n_steps, engine.population_widths)(lam, args)``:
         the start y0 (n_state,), the step dt (s), the candidates' torques tau (N m, shape (lam,
         2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
-        J), eq. 18's samples every ``every``-th step with the desired joint angles angles_ref (rad,
-        shape (n_steps // every + 1, J)) and its penalty weight (deg). A model with free or path joints
-        gives those of ``kernels_general.rk4_candidates`` (``population_kernel``)."""
+        J), eq. 18's samples every ``every``-th step with the desired coordinates angles_ref (rad,
+        shape (n_steps // every + 1, J)) and its penalty weight (deg), then the kernels' layout and
+        the loads on the grid."""
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):
@@ -870,23 +808,9 @@ class Engine:
         samples = (n_steps // every + 1, self.n_joints)
         if np.shape(angles_ref) != samples:
             raise ValueError(f"angles_ref must have shape {samples}, got {np.shape(angles_ref)}")
-        start = (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
-                 np.ascontiguousarray(tau, dtype=float))
-        rest = (int(every), np.array(angles_ref, dtype=float), float(penalty_weight))
-        if not self.compiled:
-            loads = self.load_values(np.arange(rows) * (0.5 * float(dt)))
-            return (*start, ref, refd, *rest, loads, *self.dense_simulation_layout())
-        return (*start, ref + self.joint_offset, refd, *rest, *self.simulation_layout())
-
-    @property
-    def population_kernel(self):
-        """The kernel of open-loop candidates for ``fdbench.population.Population`` that takes
-        ``population_args``: ``kernels.rk4_candidates``, or ``kernels_general``'s for free or path joints."""
-        if self.compiled:
-            from .kernels import rk4_candidates
-        else:
-            from .kernels_general import rk4_candidates
-        return rk4_candidates
+        return (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
+                np.ascontiguousarray(tau, dtype=float), ref, refd, int(every), np.array(angles_ref, dtype=float),
+                float(penalty_weight), *self.kernel_args(), self.loads_at(np.arange(rows) * (0.5 * float(dt))))
 
     @property
     def population_widths(self) -> tuple:

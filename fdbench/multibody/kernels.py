@@ -1,32 +1,45 @@
-"""The multibody engine's compiled kernels (see ``fdbench.multibody.engine`` for the formulation).
+"""The multibody engine's compiled kernels (see ``fdbench.multibody.engine`` for the formulation):
+one RK4 driver of eq. 12 under a feedback law, one inverse dynamics (eq. 3), one sensitivity
+derivation, over one data layout (``fdbench.multibody.layout``: named tuples of arrays built once
+per ``Engine``, so numba compiles and caches each kernel once for every model of a kind).
 
-Every kernel takes arrays only: the engine's data layout (indices and constants built once per
-``Engine``), so numba compiles and caches each kernel once for every model. Three layouts travel
-with the calls, each a tuple of arrays in a fixed order:
+Paths, free joints and external loads are optional arguments, None when a model has none; numba
+resolves every ``is None`` test when it compiles, so each pattern of None is its own variant with
+none of the absent parts' code. A model of pin joints only (paths, free and loads all None) takes
+the banded solve: the angle rows hold no mass and each holds one angle, so the angles are
+eliminated and the points' matrix K (inside its envelope) is factored by L D L^T (``_drive``'s
+``assemble`` and ``solve``). Any other model takes the dense solve: eq. 12,
+(M + alpha J^T J) q'' = Q - alpha J^T (J' q' + 2 xi omega Phi' + omega^2 Phi), over points and
+angles together by a Cholesky factorisation inside its envelope, each constraint row kept as its few
+nonzero entries (``constraints``):
 
-* the penalty layout (``Engine._kernel_layout``): pt_index, pt_fixed, body_pts, body_geom,
-  joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params;
-* the inverse-dynamics layout (``Engine.inverse_torques_layout``): joint_parent, joint_offset,
-  joint_at_parent, joint_at_child, pt_owner, pt_local, pt_index, mass, q_ext;
-* the simulation layout (``Engine.simulation_layout``): the plant's joint offsets, its penalty
-  layout, then the inverse-dynamics layout of the model computed-torque control believes.
+* a free joint's body has its joint point i among the free points with no constraint to ground;
+  its coordinates are the body's angle (minus the offset) and point i's x and y (minus
+  ``at_parent``), whose generalised forces (N) act on point i's coordinates;
+* a joint with a path ties the child's point i to its parent by two constraints,
+  r_i - r_pi - G(theta) e_p = 0 with e_p = r_pj - r_pi, G = c1 I + c2 R90 and (c1, c2) the
+  parent-frame point at_parent + path(theta) in the parent's basic-point frame (linear in the
+  path's offset s: (c1, c2) = base + L s); on ground, r_i - at_parent - path(theta) = 0;
+* external loads from data: F on the body's joint point i and (P - r_i) x F + M on its angle.
 
-One RK4 driver (``_drive``, called as ``rk4``) serves every feedback law (``mode``): PD (per-joint
-PD plus feedforward), COMPUTED (computed torque through the believed model's inverse dynamics) and
-GAINS (a full gain matrix on the half-step grid). Its stage code is the only one: ``derivatives``
-(the adaptive integrators' right-hand side for k states), ``constraint_violation``,
-``rk4_candidates`` (the population's open-loop simulations with eq. 18) and the sensitivities
-(``fdbench.multibody.sensitivity``: the driver runs the tangents after each stage) all run it.
-Strict IEEE arithmetic.
+The family, one algorithm a module: ``layout`` (the data), ``inverse`` (eq. 3), ``tangents`` (the
+sensitivities of a stage), this module (the RK4 driver and its entries) and, above the engine, the
+shooting problem's eq. 18 and population (``fdbench.tracking``).
+
+One RK4 driver (``_drive``, called as ``rk4``) serves every feedback law (``Law.mode``): PD (per
+coordinate, plus feedforward), COMPUTED (computed torque through the believed model's inverse
+dynamics) and GAINS (a full gain matrix on the half-step grid). Its stage code is the only one:
+``derivatives`` (the adaptive integrators' right-hand side), ``constraint_violation``,
+``rk4_sensitivity`` (the driver runs the tangents after each stage) and the population of
+``fdbench.tracking`` all run it. Strict IEEE arithmetic.
 
 Speed (``python benchmarks/bench_engine.py``): numba increments and decrements the reference count
 of every array that an inlined function takes at each of its calls whenever the callee branches
-or loops (the LLVM pass that removes the pairs does not see through them), which cost more than
-the arithmetic. So the stage code is closures over the driver's own arrays (inlined without
-such counts), the stages run in one loop, per-body indices and geometry are hoisted out of it, a
-step's start reuses the sin and cos of its violation check, and the solve is unrolled for one free
-point. The operations on every number are those of the plain formulas: the results do not move by
-a bit.
+or loops, which cost more than the arithmetic. So the stage code is closures over the driver's own
+arrays (inlined without such counts), the stages run in one loop, per-body indices and geometry
+are hoisted out of it, a step's start reuses the sin and cos of its violation check, and the
+banded solve is unrolled for one free point. The operations on every number are those of the plain
+formulas.
 """
 
 from __future__ import annotations
@@ -36,334 +49,141 @@ import math
 import numpy as np
 
 from ..jit import njit
-from ..population import DEGREES_PER_RADIAN
+from .inverse import N_KIN, _inverse, _no_loads, _spline_at
+from .inverse import inverse_torques  # noqa: F401 - eq. 3, one of the kernels
+from .tangents import (FORM, LAMBDA, MAX_ENTRIES, N_AUX, N_STAGE, PIVOT, VELOCITY_TERM, _load_in_ground,
+                       _stage_sensitivity, _stage_tangents)
+from .layout import (ALPHA, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA, COLUMN, COMPUTED, CONSTRAINT, D, FREE,
+                     GAINS, KI, KJ, L_11, L_12, L_21, L_22, LENGTH, LOAD_BODY, MOMENT, NONFINITE, OFFSET, OK, OMEGA2,
+                     PARENT, PD, SINGULAR, SWITCH_COS, TWO_XI_OMEGA, VIOLATION, Law)
 
-# a simulation's status codes (``simulation.STATUS_OF_CODE`` names them)
-OK, NONFINITE, SINGULAR, CONSTRAINT = 0, 1, 2, 3
-VIOLATION_TOL = 1e-3  # m (or m^2): a constraint violation beyond this stops a simulation
-
-# named indices into the kernels' arrays
-ALPHA, TWO_XI_OMEGA, OMEGA2, SWITCH_COS, VIOLATION, N_PARAMS = 0, 1, 2, 3, 4, 5  # params
-LENGTH, BETA = 0, 1  # body_geom columns: d (m), beta (rad)
-LAMBDA, PIVOT, VELOCITY_TERM, FORM, N_AUX = 0, 1, 2, 3, 4  # aux columns per body
-FIXED = -1  # pt_index of a point fixed to ground (and lin_idx padding)
-PD, COMPUTED, GAINS = 0, 1, 2  # feedback laws (``rk4``'s mode)
-# columns of the inverse dynamics' per-body scratch: angle (rad), its cos and sin, rate (rad/s),
-# angular acceleration (rad/s^2), the joint point (m), the frame origin (m) and its acceleration (m/s^2)
-PHI, COS, SIN, RATE, ACC, JOINT_X, JOINT_Y, ORIGIN_X, ORIGIN_Y, ORIGIN_AX, ORIGIN_AY, N_KIN = range(12)
+CHECK, ASSEMBLE = 0, 1  # what the driver's ``constraints`` does with each row
 
 
-# ---------------------------------------------------------------------- inverse dynamics (eq. 3)
-@njit(inline="always")
-def _body_point(kin, b, lx, ly):
-    """Position (m) and acceleration (m/s^2) of the point (lx, ly) (m, body frame) of body b, from
-    the bodies' kinematics ``kin``: x, y, ax, ay."""
-    c, s = kin[b, COS], kin[b, SIN]
-    arm_x, arm_y = lx * c - ly * s, lx * s + ly * c
-    al, w2 = kin[b, ACC], kin[b, RATE] * kin[b, RATE]
-    return (kin[b, ORIGIN_X] + arm_x, kin[b, ORIGIN_Y] + arm_y, kin[b, ORIGIN_AX] - al * arm_y - w2 * arm_x,
-            kin[b, ORIGIN_AY] + al * arm_x - w2 * arm_y)
-
-
-@njit(error_model="numpy", inline="always")
-def _inverse_torques(z, zd, zdd, joint_parent, joint_offset, joint_at_parent, joint_at_child, pt_owner, pt_local,
-                     pt_index, mass, q_ext, kin, points, out):
-    """Eq. 3, tau = R^T (M_p p'' - Q_ext) (N m), into out (J,) for the joint angles z (rad), rates zd
-    (rad/s) and accelerations zdd (rad/s^2), shape (J,): the bodies' kinematics from ground out
-    (parents before children), the free points' positions and accelerations, then each point's
-    force M_p p'' - Q_ext projected on R90 (r_P - r_joint) for every joint on its owner's path.
-    kin (J, N_KIN), points (3, n_p): scratch."""
-    n_b = joint_parent.shape[0]
-    for k in range(n_b):
-        p = joint_parent[k]
-        if p < 0:
-            phi, w, al = z[k] + joint_offset[k], zd[k], zdd[k]
-            rx, ry, ax, ay = joint_at_parent[k, 0], joint_at_parent[k, 1], 0.0, 0.0
-        else:
-            phi, w, al = kin[p, PHI] + z[k] + joint_offset[k], kin[p, RATE] + zd[k], kin[p, ACC] + zdd[k]
-            rx, ry, ax, ay = _body_point(kin, p, joint_at_parent[k, 0], joint_at_parent[k, 1])
-        c, s = math.cos(phi), math.sin(phi)
-        arm_x = joint_at_child[k, 0] * c - joint_at_child[k, 1] * s
-        arm_y = joint_at_child[k, 0] * s + joint_at_child[k, 1] * c
-        kin[k, PHI], kin[k, COS], kin[k, SIN], kin[k, RATE], kin[k, ACC] = phi, c, s, w, al
-        kin[k, JOINT_X], kin[k, JOINT_Y] = rx, ry
-        kin[k, ORIGIN_X], kin[k, ORIGIN_Y] = rx - arm_x, ry - arm_y
-        kin[k, ORIGIN_AX], kin[k, ORIGIN_AY] = ax + al * arm_y + w * w * arm_x, ay - al * arm_x + w * w * arm_y
-    for pt in range(pt_index.shape[0]):  # positions (row 0) and accelerations (row 1) of the free points
-        i = pt_index[pt]
-        if i >= 0:
-            points[0, i], points[0, i + 1], points[1, i], points[1, i + 1] = _body_point(
-                kin, pt_owner[pt], pt_local[pt, 0], pt_local[pt, 1])
-    n_p = mass.shape[0]
-    for r in range(n_p):  # row 2: M_p p'' - Q_ext
-        total = 0.0
-        for c in range(n_p):
-            total += mass[r, c] * points[1, c]
-        points[2, r] = total - q_ext[r]
-    for k in range(n_b):
-        out[k] = 0.0
-    for pt in range(pt_index.shape[0]):
-        i = pt_index[pt]
-        if i < 0:
-            continue
-        b = pt_owner[pt]
-        while b >= 0:
-            lever_x, lever_y = points[0, i] - kin[b, JOINT_X], points[0, i + 1] - kin[b, JOINT_Y]
-            out[b] += lever_x * points[2, i + 1] - lever_y * points[2, i]
-            b = joint_parent[b]
-
-
-@njit(error_model="numpy")
-def inverse_torques(z, zd, zdd, joint_parent, joint_offset, joint_at_parent, joint_at_child, pt_owner, pt_local,
-                    pt_index, mass, q_ext, out):
-    """The joint torques (N m) of the minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2; shape (J,))
-    into out (J,): eq. 3 over the inverse-dynamics layout (``Engine.inverse_torques_layout``)."""
-    kin, points = np.empty((joint_parent.shape[0], N_KIN)), np.empty((3, mass.shape[0]))
-    _inverse_torques(z, zd, zdd, joint_parent, joint_offset, joint_at_parent, joint_at_child, pt_owner, pt_local,
-                     pt_index, mass, q_ext, kin, points, out)
-
-
-# ---------------------------------------------------------------------- sensitivities of a stage
-# (the tangents of ``fdbench.multibody.sensitivity``, run by the driver after each stage)
-# columns of a stage's per-body coefficients (``_stage_values``), with e = r_j - r_i the body's
-# end minus its joint point (m) and de, de' a direction's change of e and e':
-#   the distance rows' change g = de GAIN + e (TX dex + TY dey + TVX dex' + TVY dey'), -g on j, +g on i;
-#   the angle row's pivot change PSI_PIVOT dpsi and velocity term change
-#   PSI_TERM dpsi + RATE_TERM dw + 2 xi omega de'_axis + omega^2 de_axis;
-# the multiplier, 1 / pivot, the angle acceleration (rad/s^2) and the form (the axis) at the stage
-(EX, EY, GAIN, TX, TY, TVX, TVY, PSI_PIVOT, PSI_TERM, RATE_TERM, STAGE_LAMBDA, INV_PIVOT, STAGE_ACC, AXIS,
- N_STAGE) = range(15)
-
-
-@njit(error_model="numpy", inline="always")
-def _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag):
-    """The coefficients every direction's tangent at the stage state y needs: per body into values
-    (n_b, N_STAGE), and 1 / D of the factor K = L D L^T into inv_diag (n_p,). x: the stage's
-    solution of K x = r (the point accelerations, m/s^2), k its state derivative, aux its
-    multipliers, pivots and forms (``kernels._drive``'s work arrays).
-
-    The distance rows r -= 2 alpha e cd (cd = 2 |e'|^2 + 2 xi omega 2 e.e' + omega^2 (|e|^2 - d^2))
-    and K's block 4 alpha e e^T, whose change acts on x through -dK x = -4 alpha (de (e.rel) +
-    e (de.rel)), rel = x_j - x_i, give g of the columns' comment."""
-    n_p, n_b = base.shape[0], body_pts.shape[0]
-    n_q = n_p + n_b
-    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
-    for r in range(n_p):
-        inv_diag[r] = 1.0 / K[r, r]
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        if ki >= 0:
-            xi, yi, vxi, vyi = y[ki], y[ki + 1], y[n_q + ki], y[n_q + ki + 1]
-        else:
-            xi, yi, vxi, vyi = pt_fixed[body_pts[b, 0], 0], pt_fixed[body_pts[b, 0], 1], 0.0, 0.0
-        ex, ey, evx, evy = y[kj] - xi, y[kj + 1] - yi, y[n_q + kj] - vxi, y[n_q + kj + 1] - vyi
-        rx, ry = x[kj] - (x[ki] if ki >= 0 else 0.0), x[kj + 1] - (x[ki + 1] if ki >= 0 else 0.0)
-        d = body_geom[b, LENGTH]
-        cd = 2 * (evx * evx + evy * evy) + txo * 2 * (ex * evx + ey * evy) + om2 * (ex * ex + ey * ey - d * d)
-        values[b, EX], values[b, EY] = ex, ey
-        values[b, GAIN] = 2 * alpha * cd + 4 * alpha * (ex * rx + ey * ry)
-        values[b, TX] = 4 * alpha * (txo * evx + om2 * ex + rx)
-        values[b, TY] = 4 * alpha * (txo * evy + om2 * ey + ry)
-        values[b, TVX] = 4 * alpha * (2 * evx + txo * ex)
-        values[b, TVY] = 4 * alpha * (2 * evy + txo * ey)
-        psi = y[n_p + b] + body_geom[b, BETA]
-        s, c, w = math.sin(psi), math.cos(psi), y[n_q + n_p + b]
-        if aux[b, FORM] == 1:  # (y_j - y_i) - d sin(psi): pivot -d c, velocity term d s w^2 + txo (ey' - d c w) + ...
-            values[b, PSI_PIVOT] = d * s
-            values[b, PSI_TERM] = d * c * w * w + txo * d * s * w - om2 * d * c
-            values[b, RATE_TERM] = 2 * d * s * w - txo * d * c
-        else:  # (x_j - x_i) - d cos(psi): pivot d s, velocity term d c w^2 + txo (ex' + d s w) + ...
-            values[b, PSI_PIVOT] = d * c
-            values[b, PSI_TERM] = -d * s * w * w + txo * d * c * w + om2 * d * s
-            values[b, RATE_TERM] = 2 * d * c * w + txo * d * s
-        values[b, STAGE_LAMBDA], values[b, INV_PIVOT] = aux[b, LAMBDA], 1.0 / aux[b, PIVOT]
-        values[b, STAGE_ACC], values[b, AXIS] = k[n_q + n_p + b], aux[b, FORM]
-
-
-@njit(error_model="numpy", inline="always")
-def _solve_factored(K, first, inv_diag, rhs):
-    """Solve K X = rhs in place for the columns of rhs (n_p, P) with the L D L^T factor of
-    the stage's solve (``kernels._drive``) in K and 1 / D in inv_diag."""
-    n, P = rhs.shape
-    for r in range(n):
-        for k in range(first[r], r):
-            lrk = K[r, k]
-            for q in range(P):
-                rhs[r, q] -= lrk * rhs[k, q]
-    for r in range(n):
-        for q in range(P):
-            rhs[r, q] *= inv_diag[r]
-    for r in range(n - 1, -1, -1):
-        for k in range(first[r], r):
-            lrk = K[r, k]
-            for q in range(P):
-                rhs[k, q] -= lrk * rhs[r, q]
-
-
-@njit(error_model="numpy", inline="always")
-def _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
-              dpivot, dca, out):
-    """out = f_y U + f_tau dtau for P directions at once: the derivative of the stage code
-    at a stage in the directions U (n_state, P) of the state and dtau (n_b, P) of the generalised
-    forces of the body angles (N m). K: the stage's factor; values, inv_diag: its
-    ``_stage_values``. dr (n_p, P), dlam, dpivot, dca (n_b, P): scratch."""
-    n_p, n_b = base.shape[0], body_pts.shape[0]
-    n_q = n_p + n_b
-    P = U.shape[1]
-    alpha, txo, om2 = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2]
-    for k in range(n_q):
-        for q in range(P):
-            out[k, q] = U[n_q + k, q]
-    for r in range(n_p):
-        for q in range(P):
-            dr[r, q] = 0.0
-    for r in range(lin_idx.shape[0]):  # linear constraints: their right-hand side is linear in y
-        for e in range(lin_idx.shape[1]):
-            k = lin_idx[r, e]
-            if k < 0:
-                continue
-            for f in range(lin_idx.shape[1]):
-                m = lin_idx[r, f]
-                if m < 0:
-                    continue
-                c_om2, c_txo = alpha * om2 * lin_coef[r, e] * lin_coef[r, f], alpha * txo * lin_coef[r, e] * lin_coef[r, f]
-                for q in range(P):
-                    dr[k, q] -= c_om2 * U[m, q] + c_txo * U[n_q + m, q]
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        ex, ey, gain = values[b, EX], values[b, EY], values[b, GAIN]
-        tx, ty, tvx, tvy = values[b, TX], values[b, TY], values[b, TVX], values[b, TVY]
-        psi_pivot, psi_term, rate_term = values[b, PSI_PIVOT], values[b, PSI_TERM], values[b, RATE_TERM]
-        lam, inv_pivot = values[b, STAGE_LAMBDA], values[b, INV_PIVOT]
-        on_y = values[b, AXIS] == 1.0
-        for q in range(P):
-            dex, dey, devx, devy = U[kj, q], U[kj + 1, q], U[n_q + kj, q], U[n_q + kj + 1, q]
-            if ki >= 0:
-                dex, dey = dex - U[ki, q], dey - U[ki + 1, q]
-                devx, devy = devx - U[n_q + ki, q], devy - U[n_q + ki + 1, q]
-            t = tx * dex + ty * dey + tvx * devx + tvy * devy
-            gx, gy = dex * gain + ex * t, dey * gain + ey * t
-            dpsi = U[n_p + b, q]
-            dp = psi_pivot * dpsi
-            dl = (dtau[b, q] - lam * dp) * inv_pivot
-            dc = psi_term * dpsi + rate_term * U[n_q + n_p + b, q]
-            if on_y:
-                dc += txo * devy + om2 * dey
-                gy += dl
-            else:
-                dc += txo * devx + om2 * dex
-                gx += dl
-            dr[kj, q] -= gx
-            dr[kj + 1, q] -= gy
-            if ki >= 0:
-                dr[ki, q] += gx
-                dr[ki + 1, q] += gy
-            dlam[b, q], dpivot[b, q], dca[b, q] = dl, dp, dc
-    _solve_factored(K, first, inv_diag, dr)
-    for r in range(n_p):
-        for q in range(P):
-            out[n_q + r, q] = dr[r, q]
-    for b in range(n_b):
-        ki, kj = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
-        axis = 1 if values[b, AXIS] == 1.0 else 0
-        acc, inv_pivot = values[b, STAGE_ACC], values[b, INV_PIVOT]
-        for q in range(P):
-            drel = dr[kj + axis, q] - (dr[ki + axis, q] if ki >= 0 else 0.0)
-            out[n_q + n_p + b, q] = (dlam[b, q] / alpha - dca[b, q] - drel - acc * dpivot[b, q]) * inv_pivot
-
-
-@njit(error_model="numpy", inline="always")
-def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign, work, scratch, layout):
-    """The tangents K_s of the stage at the state y (derivative k) for every parameter, from their
-    inputs U (n_state, P) (the tangents of the stage's state): acc += weight K_s, then
-    U = S + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
-    multipliers (``_drive``'s K, rhs, aux); G[half, q] is d tau / d p_q (N m per parameter unit), which
-    moves the generalised force of body b's angle by torque_sign[b, q] G[half, q]; layout: the
-    penalty layout (``rk4``'s order); scratch: values, inv_diag, dtau, dr, dlam, dpivot,
-    dca, dk of ``_stage_values`` and ``_tangents``."""
-    K, x, aux = work[0], work[1], work[2]
-    values, inv_diag, dtau, dr, dlam, dpivot, dca, dk = scratch
-    (pt_index, pt_fixed, body_pts, body_geom, _, lin_idx, lin_coef, _, first, base, _, params) = layout
-    _stage_values(y, k, pt_index, pt_fixed, body_pts, body_geom, first, base, params, K, x, aux, values, inv_diag)
-    for b in range(torque_sign.shape[0]):
-        for q in range(torque_sign.shape[1]):
-            dtau[b, q] = torque_sign[b, q] * G[half, q]
-    _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
-              dpivot, dca, dk)
-    for m in range(S.shape[0]):
-        for q in range(S.shape[1]):
-            acc[m, q] += weight * dk[m, q]
-            U[m, q] = S[m, q] + next_step * dk[m, q]
+@njit
+def n_rows(model, paths):
+    """The number of constraint rows of the dense solve: distance and angle per body, the linear
+    rows, two per path."""
+    return 2 * model.body_int.shape[0] + model.lin_const.shape[0] + (0 if paths is None else 2 * paths.body.shape[0])
 
 
 # ---------------------------------------------------------------------- the RK4 driver (eq. 12 under a feedback law)
 @njit(error_model="numpy")
-def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts,
-           body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset,
-           n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied, K, rhs, aux,
-           G, torque_sign, every, dz):
-    """``rk4`` whose grid starts at row ``start`` of tau, ref, refd, refdd and gains (step i uses rows
-    start + 2 i, start + 2 i + 1, start + 2 i + 2); with n_steps 0 it evaluates the state derivative
-    of y0 alone (into rates[0]). K (n_p, n_p), rhs (n_p,), aux (J, N_AUX): work arrays that hold,
-    after the call, the last stage's L D L^T factor of the points' matrix, its solution (the point
-    accelerations, m/s^2) and per body the multiplier, pivot, velocity term and form.
+def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads, out,
+           residuals, G, param_col, every, dz):
+    """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the state y0 (n_state,) under the
+    feedback ``law`` (``layout.Law``), its grid starting at row ``start`` (step i uses rows
+    start + 2 i, start + 2 i + 1, start + 2 i + 2); with n_steps 0 the state derivative of y0 alone
+    (into rates[0]), with -1 only the constraints of y0 (the returned violation). model, paths,
+    free, loads: the plant's layout (``layout``; paths, free, loads None when absent); believed,
+    believed_paths, believed_loads: the model computed-torque control believes. out: (states,
+    rates (n + 1, n_state), applied (n + 1, J)), filled up to the last step reached. residuals:
+    None, or (phi_rows, jv_rows) (n_rows,) to hold the dense solve's Phi and J q' of every
+    constraint row at the last state checked or stage run. Returns (status, steps_done, max
+    constraint violation).
 
-    With dz of more than zero rows, also the forward sensitivities of the joint angles
-    (``fdbench.multibody.sensitivity.rk4_sensitivity``): G (2 n_steps + 1, P) d tau / d p on the
-    grid, torque_sign (J, P) the signs with which parameter q moves the body angles' generalised
-    forces, dz (n_steps // every + 1, J, P) the derivatives at every ``every``-th step reached.
+    With dz not None, also the forward sensitivities of the coordinates (``rk4_sensitivity``; open
+    loop only, the torque not depending on the state): G (rows, P) d tau / d p on the grid,
+    parameter q moving coordinate param_col[q]'s generalised force; dz (n_steps // every + 1, J, P)
+    the derivatives of the coordinates at every ``every``-th step reached.
 
     Speed: the stage code is written once, as closures over this function's arrays (numba inlines
     them without the reference counting that array arguments of inlined functions cost at every
-    call), and runs in a loop over the four stages; ``state`` holds the stage's state, ``ks``
-    0 to 3 its derivatives k1 to k4. The operations on every number are the plain formulas'."""
-    n_p, n_b = base.shape[0], joint_parent.shape[0]
+    call), and runs in a loop over the four stages; ``state`` holds the stage's state, ``ks`` 0 to
+    3 its derivatives k1 to k4. The operations on every number are the plain formulas'."""
+    tau, ref, refd, refdd, kp, kd, mode, gains = law
+    states, rates, applied = out
+    pt_index, pt_fixed, body_pts, body_geom = model.pt_index, model.pt_fixed, model.body_pts, model.body_geom
+    joint_parent, offset, first, base = model.joint_parent, model.offset, model.first, model.base
+    lin_idx, lin_coef, lin_const = model.lin_idx, model.lin_coef, model.lin_const
+    mass, q_ext, params = model.mass, model.q_ext, model.params
+    body_int, body_float, dense_first = model.body_int, model.body_float, model.dense_first
+    n_b, n_p = body_int.shape[0], mass.shape[0]
     n_q = n_p + n_b
     n = 2 * n_q
+    J = tau.shape[1]
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
-    one_point = n_p == 2 and first[1] == 0  # one free point: the solve's unrolled form
-    # the work arrays: views of one buffer (one allocation per call; the sensitivities call this per stage)
-    n_nominal = n_mass.shape[0]
-    vectors = 6 * n + 5 * n_b  # y, the stage's state, k1 to k4; torque, q_phi, z, zd, v
-    tables = n_b * (N_KIN + 6)  # kin; trig (sin, cos); shape (d, beta, fixed point i)
-    buffer, ends = np.zeros(vectors + tables + 3 * n_nominal), np.empty((n_b, 2), dtype=np.int64)
-    y, state, ks = buffer[:n], buffer[n:2 * n], buffer[2 * n:6 * n].reshape((4, n))
-    per_joint = buffer[6 * n:vectors].reshape((5, n_b))
-    torque, q_phi, z, zd, v = per_joint[0], per_joint[1], per_joint[2], per_joint[3], per_joint[4]
-    kin = buffer[vectors:vectors + n_b * N_KIN].reshape((n_b, N_KIN))
-    trig = buffer[vectors + n_b * N_KIN:vectors + n_b * (N_KIN + 2)].reshape((n_b, 2))
-    shape = buffer[vectors + n_b * (N_KIN + 2):vectors + tables].reshape((n_b, 4))
-    points = buffer[vectors + tables:].reshape((3, n_nominal))
+    one_point = n_p == 2 and first[1] == 0  # one free point: the banded solve's unrolled form
+    load_frames, load_values = _no_loads(loads)
+    believed_frames, believed_values = _no_loads(believed_loads)
+    if paths is None:
+        path_body, path_float = np.zeros(0, dtype=np.int64), np.zeros((0, L_22 + 1))
+        knots, spline_start = np.zeros((0, 5)), np.zeros(1, dtype=np.int64)
+    else:
+        path_body, path_float, knots, spline_start = paths.body, paths.maps, paths.knots, paths.start
+    if residuals is None:
+        phi_rows, jv_rows = np.empty(n_rows(model, paths)), np.empty(n_rows(model, paths))
+    else:
+        phi_rows, jv_rows = residuals[0], residuals[1]
+    y, state, ks = np.empty(n), np.empty(n), np.empty((4, n))
+    torque, z, zd, v, err = np.empty(J), np.empty(J), np.empty(J), np.empty(J), np.empty(J)
+    kin, points = np.zeros((believed.body_int.shape[0], N_KIN)), np.zeros((3, believed.mass.shape[0]))
+    rhs = np.zeros(n_q)  # the right-hand side, then the solution (the banded solve: its first n_p)
+    K, aux, q_phi = np.zeros((n_p, n_p)), np.zeros((n_b, N_AUX)), np.zeros(n_b)  # the banded solve's
+    trig, shape, ends = np.zeros((n_b, 2)), np.zeros((n_b, 4)), np.empty((n_b, 2), dtype=np.int64)
+    A = np.empty((n_q, n_q))  # the dense solve's
+    idx, val = np.empty(MAX_ENTRIES, dtype=np.int64), np.empty(MAX_ENTRIES)
     for m in range(n):
         y[m] = y0[m]
-    sensitive, P = dz.shape[0] > 0, G.shape[1]  # the sensitivities: S = dy/dp, stage inputs U, their sum acc
-    S, U, acc = np.zeros((n, P)), np.zeros((n, P)), np.zeros((n, P))
-    tangent_work = (np.empty((n_b, N_STAGE)), np.empty(n_p), np.empty((n_b, P)), np.empty((n_p, P)),
-                    np.empty((n_b, P)), np.empty((n_b, P)), np.empty((n_b, P)), np.empty((n, P)))
-    factor = (K, rhs, aux)
-    layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext,
-              params)
     # per body, hoisted: the coordinate indices of its points i and j (i: FIXED on ground), and its
     # d (m), beta (rad) and point i's position (m) where it is fixed
     for b in range(n_b):
         ends[b, 0], ends[b, 1] = pt_index[body_pts[b, 0]], pt_index[body_pts[b, 1]]
         shape[b, 0], shape[b, 1] = body_geom[b, LENGTH], body_geom[b, BETA]
         shape[b, 2], shape[b, 3] = pt_fixed[body_pts[b, 0], 0], pt_fixed[body_pts[b, 0], 1]
+    # the sensitivities: S = dy/dp, the stage's input U and derivative dk, their RK4 sum acc; the
+    # dense solve's D = d(b - A x)/dy (jac), then A^-1 D; force_rows (n_q, J): where each
+    # coordinate's force enters b; the banded solve's tangents' scratch (``dz is None`` tests are
+    # resolved when numba compiles: a kernel without sensitivities has none of their code)
+    P = 0 if G is None else G.shape[1]
+    ns = 0 if dz is None else n
+    S, U, acc, dk = np.zeros((ns, P)), np.zeros((ns, P)), np.zeros((ns, P)), np.zeros((ns, P))
+    jac, moved = np.zeros((ns // 2, n)), np.zeros((ns // 2, P))
+    force_rows, solved_rows = np.zeros((ns // 2, J)), np.zeros((ns // 2, J))
+    n_kept = 0 if dz is None else phi_rows.shape[0]  # per constraint row: its entries, Hessian, term
+    row_count, row_term = np.zeros(n_kept, dtype=np.int64), np.zeros(n_kept)
+    row_idx, row_val = np.zeros((n_kept, MAX_ENTRIES), dtype=np.int64), np.zeros((n_kept, MAX_ENTRIES))
+    row_third, row_hess = np.zeros((n_kept, MAX_ENTRIES)), np.zeros((n_kept, MAX_ENTRIES, MAX_ENTRIES))
+    path_kept = np.zeros((path_body.shape[0] if dz is not None else 0, 12))  # per path: its first row, geometry
+    kept_rows = (row_count, row_term, row_idx, row_val, row_hess, row_third)
+    nb_s = 0 if dz is None else n_b
+    torque_sign = np.zeros((nb_s, P))  # the banded tangents: coordinate -> generalised forces of the body angles
+    tangent_work = (np.empty((nb_s, N_STAGE)), np.empty(n_p if dz is not None else 0), np.empty((nb_s, P)),
+                    np.empty((n_p if dz is not None else 0, P)), np.empty((nb_s, P)), np.empty((nb_s, P)),
+                    np.empty((nb_s, P)), np.empty((ns, P)))
+    factor = (K, rhs, aux)
+    banded_layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
+                     q_ext, params)
+    if dz is not None:
+        for k in range(n_b):
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            force_rows[n_p + k, col] += 1.0
+            if p >= 0:
+                force_rows[n_p + p, col] -= 1.0
+            if body_int[k, FREE] == 1:
+                force_rows[body_int[k, KI], col + 1] += 1.0
+                force_rows[body_int[k, KI] + 1, col + 2] += 1.0
+        if paths is None and free is None and loads is None:  # the banded solve: a coordinate per body
+            for q in range(P):
+                torque_sign[param_col[q], q] = 1.0
+                if joint_parent[param_col[q]] >= 0:
+                    torque_sign[joint_parent[param_col[q]], q] = -1.0
 
-    def joint_point(b):
+    def point(b):
         """x, y, x', y' of body b's point i in the stage's state (fixed: its position, zero velocity)."""
         k = ends[b, 0]
         if k < 0:
             return shape[b, 2], shape[b, 3], 0.0, 0.0
         return state[k], state[k + 1], state[n_q + k], state[n_q + k + 1]
 
+    # ------------------------------------------------------------------ the banded solve (pin joints)
     def violation():
         """max |Phi_i| (m^2 and m) of the stage's state: distances, angles (the form in force), linear;
         sin and cos of the bodies' angles into trig, for the state's first stage."""
         worst = 0.0
         for b in range(n_b):
-            xi, yi, _, _ = joint_point(b)
+            xi, yi, _, _ = point(b)
             kj = ends[b, 1]
             dx, dy, d = state[kj] - xi, state[kj + 1] - yi, shape[b, 0]
             psi = state[n_p + b] + shape[b, 1]
@@ -378,34 +198,6 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                     value += lin_coef[r, e] * state[lin_idx[r, e]]
             worst = max(worst, abs(value))
         return worst
-
-    def law(half):
-        """The applied joint torques (N m) at the stage's state and grid row ``half`` into torque
-        (``rk4``'s modes). ref holds the reference joint angles plus the plant's joint offsets, as
-        z here is the difference of the body angles."""
-        for k in range(n_b):
-            p = joint_parent[k]
-            z[k] = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0)
-            zd[k] = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
-        if mode == GAINS:
-            for k in range(n_b):
-                total = tau[half, k]
-                for j in range(n_b):
-                    total += gains[half, k, j] * (ref[half, j] - z[j])
-                for j in range(n_b):
-                    total += gains[half, k, n_b + j] * (refd[half, j] - zd[j])
-                torque[k] = total
-        elif mode == COMPUTED:
-            for k in range(n_b):
-                v[k] = refdd[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
-                z[k] -= offset[k]
-            _inverse_torques(z, zd, v, n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass,
-                             n_q_ext, kin, points, torque)
-            for k in range(n_b):
-                torque[k] += tau[half, k]
-        else:
-            for k in range(n_b):
-                torque[k] = tau[half, k] + kp[k] * (ref[half, k] - z[k]) + kd[k] * (refd[half, k] - zd[k])
 
     def assemble(carried):
         """The points' matrix K (its envelope) and right-hand side rhs of eq. 12 at the stage's state
@@ -434,7 +226,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                     rhs[k] -= lin_coef[r, e] * cc
         for b in range(n_b):
             ki, kj = ends[b, 0], ends[b, 1]
-            xi, yi, vxi, vyi = joint_point(b)
+            xi, yi, vxi, vyi = point(b)
             xj, yj, vxj, vyj = state[kj], state[kj + 1], state[n_q + kj], state[n_q + kj + 1]
             dx, dy, dvx, dvy = xj - xi, yj - yi, vxj - vxi, vyj - vyi
             d = shape[b, 0]
@@ -476,7 +268,7 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                 rhs[ki + axis] += lam
             aux[b, LAMBDA], aux[b, PIVOT], aux[b, VELOCITY_TERM], aux[b, FORM] = lam, pivot, ca, axis
 
-    def solve():
+    def solve_banded():
         """Solve K x = rhs in place (x into rhs) for K symmetric positive definite, its lower triangle
         given inside the envelope first[r] <= c <= r, by L D L^T (L into K's strict lower triangle, D
         on its diagonal). Returns OK, NONFINITE for a pivot that is NaN, or SINGULAR for one that is
@@ -530,27 +322,284 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                     rhs[k] -= K[r, k] * x
         return status
 
-    def derivative(row):
-        """y' = [q', q''] of eq. 12 at the stage's state under torque into ks[row] (row 0: the
-        step's start, whose sin and cos are in trig). Returns OK, or the solve's status (then the
-        accelerations are left unfinished)."""
+    # ------------------------------------------------------------------ the dense solve (free and path joints, loads)
+    def row(r, phi, jdv, count, task):
+        """Constraint row r of value phi and velocity term J' q' jdv, its count nonzero entries in
+        idx, val: Phi and J q' into phi_rows, jv_rows; in task ASSEMBLE, its alpha J^T J into A's
+        lower triangle and -alpha J^T (J' q' + 2 xi omega J q' + omega^2 Phi) into rhs, and with
+        the sensitivities its entries and that term into the row_* arrays (``constraints`` puts its
+        Hessian H and third derivative T(q', q', .) on those entries into row_hess, row_third).
+        Returns |phi|."""
+        jv = 0.0
+        for e in range(count):
+            jv += val[e] * state[n_q + idx[e]]
+        phi_rows[r], jv_rows[r] = phi, jv
+        if dz is not None and task == ASSEMBLE:  # kept for ``_stage_tangents`` (the sites keep H and T)
+            row_count[r], row_term[r] = count, jdv + txo * jv + om2 * phi
+            for e in range(count):
+                row_idx[r, e], row_val[r, e] = idx[e], val[e]
+        if task == ASSEMBLE:
+            cc = alpha * (jdv + txo * jv + om2 * phi)
+            for e in range(count):
+                rhs[idx[e]] -= val[e] * cc
+                for f in range(count):
+                    if idx[e] >= idx[f]:
+                        A[idx[e], idx[f]] += alpha * val[e] * val[f]
+        return abs(phi)
+
+    def constraints(task):
+        """Every constraint row at the stage's state (``row`` in task CHECK or ASSEMBLE): the bodies'
+        distance and angle rows (the form in force), the linear rows, two rows per path. Returns max
+        |Phi| (m^2 and m). Every test of the task compares it with a constant and every test of the
+        sensitivities dz with None, so that numba drops the code of the others from each (inlined) call."""
+        worst, r = 0.0, 0
+        for b in range(n_b):
+            ki, kj = body_int[b, KI], body_int[b, KJ]
+            xi, yi, vxi, vyi = point(b)
+            ex, ey, evx, evy = state[kj] - xi, state[kj + 1] - yi, state[n_q + kj] - vxi, state[n_q + kj + 1] - vyi
+            d = body_float[b, D]
+            idx[0], val[0], idx[1], val[1] = kj, 2 * ex, kj + 1, 2 * ey
+            if ki >= 0:
+                idx[2], val[2], idx[3], val[3] = ki, -2 * ex, ki + 1, -2 * ey
+            if dz is not None and task == ASSEMBLE:  # |e|^2 - d^2: H = 2 on (j, j), (i, i), -2 on (i, j) per axis
+                hess = row_hess[r]
+                hess[0, 0], hess[1, 1] = 2.0, 2.0
+                if ki >= 0:
+                    hess[2, 2], hess[3, 3] = 2.0, 2.0
+                    hess[0, 2], hess[2, 0], hess[1, 3], hess[3, 1] = -2.0, -2.0, -2.0, -2.0
+            worst = max(worst, row(r, ex * ex + ey * ey - d * d, 2 * (evx * evx + evy * evy), 4 if ki >= 0 else 2,
+                                   task))
+            psi, w = state[n_p + b] + body_float[b, BETA], state[n_q + n_p + b]
+            s, c = math.sin(psi), math.cos(psi)
+            if abs(c) >= switch:  # the sin form, (y_j - y_i) - d sin(psi)
+                axis, phi, pivot, jdv = 1, ey - d * s, -d * c, d * s * w * w
+            else:  # the cos form, (x_j - x_i) - d cos(psi)
+                axis, phi, pivot, jdv = 0, ex - d * c, d * s, d * c * w * w
+            idx[0], val[0], idx[1], val[1] = kj + axis, 1.0, n_p + b, pivot
+            if ki >= 0:
+                idx[2], val[2] = ki + axis, -1.0
+            if dz is not None and task == ASSEMBLE:  # d2 Phi / d psi2 and d3 Phi / d psi3 w^2 of the form
+                row_hess[r + 1, 1, 1] = d * s if axis == 1 else d * c
+                row_third[r + 1, 1] = d * c * w * w if axis == 1 else -d * s * w * w
+            worst = max(worst, row(r + 1, phi, jdv, 3 if ki >= 0 else 2, task))
+            r += 2
+        for lr in range(lin_const.shape[0]):
+            total, count = 0.0, 0
+            for e in range(lin_idx.shape[1]):
+                if lin_idx[lr, e] >= 0:
+                    total += lin_coef[lr, e] * state[lin_idx[lr, e]]
+                    idx[count], val[count] = lin_idx[lr, e], lin_coef[lr, e]
+                    count += 1
+            worst = max(worst, row(r, total + lin_const[lr], 0.0, count, task))
+            r += 1
+        for m in range(path_body.shape[0]):
+            k = path_body[m]
+            p, ki = body_int[k, PARENT], body_int[k, KI]
+            theta = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0) - body_float[k, OFFSET]
+            rate = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
+            sx0, sx1, sx2, sx3 = _spline_at(knots, spline_start[2 * m], spline_start[2 * m + 1], theta)
+            sy0, sy1, sy2, sy3 = _spline_at(knots, spline_start[2 * m + 1], spline_start[2 * m + 2], theta)
+            if p < 0:  # on ground: r_i - at_parent - s(theta)
+                idx[0], val[0], idx[1], val[1] = ki, 1.0, n_p + k, -sx1
+                if dz is not None and task == ASSEMBLE:
+                    row_hess[r, 1, 1], row_third[r, 1] = -sx2, -sx3 * rate * rate
+                worst = max(worst, row(r, state[ki] - body_float[k, AT_PARENT_X] - sx0, -sx2 * rate * rate, 2,
+                                       task))
+                idx[0], val[0], idx[1], val[1] = ki + 1, 1.0, n_p + k, -sy1
+                if dz is not None and task == ASSEMBLE:
+                    row_hess[r + 1, 1, 1], row_third[r + 1, 1] = -sy2, -sy3 * rate * rate
+                worst = max(worst, row(r + 1, state[ki + 1] - body_float[k, AT_PARENT_Y] - sy0, -sy2 * rate * rate,
+                                       2, task))
+                r += 2
+                continue
+            pi, pj = body_int[p, KI], body_int[p, KJ]
+            xpi, ypi, vxpi, vypi = point(p)
+            ex, ey = state[pj] - xpi, state[pj + 1] - ypi
+            evx, evy = state[n_q + pj] - vxpi, state[n_q + pj + 1] - vypi
+            f = path_float[m]
+            c0a, c0b = f[BASE_1] + (f[L_11] * sx0 + f[L_12] * sy0), f[BASE_2] + (f[L_21] * sx0 + f[L_22] * sy0)
+            c1a, c1b = f[L_11] * sx1 + f[L_12] * sy1, f[L_21] * sx1 + f[L_22] * sy1
+            c2a, c2b = f[L_11] * sx2 + f[L_12] * sy2, f[L_21] * sx2 + f[L_22] * sy2
+            # G(c, x) = c_a x + c_b R90 x; the angle columns -G(c1, e_p) on the child, + on the parent
+            tx, ty = -(c1a * ex - c1b * ey), -(c1a * ey + c1b * ex)
+            jx = -2 * (c1a * evx - c1b * evy) * rate - (c2a * ex - c2b * ey) * rate * rate
+            jy = -2 * (c1a * evy + c1b * evx) * rate - (c2a * ey + c2b * ex) * rate * rate
+            for axis in range(2):
+                if axis == 0:
+                    phi, t, jdv = state[ki] - xpi - (c0a * ex - c0b * ey), tx, jx
+                    gj0, gj1 = c0a, -c0b  # row 0 of G's matrix [[c0a, -c0b], [c0b, c0a]]
+                else:
+                    phi, t, jdv = state[ki + 1] - ypi - (c0a * ey + c0b * ex), ty, jy
+                    gj0, gj1 = c0b, c0a
+                idx[0], val[0] = ki + axis, 1.0
+                idx[1], val[1], idx[2], val[2] = pj, -gj0, pj + 1, -gj1
+                idx[3], val[3], idx[4], val[4] = n_p + k, t, n_p + p, -t
+                count = 5
+                if pi >= 0:
+                    idx[5], val[5] = pi, gj0 - (1.0 if axis == 0 else 0.0)
+                    idx[6], val[6] = pi + 1, gj1 - (1.0 if axis == 1 else 0.0)
+                    count = 7
+                worst = max(worst, row(r + axis, phi, jdv, count, task))
+            if dz is not None and task == ASSEMBLE:  # for ``_path_hessian``
+                path_kept[m, 0], path_kept[m, 1], path_kept[m, 2], path_kept[m, 3] = r, ex, ey, evx
+                path_kept[m, 4], path_kept[m, 5], path_kept[m, 6], path_kept[m, 7] = evy, rate, c1a, c1b
+                path_kept[m, 8], path_kept[m, 9] = c2a, c2b
+                path_kept[m, 10] = f[L_11] * sx3 + f[L_12] * sy3
+                path_kept[m, 11] = f[L_21] * sx3 + f[L_22] * sy3
+            r += 2
+        return worst
+
+    def coordinates():
+        """The coordinates z and rates zd (J,) of the stage's state."""
+        for k in range(n_b):
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            z[col] = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0) - body_float[k, OFFSET]
+            zd[col] = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
+            if body_int[k, FREE] == 1:
+                ki = body_int[k, KI]
+                z[col + 1] = state[ki] - body_float[k, AT_PARENT_X]
+                z[col + 2] = state[ki + 1] - body_float[k, AT_PARENT_Y]
+                zd[col + 1], zd[col + 2] = state[n_q + ki], state[n_q + ki + 1]
+
+    def solve_dense():
+        """Solve A x = rhs in place (x into rhs) by the Cholesky factor L of A's lower triangle (into
+        it), row by row inside the envelope dense_first[r] <= c <= r (which L keeps). Returns OK,
+        NONFINITE for a matrix that is not finite, SINGULAR for one that is not positive definite."""
+        for r in range(n_q):
+            for c in range(dense_first[r], r + 1):
+                if not math.isfinite(A[r, c]):
+                    return NONFINITE
+        for r in range(n_q):
+            fr = dense_first[r]
+            for c in range(fr, r):
+                total = A[r, c]
+                for k in range(max(fr, dense_first[c]), c):
+                    total -= A[r, k] * A[c, k]
+                A[r, c] = total / A[c, c]
+            diag = A[r, r]
+            for k in range(fr, r):
+                diag -= A[r, k] * A[r, k]
+            if not diag > 0.0:
+                return SINGULAR
+            A[r, r] = math.sqrt(diag)
+        for r in range(n_q):  # L w = rhs
+            total = rhs[r]
+            for k in range(dense_first[r], r):
+                total -= A[r, k] * rhs[k]
+            rhs[r] = total / A[r, r]
+        for r in range(n_q - 1, -1, -1):  # L^T x = w, column by column
+            x = rhs[r] / A[r, r]
+            rhs[r] = x
+            for k in range(dense_first[r], r):
+                rhs[k] -= A[r, k] * x
+        return OK
+
+    # ------------------------------------------------------------------ either solve
+    def check():
+        """max |Phi_i| (m^2 and m) of the stage's state (the value the steps check)."""
+        if paths is None and free is None and loads is None:
+            return violation()
+        return constraints(CHECK)
+
+    def law(half):
+        """The applied generalised forces (N m; N for a free joint's x and y) at the stage's state and
+        grid row ``half`` into torque, under ``law``'s mode: the errors e = ref - z, e' = refd - zd
+        (for pin joints taken as (ref + offset) - (the body angles' difference), z then less the
+        offsets for the inverse dynamics)."""
+        if paths is None and free is None and loads is None:
+            for k in range(n_b):
+                p = joint_parent[k]
+                z[k] = state[n_p + k] - (state[n_p + p] if p >= 0 else 0.0)
+                zd[k] = state[n_q + n_p + k] - (state[n_q + n_p + p] if p >= 0 else 0.0)
+                err[k] = (ref[half, k] + offset[k]) - z[k]
+        else:
+            coordinates()
+            for k in range(J):
+                err[k] = ref[half, k] - z[k]
+        if mode == GAINS:
+            for k in range(J):  # term by term onto tau: K = [diag kp, diag kd] gives PD's numbers to the bit
+                total = tau[half, k]
+                for j in range(J):
+                    total += gains[half, k, j] * err[j]
+                for j in range(J):
+                    total += gains[half, k, J + j] * (refd[half, j] - zd[j])
+                torque[k] = total
+        elif mode == COMPUTED:
+            for k in range(J):
+                v[k] = refdd[half, k] + kp[k] * err[k] + kd[k] * (refd[half, k] - zd[k])
+            if paths is None and free is None and loads is None:
+                for k in range(n_b):
+                    z[k] -= offset[k]
+            _inverse(z, zd, v, believed, believed_paths, believed_frames,
+                     believed_values[half if believed_values.shape[1] > 0 else 0], kin, points, torque)
+            for k in range(J):
+                torque[k] += tau[half, k]
+        else:
+            for k in range(J):
+                torque[k] = tau[half, k] + kp[k] * err[k] + kd[k] * (refd[half, k] - zd[k])
+
+    def derivative(stage, half):
+        """y' = [q', q''] of eq. 12 at the stage's state under torque (and the loads of grid row half)
+        into ks[stage] (stage 0: the step's start, whose sin and cos the banded solve takes from
+        trig). Returns OK, or the solve's status (then the accelerations are left unfinished)."""
         for k in range(n_q):
-            ks[row, k] = state[n_q + k]
-        assemble(row == 0)
-        status = solve()
+            ks[stage, k] = state[n_q + k]
+        if paths is None and free is None and loads is None:
+            assemble(stage == 0)
+            status = solve_banded()
+            if status == OK:
+                for r in range(n_p):
+                    ks[stage, n_q + r] = rhs[r]
+                for b in range(n_b):
+                    ki, kj = ends[b, 0], ends[b, 1]
+                    axis = int(aux[b, FORM])
+                    rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
+                    ks[stage, n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
+            return status
+        for r in range(n_q):
+            for c in range(dense_first[r], r + 1):
+                A[r, c] = mass[r, c] if r < n_p else 0.0
+            rhs[r] = q_ext[r] if r < n_p else 0.0
+        for k in range(n_b):  # generalised forces: a joint's torque on its child's and parent's angles
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            rhs[n_p + k] += torque[col]
+            if p >= 0:
+                rhs[n_p + p] -= torque[col]
+            if body_int[k, FREE] == 1:
+                rhs[body_int[k, KI]] += torque[col + 1]
+                rhs[body_int[k, KI] + 1] += torque[col + 2]
+        values = load_values[half if load_values.shape[1] > 0 else 0]
+        for k in range(load_frames.shape[0]):  # external loads: F on the body's point i, (P - r_i) x F + M on its angle
+            fx, fy, px, py = _load_in_ground(values, k, load_frames, body_int, body_float, state, n_p, n_q)
+            b = load_frames[k, LOAD_BODY]
+            xi, yi, _, _ = point(b)
+            if body_int[b, KI] >= 0:
+                rhs[body_int[b, KI]] += fx
+                rhs[body_int[b, KI] + 1] += fy
+            rhs[n_p + b] += (px - xi) * fy - (py - yi) * fx + values[k, MOMENT]
+        if dz is not None:  # the rows' Hessians, filled where nonzero by the assembly
+            row_hess[:], row_third[:] = 0.0, 0.0
+        constraints(ASSEMBLE)
+        status = solve_dense()
         if status == OK:
-            for r in range(n_p):
-                ks[row, n_q + r] = rhs[r]
-            for b in range(n_b):
-                ki, kj = ends[b, 0], ends[b, 1]
-                axis = int(aux[b, FORM])
-                rel = rhs[kj + axis] - (rhs[ki + axis] if ki >= 0 else 0.0)
-                ks[row, n_q + n_p + b] = (aux[b, LAMBDA] / alpha - aux[b, VELOCITY_TERM] - rel) / aux[b, PIVOT]
+            for r in range(n_q):
+                ks[stage, n_q + r] = rhs[r]
         return status
+
+    def coordinate_sensitivities(sample):
+        """dz[sample] = the coordinates' rows of S: a body's angle minus its parent's, a free joint's
+        point i."""
+        for k in range(n_b):
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            for q in range(P):
+                dz[sample, col, q] = S[n_p + k, q] - (S[n_p + p, q] if p >= 0 else 0.0)
+                if body_int[k, FREE] == 1:
+                    dz[sample, col + 1, q] = S[body_int[k, KI], q]
+                    dz[sample, col + 2, q] = S[body_int[k, KI] + 1, q]
 
     for m in range(n):
         state[m] = y[m]
-    max_viol = violation()
+    max_viol = check()
     code = OK
     for i in range(n_steps + 1):
         j = start + 2 * i
@@ -559,30 +608,41 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
                 h = dt if stage == 3 else 0.5 * dt
                 for m in range(n):
                     state[m] = y[m] + h * ks[stage - 1, m]
-            law(j + (stage + 1) // 2)
-            code = derivative(stage)
+            half = j + (stage + 1) // 2
+            law(half)
+            code = derivative(stage, half)
             if stage == 0:
                 for m in range(n):
                     states[i, m] = y[m]
-                    rates[i, m] = ks[0, m]
-                for m in range(n_b):
+                    if paths is None and free is None and loads is None:
+                        rates[i, m] = ks[0, m]
+                    else:
+                        rates[i, m] = ks[0, m] if (code == OK or m < n_q) else np.nan
+                for m in range(J):
                     applied[i, m] = torque[m]
-                if sensitive and i % every == 0:
-                    for b in range(n_b):
-                        parent = joint_parent[b]
-                        for q in range(P):
-                            dz[i // every, b, q] = S[n_p + b, q] - (S[n_p + parent, q] if parent >= 0 else 0.0)
+                if dz is not None:
+                    if i % every == 0 and i // every < dz.shape[0]:
+                        coordinate_sensitivities(i // every)
             if code != OK or i == n_steps:
                 break
-            if sensitive:  # K_s of this stage: acc += weight K_s, U = S + (the next stage's step) K_s
+            if dz is not None:  # dk of this stage: acc += weight dk, U = S + (the next stage's step) dk
                 if stage == 0:
                     for m in range(n):
                         for q in range(P):
                             U[m, q], acc[m, q] = S[m, q], 0.0
                 weight = 1.0 if stage == 0 or stage == 3 else 2.0
                 next_step = 0.5 * dt if stage < 2 else (dt if stage == 2 else 0.0)
-                _stage_sensitivity(state, ks[stage], S, U, acc, weight, next_step, j + (stage + 1) // 2, G,
-                                   torque_sign, factor, tangent_work, layout)
+                if paths is None and free is None and loads is None:
+                    _stage_sensitivity(state, ks[stage], S, U, acc, weight, next_step, half, G, torque_sign, factor,
+                                       tangent_work, banded_layout)
+                else:
+                    _stage_tangents(state, rhs, A, dense_first, values_at(load_values, half), load_frames, body_int,
+                                    body_float, path_body, params, kept_rows, path_kept, force_rows, G[half],
+                                    param_col, U, jac, solved_rows, moved, dk)
+                    for m in range(n):
+                        for q in range(P):
+                            acc[m, q] += weight * dk[m, q]
+                            U[m, q] = S[m, q] + next_step * dk[m, q]
         if code != OK:
             return code, i, max_viol
         if i == n_steps:
@@ -593,11 +653,11 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
             finite = finite and math.isfinite(state[m])
         if not finite:
             return NONFINITE, i, max_viol
-        viol = violation()
+        viol = check()
         if viol > params[VIOLATION]:
             return CONSTRAINT, i, max(max_viol, viol)
         max_viol = max(max_viol, viol)
-        if sensitive:
+        if dz is not None:
             for m in range(n):
                 for q in range(P):
                     S[m, q] += dt / 6.0 * acc[m, q]
@@ -607,53 +667,39 @@ def _drive(y0, dt, n_steps, start, tau, ref, refd, refdd, kp, kd, mode, gains, o
 
 
 @njit(inline="always")
-def _no_sensitivities(n_b):
-    """``_drive``'s sensitivity arguments for a run without them: G, torque_sign, every, dz."""
-    return np.zeros((1, 0)), np.zeros((n_b, 0)), 1, np.zeros((0, n_b, 0))
+def values_at(values, half):
+    """Row ``half`` of the loads' values on the grid (row 0 of an empty table)."""
+    return values[half if values.shape[1] > 0 else 0]
 
 
 @njit(error_model="numpy")
-def rk4(y0, dt, n_steps, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts, body_geom,
-        joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent,
-        n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates, applied):
-    """Classical RK4 of eq. 12 over n_steps steps of dt (s) under the feedback law ``mode`` (PD,
-    COMPUTED or GAINS), from the state y0 (n_state,). mode PD: tau + kp (ref - z) + kd (refd - z');
-    GAINS: tau + gains[half] [ref - z, refd - z'], accumulated term by term onto tau (so that
-    K = [diag kp, diag kd] gives PD's numbers to the last bit); COMPUTED: the believed model's
-    (``nominal``) inverse dynamics at (z, z') for the accelerations refdd + kp e + kd e', plus tau.
-
-    tau, ref, refd, refdd: shape (2 n_steps + 1, J), the feedforward torques (N m), the reference
-    joint angles plus the joint offsets (rad), velocities (rad/s) and accelerations (rad/s^2) on
-    the half-step grid t_k = k dt / 2; kp, kd: shape (J,) (PD: N m/rad, N m s/rad; COMPUTED: 1/s^2,
-    1/s); gains: shape (2 n_steps + 1, J, 2J) for GAINS (N m/rad, N m s/rad), any (m, J, 2J)
-    otherwise; offset: the plant's joint offsets (rad); then the penalty layout and the believed
-    model's inverse-dynamics layout (``Engine.simulation_layout``). Fills states (n+1, n_state),
-    rates (n+1, n_state) (the state derivative) and applied (n+1, J) (N m) up to the last step
-    reached. Returns (status, steps_done, max constraint violation)."""
-    n_p, n_b = base.shape[0], joint_parent.shape[0]
-    return _drive(y0, dt, n_steps, 0, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts,
-                  body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent,
-                  n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states, rates,
-                  applied, np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX)), *_no_sensitivities(n_b))
+def rk4(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads, states,
+        rates, applied):
+    """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the state y0 (n_state,) under the
+    feedback law ``law`` (``layout.Law``: mode PD, tau + kp (ref - z) + kd (refd - z'); GAINS,
+    tau + gains[half] [ref - z, refd - z'], accumulated term by term onto tau (so that
+    K = [diag kp, diag kd] gives PD's numbers to the last bit); COMPUTED, the believed model's
+    inverse dynamics at (z, z') for the accelerations refdd + kp e + kd e', plus tau), its grid
+    from row ``start`` (step i uses rows start + 2 i to start + 2 i + 2). model, paths, free, loads:
+    the plant (``fdbench.multibody.layout``; None for what it lacks); believed, believed_paths,
+    believed_loads: the model computed-torque control believes. Fills states, rates (n+1, n_state)
+    (the state and its derivative) and applied (n+1, J) up to the last step reached. Returns
+    (status, steps_done, max constraint violation)."""
+    return _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads,
+                  (states, rates, applied), None, None, None, 1, None)
 
 
 @njit(error_model="numpy")
-def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index, pt_fixed, body_pts, body_geom,
-                joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset,
-                n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, out, applied):
-    """The state derivatives (into out, shape (k, n_state)) and the applied joint torques (N m, into
-    applied, shape (k, J)) of k states (shape (k, n_state)) under ``rk4``'s feedback law, row i with
-    row i of tau, ref, refd, refdd (each (k, J)) and of gains ((k, J, 2J) for GAINS); the
-    accelerations are NaN where the points' matrix is singular."""
-    n_p, n_b, n = base.shape[0], joint_parent.shape[0], states.shape[1]
-    K, rhs, aux = np.zeros((n_p, n_p)), np.zeros(n_p), np.zeros((n_b, N_AUX))
-    state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, n_b))
-    no_sensitivities = _no_sensitivities(n_b)
+def derivatives(states, law, model, paths, free, loads, believed, believed_paths, believed_loads, out, applied):
+    """The state derivatives (into out, (k, n_state)) and applied generalised forces (into applied,
+    (k, J)) of k states (k, n_state) under ``rk4``'s feedback law, row i with row i of the law's
+    arrays and of the loads' values; the accelerations are NaN where the solve fails."""
+    n, J = states.shape[1], law.tau.shape[1]
+    state, rate, torque = np.empty((1, n)), np.empty((1, n)), np.empty((1, J))
     for i in range(states.shape[0]):
-        code, _, _ = _drive(states[i], 0.0, 0, i, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_index,
-                            pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
-                            q_ext, params, n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index,
-                            n_mass, n_q_ext, state, rate, torque, K, rhs, aux, *no_sensitivities)
+        # np.int64(0), not 0: a literal argument would make numba compile the whole driver again
+        code, _, _ = _drive(states[i], 0.0, np.int64(0), i, law, model, paths, free, loads, believed, believed_paths,
+                            believed_loads, (state, rate, torque), None, None, None, 1, None)
         out[i] = rate[0]
         applied[i] = torque[0]
         if code != OK:
@@ -661,76 +707,33 @@ def derivatives(states, tau, ref, refd, refdd, kp, kd, mode, gains, offset, pt_i
 
 
 @njit(error_model="numpy")
-def constraint_violation(y, offset, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef,
-                         lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent, n_at_child, n_owner,
-                         n_local, n_index, n_mass, n_q_ext):
-    """max |Phi_i| (m^2 and m) of the state y (n_state,), the angle constraints in the form in force
-    (the value ``rk4`` checks), over the simulation layout (``Engine.simulation_layout``)."""
-    n_p, n_b, n = base.shape[0], joint_parent.shape[0], y.shape[0]
-    rows, gains = np.zeros((1, n_b)), np.zeros((1, n_b, 2 * n_b))
-    _, _, worst = _drive(y, 0.0, 0, 0, rows, rows, rows, rows, rows[0], rows[0], PD, gains, offset, pt_index, pt_fixed,
-                         body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
-                         n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext,
-                         np.empty((1, n)), np.empty((1, n)), np.empty((1, n_b)), np.zeros((n_p, n_p)), np.zeros(n_p),
-                         np.zeros((n_b, N_AUX)), *_no_sensitivities(n_b))
+def constraint_violation(y, model, paths, free, loads, residuals):
+    """max |Phi| (m^2 and m) of the state y (n_state,), the angle constraints in the form in force
+    (the value ``rk4`` checks). residuals: None, or (phi_rows, jv_rows) (n_rows,) to receive the
+    dense solve's Phi and J q' of every constraint row (distance and angle per body, the linear
+    rows, two per path)."""
+    n, J = y.shape[0], model.joint_parent.shape[0] + 2 * (0 if free is None else free.shape[0])
+    rows, gains = np.zeros((1, J)), np.zeros((1, J, 2 * J))
+    law = Law(rows, rows, rows, rows, rows[0], rows[0], PD, gains)
+    # np.int64, not literals: a literal argument would make numba compile the whole driver again
+    _, _, worst = _drive(y, 0.0, np.int64(-1), np.int64(0), law, model, paths, free, loads, model, paths, loads,
+                         (np.empty((1, n)), np.empty((1, n)), np.empty((1, J))), residuals, None, None, 1, None)
     return worst
 
 
-# ---------------------------------------------------------------------- the population (eq. 18)
-@njit(nogil=True)
-def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight, offset, joint_parent, n_p):
-    """Eq. 18 for J joints from a simulation's states, shape (n_steps + 1, n_state), filled up to
-    step ``done``: the RMSE (deg) of the joint angles (the body angles' differences minus the
-    offsets) at the motion's samples (every ``every``-th step; desired angles angles_ref (rad),
-    shape (samples, J)) over the samples reached and all joints, plus penalty_weight times the
-    fraction of the steps not reached. The squared errors are summed sample by sample, joint by
-    joint in order; a non-finite RMSE counts as 0."""
-    n_b = angles_ref.shape[1]
-    count = done // every + 1
-    total = 0.0
-    for k in range(count):
-        y = states[k * every]
-        for j in range(n_b):
-            p = joint_parent[j]
-            z = y[n_p + j] - (y[n_p + p] if p >= 0 else 0.0) - offset[j]
-            error = (z - angles_ref[k, j]) * DEGREES_PER_RADIAN
-            total += error * error
-    rmse = math.sqrt(total / (n_b * count))
-    if not math.isfinite(rmse):
-        rmse = 0.0
-    return rmse + penalty_weight * (1.0 - done / n_steps)
-
-
-@njit(nogil=True)
-def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, offset, pt_index, pt_fixed,
-                   body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base, q_ext, params,
-                   n_parent, n_offset, n_at_parent, n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states,
-                   rates, applied, objective, candidate, stride, step, budget):
-    """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
-    candidates candidate, candidate + stride, ... of tau (N m, shape (lam, 2 n_steps + 1, J)), for
-    ``fdbench.population.Population``, at most ``budget`` steps in all: the first candidate resumes at
-    step ``step`` (its states up to there in the work buffers, from the call before), each chunk from
-    the last state of the one before at the same grid row, so the numbers are those of one call.
-    ref, refd: the half-step references as for ``rk4`` (unused by an open loop but for the layout of
-    its call); states (n+1, n_state), rates (n+1, n_state), applied (n+1, J): this thread's work
-    buffers, reused candidate after candidate; objective (lam,): filled for the candidates finished.
-    Returns the (candidate, step) to resume at (a candidate past the last: all done). Runs without
-    the GIL."""
-    n_b = joint_parent.shape[0]
-    zero, no_gains = np.zeros(n_b), np.zeros((1, n_b, 2 * n_b))
-    n_p = base.shape[0]
-    while candidate < tau.shape[0] and budget > 0:
-        n = min(budget, n_steps - step)
-        low, high = 2 * step, 2 * (step + n) + 1
-        y = y0 if step == 0 else states[step].copy()
-        code, done, _ = rk4(y, dt, n, tau[candidate, low:high], ref[low:high], refd[low:high], ref[low:high], zero,
-                            zero, PD, no_gains, offset, pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx,
-                            lin_coef, lin_const, first, base, q_ext, params, n_parent, n_offset, n_at_parent,
-                            n_at_child, n_owner, n_local, n_index, n_mass, n_q_ext, states[step:step + n + 1],
-                            rates[step:step + n + 1], applied[step:step + n + 1])
-        step, budget = step + done, budget - max(done, 1)  # steps run: a failing candidate costs few
-        if code != OK or step == n_steps:
-            objective[candidate] = tracking_objective(states, step, every, angles_ref, n_steps, penalty_weight,
-                                                      offset, joint_parent, n_p)
-            candidate, step = candidate + stride, 0
-    return candidate, step
+@njit(error_model="numpy")
+def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model, paths, free, loads, states, rates,
+                    applied, dz):
+    """Open-loop RK4 (``rk4`` in PD mode with zero gains, as the population runs it) and the forward
+    sensitivities of the coordinates (``fdbench.multibody.sensitivity``): tau, ref, refd (rows, J)
+    on the half-step grid, G (rows, P) d tau / d p, parameter q moving coordinate param_col[q]'s
+    generalised force only (N m or N per parameter unit). The initial state does not depend on p.
+    Fills states, rates, applied as ``rk4`` does and dz (n_steps // every + 1, J, P), the derivative
+    of the coordinates (rad; m for a free joint's x and y, per parameter unit) at every ``every``-th
+    step reached. Returns (status, steps_done)."""
+    J = tau.shape[1]
+    zero = np.zeros(J)
+    law = Law(tau, ref, refd, ref, zero, zero, PD, np.zeros((1, J, 2 * J)))
+    code, done, _ = _drive(y0, dt, n_steps, 0, law, model, paths, free, loads, model, paths, loads,
+                           (states, rates, applied), None, G, param_col, every, dz)
+    return code, done

@@ -17,7 +17,7 @@ Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F +
 (d_m: the direction of a path joint's point per radian) and F on a free joint's x and y, i.e.
 J_P(z)^T F with P taken as the body's material point at that instant (``generalized_forces``).
 In the mixed coordinates of eq. 12 the same load is F on the body's joint point i and the moment
-(P - r_i) x F + M on its angle (``fdbench.multibody.kernels_general``).
+(P - r_i) x F + M on its angle (``fdbench.multibody.kernels``).
 """
 
 from __future__ import annotations

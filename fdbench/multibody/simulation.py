@@ -25,7 +25,7 @@ import numpy as np
 from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrator, check_tolerances,
                          solve_adaptive, steps)
 from .engine import Engine
-from .kernels import COMPUTED, GAINS, PD, VIOLATION
+from .layout import COMPUTED, GAINS, PD, VIOLATION
 
 STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # the kernels' codes
 
@@ -367,35 +367,39 @@ class _Still:
         return zero, zero, zero
 
 
-def warm_up(adaptive: bool = False, dense: bool = False) -> None:
-    """Load (or compile) the engine's kernels (RK4, inverse dynamics, the population: the banded
-    ones, and with ``dense`` also the dense ones of free and path joints and loads) on a small
-    library model, and with ``adaptive`` the adaptive integrators' right-hand side and scipy's
-    integrators, so that later timings exclude it."""
+def warm_up(adaptive: bool = False, engines=()) -> list:
+    """Load (or compile) the engine's kernels (RK4, inverse dynamics) on a small library model of
+    pin joints, and on each of ``engines`` of another kind (free or path joints, loads: the kernels
+    compile one variant per kind), and with ``adaptive`` the adaptive integrators' right-hand side
+    and scipy's integrators, so that later timings exclude it. Returns the engines warmed, one per
+    kind (the shooting problem warms its population kernel on them: ``fdbench.tracking.warm_up``)."""
     from ..compile_guard import compiling
 
     with compiling():  # Ctrl-C while a kernel compiles ends the command at once
-        _warm_up(adaptive, dense)
+        return _warm_up(adaptive, engines)
 
 
-def _warm_up(adaptive: bool, dense: bool) -> None:
-    from ..population import Population
+def kind(engine: Engine) -> tuple:
+    """The variant of the kernels an engine's model takes: which of paths, free joints and loads it has."""
+    return engine.paths is None, engine.free is None, engine.loads is None
+
+
+def _warm_up(adaptive: bool, others) -> list:
     from ..models import find_model
-    from .loads import ExternalLoad, ExternalLoads
 
-    model = find_model("forearm")
-    zero_load = ExternalLoads((ExternalLoad("none", model.joints[0].child),), [0.0, 1.0], np.zeros((2, 1, 2)),
-                              np.zeros((2, 1, 2)), np.zeros((2, 1)))
-    engines = (Engine(model), Engine(model, loads=zero_load)) if dense else (Engine(model),)
-    for engine in engines:  # the banded kernels, then the dense ones
+    warmed = {}
+    for engine in (Engine(find_model("forearm")), *others):  # the banded kernels, then the others
+        if kind(engine) in warmed:
+            continue
+        warmed[kind(engine)] = engine
         motion = _Still(engine.joints)
+        J = engine.n_joints
         simulate(None, engine, motion, dt=0.05)
-        engine.inverse_torques(np.zeros(1), np.zeros(1), np.zeros(1), 0.0)
-        y0, rows = engine.state_from_joints(np.zeros(1), np.zeros(1)), np.zeros((5, 1))
-        Population(engine.population_kernel, 2, engine.population_widths)(
-            2, engine.population_args(y0, 0.05, 2, np.zeros((2, 5, 1)), rows, rows, 1, np.zeros((3, 1)), 1.0))
+        engine.inverse_torques(np.zeros(J), np.zeros(J), np.zeros(J), 0.0)
         if adaptive:
             import scipy.integrate  # noqa: F401
             import scipy.optimize  # noqa: F401
 
+            y0 = engine.state_from_joints(np.zeros(J), np.zeros(J))
             _rates(None, engine, motion, _law(engine, 0.0, 0.0, False, None, None), np.zeros(1), y0[None])
+    return list(warmed.values())

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from helpers import forearm_closed_form as forearm
 from fdbench.multibody import engine as mb
-from fdbench.multibody.kernels import CONSTRAINT, NONFINITE, OK
+from fdbench.multibody.layout import CONSTRAINT, NONFINITE, OK
 from fdbench.multibody.engine import Engine
 
 from fdbench.multibody.model import GROUND, Body, Joint, Load, Model
@@ -353,7 +353,7 @@ def test_sensitivities_stop_on_a_constraint_violation_where_rk4_does():
     states, rates = np.full((n + 1, 6), np.nan), np.full((n + 1, 6), np.nan)
     applied, dz = np.full((n + 1, 1), np.nan), np.full((n + 1, 1, 1), np.nan)
     code, done = rk4_sensitivity(y0, 1e-3, n, tau, rows, rows, np.ones((2 * n + 1, 1)), np.zeros(1, dtype=np.int64),
-                                 1, *engine.simulation_layout(), states, rates, applied, dz)
+                                 1, *engine.kernel_args(), None, states, rates, applied, dz)
     assert (code, done) == (expected.status, expected.steps_done)
     assert np.array_equal(states, expected.states, equal_nan=True)
     assert np.isfinite(dz[done, 0, 0]) and np.isnan(dz[done + 1, 0, 0])

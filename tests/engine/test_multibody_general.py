@@ -1,7 +1,7 @@
-"""Eq. 12 for free and path joints by the compiled dense kernels (fdbench.multibody.kernels_general):
+"""Eq. 12 for free and path joints by the kernels' dense solve (fdbench.multibody.kernels):
 
-- on models of pin joints only, the dense kernels' state derivative, constraint violation and
-  inverse dynamics equal the banded kernels' (another assembly and solve of the same equations) to
+- on models of pin joints only, the dense solve's state derivative, constraint violation and
+  computed torque equal the banded solve's (another assembly and solve of the same equations) to
   their rounding, 1e-14 times the dense leading matrix's condition number (relative);
 - on random models with free and path joints, the engine's state from joint values lies on the
   constraints (positions and velocities, to rounding), and eq. 12's accelerations there converge to
@@ -28,12 +28,12 @@ from hypothesis import strategies as st
 from helpers import reference_dynamics as ref
 from helpers.multibody_strategies import models, models_with_paths_and_free_joints
 from helpers.population_checks import restore_threads  # noqa: F401 - a fixture
-from helpers.dense_checks import leading_matrix, residuals
+from helpers.dense_checks import dense_args, leading_matrix, residuals
 from helpers.models import hopper_loads, hopper_model
 
-from fdbench.multibody import kernels_general as kg
+from fdbench.multibody import kernels
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.kernels import COMPUTED, GAINS, PD
+from fdbench.multibody.layout import COMPUTED, GAINS, PD, Law
 
 
 def random_joint_state(engine, seed):
@@ -43,15 +43,15 @@ def random_joint_state(engine, seed):
 
 
 def dense_rates(engine, y, tau, mode=PD, kp=0.0, kd=0.0, ref_z=None):
-    """The dense kernels' state derivative and applied forces at one state (PD with zero gains by default)."""
+    """The dense solve's state derivative and applied forces at one state (PD with zero gains by default)."""
     J = engine.n_joints
     zero = np.zeros((1, J))
     ref_z = zero if ref_z is None else ref_z[None]
     kp, kd = np.full(J, kp), np.full(J, kd)
     out, applied = np.empty((1, engine.n_state)), np.empty((1, J))
-    loads = engine.load_values(np.zeros(1))
-    kg.derivatives(y[None], tau[None], ref_z, zero, zero, kp, kd, mode, np.zeros((1, J, 2 * J)), loads, loads,
-                   *engine.dense_simulation_layout(), out, applied)
+    loads = engine.loads_at(np.zeros(1))
+    law = Law(tau[None], ref_z, zero, zero, kp, kd, mode, np.zeros((1, J, 2 * J)))
+    kernels.derivatives(y[None], law, *dense_args(engine), loads, engine.layout, engine.paths, loads, out, applied)
     return out[0], applied[0]
 
 
@@ -73,10 +73,6 @@ def test_the_dense_kernels_equal_the_banded_kernels_on_pin_joints(model, seed):
     zero = np.zeros((1, engine.n_joints))
     banded_ct, banded_applied = engine.rates(y[None], tau[None], ref_z[None], zero, zero, 30.0, 3.0, COMPUTED)
     np.testing.assert_allclose(applied, banded_applied[0], rtol=1e-12, atol=1e-12 * np.abs(applied).max())
-    out = np.empty(engine.n_joints)
-    kg.inverse_torques(z, zd, tau, engine.load_values(np.zeros(1))[0], *engine.dense_inverse_layout, out)
-    expected = engine.inverse_torques(z, zd, tau)
-    np.testing.assert_allclose(out, expected, rtol=0, atol=1e-12 * max(1.0, np.abs(expected).max()))
 
 
 @settings(max_examples=15, deadline=None)
@@ -219,7 +215,7 @@ def test_computed_torque_through_another_nominal_model_follows_the_reference():
 
 
 def test_the_population_on_a_free_base_with_a_knee_path_is_eq_18_of_each_simulation(restore_threads, monkeypatch):
-    """CMA-ES's population of open-loop candidates (``kernels_general.rk4_candidates``) on the
+    """CMA-ES's population of open-loop candidates (``tracking.rk4_candidates``) on the
     hopper: each candidate's number is eq. 18 of its own simulation by ``simulate`` (the angles' RMSE
     in deg plus the translations' in cm by numpy, the penalty of the part not reached), one
     candidate thrown off its motion included, and equals the rows one by one to the bit on 1 to 3

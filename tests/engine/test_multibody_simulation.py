@@ -28,7 +28,7 @@ from fdbench.integrate import Status
 from fdbench.multibody import simulation as sim
 from fdbench.models import find_model
 from fdbench.multibody.engine import COMPUTED, GAINS, PD, Engine
-from fdbench.multibody.kernels import rk4_candidates
+from fdbench.tracking import rk4_candidates
 
 
 class Sines:

@@ -15,7 +15,7 @@ import pytest
 
 from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.kernels import COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, PD, VIOLATION
+from fdbench.multibody.layout import COMPUTED, CONSTRAINT, GAINS, NONFINITE, OK, PD, VIOLATION
 from fdbench.multibody.motions import joint_motion
 
 MODEL = find_model("forearm")

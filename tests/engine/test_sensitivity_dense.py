@@ -1,8 +1,10 @@
-"""Exact gradients on models with free or path joints and external loads: the dense kernels' forward
-sensitivities (``fdbench.multibody.sensitivity.rk4_sensitivity_dense``) checked against
+"""Exact gradients on models with free or path joints and external loads: the dense solve's forward
+sensitivities (``fdbench.multibody.kernels.rk4_sensitivity`` with paths, free joints or loads)
+checked against
 
-- the banded kernels' sensitivities (another derivation: the angle rows eliminated by hand, one
-  direction at a time) on random models of pin joints, which both kernels take;
+- the banded solve's sensitivities (another derivation: the angle rows eliminated by hand, one
+  direction at a time) on random models of pin joints, which both solves take (the dense one when
+  ``free`` is an empty array rather than None);
 - central differences of the simulation itself on the hopper (a free pelvis, a knee on a path,
   three loads in ground's and in moving frames): their error falls as h^2 towards the
   sensitivities, the sign of a derivative, not an approximation, being checked;
@@ -25,7 +27,7 @@ from helpers.multibody_strategies import models
 from helpers.models import hopper_loads, hopper_model
 
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.sensitivity import rk4_sensitivity, rk4_sensitivity_dense
+from fdbench.multibody.sensitivity import rk4_sensitivity
 
 STEPS, DT = 40, 0.002
 
@@ -43,14 +45,14 @@ def _torques(engine, seed, scale=2.0):
 
 
 def dense_run(engine, y0, tau, G, param_col, sensitivities=True):
-    """(states, dz, steps done) of the dense kernels' open-loop RK4 with sensitivities."""
+    """(states, dz, steps done) of the dense solve's open-loop RK4 with sensitivities."""
     J, P, rows = engine.n_joints, G.shape[1], 2 * STEPS + 1
     states, rates = np.empty((STEPS + 1, engine.n_state)), np.empty((STEPS + 1, engine.n_state))
     dz = np.empty((STEPS + 1, J, P))
     zero = np.zeros((rows, J))
-    _, done = rk4_sensitivity_dense(y0, DT, STEPS, tau, zero, zero, G, param_col, 1,
-                                    engine.load_values(np.arange(rows) * DT / 2), *engine.dense_simulation_layout(),
-                                    states, rates, np.empty((STEPS + 1, J)), dz)
+    free = np.zeros(0, dtype=np.int64) if engine.free is None else engine.free  # the dense solve
+    _, done = rk4_sensitivity(y0, DT, STEPS, tau, zero, zero, G, param_col, 1, engine.layout, engine.paths, free,
+                              engine.loads_at(np.arange(rows) * DT / 2), states, rates, np.empty((STEPS + 1, J)), dz)
     return states, dz, done
 
 
@@ -66,9 +68,9 @@ def test_the_dense_sensitivities_equal_the_banded_ones_on_pin_joints(model, seed
     rows = 2 * STEPS + 1
     banded_states, rates = np.empty((STEPS + 1, engine.n_state)), np.empty((STEPS + 1, engine.n_state))
     banded_dz = np.empty((STEPS + 1, J, G.shape[1]))
-    _, banded_done = rk4_sensitivity(y0, DT, STEPS, tau, np.zeros((rows, J)) + engine.joint_offset,
-                                     np.zeros((rows, J)), G, param_col, 1, *engine.simulation_layout(), banded_states,
-                                     rates, np.empty((STEPS + 1, J)), banded_dz)
+    _, banded_done = rk4_sensitivity(y0, DT, STEPS, tau, np.zeros((rows, J)), np.zeros((rows, J)), G, param_col, 1,
+                                     *engine.kernel_args(), None, banded_states, rates, np.empty((STEPS + 1, J)),
+                                     banded_dz)
     assert done == banded_done
     scale = np.abs(banded_dz[:done + 1]).max()
     assert scale > 0

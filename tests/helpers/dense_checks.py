@@ -1,18 +1,24 @@
-"""Checks on the dense kernels' state: its constraint residuals and the leading matrix of eq. 12."""
+"""Checks on the dense solve's state (paths, free joints and loads taken, pin joints not banded):
+its constraint residuals and the leading matrix of eq. 12."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from fdbench.multibody import kernels_general as kg
+from fdbench.multibody import kernels
+
+
+def dense_args(engine):
+    """The kernels' (model, paths, free) of the engine with the dense solve taken: free an empty
+    array (not None) for a model without free joints."""
+    return engine.layout, engine.paths, np.zeros(0, dtype=np.int64) if engine.free is None else engine.free
 
 
 def residuals(engine, y):
-    """(max |Phi|, Phi, J q') of the dense kernels at the state y."""
-    layout = engine.dense_layout
-    rows = kg.n_rows(layout[0], layout[2], engine.lin_const)
+    """(max |Phi|, Phi, J q') of the dense solve at the state y."""
+    rows = kernels.n_rows(engine.layout, engine.paths)
     phi, jv = np.empty(rows), np.empty(rows)
-    worst = kg.constraint_residuals(y, *layout, phi, jv)
+    worst = kernels.constraint_violation(y, *dense_args(engine), engine.loads_at(np.zeros(1)), (phi, jv))
     return worst, phi, jv
 
 

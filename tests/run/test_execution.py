@@ -375,9 +375,9 @@ coordinates = ["tilt", "tx", "ty"]
 
 
 def test_the_parent_warms_the_kernels_of_every_family_its_runs_use(tmp_path, monkeypatch):
-    """Before forking its workers the local backend loads the kernels once for them all: the dense
-    family too when a run's model has a free joint (else every worker would compile it at once),
-    and scipy's integrators when a run uses one."""
+    """Before forking its workers the local backend loads the kernels once for them all: for every
+    kind of model its runs use (a free joint's variant too, else every worker would compile it at
+    once), and scipy's integrators when a run uses one."""
     import fdbench.multibody.simulation as simulation
     from fdbench import execution
     from fdbench.spec import with_model_file
@@ -385,11 +385,13 @@ def test_the_parent_warms_the_kernels_of_every_family_its_runs_use(tmp_path, mon
     asked = []
     for owner in (simulation, execution):  # wherever execution finds it
         if hasattr(owner, "warm_up"):
-            monkeypatch.setattr(owner, "warm_up", lambda adaptive=False, dense=False: asked.append((adaptive, dense)))
+            monkeypatch.setattr(owner, "warm_up", lambda adaptive=False, engines=():
+                                asked.append((adaptive, {simulation.kind(e) for e in engines})) or [])
     model = tmp_path / "floating.toml"
     model.write_text(FLOATING)
     floating = with_model_file(control_spec(model_name=str(model)))
     execution._prepare_parent([control_spec(), control_spec(model_name="arm2")])
     execution._prepare_parent([control_spec(), floating])
     execution._prepare_parent([control_spec(integrator="rk45")])
-    assert asked == [(False, False), (False, True), (True, False)]
+    pins, free = (True, True, True), (True, False, True)  # (no paths, no free joints, no loads)
+    assert asked == [(False, {pins}), (False, {pins, free}), (True, {pins})]
