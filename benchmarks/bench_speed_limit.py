@@ -62,7 +62,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from timing import best_of, cpu_per_call
+from timing import best_of, cpu_per_call, positive
 
 GOAL = 1.5  # x C, for a CMA-ES evaluation
 ONE_SHOT_GOAL = 2.0  # x C, for a one-shot control run's runtime_s
@@ -276,13 +276,6 @@ def main(c_source: Path, runs: int) -> None:
         print(f"  {label[4:]:<38}{simulations / c_s:>6.2f}{torques / c_s:>8.2f}{cma / c_s:>8.2f}{rest / c_s:>8.2f}")
     print(f"goals: a one-shot control within {ONE_SHOT_GOAL:g}x and a CMA-ES evaluation within {GOAL:g}x of the C "
           "loop, single thread")
-
-
-def positive(text: str) -> int:
-    """A positive integer, for --runs."""
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
-    return int(text)
 
 
 if __name__ == "__main__":

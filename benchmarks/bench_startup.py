@@ -20,6 +20,8 @@ import subprocess
 import sys
 import time
 
+from timing import positive
+
 COMMANDS = [  # (arguments, goal in s or None)
     (["--help"], 0.5),
     (["control", "--help"], None),
@@ -47,13 +49,6 @@ def main(runs: int) -> None:
         verdict = "" if goal is None else f"under {goal:g} s: wall {'yes' if wall < goal else 'no'}, " \
                                           f"CPU {'yes' if cpu < goal else 'no'}"
         print(f"{' '.join(args):<40}{wall:>8.3f}{cpu:>8.3f}  {verdict}".rstrip())
-
-
-def positive(text: str) -> int:
-    """A positive integer, for --runs."""
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
-    return int(text)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """The benchmarks' one way of timing a call: the fastest of several rounds (the machine may be busy;
 the minimum is the least disturbed measurement)."""
 
+import argparse
 import math
 import time
 
@@ -23,3 +24,10 @@ def cpu_per_call(fn, calls: int) -> float:
     for _ in range(calls):
         fn()
     return (time.process_time() - start) / calls
+
+
+def positive(text: str) -> int:
+    """A positive integer, for --runs."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text!r}")
+    return int(text)
