@@ -168,7 +168,8 @@ def tendon_force_length_inverse(force, strain):
 def activation_derivative(excitation, activation, tau_act, tau_deact, smoothing):
     """da/dt (1/s), De Groote et al.'s smooth activation dynamics as OpenSim's: (e - a) times
     (f + 1/2) / (tau_act (1/2 + 3a/2)) + (1/2 - f) (1/2 + 3a/2) / tau_deact, f = tanh(b (e - a)) / 2
-    with b = ``smoothing`` (default 0.1)."""
+    with b = ``smoothing`` (default 0.1). Each muscle its own constants (OpenSim 4.6 keeps those
+    of the first muscle it computes for every muscle of the process)."""
     z = 0.5 + 1.5 * activation
     f = 0.5 * math.tanh(smoothing * (excitation - activation))
     return ((f + 0.5) / (tau_act * z) + (0.5 - f) * z / tau_deact) * (excitation - activation)
@@ -199,9 +200,10 @@ def rigid_tendon_force(activation, length, lengthening, p):
 def compliant_tendon(activation, tendon_force, length, lengthening, p):
     """A muscle with a compliant tendon in explicit form, its state the normalised tendon force
     ``tendon_force``: the tendon's force (N) and d(tendon_force)/dt (1/s), at ``activation``,
-    muscle-tendon ``length`` (m) and ``lengthening`` speed (m/s); ``p``: its ``parameters``.
-    As OpenSim's: the fibre velocity is f_V's inverse at (tendon_force / cos(alpha) - f_PE) /
-    (a f_L), the fibre damping not counted (it is in the fibre force alone)."""
+    muscle-tendon ``length`` (m) and ``lengthening`` speed (m/s); ``p``: its ``parameters``;
+    activation > 0 (a f_L divides). As OpenSim's: the fibre velocity is f_V's inverse at
+    (tendon_force / cos(alpha) - f_PE) / (a f_L), the fibre damping not counted (it is in the
+    fibre force alone)."""
     norm_tendon = tendon_force_length_inverse(tendon_force, p[TENDON_STRAIN])
     l_m, cos_alpha = fiber_length(length - p[L_SLACK] * norm_tendon, p[L_OPT], p[ALPHA_OPT])
     norm_length = l_m / p[L_OPT]

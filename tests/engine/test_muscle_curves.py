@@ -115,8 +115,8 @@ def ours(name: str, s: dict) -> float:
 
 
 def random_muscle(rng) -> dict:
-    """OpenSim's properties of a random muscle (activation's time constants and smoothing at their
-    defaults: OpenSim 4.6 reads them into static variables once per process)."""
+    """OpenSim's properties of a random muscle, activation's time constants and smoothing at their
+    defaults (OpenSim 4.6 keeps those of the first muscle of a process for all its muscles)."""
     return {"max_isometric_force": rng.uniform(200.0, 3000.0), "optimal_fiber_length": rng.uniform(0.04, 0.2),
             "tendon_slack_length": rng.uniform(0.05, 0.4), "pennation_angle_at_optimal": rng.uniform(0.0, 0.5),
             "max_contraction_velocity": rng.uniform(5.0, 15.0),
@@ -200,6 +200,26 @@ def test_muscles_in_a_model_are_opensims_with_rigid_and_compliant_tendons(agains
                                             p[mu.SMOOTHING]) == pytest.approx(activation_rate, rel=1e-6, abs=1e-12)
             checked += 1
     assert checked == 200
+
+
+def test_activation_dynamics_with_other_time_constants_and_smoothing_are_opensims():
+    """A muscle with its own activation_time_constant, deactivation_time_constant and
+    activation_dynamics_smoothing, alone in its process: OpenSim 4.6 keeps these three of the first
+    muscle it computes in static variables, shared by every muscle of the process after it."""
+    if importlib.util.find_spec("opensim") is None:
+        pytest.skip("the opensim package is not installed (pip install 'fdbench[opensim]')")
+    rng = np.random.default_rng(RNG_SEED + 1)
+    properties = {**random_muscle(rng), "activation_time_constant": 0.01, "deactivation_time_constant": 0.04,
+                  "activation_dynamics_smoothing": 10.0}
+    p = mu.parameters(**properties)
+    states = random_states(rng, p, True, 20)
+    theirs = opensim({"curves": [], "muscles": [{"properties": properties, "rigid": True,
+                                                 "anchor": p[mu.L_SLACK] + p[mu.L_OPT], "states": states}]})
+    rates = [answer[-1] for answer in theirs["muscles"][0]]
+    mine = [mu.activation_derivative(e, a, 0.01, 0.04, 10.0) for _, _, a, _, e in states]
+    np.testing.assert_allclose(mine, rates, rtol=1e-6, atol=1e-12)
+    defaults = [mu.activation_derivative(e, a, 0.015, 0.06, 0.1) for _, _, a, _, e in states]
+    assert np.abs(np.subtract(defaults, rates)).max() > 1.0  # the constants did matter (1/s)
 
 
 # ---------------------------------------------------------------------- checks of its own
