@@ -30,6 +30,7 @@ from fdbench.multibody.muscles import Muscle, PathPoint, PointPath, PolynomialPa
 
 from helpers.cli_checks import assert_one_line_error
 from helpers.osim_files import body, joint, path_knee_model
+from helpers.paths import ROOT
 
 runner = CliRunner()
 
@@ -330,3 +331,21 @@ def test_a_bad_muscle_in_toml_names_the_key(tmp_path):
     path.write_text(to_toml(model).replace('{ body = "foot"', '{ body = "radius"', 1))
     assert_one_line_error(runner.invoke(app, ["models", "show", str(path)]), "muscles[0].path.points[4].body",
                           "unknown body 'radius'")
+
+
+def test_the_readme_muscle_is_the_polynomial_it_states(tmp_path):
+    """The README's polynomial muscle, added to arm2's file, reads and has l = 0.30 - 0.02 elbow
+    + 0.004 shoulder elbow^2."""
+    import re
+
+    from fdbench.models import library
+
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("\n### Muscles\n"):]
+    (example,) = re.findall(r"```\n(\[\[muscles\]\].*?)```", section, flags=re.DOTALL)
+    path = tmp_path / "arm.toml"
+    path.write_text(library()["arm2"].read_text() + "\n" + example)
+    model = load_model(path)
+    q = np.random.default_rng(1).uniform(-1, 1, (10, 2))
+    lengths, _ = muscle_geometry(model, q)
+    np.testing.assert_allclose(lengths[:, 0], 0.30 - 0.02 * q[:, 1] + 0.004 * q[:, 0] * q[:, 1] ** 2, rtol=0, atol=1e-15)
