@@ -44,6 +44,9 @@ Choices made here (documented in the README's "Your own model"):
   duration, from rest to rest, with ``duration`` (s, at least 0.01), ``start`` and ``goal``
   (tables {joint = angle}, rad, naming every joint and no other); or 'eq5-paper', 'eq5-exact':
   the paper's eq. 5 of a one-angle model, its span fixed (``fdbench.multibody.motions.eq5``).
+* ``[[muscles]]`` (optional): Hill-type muscles, their constants and paths (points fixed to bodies
+  or a polynomial length), read, checked and written by ``fdbench.multibody.muscles``; their
+  lengths and moment arms are ``fdbench.multibody.muscle_paths``.
 * ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
   a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
   ``<body>.inertia`` an ``@<joint>`` of the body for the inertia about the joint's point (inertia +

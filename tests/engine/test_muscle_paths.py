@@ -157,6 +157,25 @@ def test_paths_through_the_engine_s_body_points_have_their_lengths():
     np.testing.assert_array_equal(one, lengths[:, 0])
 
 
+def test_a_muscle_over_one_pin_is_the_closed_form():
+    """The forearm (one pin at the origin) with a muscle from (0, h) on ground to (d, 0) on the
+    forearm: l = sqrt(d^2 + h^2 - 2 d h sin(theta)), moment arm d h cos(theta) / l; a model without
+    muscles has none."""
+    d, h = 0.05, 0.3
+    data = to_dict(find_model("forearm")) | {"muscles": [MUSCLE | {"name": "flexor", "path": {"points": [
+        {"body": "ground", "at": [0.0, h]}, {"body": "forearm", "at": [d, 0.0]}]}}]}
+    model = model_from_dict(data, "forearm")
+    theta = np.linspace(-1.5, 1.5, 31)
+    lengths, arms = muscle_geometry(model, theta[:, None])
+    expected = np.sqrt(d * d + h * h - 2 * d * h * np.sin(theta))
+    np.testing.assert_allclose(lengths[:, 0], expected, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(arms[:, 0, 0], d * h * np.cos(theta) / expected, rtol=0, atol=1e-15)
+    none = muscle_geometry(find_model("arm2"), np.zeros((3, 2)))
+    assert none[0].shape == (3, 0) and none[1].shape == (3, 0, 2)
+    with pytest.raises(ValueError, match=r"shape \(1,\) or \(n, 1\)"):
+        muscle_geometry(model, np.zeros(2))
+
+
 @st.composite
 def leg_paths(draw):
     """Three to five points on random bodies and frames (ground included), 1 cm or more apart in
