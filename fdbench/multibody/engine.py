@@ -440,65 +440,58 @@ class Engine:
         return own, believed.layout, believed.paths, theirs
 
     # ------------------------------------------------------------------ kinematics (numpy)
-    def _kinematics(self, z, zd, zdd):
-        """Body angles phi, rates w, angular accelerations (shape (n, B)) and body origins' positions,
-        velocities and accelerations (shape (n, B, 2)); the joints' world positions (n, B, 2) and,
-        for a joint with a path, the world direction of its point's motion per radian (n, B, 2) (m/rad;
-        0 without a path). z, zd, zdd: the coordinates (n, J)."""
+    def _kinematics(self, z, zd):
+        """Body angles phi and rates w (shape (n, B)), body origins' positions and velocities, the
+        joints' world positions and, for a joint with a path, the world direction of its point's
+        motion per radian (m/rad; 0 without a path) (shape (n, B, 2)) of the coordinates z and rates
+        zd (n, J)."""
         n, B = z.shape[0], self.n_bodies
-        phi, w, al = np.zeros((n, B)), np.zeros((n, B)), np.zeros((n, B))
-        o, vo, ao, joint_at, path_dir = (np.zeros((n, B, 2)) for _ in range(5))
+        phi, w = np.zeros((n, B)), np.zeros((n, B))
+        o, vo, joint_at, path_dir = (np.zeros((n, B, 2)) for _ in range(4))
         for k, joint in enumerate(self.model.joints):
             p, c = self.joint_parent[k], self.joint_column[k]
             at_parent = np.asarray(joint.at_parent, dtype=float)
             if p == FIXED:
-                phi[:, k], w[:, k], al[:, k] = z[:, c] + joint.offset, zd[:, c], zdd[:, c]
-                r, v, a = np.broadcast_to(at_parent, (n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+                phi[:, k], w[:, k] = z[:, c] + joint.offset, zd[:, c]
+                r, v = np.broadcast_to(at_parent, (n, 2)), np.zeros((n, 2))
                 if joint.type == "free":
-                    r, v, a = r + z[:, c + 1:c + 3], zd[:, c + 1:c + 3], zdd[:, c + 1:c + 3]
+                    r, v = r + z[:, c + 1:c + 3], zd[:, c + 1:c + 3]
                 parent_phi, parent_w = np.zeros(n), np.zeros(n)
             else:
                 phi[:, k] = phi[:, p] + z[:, c] + joint.offset
-                w[:, k], al[:, k] = w[:, p] + zd[:, c], al[:, p] + zdd[:, c]
-                r, v, a = self._body_point(p, at_parent, phi, w, al, o, vo, ao)
+                w[:, k] = w[:, p] + zd[:, c]
+                r, v = self._body_point(p, at_parent, phi, w, o, vo)
                 parent_phi, parent_w = phi[:, p], w[:, p]
             if joint.path is not None:  # the point moves along the path in the parent's frame
-                theta, rate, acc = z[:, c], zd[:, c], zdd[:, c]
+                theta, rate = z[:, c], zd[:, c]
                 splines = joint.path.splines()
-                s0, s1, s2 = (np.stack([sp.evaluate(theta, order) for sp in splines], axis=-1) for order in range(3))
-                arm, d1, d2 = (_rotate_each(parent_phi, u) for u in (s0, s1, s2))
+                s0, s1 = (np.stack([sp.evaluate(theta, order) for sp in splines], axis=-1) for order in range(2))
+                arm, d1 = (_rotate_each(parent_phi, u) for u in (s0, s1))
                 r = r + arm
                 v = v + parent_w[:, None] * _perp(arm) + d1 * rate[:, None]
-                parent_al = al[:, p] if p != FIXED else np.zeros(n)
-                a = (a + parent_al[:, None] * _perp(arm) - parent_w[:, None] ** 2 * arm
-                     + 2 * parent_w[:, None] * _perp(d1) * rate[:, None] + d2 * rate[:, None] ** 2 + d1 * acc[:, None])
                 path_dir[:, k] = d1
             joint_at[:, k] = r
             arm = _rotate(phi[:, k], np.asarray(joint.at_child, dtype=float))
             o[:, k] = r - arm
             vo[:, k] = v - w[:, k, None] * _perp(arm)
-            ao[:, k] = a - al[:, k, None] * _perp(arm) + w[:, k, None] ** 2 * arm
-        return phi, w, al, o, vo, ao, joint_at, path_dir
+        return phi, w, o, vo, joint_at, path_dir
 
     @staticmethod
-    def _body_point(b, local, phi, w, al, o, vo, ao):
-        """Position, velocity and acceleration (n, 2) of a point of body b (m, body frame)."""
+    def _body_point(b, local, phi, w, o, vo):
+        """Position and velocity (n, 2) of a point of body b (m, body frame)."""
         arm = _rotate(phi[:, b], np.asarray(local, dtype=float))
-        return (o[:, b] + arm, vo[:, b] + w[:, b, None] * _perp(arm),
-                ao[:, b] + al[:, b, None] * _perp(arm) - w[:, b, None] ** 2 * arm)
+        return o[:, b] + arm, vo[:, b] + w[:, b, None] * _perp(arm)
 
-    def _free_points(self, z, zd, zdd):
-        """p, p', p'' (n, n_p), the body angles, rates, accelerations (n, B) and the kinematics."""
-        kin = self._kinematics(z, zd, zdd)
-        phi, w, al, o, vo, ao, _, _ = kin
+    def _free_points(self, z, zd):
+        """p, p' (n, n_p) and the body angles and rates (n, B)."""
+        phi, w, o, vo, _, _ = self._kinematics(z, zd)
         n = z.shape[0]
-        p, pd, pdd = np.zeros((n, self.n_p)), np.zeros((n, self.n_p)), np.zeros((n, self.n_p))
+        p, pd = np.zeros((n, self.n_p)), np.zeros((n, self.n_p))
         for pt in range(self.n_points):
             k = self.pt_index[pt]
             if k != FIXED:
-                p[:, k:k + 2], pd[:, k:k + 2], pdd[:, k:k + 2] = self._body_point(
-                    self.pt_owner[pt], self.pt_local[pt], phi, w, al, o, vo, ao)
-        return p, pd, pdd, kin
+                p[:, k:k + 2], pd[:, k:k + 2] = self._body_point(self.pt_owner[pt], self.pt_local[pt], phi, w, o, vo)
+        return p, pd, phi, w
 
     def _samples(self, *arrays):
         """Arrays of shape (J,) or (n, J), all alike, as (n, J), and whether the input was one
@@ -524,7 +517,7 @@ class Engine:
         z, zd = self._vector(z, self.n_joints, "z"), self._vector(zd, self.n_joints, "zd")
         key = z.tobytes() + zd.tobytes()
         if self._last_start is None or self._last_start[0] != key:  # a run's start, kept for its repeats
-            p, pd, _, (phi, w, *_) = self._free_points(z[None], zd[None], np.zeros((1, self.n_joints)))
+            p, pd, phi, w = self._free_points(z[None], zd[None])
             self._last_start = key, np.concatenate([p[0], phi[0], pd[0], w[0]])
         return self._last_start[1].copy()
 
@@ -573,19 +566,23 @@ class Engine:
                                                   self.loads_at(np.zeros(1)), None))
 
     def inverse_dynamics(self, z, zd, zdd, t=None) -> np.ndarray:
-        """Eq. 3: tau = R^T (M q'' - Q_ext) (N m) of joint angles, rates and accelerations (rad,
-        rad/s, rad/s^2) of shape (n, J) or (J,); the same shape out. With external loads, the times
-        t (s, shape (n,) or a number) they are taken at, and their generalised forces subtracted."""
+        """Eq. 3: tau = R^T (M q'' - Q_ext) (N m; N for a free joint's x and y) of joint angles,
+        rates and accelerations (rad, rad/s, rad/s^2; m for a free joint's x and y) of shape (n, J)
+        or (J,), by the compiled kernel (``inverse.inverse_torques``); the same shape out. With
+        external loads, the times t (s, shape (n,) or a number) they are taken at, and their
+        generalised forces subtracted."""
         (z, zd, zdd), single = self._samples(z, zd, zdd)
-        p, _, pdd, kin = self._free_points(z, zd, zdd)
-        tau = self._generalized_forces(p, self._mass_times(pdd) - self.q_ext, kin)
-        if self.loads is not None:
-            if t is None:
-                raise ValueError("a model with external loads needs the times of its inverse dynamics")
-            from .loads import generalized_forces
-
-            tau -= generalized_forces(self, self.loads, z, np.broadcast_to(np.asarray(t, dtype=float), (len(z),)))
+        if self.loads is not None and t is None:
+            raise ValueError("a model with external loads needs the times of its inverse dynamics")
+        times = np.broadcast_to(np.asarray(0.0 if t is None else t, dtype=float), (len(z),))
+        tau = self._eq3(z, zd, zdd, self.layout, self.loads_at(times))
         return tau[0] if single else tau
+
+    def _eq3(self, z, zd, zdd, layout, loads) -> np.ndarray:
+        """The compiled eq. 3 (n, J) of the samples z, zd, zdd (n, J) over ``layout`` under ``loads``."""
+        tau = np.empty(z.shape)
+        kernels.inverse_torques(*(np.ascontiguousarray(a) for a in (z, zd, zdd)), layout, self.paths, loads, tau)
+        return tau
 
     def mass_matrix(self, z) -> np.ndarray:
         """Minimal M(z) = R^T M R, shape (J, J) (or (n, J, J) for z of shape (n, J)), kg m^2, by
@@ -594,9 +591,8 @@ class Engine:
         twists (rad/s and the velocity of the body point at the world origin, m/s, per unit rate) and
         I_d the composite inertia of the subtree d moves, about the origin. Cost O(J^2), no R."""
         (z,), single = self._samples(z)
-        zero = np.zeros_like(z)
-        phi, w, al, o, vo, ao, joint_at, path_dir = self._kinematics(z, zero, zero)
-        com = np.stack([self._body_point(b, self.model.body(name).com, phi, w, al, o, vo, ao)[0]
+        phi, w, o, vo, joint_at, path_dir = self._kinematics(z, np.zeros_like(z))
+        com = np.stack([self._body_point(b, self.model.body(name).com, phi, w, o, vo)[0]
                         for b, name in enumerate(self.body_names)], axis=1)  # (n, B, 2) m
         mass, inertia = self._body_inertias
         # per subtree: mass (kg), first moment about the origin (kg m), inertia about the origin (kg m^2)
@@ -650,38 +646,6 @@ class Engine:
                 for array in arrays:
                     array[:, parent] += array[:, b]
 
-    def _mass_times(self, pdd) -> np.ndarray:
-        """pdd M (n, n_p) for point accelerations pdd (n, n_p): the points' mass matrix is sparse
-        (4 x 4 blocks per body), so this costs O(n B), not O(n n_p^2)."""
-        if getattr(self, "_sparse_mass", None) is None:
-            from scipy.sparse import csr_matrix
-
-            self._sparse_mass = csr_matrix(self.mass)
-        return np.asarray((self._sparse_mass @ pdd.T).T)  # M is symmetric
-
-    def _generalized_forces(self, p, f, kin) -> np.ndarray:
-        """R^T f (n, J) for forces f (n, n_p) at the free points p (n, n_p) (N and m), without R:
-        a joint's angle takes the moment about its point of the forces on its subtree's points (plus
-        their sum along a path's direction), a free joint's x and y their sum."""
-        joint_at, path_dir = kin[-2], kin[-1]
-        n, B = p.shape[0], self.n_bodies
-        force, moment = np.zeros((n, B, 2)), np.zeros((n, B))  # per body, about the world origin
-        for pt in range(self.n_points):
-            k = self.pt_index[pt]
-            if k != FIXED:
-                b = self.pt_owner[pt]
-                force[:, b] += f[:, k:k + 2]
-                moment[:, b] += p[:, k] * f[:, k + 1] - p[:, k + 1] * f[:, k]
-        self._to_subtrees(force, moment)
-        tau = np.empty((n, self.n_joints))
-        for b, joint in enumerate(self.model.joints):
-            c, r = self.joint_column[b], joint_at[:, b]
-            tau[:, c] = (moment[:, b] - (r[:, 0] * force[:, b, 1] - r[:, 1] * force[:, b, 0])
-                         + np.sum(path_dir[:, b] * force[:, b], axis=-1))
-            if joint.type == "free":
-                tau[:, c + 1:c + 3] = force[:, b]
-        return tau
-
     def bias(self, z, zd) -> np.ndarray:
         """h(z, z') (N m) with M(z) z'' + h(z, z') = tau: R^T (M R' z' - Q_ext), shape (J,) (or (n, J))."""
         return self.inverse_dynamics(z, zd, np.zeros_like(np.asarray(zd, dtype=float)))
@@ -690,25 +654,18 @@ class Engine:
         """World positions (m) of every body's joint point ('<body>.joint') and end ('<body>.end'),
         shape (2,) (or (n, 2) for z of shape (n, J))."""
         (z,), single = self._samples(z)
-        zero = np.zeros_like(z)
-        phi, w, al, o, vo, ao, joint_at, _ = self._kinematics(z, zero, zero)
+        phi, w, o, vo, joint_at, _ = self._kinematics(z, np.zeros_like(z))
         points = {}
         for b, name in enumerate(self.body_names):
             points[f"{name}.joint"] = joint_at[:, b]
-            points[f"{name}.end"] = self._body_point(b, self._local_end[b], phi, w, al, o, vo, ao)[0]
+            points[f"{name}.end"] = self._body_point(b, self._local_end[b], phi, w, o, vo)[0]
         return {key: value[0] if single else value for key, value in points.items()}
 
     def inverse_torques(self, z, zd, zdd, t=None) -> np.ndarray:
-        """Eq. 3 by the compiled kernel (``kernels.inverse_torques``; external loads taken at the time
-        t s): the generalised forces (N m; N for a free joint's x and y) of one minimal motion
-        (z, zd, zdd) (rad, rad/s, rad/s^2; m for a free joint's x and y), shape (J,)."""
+        """``inverse_dynamics`` of one minimal motion (z, zd, zdd) (rad, rad/s, rad/s^2; m for a free
+        joint's x and y), shape (J,) each, at the time t (s): shape (J,)."""
         z, zd, zdd = (self._vector(a, self.n_joints, name) for a, name in ((z, "z"), (zd, "zd"), (zdd, "zdd")))
-        if self.loads is not None and t is None:
-            raise ValueError("a model with external loads needs the times of its inverse dynamics")
-        out = np.empty((1, self.n_joints))
-        kernels.inverse_torques(z[None], zd[None], zdd[None], self.layout, self.paths,
-                                self.loads_at(np.zeros(1) if t is None else np.array([float(t)])), out)
-        return out[0]
+        return self.inverse_dynamics(z, zd, zdd, None if t is None else float(t))
 
     def simulate(self, y0, dt, n_steps, tau_half, ref_half, refd_half, refdd_half, kp, kd, mode=PD, gains=None,
                  nominal: "Engine | None" = None) -> SimResult:

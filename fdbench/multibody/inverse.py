@@ -16,9 +16,11 @@ from .layout import (AT_CHILD_X, AT_CHILD_Y, AT_PARENT_X, AT_PARENT_Y, COLUMN, F
 
 # columns of the inverse dynamics' per-body scratch: angle (rad), its cos and sin, rate (rad/s),
 # angular acceleration (rad/s^2), the joint point (m), the frame origin (m) and its acceleration
-# (m/s^2), the path's world direction per radian (m/rad; 0 without a path)
+# (m/s^2), the path's world direction per radian (m/rad; 0 without a path), the force (N) on the
+# body's subtree and its moment about the world origin (N m), the loads' generalised forces on the
+# body's joint (N m on its angle, N on a free joint's x and y)
 (PHI, COS, SIN, RATE, ACC, JOINT_X, JOINT_Y, ORIGIN_X, ORIGIN_Y, ORIGIN_AX, ORIGIN_AY, DIR_X, DIR_Y,
- N_KIN) = range(14)
+ FORCE_X, FORCE_Y, MOMENT_0, LOAD_ANGLE, LOAD_X, LOAD_Y, N_KIN) = range(20)
 
 
 # ---------------------------------------------------------------------- inverse dynamics (eq. 3)
@@ -57,11 +59,13 @@ def _spline_at(knots, first, last, t):
 def _inverse(z, zd, zdd, model, paths, frames, values, kin, points, out):
     """Eq. 3, tau = R^T (M_p p'' - Q_ext), into out (J,) (N m; N for a free joint's x and y) for the
     coordinates z, rates zd and accelerations zdd (J,): the bodies' kinematics from ground out
-    (parents before children), the free points' positions and accelerations, then each point's
-    force M_p p'' - Q_ext projected on every joint on its owner's path (a pin's lever
-    R90 (r_P - r_joint), plus a path's direction, a free joint's world axes), less the external
-    loads' (frames (L, N_LOAD_INT), values (L, N_LOAD); L may be 0). kin (B, N_KIN), points (3, n_p):
-    scratch."""
+    (parents before children), the free points' positions and accelerations, the points' forces
+    f = M_p p'' - Q_ext, then R^T f without R: per body the sum of its points' f and their moment about
+    the world origin, summed over its subtree; a joint's angle takes that moment about its point
+    (plus the sum along a path's direction), a free joint's x and y the sum; less the external
+    loads' generalised forces (frames (L, N_LOAD_INT), values (L, N_LOAD); L may be 0). The
+    operations are numpy's former ``Engine.inverse_dynamics``', in its order. kin (B, N_KIN),
+    points (3, n_p): scratch."""
     body_int, body_float = model.body_int, model.body_float
     pt_index, pt_owner, pt_local, mass, q_ext = model.pt_index, model.pt_owner, model.pt_local, model.mass, model.q_ext
     n_b = body_int.shape[0]
@@ -89,8 +93,8 @@ def _inverse(z, zd, zdd, model, paths, frames, values, kin, points, out):
                 d1x, d1y = sx1 * pc - sy1 * ps, sx1 * ps + sy1 * pc
                 d2x, d2y = sx2 * pc - sy2 * ps, sx2 * ps + sy2 * pc
                 rx, ry = rx + arm_x, ry + arm_y
-                ax = ax - pal * arm_y - pw * pw * arm_x - 2 * pw * d1y * rate + d2x * rate * rate + d1x * acc
-                ay = ay + pal * arm_x - pw * pw * arm_y + 2 * pw * d1x * rate + d2y * rate * rate + d1y * acc
+                ax = ax - pal * arm_y - pw * pw * arm_x - 2 * pw * d1y * rate + d2x * (rate * rate) + d1x * acc
+                ay = ay + pal * arm_x - pw * pw * arm_y + 2 * pw * d1x * rate + d2y * (rate * rate) + d1y * acc
                 kin[k, DIR_X], kin[k, DIR_Y] = d1x, d1y
         c, s = math.cos(phi), math.sin(phi)
         arm_x = body_float[k, AT_CHILD_X] * c - body_float[k, AT_CHILD_Y] * s
@@ -110,45 +114,48 @@ def _inverse(z, zd, zdd, model, paths, frames, values, kin, points, out):
         for c in range(n_p):
             total += mass[r, c] * points[1, c]
         points[2, r] = total - q_ext[r]
-    for j in range(out.shape[0]):
-        out[j] = 0.0
-    for pt in range(pt_index.shape[0]):
+    for k in range(n_b):
+        kin[k, FORCE_X], kin[k, FORCE_Y], kin[k, MOMENT_0] = 0.0, 0.0, 0.0
+        kin[k, LOAD_ANGLE], kin[k, LOAD_X], kin[k, LOAD_Y] = 0.0, 0.0, 0.0
+    for pt in range(pt_index.shape[0]):  # per body: the force on its points and its moment about the origin
         i = pt_index[pt]
-        if i < 0:
-            continue
-        fx, fy = points[2, i], points[2, i + 1]
-        b = pt_owner[pt]
-        while b >= 0:
-            col = body_int[b, COLUMN]
-            lever_x, lever_y = points[0, i] - kin[b, JOINT_X], points[0, i + 1] - kin[b, JOINT_Y]
-            if paths is not None:
-                out[col] += lever_x * fy - lever_y * fx + kin[b, DIR_X] * fx + kin[b, DIR_Y] * fy
-            else:
-                out[col] += lever_x * fy - lever_y * fx
-            if body_int[b, FREE] == 1:
-                out[col + 1] += fx
-                out[col + 2] += fy
-            b = body_int[b, PARENT]
-    for k in range(frames.shape[0]):  # the loads' generalised forces, subtracted
+        if i >= 0:
+            fx, fy, b = points[2, i], points[2, i + 1], pt_owner[pt]
+            kin[b, FORCE_X] += fx
+            kin[b, FORCE_Y] += fy
+            kin[b, MOMENT_0] += points[0, i] * fy - points[0, i + 1] * fx
+    for k in range(n_b - 1, -1, -1):  # summed over each subtree (children come after their parent)
+        p = body_int[k, PARENT]
+        if p >= 0:
+            kin[p, FORCE_X] += kin[k, FORCE_X]
+            kin[p, FORCE_Y] += kin[k, FORCE_Y]
+            kin[p, MOMENT_0] += kin[k, MOMENT_0]
+    for k in range(frames.shape[0]):  # the loads' generalised forces, per joint
         fx, fy, px, py = values[k, FX], values[k, FY], values[k, PX], values[k, PY]
         frame = frames[k, FORCE_FRAME]
         if frame >= 0:
             fx, fy = fx * kin[frame, COS] - fy * kin[frame, SIN], fx * kin[frame, SIN] + fy * kin[frame, COS]
         frame = frames[k, POINT_FRAME]
         if frame >= 0:
-            px, py = (kin[frame, ORIGIN_X] + px * kin[frame, COS] - py * kin[frame, SIN],
-                      kin[frame, ORIGIN_Y] + px * kin[frame, SIN] + py * kin[frame, COS])
+            px, py = (kin[frame, ORIGIN_X] + (px * kin[frame, COS] - py * kin[frame, SIN]),
+                      kin[frame, ORIGIN_Y] + (px * kin[frame, SIN] + py * kin[frame, COS]))
         b = frames[k, LOAD_BODY]
         while b >= 0:
-            col = body_int[b, COLUMN]
             lever = (px - kin[b, JOINT_X]) * fy - (py - kin[b, JOINT_Y]) * fx
             if paths is not None:
                 lever += kin[b, DIR_X] * fx + kin[b, DIR_Y] * fy
-            out[col] -= lever + values[k, MOMENT]
-            if body_int[b, FREE] == 1:
-                out[col + 1] -= fx
-                out[col + 2] -= fy
+            kin[b, LOAD_ANGLE] += lever + values[k, MOMENT]
+            kin[b, LOAD_X] += fx
+            kin[b, LOAD_Y] += fy
             b = body_int[b, PARENT]
+    for k in range(n_b):  # a joint takes its subtree's moment about its point (plus the force along a path)
+        col, fx, fy = body_int[k, COLUMN], kin[k, FORCE_X], kin[k, FORCE_Y]
+        torque = kin[k, MOMENT_0] - (kin[k, JOINT_X] * fy - kin[k, JOINT_Y] * fx)
+        if paths is not None:
+            torque += kin[k, DIR_X] * fx + kin[k, DIR_Y] * fy
+        out[col] = torque - kin[k, LOAD_ANGLE]
+        if body_int[k, FREE] == 1:
+            out[col + 1], out[col + 2] = fx - kin[k, LOAD_X], fy - kin[k, LOAD_Y]
 
 
 @njit(error_model="numpy")

@@ -116,7 +116,7 @@ def _external_loads_expression(ca, model: Model, loads: tuple, z, p):
     loads (``loads.ExternalLoad``: the body, the frames of force and point) given, per load, by
     the parameters p[5 l : 5 l + 5] = force (N), point (m), each in the load's frame, and free
     moment (N m): Q = J_o^T F + J_phi^T ((P - o) x F + M) for the body's origin o and angle phi,
-    i.e. J_P(z)^T F + J_phi^T M with P the body's material point at P (``loads.generalized_forces``)."""
+    i.e. J_P(z)^T F + J_phi^T M with P the body's material point at P (``loads``' module docstring)."""
     from .loads import GROUND as LOADS_GROUND
 
     body_of = {joint.child: k for k, joint in enumerate(model.joints)}

@@ -24,12 +24,12 @@ from hypothesis import strategies as st
 
 from helpers import reference_dynamics as ref
 from helpers.multibody_strategies import models_with_paths_and_free_joints
-from helpers.dense_checks import leading_matrix
+from helpers.dense_checks import leading_matrix, load_forces
 
 from fdbench.files import BadFile
 from fdbench.multibody.model import GROUND, Body, Frame, Joint, Model
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.loads import ExternalLoad, ExternalLoads, generalized_forces, read_external_loads
+from fdbench.multibody.loads import ExternalLoad, ExternalLoads, read_external_loads
 from fdbench.outcomes import residual_fields
 
 G = 9.81
@@ -162,7 +162,7 @@ def test_loads_in_a_welded_frame_at_an_angle_and_in_another_body_s_frame_are_whe
         M1 = mix(8)
         F2, P2 = mix([9, 10]), hip + rotate(thigh, mix([12, 13]))
         expected = [cross(P1 - hip, F1) + M1 + cross(P2 - hip, F2), cross(P1 - knee, F1) + M1 + cross(P2 - knee, F2)]
-        np.testing.assert_allclose(generalized_forces(engine, loads, [[q1, q2]], [0.5])[0], expected,
+        np.testing.assert_allclose(load_forces(engine, [q1, q2], 0.5), expected,
                                    rtol=1e-12, atol=1e-12)
 
 
@@ -182,7 +182,7 @@ def test_a_force_without_a_point_acts_at_the_origin_of_the_body_or_frame_it_is_a
     F2, P2 = np.array(ROWS[0.0][9:11]), hip + rotate(q1, ROWS[0.0][12:14])
     expected = [cross(foot_origin - hip, F1) + M1 + cross(P2 - hip, F2),
                 cross(foot_origin - knee, F1) + M1 + cross(P2 - knee, F2)]
-    np.testing.assert_allclose(generalized_forces(engine, loads, [[q1, q2]], [0.0])[0], expected, rtol=1e-12)
+    np.testing.assert_allclose(load_forces(engine, [q1, q2], 0.0), expected, rtol=1e-12)
 
 
 # ---------------------------------------------------------------- random models against the reference
@@ -212,7 +212,8 @@ def virtual_work(tree: ref.GeneralTree, z, body: int, P, F, M) -> np.ndarray:
 @given(model=models_with_paths_and_free_joints(max_bodies=4), seed=st.integers(0, 2**16))
 def test_the_loads_generalised_forces_are_their_virtual_work_on_random_models(model, seed):
     """Two loads on random bodies, their forces and points in ground's or random bodies' axes:
-    generalized_forces equals the reference's virtual work, frames resolved by hand."""
+    the compiled eq. 3's loads (at rest, without gravity) are the reference's virtual work, frames
+    resolved by hand."""
     rng = np.random.default_rng(seed)
     names = [joint.child for joint in model.joints]
     frame = lambda: GROUND if rng.random() < 0.3 else str(rng.choice(names))  # noqa: E731
@@ -232,7 +233,7 @@ def test_the_loads_generalised_forces_are_their_virtual_work_on_random_models(mo
             b = names.index(load.point_frame)
             P = origin[b] + rotate(angle[b], P)
         expected += virtual_work(tree, z, names.index(load.body), P, F, moment[k])
-    ours = generalized_forces(engine, data, z[None], [0.3])[0]
+    ours = load_forces(engine, z, 0.3)
     np.testing.assert_allclose(ours, expected, rtol=1e-9, atol=1e-9 * max(1.0, np.abs(expected).max()))
 
 
@@ -270,7 +271,7 @@ def test_under_inverse_dynamics_torques_with_loads_the_simulation_keeps_the_moti
     tau = Engine(model, alpha=1e7, loads=data).inverse_dynamics(z, zd, zdd, when)
     zero = np.zeros((1, J))
     rate, _ = bare.rates(y[None], tau[None], zero, zero, zero, 0.0, 0.0)
-    loads_q = generalized_forces(bare, data, z[None], [when])[0]
+    loads_q = load_forces(Engine(model, loads=data), z, when)
     if np.abs(loads_q).max() > 1e-3 * max(1.0, np.abs(tau).max()):
         assert np.abs(bare.joints_from_state(rate[0])[1] - zdd).max() > 10 * errors[1] * max(1.0, np.abs(zdd).max())
 

@@ -2,7 +2,7 @@
 collocation (fdbench.collocation) and the time-varying LQR (fdbench.multibody.lqr), for any
 model description:
 
-- M(z), h(z, z') and the inverse dynamics against the engine's numpy ones and the independent
+- M(z), h(z, z') and the inverse dynamics against the engine's (compiled eq. 3, composite bodies) and the independent
   reference (tests/helpers/reference_dynamics.py) on random chains and trees, to 1e-9 relative;
 - the arm's M and h against the closed form of Lagrange's equations (the values of arm2.toml);
 - the linearisation against central differences of the forward dynamics;

@@ -34,3 +34,13 @@ def leading_matrix(engine, y):
     mass = np.zeros((engine.n_q, engine.n_q))
     mass[:engine.n_p, :engine.n_p] = engine.mass
     return mass + engine.params[0] * jacobian.T @ jacobian
+
+
+def load_forces(engine, z, t) -> np.ndarray:
+    """The external loads' generalised forces (J,) at the coordinates z (J,) and the time t (s), by
+    the compiled eq. 3: at rest, without gravity (Q_ext = 0), it leaves minus the loads' forces."""
+    out = np.empty((1, engine.n_joints))
+    z = np.ascontiguousarray(z, dtype=float).reshape(1, -1)
+    kernels.inverse_torques(z, np.zeros_like(z), np.zeros_like(z), engine.layout._replace(q_ext=0.0 * engine.q_ext),
+                            engine.paths, engine.loads_at(np.array([float(t)])), out)
+    return -out[0]
