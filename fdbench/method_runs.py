@@ -33,12 +33,12 @@ from .optimizers import make_optimizer
 from .optimizers.base import NO_ITERATION
 from .outcomes import in_file_units, outcome, residual_fields
 from .params_file import make_saved_torque, read_params
-from .problem import TrackingProblem
+from .problem import TrackingProblem, tracking_setup
 from .problem import residual_weight as problem_residual_weight
 from .peers import run as run_peer
 from .records import RunOutcome, base_record, explained
 from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, reference,
-                         simulate, warm_up)
+                         warm_up)
 from .torques import TORQUES
 from .torques.ann import select_hidden
 
@@ -90,11 +90,14 @@ def _method_run(spec, on_evaluation=None, on_start=None):
     warm_up(spec)
     law, known = controller(spec), plan(spec)
     law.warm_up(known)
+    body, desired, inverse, grid = _set_up(spec)
+    if grid is not None:  # the plan's feedforward (eq. 3) on the half-step grid, kept by it
+        known.feedforward()(grid.t)
     began = time.perf_counter()
-    inverse = reference(spec)
     design = law.design(known)
-    result = simulate(spec, design.feedforward, kp=design.kp, kd=design.kd, gains=design.gains,
-                       computed=design.computed, nominal=known.engine if design.computed else None)
+    result = sim.simulate(design.feedforward, body, desired, kp=design.kp, kd=design.kd, gains=design.gains,
+                          computed=design.computed, nominal=known.engine if design.computed else None, grid=grid,
+                          **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     name = spec.controller or "pd"  # the name it is registered under
@@ -102,6 +105,16 @@ def _method_run(spec, on_evaluation=None, on_start=None):
     if name != "pd":
         record["controller_options"] = options_text(spec.method_options)
     return outcome(spec, record, result, inverse)
+
+
+def _set_up(spec):
+    """What a run prepares before its clock starts, as the C loop precomputes its references and
+    feedforward: the plant's engine, the desired motion, the indicators' reference (eq. 3 on the
+    true motion's samples, ``run_inputs.reference``; measured after the run, not part of it) and,
+    with RK4, the desired motion on the half-step grid (``simulation.HalfSteps``; else None)."""
+    desired = motions(spec)[0]
+    grid = sim.half_steps(desired, spec.dt) if spec.integrator == "rk4" else None
+    return engine(spec), desired, reference(spec), grid
 
 
 # ---------------------------------------------------------------------- open loop
@@ -125,9 +138,11 @@ def _open_loop(spec, torque_file=None, params_file=None, torque=None):
         digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
     warm_up(spec)
+    body, desired, inverse, grid = _set_up(spec)
+    if grid is not None:
+        drive = sim.on_half_steps(drive, grid, body.n_joints)
     began = time.perf_counter()
-    inverse = reference(spec)
-    result = simulate(spec, drive)
+    result = sim.simulate(drive, body, desired, grid=grid, **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
@@ -180,18 +195,19 @@ def _optimize(spec, on_evaluation, on_start):
         warm_up_sensitivities()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
+    # eq. 3 and the references on the half-step grid, before the clock as the C loop's
+    setup = tracking_setup(engine(spec, nominal(spec)), motions(spec)[0], spec.dt, spec.feedforward)
     if on_start:
         on_start(spec.budget)
-    desired, _ = motions(spec)
     began = time.perf_counter()
     options, extra = dict(spec.torque_options), {}
     if options.get("hidden") == "auto":  # the count that fits every joint's inverse-dynamics torque
-        inv = sim.inverse_dynamics(None, engine(spec, nominal(spec)), desired)
+        inv = setup.inverse
         fits = [select_hidden(inv.t, inv.torque[:, j]) for j in range(inv.torque.shape[1])]
         options["hidden"] = max(n for n, _ in fits)
         extra["hidden_fits"] = [(n, max(dict(tried).get(n, math.inf) for _, tried in fits))
                                 for n in range(1, options["hidden"] + 1)]
-    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, **options)
+    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, setup=setup, **options)
     batch = problem.objectives_scaled if problem.batched else None
     gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
     found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
@@ -223,15 +239,16 @@ def _collocate(spec):
     warm_up(spec)
     casadi()  # its import is not part of the runtime
 
-    desired, truth = motions(spec)
+    truth = motions(spec)[1]
+    body, desired, inverse, grid = _set_up(spec)
+    model, external = nominal(spec), loads(spec)
     began = time.perf_counter()
-    inverse = reference(spec)
-    solution = collocate(nominal(spec), desired, **options, loads=loads(spec))
-    result = simulate(spec, solution.torque_function())
+    solution = collocate(model, desired, **options, loads=external)
+    result = sim.simulate(solution.torque_function(), body, desired, grid=grid, **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     done = outcome(spec, record, result, inverse, extra={"collocation": solution})
-    own = own_fields(nominal(spec), solution, truth)
+    own = own_fields(model, solution, truth)
     record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
     return done
 

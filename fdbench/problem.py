@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -65,6 +66,29 @@ class ShootingProblem:
         return self.objectives(np.atleast_2d(np.asarray(X, dtype=float)) * self.scale)
 
 
+@dataclass(frozen=True)
+class TrackingSetup:
+    """What a tracking problem takes from the nominal model on the desired motion, made before an
+    optimisation's clock starts as the C loop precomputes its references and feedforward: eq. 3 on
+    the motion's samples (``inverse``, a ``simulation.JointInverse``: the parameters' fit and eq.
+    18's reference), RK4's half-step grid of the motion (``grid``, a ``simulation.HalfSteps``) and,
+    with feedforward, eq. 3 on its half steps (``feedforward``, N m, (2 n + 1, J), read-only; else None)."""
+
+    inverse: sim.JointInverse
+    grid: sim.HalfSteps
+    feedforward: np.ndarray | None
+
+
+def tracking_setup(nominal, motion, dt: float = 1e-3, feedforward: bool = False) -> TrackingSetup:
+    """The ``TrackingSetup`` of the engine ``nominal`` on ``motion`` with steps of about dt (s)."""
+    grid = sim.half_steps(motion, dt)
+    torque = None
+    if feedforward:
+        torque = np.array(sim.inverse_dynamics(grid.t, nominal, motion).torque)
+        torque.flags.writeable = False
+    return TrackingSetup(sim.inverse_dynamics(None, nominal, motion), grid, torque)
+
+
 class TrackingProblem(ShootingProblem):
     """Optimise per-joint torque parameters so that the simulated body (``engine``) tracks ``motion``.
 
@@ -75,12 +99,13 @@ class TrackingProblem(ShootingProblem):
     joints; default: ``engine``) gives the inverse dynamics that prepare the parameters, the
     feedforward and the objective's reference. ``dt``, ``integrator``, ``rtol`` and ``atol`` say how
     to simulate (``simulation.simulate``): with rk4 the torques are computed on its half-step grid at
-    once, with an adaptive integrator at the times it asks for."""
+    once, with an adaptive integrator at the times it asks for. ``setup``: the ``TrackingSetup`` of
+    ``nominal`` on ``motion`` with this dt and feedforward, made beforehand (default: made here)."""
 
     def __init__(self, torque, engine, motion, feedforward: bool = False, penalty_weight: float = 1.0,
                  dt: float = 1e-3, nominal=None, integrator: str = "rk4", rtol: float = 1e-6, atol: float = 1e-9,
-                 residual_weight: float = 0.0, **options):
-        from .integrate import check_integrator, steps
+                 residual_weight: float = 0.0, setup: TrackingSetup | None = None, **options):
+        from .integrate import check_integrator
         from .torques import make_torque
 
         if not (math.isfinite(penalty_weight) and penalty_weight >= 0):
@@ -92,7 +117,11 @@ class TrackingProblem(ShootingProblem):
         self.residual_weight = float(residual_weight) if base is not None else 0.0
         self.base_column = engine.model.coordinates.index(base.coordinate_names[0]) if base is not None else None
         self._nominal = engine if nominal is None else nominal
-        self.inverse = sim.inverse_dynamics(None, self._nominal, motion)
+        if setup is None:
+            setup = tracking_setup(self._nominal, motion, dt, feedforward)
+        elif setup.grid.motion is not motion or setup.grid.dt != dt or (setup.feedforward is None) == bool(feedforward):
+            raise ValueError("the tracking set-up is of another motion, step or feedforward")
+        self.inverse, self._grid = setup.inverse, setup.grid
         self.duration = motion.duration
         n_joints = self.inverse.torque.shape[1]
         self.parts = ([make_torque(torque, **options) for _ in range(n_joints)] if isinstance(torque, str)
@@ -103,21 +132,19 @@ class TrackingProblem(ShootingProblem):
         self.p0 = np.concatenate(p0)
         self.scale = np.concatenate([np.asarray(part.scale(), dtype=float) for part in self.parts])
         self.x0 = self.p0 / self.scale
-        n = steps(dt, self.duration)
-        self._half = np.linspace(0.0, self.duration, 2 * n + 1)
+        n = self._grid.n
+        self._half = self._grid.t
         self._on_grid_batch = [part.on_grid_batch(self._half) for part in self.parts]
-        self._ff_half = (np.array(sim.inverse_dynamics(self._half, self._nominal, motion).torque) if feedforward
-                         else np.zeros((2 * n + 1, n_joints)))
-        self._every = (sim.samples_on_grid(np.linspace(0.0, self.duration, n + 1), motion.samples)
-                       if self.integrator == "rk4" else 0)  # the population kernel is RK4's
+        self._ff_half = setup.feedforward if feedforward else np.zeros((2 * n + 1, n_joints))
+        self._every = self._grid.every if self.integrator == "rk4" else 0  # the population kernel is RK4's
         self._population, self._jacobians = None, None
         self._n_steps = n
         if self._every:  # the motion's samples fall on steps: eq. 18 straight from the kernel's states
             z0, zd0, _ = motion(np.zeros(1))
-            ref, refd, _ = (np.ascontiguousarray(r, dtype=float) for r in motion(self._half))
             # the population kernel's arguments around the candidates' torques (see ``objectives``)
             self._kernel_start = (engine.state_from_joints(z0[0], zd0[0]), self.duration / n, n)
-            self._kernel_rest = (ref, refd, self._every, np.ascontiguousarray(self.inverse.angles), penalty_weight)
+            self._kernel_rest = (self._grid.ref, self._grid.refd, self._every, np.ascontiguousarray(self.inverse.angles),
+                                 penalty_weight)
 
     @property
     def n_params(self) -> int:
@@ -164,7 +191,8 @@ class TrackingProblem(ShootingProblem):
             return sim.simulate(self.torque_function(p), self.engine, self.motion, **how)
         tau = self.torques_on_grid(p)
         half = self._half
-        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.engine, self.motion, **how)
+        return sim.simulate(lambda t: tau if t is half else _interp(half, tau, t), self.engine, self.motion, **how,
+                            grid=self._grid)
 
     def rmse_deg(self, result: sim.Simulation) -> float:
         """Eq. 18's tracking term over the samples reached: the RMSE of the angles (deg), plus that of

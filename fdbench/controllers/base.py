@@ -17,6 +17,7 @@ import inspect
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -40,7 +41,12 @@ class Plan:
 
     def feedforward(self):
         """The nominal model's inverse-dynamics torques on the desired motion, a torque function
-        t (s), shape (k,) -> (k, J) N m."""
+        t (s), shape (k,) -> (k, J) N m: one per plan, which keeps the last times it was
+        evaluated at (a run samples it on the half-step grid before its clock starts)."""
+        return self._feedforward
+
+    @cached_property
+    def _feedforward(self):
         from ..multibody.simulation import feedforward  # lazy: numba off the CLI's start-up
 
         return feedforward(self.engine, self.motion)

@@ -44,7 +44,9 @@ class PD(Controller):
         self.kd = None if kd is None else check_non_negative("--kd", kd)  # N m s/rad
 
     def gains(self, plan: Plan) -> tuple[np.ndarray, np.ndarray]:
-        """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,)."""
+        """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,); the mass matrix only for a default."""
+        if self.kp is not None and self.kd is not None:
+            return np.full(len(plan.joints), self.kp), np.full(len(plan.joints), self.kd)
         z0 = plan.motion(np.zeros(1))[0][0]
         mass = plan.engine.mass_matrix(z0)
         if plan.engine.model.floating_base is not None:

@@ -102,9 +102,56 @@ class FeedbackLaw:
                                                                                                2 * n_joints)
 
 
+@dataclass(frozen=True)
+class HalfSteps:
+    """RK4's grid over ``motion``'s span, asked for with steps of about ``dt`` s: ``n`` steps of
+    ``step`` s, the half-step times ``t`` = k step / 2, k = 0 .. 2 n (s, shape (2 n + 1,)), the motion
+    on them (ref rad, refd rad/s, refdd rad/s^2, each (2 n + 1, J); all read-only), the steps' times
+    ``t_steps`` (s, shape (n + 1,)) and ``every``, the steps between the motion's samples where they
+    lie on the steps (else 0, see ``samples_on_grid``).
+    Made once (``half_steps``) before a timed run, as the C loop prepares its references."""
+
+    motion: object
+    dt: float
+    n: int
+    step: float
+    t: np.ndarray
+    ref: np.ndarray
+    refd: np.ndarray
+    refdd: np.ndarray
+    t_steps: np.ndarray
+    every: int
+
+
+def half_steps(motion, dt: float = 1e-3) -> HalfSteps:
+    """The ``HalfSteps`` of ``motion`` with steps of about dt (s)."""
+    n = steps(dt, motion.duration)
+    t = np.linspace(0.0, motion.duration, 2 * n + 1)
+    ref, refd, refdd = (np.array(r, dtype=float) for r in motion(t))  # copies of the motion's: made read-only
+    t_steps = np.linspace(0.0, motion.duration, n + 1)
+    for array in (t, ref, refd, refdd, t_steps):
+        array.flags.writeable = False
+    return HalfSteps(motion, float(dt), n, motion.duration / n, t, ref, refd, refdd, t_steps,
+                     samples_on_grid(t_steps, motion.samples))
+
+
+def on_half_steps(torque, grid: HalfSteps, n_joints: int):
+    """The torque function ``torque`` (None: zero) with its values at the grid's half steps
+    computed now, (2 n + 1, J) N m: called at ``grid.t`` it returns them, at other times it calls
+    ``torque``. For a timed simulation whose drive, like the C loop's, is sampled beforehand."""
+    values = _torques(torque, grid.t, n_joints)
+    values.flags.writeable = False
+
+    def sampled(t):
+        return values if t is grid.t else _torques(torque, np.asarray(t, dtype=float), n_joints)
+
+    sampled.__name__ = getattr(torque, "__name__", "function")
+    return sampled
+
+
 def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3, start=None,
              computed: bool = False, nominal: Engine | None = None, gains=None, integrator: str = "rk4",
-             rtol: float = 1e-6, atol: float = 1e-9) -> Simulation:
+             rtol: float = 1e-6, atol: float = 1e-9, grid: HalfSteps | None = None) -> Simulation:
     """Forward dynamics of ``engine`` (the plant) over the motion's span, driven by the feedforward
     ``torque`` (a torque function, or None for zero) plus feedback towards the motion, the results
     on the motion's samples.
@@ -118,7 +165,8 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     ``start``: the initial state (n_state,) (default: on the motion at t = 0).
     ``integrator``: 'rk4' (compiled, a fixed step of about ``dt`` s, torques and references on its
     half-step grid) or one of scipy's adaptive methods (``fdbench.integrate.SCIPY_METHODS``) with
-    the relative and absolute tolerances ``rtol`` and ``atol``."""
+    the relative and absolute tolerances ``rtol`` and ``atol``. ``grid``: the motion's
+    ``HalfSteps`` for this dt, made beforehand (default: made here; rk4 only)."""
     check_integrator(integrator)
     if integrator != "rk4":
         check_tolerances(rtol, atol)
@@ -133,8 +181,10 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     if y0.shape != (engine.n_state,) or not np.all(np.isfinite(y0)):
         raise ValueError(f"the initial state must be {engine.n_state} finite numbers [q, q'], got shape {y0.shape}")
     law = _law(engine, kp, kd, computed, nominal, gains)
+    if grid is not None and (grid.motion is not motion or grid.dt != dt):
+        raise ValueError(f"the half-step grid is of another motion or step (dt {grid.dt} s, not {dt} s)")
     if integrator == "rk4":
-        result = _simulate_rk4(torque, engine, motion, law, y0, dt)
+        result = _simulate_rk4(torque, engine, motion, law, y0, grid or half_steps(motion, dt))
     else:
         result = _simulate_adaptive(torque, engine, motion, law, y0, integrator, rtol, atol)
     result.runtime_s = time.perf_counter() - began
@@ -155,15 +205,14 @@ def _torques(torque, t: np.ndarray, n_joints: int) -> np.ndarray:
     return np.array(torque(t), dtype=float).reshape(len(t), n_joints)
 
 
-def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, dt: float) -> Simulation:
-    """The compiled RK4 (``Engine.simulate``) with steps of about dt (s)."""
-    n = steps(dt, motion.duration)
-    half = np.linspace(0.0, motion.duration, 2 * n + 1)
-    ref, refd, refdd = motion(half)
-    result = engine.simulate(y0, motion.duration / n, n, _torques(torque, half, engine.n_joints), ref, refd, refdd,
-                             law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints), law.nominal)
-    grid = np.linspace(0.0, motion.duration, n + 1)
-    y, applied = _on_samples(grid, result.states, result.rates, result.applied, result.steps_done, motion.samples)
+def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, grid: HalfSteps) -> Simulation:
+    """The compiled RK4 (``Engine.simulate``) on the half-step grid ``grid``."""
+    n, half = grid.n, grid.t
+    result = engine.simulate(y0, grid.step, n, _torques(torque, half, engine.n_joints), grid.ref, grid.refd,
+                             grid.refdd, law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints),
+                             law.nominal)
+    y, applied = _on_samples(grid.t_steps, grid.every, result.states, result.rates, result.applied, result.steps_done,
+                             motion.samples)
     z, zd = engine.joints_from_state(y)
     return Simulation(motion.samples, z, zd, y, applied, result.steps_done * motion.duration / n,
                       STATUS_OF_CODE[result.status], result.max_violation)
@@ -239,11 +288,10 @@ def dt_on_samples(dt: float, ts) -> float:
     return float(interval / math.ceil(interval / dt - 1e-9))
 
 
-def _on_samples(grid, states, rates, applied, done, ts):
+def _on_samples(grid, every, states, rates, applied, done, ts):
     """States (n, n_state) and applied torques (n, J) on the motion's samples ts (s): taken from
-    the grid where the samples lie on it, else interpolated (cubic Hermite for the states, linear
-    for the torques)."""
-    every = samples_on_grid(grid, ts)
+    the grid (s) every ``every`` steps where the samples lie on it (``samples_on_grid``), else (0)
+    interpolated (cubic Hermite for the states, linear for the torques)."""
     if every:
         y, tau = states[::every].copy(), applied[::every].copy()
         beyond = np.arange(len(ts)) * every > done

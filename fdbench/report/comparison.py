@@ -742,8 +742,9 @@ def settings_table(plan: ComparisonPlan, spec, jobs: str, seeds: int = 1) -> dic
                                   f"{options.budget} evaluations")
     table.update({
         "forearm": "the paper's model and motion (eq. 5, as printed), the same methods and settings",
-        "runtime_s": "the method's own wall time per run (set-up and simulations; imports and kernel loading "
-                     "excluded)",
+        "runtime_s": "the method's own wall time per run (design or optimisation, simulations and their samples); "
+                     "before the clock starts, as in the C speed limit: the references and eq. 3's feedforward on "
+                     "the RK4 half-step grid, eq. 3 on the samples, imports and kernel loading",
         "parallel jobs": jobs,
         "fdbench": __version__ + (f" (commit {git_commit()[:12]})" if git_commit() else ""),
         "machine": machine(),

@@ -877,8 +877,11 @@ def settings_table(plan: Plan, seeds: int, jobs: int) -> dict:
             "budget": f"{first.budget} evaluations per optimisation",
             "seeds": f"{seeds} per cell (0 to {seeds - 1})",
         })
-    table["runtime_s"] = ("the method's own wall time per run (set-up, evaluations, final simulation); kernel "
-                          "loading and imports are done before the clock starts")
+    table["runtime_s"] = ("the method's own wall time per run: the controller's design or the optimisation (initial "
+                          "guess, pre-training, every evaluation with the optimiser's work, final simulation) and the "
+                          "simulations with their samples; done before the clock starts, as by the C speed limit: "
+                          "the desired motion and eq. 3's feedforward on the RK4 half-step grid, eq. 3 on the samples "
+                          "(the fit's target, the indicators' reference), imports and kernel loading")
     table.update({
         "parallel jobs": str(jobs),
         "fdbench": f"{__version__}" + (f" (commit {git_commit()[:12]})" if git_commit() else ""),
