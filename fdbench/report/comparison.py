@@ -117,10 +117,11 @@ def has_floating_base(model_name: str, model_changes=()) -> bool:
     return with_changes(model_name, model_changes).floating_base is not None
 
 
-MAIN_COLUMNS = ("method", "status / t_end", "RMSE_rot (deg)", "RMSE_trans (cm)", "RMSE_torque (N m)",
-                "RMSE_force (N)", "residual force RMS (N)", "residual moment RMS (N m)", "runtime (s)")
-MAIN_FIELDS = ("rmse_rot_deg", "rmse_trans_cm", "rmse_torque_nm", "rmse_force_n", "residual_force_rms_n",
-               "residual_moment_rms_nm", "runtime_s")
+# the main table's indicators and their columns' labels
+MAIN_LABELS = {"rmse_rot_deg": "RMSE_rot (deg)", "rmse_trans_cm": "RMSE_trans (cm)", "rmse_torque_nm": "RMSE_torque (N m)",
+               "rmse_force_n": "RMSE_force (N)", "residual_force_rms_n": "residual force RMS (N)",
+               "residual_moment_rms_nm": "residual moment RMS (N m)", "runtime_s": "runtime (s)"}
+MAIN_FIELDS = tuple(MAIN_LABELS)
 CSV_COLUMNS = ("model", "method", "key", "command", "controller", "status", "t_end", *MAIN_FIELDS,
                "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm", "evaluations", "budget", "n_params",
                "spec_hash", "run_id")
@@ -138,11 +139,12 @@ def ended(row: Row, duration: float) -> str:
 # ---- tables ------------------------------------------------------------------------------------
 
 
-def main_table(rows: list[Row], duration: float) -> list[str]:
-    """Every method's status and indicators, one line each (Markdown)."""
-    lines = ["| " + " | ".join(MAIN_COLUMNS) + " |", "|---|---|" + "---:|" * len(MAIN_FIELDS)]
+def main_table(rows: list[Row], duration: float, fields=MAIN_FIELDS) -> list[str]:
+    """Every method's status and indicators ``fields``, one line each (Markdown)."""
+    lines = ["| method | status / t_end | " + " | ".join(MAIN_LABELS[name] for name in fields) + " |",
+             "|---|---|" + "---:|" * len(fields)]
     for row in rows:
-        values = " | ".join(number(row.record.get(name)) for name in MAIN_FIELDS)
+        values = " | ".join(number(row.record.get(name)) for name in fields)
         lines.append(f"| {row.name} | {ended(row, duration)} | {values} |")
     return lines
 
@@ -175,15 +177,6 @@ def coordinate_table(rows: list[Row], names: tuple, kinds: tuple) -> list[str]:
 
 def _coordinate_field(name: str, kind: str) -> str:
     return f"rmse_trans_cm_{name}" if kind == "translation" else f"rmse_rot_deg_{name}"
-
-
-def forearm_table(rows: list[Row], duration: float) -> list[str]:
-    """The forearm's runs of the same methods: status, RMSE_rot, RMSE_torque, runtime (Markdown)."""
-    lines = ["| method | status / t_end | RMSE_rot (deg) | RMSE_torque (N m) | runtime (s) |", "|---|---|---:|---:|---:|"]
-    for row in rows:
-        lines.append(f"| {row.name} | {ended(row, duration)} | {number(row.record.get('rmse_rot_deg'))} "
-                     f"| {number(row.record.get('rmse_torque_nm'))} | {number(row.record.get('runtime_s'))} |")
-    return lines
 
 
 def residual_means_table(inverse_fields: dict, rows: list[Row]) -> list[str]:
@@ -542,7 +535,7 @@ def _per_coordinate(p: Parts) -> list[str]:
 def _forearm(p: Parts) -> list[str]:
     return ["", "## The same methods on the forearm", "",
             "The paper's forearm and motion (eq. 5), the same methods, budget and population:", ""] \
-        + forearm_table(p.forearm, _duration(p.forearm))
+        + main_table(p.forearm, _duration(p.forearm), ("rmse_rot_deg", "rmse_torque_nm", "runtime_s"))
 
 
 def _claim(p: Parts) -> list[str]:
