@@ -724,8 +724,7 @@ def _provenance(rows: list[Row], rerun_command: str) -> list[str]:
         return ["No record of when the runs were made.", ""]
     groups = {}
     for row, p in infos:
-        key = (p.get("machine"), p.get("jobs"), (p.get("git_commit") or "")[:12], p.get("fdbench_version"))
-        groups.setdefault(key, []).append((row, p))
+        groups.setdefault(_session(p), []).append((row, p))
     lines = []
     if len(groups) == 1:
         (machine, jobs, commit, version), members = next(iter(groups.items()))
@@ -740,8 +739,7 @@ def _provenance(rows: list[Row], rerun_command: str) -> list[str]:
         for row in rows:
             by_key = {}
             for p in row.provenance:
-                key = (p.get("machine"), p.get("jobs"), (p.get("git_commit") or "")[:12], p.get("fdbench_version"))
-                by_key.setdefault(key, []).append(p["created_at"])
+                by_key.setdefault(_session(p), []).append(p["created_at"])
             for (machine, jobs, commit, version), times in by_key.items():
                 times.sort()
                 span = _when(times[0]) if times[0] == times[-1] else f"{_when(times[0])} to {_when(times[-1])}"
@@ -752,6 +750,11 @@ def _provenance(rows: list[Row], rerun_command: str) -> list[str]:
                  f"stored runs are reused as they are. `{rerun_command}` makes every run of this report again "
                  "and refreshes them.")
     return lines
+
+
+def _session(p: dict) -> tuple:
+    """What sets a run's session apart: (machine, jobs, commit, fdbench version)."""
+    return p.get("machine"), p.get("jobs"), (p.get("git_commit") or "")[:12], p.get("fdbench_version")
 
 
 def _when(iso: str) -> str:
