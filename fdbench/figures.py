@@ -22,8 +22,8 @@ import numpy as np
 FIGURE_FILES = ("figure2_inverse_dynamics.png", "figure5_tracking.png", "figure6_tracking.png",
                 "convergence_table2.png", "convergence_table3.png")
 
+# the reference lines (the desired rotation, the inverse-dynamics torque or residuals): dashed black, on top
 DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
-INVERSE_TORQUE = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
 CONTROL_STYLE = {"color": "tab:red", "linestyle": "-", "linewidth": 2.0}
 TORQUE_COLOURS = {"ann": "tab:blue", "cs": "tab:green", "pf": "tab:purple"}
 OPTIMIZER_LINES = {"cmaes": "-", "bfgs": "--", "nelder-mead": ":", "lbfgsb": "-."}
@@ -139,6 +139,7 @@ def _pyplot():
 
 
 def _save(fig, path: Path) -> None:
+    """Write the figure as a PNG file and close it."""
     import io
 
     from .files import write_atomic
@@ -146,6 +147,7 @@ def _save(fig, path: Path) -> None:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
     write_atomic(path, buffer.getvalue(), "--figures")
+    _pyplot().close(fig)
 
 
 def recorded_samples(motion) -> tuple | None:
@@ -187,7 +189,6 @@ def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str 
     for ax in (top, bottom):
         ax.grid(alpha=0.3)
     _save(fig, path)
-    plt.close(fig)
 
 
 def tracking_figure(inverse, curves, path: Path, title: str) -> None:
@@ -213,7 +214,7 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
             ax.plot(t, values, label=_marked(label, left), **style)
     top.plot(t, desired, label="desired rotation", **DESIRED)
     middle.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)  # the desired rotation: no error
-    (reference,) = bottom.plot(t, inverse.torque[:, 0], label="inverse-dynamics torque", **INVERSE_TORQUE)
+    (reference,) = bottom.plot(t, inverse.torque[:, 0], label="inverse-dynamics torque", **DESIRED)
     top.set_ylabel("rotation (deg)")
     top.set_title(title, fontsize=11)
     top.legend(fontsize=7.5, loc="upper left", bbox_to_anchor=(1.01, 1.0))
@@ -224,7 +225,6 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
     for ax in (top, middle, bottom):
         ax.grid(alpha=0.3)
     _save(fig, path)
-    plt.close(fig)
 
 
 def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
@@ -256,7 +256,7 @@ def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
             for label, style, values in drawn:
                 ax.plot(t, values, label=_marked(label, left), **style)
         top.axhline(0.0, color="0.4", linewidth=0.8, zorder=0)
-        bottom.plot(t, inverse.torque[:, j], label="inverse-dynamics torque", **INVERSE_TORQUE)
+        bottom.plot(t, inverse.torque[:, j], label="inverse-dynamics torque", **DESIRED)
         top.set_title(joint, fontsize=10)
         top.set_ylabel("error (deg)")
         bottom.set_ylabel("applied torque (N m)")
@@ -267,7 +267,6 @@ def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
                        bbox_to_anchor=(1.01, 1.0))
     fig.suptitle(title, fontsize=11)
     _save(fig, path)
-    plt.close(fig)
 
 
 def convergence_figure(series, path: Path, title: str, reference: float | None = None) -> None:
@@ -293,7 +292,6 @@ def convergence_figure(series, path: Path, title: str, reference: float | None =
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7.5)
     _save(fig, path)
-    plt.close(fig)
 
 
 def figure2_samples(spec) -> tuple:
@@ -447,8 +445,6 @@ def _display(values: np.ndarray, kinds) -> np.ndarray:
 def recording(spec) -> tuple | None:
     """(t (s), the recorded samples (rad or m), shape (n, J)) of the spec's recorded motion, None
     for a formula's."""
-    from .figures import recorded_samples
-
     return recorded_samples(spec.motions()[0])
 
 
@@ -595,7 +591,6 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
     fig.tight_layout()
     _legend_outside(fig, axes[0, 0])
     _save(fig, path)
-    plt.close(fig)
 
 
 def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
@@ -617,7 +612,6 @@ def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
     fig.tight_layout()
     _legend_outside(fig, axes[0])
     _save(fig, path)
-    plt.close(fig)
 
 
 def _legend_outside(fig, ax) -> None:
@@ -664,7 +658,6 @@ def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Pat
                  fontsize=11)
     fig.tight_layout(rect=(0, 0, 1, 0.985))
     _save(fig, path)
-    plt.close(fig)
 
 
 def _draw(ax, frame: np.ndarray, **style) -> list:

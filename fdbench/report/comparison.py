@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from .. import __version__
 from .methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, EVERY, FLOATING_BASE_PENALTY, LQR, OPEN_LOOP, PD,
                       SLOWEST_FIRST, Dataset, Options, methods, rows, select)
-from .paper import Row
+from .paper import Row, figure_lines, provenance_section, render, settings_lines
 from .paper import significant as number
 
 # OpenSim RRA's average residuals for OpenSim's example walk, subject01 (FX, FY in N, MZ in N m),
@@ -117,10 +117,11 @@ def has_floating_base(model_name: str, model_changes=()) -> bool:
     return with_changes(model_name, model_changes).floating_base is not None
 
 
-MAIN_COLUMNS = ("method", "status / t_end", "RMSE_rot (deg)", "RMSE_trans (cm)", "RMSE_torque (N m)",
-                "RMSE_force (N)", "residual force RMS (N)", "residual moment RMS (N m)", "runtime (s)")
-MAIN_FIELDS = ("rmse_rot_deg", "rmse_trans_cm", "rmse_torque_nm", "rmse_force_n", "residual_force_rms_n",
-               "residual_moment_rms_nm", "runtime_s")
+# the main table's indicators and their columns' labels
+MAIN_LABELS = {"rmse_rot_deg": "RMSE_rot (deg)", "rmse_trans_cm": "RMSE_trans (cm)", "rmse_torque_nm": "RMSE_torque (N m)",
+               "rmse_force_n": "RMSE_force (N)", "residual_force_rms_n": "residual force RMS (N)",
+               "residual_moment_rms_nm": "residual moment RMS (N m)", "runtime_s": "runtime (s)"}
+MAIN_FIELDS = tuple(MAIN_LABELS)
 CSV_COLUMNS = ("model", "method", "key", "command", "controller", "status", "t_end", *MAIN_FIELDS,
                "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm", "evaluations", "budget", "n_params",
                "spec_hash", "run_id")
@@ -138,11 +139,12 @@ def ended(row: Row, duration: float) -> str:
 # ---- tables ------------------------------------------------------------------------------------
 
 
-def main_table(rows: list[Row], duration: float) -> list[str]:
-    """Every method's status and indicators, one line each (Markdown)."""
-    lines = ["| " + " | ".join(MAIN_COLUMNS) + " |", "|---|---|" + "---:|" * len(MAIN_FIELDS)]
+def main_table(rows: list[Row], duration: float, fields=MAIN_FIELDS) -> list[str]:
+    """Every method's status and indicators ``fields``, one line each (Markdown)."""
+    lines = ["| method | status / t_end | " + " | ".join(MAIN_LABELS[name] for name in fields) + " |",
+             "|---|---|" + "---:|" * len(fields)]
     for row in rows:
-        values = " | ".join(number(row.record.get(name)) for name in MAIN_FIELDS)
+        values = " | ".join(number(row.record.get(name)) for name in fields)
         lines.append(f"| {row.name} | {ended(row, duration)} | {values} |")
     return lines
 
@@ -175,15 +177,6 @@ def coordinate_table(rows: list[Row], names: tuple, kinds: tuple) -> list[str]:
 
 def _coordinate_field(name: str, kind: str) -> str:
     return f"rmse_trans_cm_{name}" if kind == "translation" else f"rmse_rot_deg_{name}"
-
-
-def forearm_table(rows: list[Row], duration: float) -> list[str]:
-    """The forearm's runs of the same methods: status, RMSE_rot, RMSE_torque, runtime (Markdown)."""
-    lines = ["| method | status / t_end | RMSE_rot (deg) | RMSE_torque (N m) | runtime (s) |", "|---|---|---:|---:|---:|"]
-    for row in rows:
-        lines.append(f"| {row.name} | {ended(row, duration)} | {number(row.record.get('rmse_rot_deg'))} "
-                     f"| {number(row.record.get('rmse_torque_nm'))} | {number(row.record.get('runtime_s'))} |")
-    return lines
 
 
 def residual_means_table(inverse_fields: dict, rows: list[Row]) -> list[str]:
@@ -481,7 +474,7 @@ def _times(ratio: float) -> str:
 class Parts:
     """What the report's sections are written from: the plan, the rows per dataset (``walk``: the
     studied one), the inverse dynamics and its residual fields, the coordinates' names and kinds,
-    the settings, the provenance lines, the figures' links, the peers' lines, the paper's cells."""
+    the settings, every row (for the provenance), the figures' links, the peers' lines, the paper's cells."""
 
     plan: ComparisonPlan
     walk: list
@@ -491,7 +484,7 @@ class Parts:
     names: tuple
     kinds: tuple
     settings: dict
-    provenance: list
+    provenance: list  # every row, for "When and where the runs were made"
     figures: dict | None = None
     peers: list | None = None
     cells: list = field(default_factory=list)
@@ -508,10 +501,6 @@ def _intro(p: Parts) -> list[str]:
             "model with a floating base, driven by its measured external loads: which method keeps the recording, how "
             "closely, how fast and with how much residual force; then the same methods on the paper's forearm, to test "
             "its claim that the forearm \"generates the same problems as more complex models\".", ""]
-
-
-def _settings(p: Parts) -> list[str]:
-    return ["## Settings", "", "| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in p.settings.items()]
 
 
 def _residuals(p: Parts) -> list[str]:
@@ -546,7 +535,7 @@ def _per_coordinate(p: Parts) -> list[str]:
 def _forearm(p: Parts) -> list[str]:
     return ["", "## The same methods on the forearm", "",
             "The paper's forearm and motion (eq. 5), the same methods, budget and population:", ""] \
-        + forearm_table(p.forearm, _duration(p.forearm))
+        + main_table(p.forearm, _duration(p.forearm), ("rmse_rot_deg", "rmse_torque_nm", "runtime_s"))
 
 
 def _claim(p: Parts) -> list[str]:
@@ -556,14 +545,10 @@ def _claim(p: Parts) -> list[str]:
         + claim_lines(p.walk, p.forearm, p.duration, _duration(p.forearm), True, p.inverse_fields)
 
 
-def _figures(p: Parts) -> list[str]:
-    return ["", "## Figures", ""] + [f"![{name}]({path})" for name, path in p.figures.items()]
-
-
 # the report's sections in order, each with when it applies
 SECTIONS = (
     (_intro, lambda p: True),
-    (_settings, lambda p: True),
+    (lambda p: settings_lines(p.settings), lambda p: True),
     (_residuals, lambda p: bool(p.inverse_fields)),  # a floating base
     (_methods, lambda p: True),
     (_indicators, lambda p: True),
@@ -572,21 +557,19 @@ SECTIONS = (
     (_forearm, lambda p: bool(p.forearm)),
     (_claim, lambda p: bool(p.forearm)),
     (lambda p: [""] + p.peers, lambda p: bool(p.peers)),
-    (lambda p: ["", "## When and where the runs were made", ""] + p.provenance, lambda p: True),
-    (_figures, lambda p: bool(p.figures)),
+    (lambda p: [""] + provenance_section(p.provenance), lambda p: True),
+    (lambda p: [""] + figure_lines(p.figures), lambda p: bool(p.figures)),
 )
 
 
 def markdown(plan, walk: list[Row], forearm: list[Row], inverse, inverse_fields: dict, names: tuple,
-             kinds: tuple, settings: dict, provenance: list[str], figures: dict | None = None,
+             kinds: tuple, settings: dict, provenance: list[Row], figures: dict | None = None,
              peers: list[str] | None = None, cells: list[Row] | None = None, extra: list[Row] | None = None) -> str:
     """The report as Markdown: every section of ``SECTIONS`` that applies. ``peers``: the lines of
     its section "Peers" (``--peers``); ``cells`` and ``extra``: the rows of the paper's cells
     selected on the studied dataset and of their exact gradients."""
-    parts = Parts(plan, walk, forearm, inverse, inverse_fields, names, kinds, settings, provenance, figures, peers,
-                  list(cells or []), list(extra or []))
-    out = [line for section, applies in SECTIONS if applies(parts) for line in section(parts)]
-    return "\n".join(out).rstrip() + "\n"
+    return render(SECTIONS, Parts(plan, walk, forearm, inverse, inverse_fields, names, kinds, settings, provenance,
+                                  figures, peers, list(cells or []), list(extra or [])))
 
 
 def _cells_lines(cells: list[Row], extra: list[Row]) -> list[str]:
@@ -703,13 +686,6 @@ def _peer_keyed(peer_rows: list[Row]) -> list[Row]:
     return [dataclasses.replace(row, key=row.records[0].get("peer")) for row in peer_rows]
 
 
-def provenance_lines(rows: list[Row]) -> list[str]:
-    """When and where the runs were made (the paper report's paragraph)."""
-    from .paper import _provenance
-
-    return _provenance([row for row in rows if row.provenance], "fdbench report --rerun")
-
-
 def settings_table(plan: ComparisonPlan, spec, jobs: str, seeds: int = 1) -> dict:
     """The report's settings: the model, motion, loads, estimate, simulation, budgets, versions."""
     from datetime import datetime, timezone
@@ -796,5 +772,5 @@ def text(fmt: str, plan: ComparisonPlan, found: dict, runs: dict, jobs: str, fig
 
         section = peers_markdown(peer_rows, list(peer_methods), beside(walk))
     return markdown(plan, walk, forearm, inverse, fields, names, kinds, settings,
-                    provenance_lines(walk + forearm + cells + extra + _peer_keyed(peer_rows)), links, section, cells,
+                    walk + forearm + cells + extra + _peer_keyed(peer_rows), links, section, cells,
                     extra), len(links or {})

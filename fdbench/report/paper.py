@@ -310,25 +310,60 @@ def legend(rows: list[Row], joint_names: tuple = (), duration_s: float | None = 
     return lines
 
 
-def _legend_for(rows: list[Row], inverse) -> list[str]:
-    """The legend of these rows on the motion of ``inverse`` (its joints, duration, kinematics)."""
-    names = tuple(inverse.joints) if len(inverse.joints) > 1 else ()
-    return legend(rows, names, float(inverse.t[-1]), inverse.motion)
+def render(sections, parts) -> str:
+    """Markdown of every section ((lines(parts), applies(parts)) pairs, in order) that applies."""
+    out = [line for section, applies in sections if applies(parts) for line in section(parts)]
+    return "\n".join(out).rstrip() + "\n"
 
 
-def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict, figures: dict | None = None,
-             rerun_command: str = "fdbench report --rerun", beyond: list[str] | None = None,
-             extra_rows: list[Row] | None = None) -> str:
-    """The report as Markdown. ``settings`` describes the run (kinematics, versions, machine...);
-    ``figures`` maps figure names to relative paths of written PNG files; ``rerun_command`` is the
-    command that refreshes every run; ``extra_rows`` are the rows of ``beyond`` (the section's
-    lines), counted in the comparison."""
-    out = ["# fdbench report", ""]
-    arm = len(inverse.joints) > 1  # a model of several joints
+def settings_lines(settings: dict) -> list[str]:
+    """The section "Settings": a row per setting."""
+    return ["## Settings", "", "| setting | value |", "|---|---|"] + [f"| {k} | {v} |" for k, v in settings.items()]
+
+
+def figure_lines(figures: dict) -> list[str]:
+    """The section "Figures": a link per written figure ({title: relative path})."""
+    return ["## Figures", ""] + [f"![{name}]({path})" for name, path in figures.items()]
+
+
+def provenance_section(rows: list[Row], rerun_command: str = "fdbench report --rerun") -> list[str]:
+    """The section "When and where the runs were made" (``_provenance``)."""
+    return ["## When and where the runs were made", ""] + _provenance(rows, rerun_command)
+
+
+@dataclass
+class PaperParts:
+    """What the paper report's sections are written from (``markdown``'s arguments)."""
+
+    rows: list
+    inverse: object
+    inverse_runtime_s: float
+    settings: dict
+    figures: dict | None
+    rerun_command: str
+    beyond: list
+    extra: list
+
+    def table(self, table) -> list:
+        return [r for r in self.rows if r.table == table]
+
+    @property
+    def arm(self) -> bool:  # a model of several joints
+        return len(self.inverse.joints) > 1
+
+    @property
+    def legend(self) -> list[str]:
+        """How to read the tables of every row, on the inverse dynamics' joints, duration and kinematics."""
+        inv = self.inverse
+        return legend(self.rows + self.extra, tuple(inv.joints) if self.arm else (), float(inv.t[-1]), inv.motion)
+
+
+def _intro(p: PaperParts) -> list[str]:
+    inverse, arm = p.inverse, p.arm
     if arm:
         intro = ("laid out as Tables 2 and 3 of the paper. The paper has no figures for this model, so none stand "
                  "beside ours; `fdbench report` gives the forearm's.")
-    elif any(row.paper for row in rows):
+    elif any(row.paper for row in p.rows):
         intro = ("reproducing Tables 2 and 3 of the paper. The paper's published figures stand beside ours, with a "
                  "judgement per cell; the section *Where we differ from the paper, and why* explains the differences "
                  "from these runs.")
@@ -337,52 +372,70 @@ def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict,
                  "motion, its noise or the model: see the settings), so the paper's figures are not set beside them.")
     body = (f"a planar model of {len(inverse.joints)} joints ({', '.join(inverse.joints)})" if arm
             else "a 1-DOF forearm" if inverse.joints == ("theta",) else f"a one-joint model ({inverse.joints[0]})")
-    out += [
-        f"Trajectory tracking in the forward dynamic simulation of {body}: PD control{' per joint' if arm else ''} "
-        f"with computed feedforward against optimised torque histories, {intro}",
-        "",
-    ]
-    out += ["## Settings", "", "| setting | value |", "|---|---|"]
-    out += [f"| {key} | {value} |" for key, value in settings.items()]
-    out += ["", "## Inverse dynamics" + ("" if arm else " (Figure 2)"), ""] + _inverse_text(inverse, inverse_runtime_s)
-    out += [""]
-    control = [r for r in rows if r.table == "control"]
-    legend = _legend_for(rows + list(extra_rows or []), inverse)
-    if control:
-        rec = control[0].records[0]
-        out += ["## PD control with computed feedforward (section 3)", ""] + legend + [""]
-        out += [_gains_text(rec, arm), ""]
-        out += _table(control, with_success=False) + [""]
-        failures = failure_lines(control)
-        out += ["Did not succeed:", ""] + failures + [""] if failures else []
-    for table, title in ((2, "Table 2: optimisation without computed feedforward"),
-                         (3, "Table 3: optimisation with computed feedforward")):
-        cells = [r for r in rows if r.table == table]
-        if cells:
-            out += [f"## {title}", ""]
-            if not control and table == min(r.table for r in rows if r.table != "control"):
-                out += legend + [""]  # defined where first read
-            out += _table(cells, with_success=True)
-            notes = []
-            if any(r.cell and not r.cell.in_paper for r in cells):
-                notes.append("Cells marked * are not in the paper.")
-            if table == 2 and not any(r.cell and r.cell.torque == "pf" for r in cells):
-                notes.append("PF is absent from Table 2 as in the paper, which left it out; "
-                             "`fdbench report --all-cells` runs it.")
-            out += [""] + [" ".join(notes)] if notes else []
-            failures = failure_lines(cells)
-            out += ["", "Runs that did not succeed:", ""] + failures if failures else []
-            out += [""]
-    out += beyond or []  # the "Beyond the paper" section (beyond.beyond_markdown)
-    out += ["## Comparison", ""] + _comparison(rows + list(extra_rows or [])) + [""]
-    differ = _differences(rows)
-    if differ:
-        out += ["## Where we differ from the paper, and why", ""] + differ + [""]
-    out += ["## When and where the runs were made", ""] + _provenance(rows + list(extra_rows or []), rerun_command) + [""]
-    if figures:
-        out += ["## Figures", ""]
-        out += [f"![{name}]({path})" for name, path in figures.items()] + [""]
-    return "\n".join(out).rstrip() + "\n"
+    return ["# fdbench report", "",
+            f"Trajectory tracking in the forward dynamic simulation of {body}: PD control{' per joint' if arm else ''} "
+            f"with computed feedforward against optimised torque histories, {intro}", ""]
+
+
+def _inverse_section(p: PaperParts) -> list[str]:
+    return (["", "## Inverse dynamics" + ("" if p.arm else " (Figure 2)"), ""]
+            + _inverse_text(p.inverse, p.inverse_runtime_s) + [""])
+
+
+def _control_section(p: PaperParts) -> list[str]:
+    control = p.table("control")
+    failures = failure_lines(control)
+    return (["## PD control with computed feedforward (section 3)", ""] + p.legend + [""]
+            + [_gains_text(control[0].records[0], p.arm), ""] + _table(control, with_success=False) + [""]
+            + (["Did not succeed:", ""] + failures + [""] if failures else []))
+
+
+def _cells_section(p: PaperParts, table: int) -> list[str]:
+    """Table 2 or 3: the legend where first read (without PD control), the table, its notes and failures."""
+    titles = {2: "Table 2: optimisation without computed feedforward", 3: "Table 3: optimisation with computed feedforward"}
+    cells = p.table(table)
+    out = [f"## {titles[table]}", ""]
+    if not p.table("control") and table == min(r.table for r in p.rows if r.table != "control"):
+        out += p.legend + [""]
+    out += _table(cells, with_success=True)
+    notes = []
+    if any(r.cell and not r.cell.in_paper for r in cells):
+        notes.append("Cells marked * are not in the paper.")
+    if table == 2 and not any(r.cell and r.cell.torque == "pf" for r in cells):
+        notes.append("PF is absent from Table 2 as in the paper, which left it out; "
+                     "`fdbench report --all-cells` runs it.")
+    out += ["", " ".join(notes)] if notes else []
+    failures = failure_lines(cells)
+    return out + (["", "Runs that did not succeed:", ""] + failures if failures else []) + [""]
+
+
+# the paper report's sections in order, each with when it applies
+PAPER_SECTIONS = (
+    (_intro, lambda p: True),
+    (lambda p: settings_lines(p.settings), lambda p: True),
+    (_inverse_section, lambda p: True),
+    (_control_section, lambda p: bool(p.table("control"))),
+    (lambda p: _cells_section(p, 2), lambda p: bool(p.table(2))),
+    (lambda p: _cells_section(p, 3), lambda p: bool(p.table(3))),
+    (lambda p: p.beyond, lambda p: bool(p.beyond)),  # "Beyond the paper" and "Peers"
+    (lambda p: ["## Comparison", ""] + _comparison(p.rows + p.extra) + [""], lambda p: True),
+    (lambda p: ["## Where we differ from the paper, and why", ""] + _differences(p.rows) + [""],
+     lambda p: bool(_differences(p.rows))),
+    (lambda p: provenance_section(p.rows + p.extra, p.rerun_command) + [""], lambda p: True),
+    (lambda p: figure_lines(p.figures), lambda p: bool(p.figures)),
+)
+
+
+def markdown(rows: list[Row], inverse, inverse_runtime_s: float, settings: dict, figures: dict | None = None,
+             rerun_command: str = "fdbench report --rerun", beyond: list[str] | None = None,
+             extra_rows: list[Row] | None = None) -> str:
+    """The report as Markdown: every section of ``PAPER_SECTIONS`` that applies. ``settings``
+    describes the run (kinematics, versions, machine...); ``figures`` maps figure names to relative
+    paths of written PNG files; ``rerun_command`` is the command that refreshes every run;
+    ``beyond``: the lines of the sections "Beyond the paper" and "Peers", whose rows are
+    ``extra_rows``, counted in the comparison."""
+    return render(PAPER_SECTIONS, PaperParts(rows, inverse, inverse_runtime_s, settings, figures, rerun_command,
+                                             list(beyond or []), list(extra_rows or [])))
 
 
 def failure_lines(rows: list[Row]) -> list[str]:
@@ -418,51 +471,38 @@ def _inverse_text(inverse, runtime_s: float) -> list[str]:
 
 
 def _table(rows: list[Row], with_success: bool) -> list[str]:
-    if not any(row.paper for row in rows):
-        return _table_without_paper(rows, with_success)
-    head = ("| method | RMSE_rot (deg) | paper | vs paper | RMSE_torque (N m) | paper | vs paper "
-            "| runtime (s) | paper | speed-up |")
-    rule = "|---|---:|---:|:--|---:|---:|:--|---:|---:|---:|"
-    if with_success:
-        head += " success |"
-        rule += "---:|"
-    lines = [head, rule]
+    """A table of rows: beside the paper's figures when some row has them, else our figures alone
+    (three significant digits), with each joint's RMSE_rot where the model has several."""
+    paper = any(row.paper for row in rows)
+    names = () if paper else joints(rows)
+    if paper:
+        head = ("| method | RMSE_rot (deg) | paper | vs paper | RMSE_torque (N m) | paper | vs paper "
+                "| runtime (s) | paper | speed-up |")
+        rule = "|---|---:|---:|:--|---:|---:|:--|---:|---:|---:|"
+    else:
+        head = ("| method | RMSE_rot (deg) |" + "".join(f" {name} (deg) |" for name in names)
+                + " RMSE_torque (N m) | runtime (s) |")
+        rule = "|---|" + "---:|" * (len(names) + 3)
+    lines = [head + " success |" if with_success else head, rule + "---:|" if with_success else rule]
     for row in rows:
-        paper = row.paper or (None, None, None)
         star = "*" if row.cell is not None and not row.cell.in_paper else ""
-        speedup = f"{_factor(row.speedup)}×" if math.isfinite(row.speedup) else "-"
-        j = _row_judgements(row)
-        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg')} | {_paper_number(paper[0])} "
-                f"| {_judgement_text(j['rmse_rot_deg'])} "
-                f"| {_spread(row, 'rmse_torque_nm')} | {_paper_number(paper[1])} "
-                f"| {_judgement_text(j['rmse_torque_nm'])} "
-                f"| {_spread(row, 'runtime_s')} | {_paper_runtime(paper[2])} | {speedup} |")
+        line = f"| {row.name}{star} | " + (_paper_cells(row) if paper else " | ".join(
+            _spread(row, name, significant) for name in ("rmse_rot_deg", *(f"rmse_rot_deg_{n}" for n in names),
+                                                         "rmse_torque_nm", "runtime_s"))) + " |"
         if with_success:
             line += f" {row.successes}/{len(row.records)}{', identical' if row.identical else ''} |"
         lines.append(line)
     return lines
 
 
-def _table_without_paper(rows: list[Row], with_success: bool) -> list[str]:
-    """The table of runs under other conditions than the paper's: our figures only, and each
-    joint's RMSE_rot where the model has several."""
-    names = joints(rows)
-    head = "| method | RMSE_rot (deg) |" + "".join(f" {name} (deg) |" for name in names)
-    head += " RMSE_torque (N m) | runtime (s) |"
-    rule = "|---|" + "---:|" * (len(names) + 3)
-    if with_success:
-        head += " success |"
-        rule += "---:|"
-    lines = [head, rule]
-    for row in rows:
-        star = "*" if row.cell is not None and not row.cell.in_paper else ""
-        line = (f"| {row.name}{star} | {_spread(row, 'rmse_rot_deg', significant)} |"
-                + "".join(f" {_spread(row, f'rmse_rot_deg_{name}', significant)} |" for name in names)
-                + f" {_spread(row, 'rmse_torque_nm', significant)} | {_spread(row, 'runtime_s', significant)} |")
-        if with_success:
-            line += f" {row.successes}/{len(row.records)}{', identical' if row.identical else ''} |"
-        lines.append(line)
-    return lines
+def _paper_cells(row: Row) -> str:
+    """A row's cells beside the paper's: each indicator, the paper's figure and the judgement; the speed-up."""
+    paper = row.paper or (None, None, None)
+    j = _row_judgements(row)
+    speedup = f"{_factor(row.speedup)}×" if math.isfinite(row.speedup) else "-"
+    return (f"{_spread(row, 'rmse_rot_deg')} | {_paper_number(paper[0])} | {_judgement_text(j['rmse_rot_deg'])} "
+            f"| {_spread(row, 'rmse_torque_nm')} | {_paper_number(paper[1])} | {_judgement_text(j['rmse_torque_nm'])} "
+            f"| {_spread(row, 'runtime_s')} | {_paper_runtime(paper[2])} | {speedup}")
 
 
 def comparison_facts(rows: list[Row]) -> dict:
@@ -684,8 +724,7 @@ def _provenance(rows: list[Row], rerun_command: str) -> list[str]:
         return ["No record of when the runs were made.", ""]
     groups = {}
     for row, p in infos:
-        key = (p.get("machine"), p.get("jobs"), (p.get("git_commit") or "")[:12], p.get("fdbench_version"))
-        groups.setdefault(key, []).append((row, p))
+        groups.setdefault(_session(p), []).append((row, p))
     lines = []
     if len(groups) == 1:
         (machine, jobs, commit, version), members = next(iter(groups.items()))
@@ -700,8 +739,7 @@ def _provenance(rows: list[Row], rerun_command: str) -> list[str]:
         for row in rows:
             by_key = {}
             for p in row.provenance:
-                key = (p.get("machine"), p.get("jobs"), (p.get("git_commit") or "")[:12], p.get("fdbench_version"))
-                by_key.setdefault(key, []).append(p["created_at"])
+                by_key.setdefault(_session(p), []).append(p["created_at"])
             for (machine, jobs, commit, version), times in by_key.items():
                 times.sort()
                 span = _when(times[0]) if times[0] == times[-1] else f"{_when(times[0])} to {_when(times[-1])}"
@@ -712,6 +750,11 @@ def _provenance(rows: list[Row], rerun_command: str) -> list[str]:
                  f"stored runs are reused as they are. `{rerun_command}` makes every run of this report again "
                  "and refreshes them.")
     return lines
+
+
+def _session(p: dict) -> tuple:
+    """What sets a run's session apart: (machine, jobs, commit, fdbench version)."""
+    return p.get("machine"), p.get("jobs"), (p.get("git_commit") or "")[:12], p.get("fdbench_version")
 
 
 def _when(iso: str) -> str:

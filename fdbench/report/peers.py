@@ -111,11 +111,15 @@ def _match(wanted, ours):
     return None
 
 
+def _accurate(pair: dict) -> bool:
+    """fdbench's RMSE_rot at most ``SAME_ACCURACY`` above the peer's."""
+    ours, theirs = pair["rmse_rot_deg_fdbench"], pair["rmse_rot_deg_peer"]
+    return ours is not None and theirs is not None and ours <= theirs * (1 + SAME_ACCURACY)
+
+
 def goal_met(pair: dict) -> bool:
     """fdbench at least ``GOAL`` times faster than the peer at equal or better RMSE_rot."""
-    ours, theirs = pair["rmse_rot_deg_fdbench"], pair["rmse_rot_deg_peer"]
-    accurate = ours is not None and theirs is not None and ours <= theirs * (1 + SAME_ACCURACY)
-    return bool(accurate and math.isfinite(pair["time_ratio"]) and pair["time_ratio"] >= GOAL)
+    return bool(_accurate(pair) and math.isfinite(pair["time_ratio"]) and pair["time_ratio"] >= GOAL)
 
 
 def goal_sentence(pair: dict) -> str:
@@ -128,12 +132,11 @@ def goal_sentence(pair: dict) -> str:
     else:
         speed = f"fdbench {significant(1 / ratio)}× slower"
     ours, theirs = pair["rmse_rot_deg_fdbench"], pair["rmse_rot_deg_peer"]
-    accurate = ours is not None and theirs is not None and ours <= theirs * (1 + SAME_ACCURACY)
     if pair["goal_met"]:
         verdict = "the goal is met"
     else:
         missing = [f"{significant(ratio)}× is below {GOAL:g}×"] if not (math.isfinite(ratio) and ratio >= GOAL) else []
-        missing += [] if accurate else [f"its RMSE_rot {significant(ours)} deg is above the peer's {significant(theirs)} deg"]
+        missing += [] if _accurate(pair) else [f"its RMSE_rot {significant(ours)} deg is above the peer's {significant(theirs)} deg"]
         verdict = "the goal is not met: " + " and ".join(missing)
     where = f" on {pair['model']}" if pair.get("model") else ""
     return (f"- {pair['fdbench']} against {pair['peer']}{where}: {speed} (RMSE_rot {significant(ours)} against {significant(theirs)} "

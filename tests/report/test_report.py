@@ -157,10 +157,12 @@ def test_cell_outside_the_paper_has_no_paper_values(tmp_path):
     row = frame.iloc[0]
     assert (row.torque, row.optimizer, bool(row.feedforward), bool(row.in_paper)) == ("pf", "bfgs", False, False)
     assert all(math.isnan(row[c]) for c in PAPER_COLUMNS + ["speedup_vs_paper"])
-    text = invoke(*args, "--format", "md").stdout
-    assert "PF (4 terms) + BFGS quasi-Newton*" in text
+    (cell,) = json.loads(invoke(*args, "--format", "json").stdout)["cells"]  # no PD control, no Table 3
+    assert (cell["table"], cell["in_paper"], cell["paper_rmse_rot_deg"]) == (2, False, None)
+    assert {v["verdict"] for v in cell["vs_paper"].values()} == {None}
+    text = invoke(*args, "--format", "md").stdout  # the star, and what it means
+    assert _table_line(_section(text, "## Table 2"), "PF (4 terms) + BFGS quasi-Newton*")
     assert "Cells marked * are not in the paper." in text
-    assert "## Table 3" not in text and "## PD control" not in text
 
 
 # ----------------------------------------------------------------------------- Markdown
@@ -194,10 +196,10 @@ def test_markdown_sections_tables_and_figures(tmp_path):
         [h for h in headings if any(h.startswith(e) for e in expected)]
     assert len(headings) == len(expected)
 
-    settings = _section(text, "## Settings")
-    assert "| budget | 15 evaluations per optimisation |" in settings
-    assert "| seeds | 2 per cell (0 to 1) |" in settings
-    assert "| kinematics | paper |" in settings
+    report = json.loads(invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
+                               "-f", "json", "-q").stdout)
+    assert [(c["table"], c["budget"], c["runs"], c["kinematics"]) for c in report["cells"]] == \
+        [("control", None, 1, "paper"), (2, 15, 2, "paper"), (3, 15, 2, "paper")]
 
     pd_section = _section(text, "## PD control")
     assert "Kp = 80.0" in pd_section and "Kd = 0.3" in pd_section
@@ -217,8 +219,7 @@ def test_markdown_sections_tables_and_figures(tmp_path):
         assert cells[-1] == "2/2, identical"
         assert "±" not in cells[1] and "±" not in cells[4] and "±" in cells[7]  # runtimes still vary
 
-    facts = json.loads(invoke("report", "--no-beyond", "--db", db, *CS_BFGS, "--seeds", 2, "--budget", 15, "--jobs", 1,
-                              "-f", "json", "-q").stdout)["comparison"]
+    facts = report["comparison"]
     assert facts["rows"] == 3 and facts["most_accurate"]["name"] in _section(text, "## Comparison")
     assert facts["fastest"]["name"] in _section(text, "## Comparison")
     assert facts["best_per_table"].keys() == {"2", "3"} and facts["vs_paper_rmse_rot"] is not None
@@ -670,12 +671,12 @@ def test_the_report_says_when_and_where_its_runs_were_made(tmp_path):
     db = tmp_path / "when.sqlite"
     args = ["report", "--db", db, *CS_BFGS, "--no-feedforward", "--seeds", 2, "--budget", 5, "--jobs", 1, "--no-beyond",
             "-q"]
-    text = invoke(*args).stdout
-    made = _section(text, "## When and where the runs were made")
-    rows = db_rows(db, "created_at, machine, jobs")
-    assert len({r[1] for r in rows}) == 1
-    assert f"All {len(rows)} runs were made on {rows[0][1]} with 1 parallel job(s)" in made
-    assert min(r[0] for r in rows)[:10] in made and "--rerun" in made
+    made = [m for cell in json.loads(invoke(*args, "-f", "json").stdout)["cells"] for m in cell["made"]]
+    rows = db_rows(db, "id, created_at, machine, jobs")
+    assert sorted((m["id"], m["created_at"], m["machine"], m["jobs"]) for m in made) == sorted(rows)
+    assert len({r[2] for r in rows}) == 1 and {r[3] for r in rows} == {1}
+    text = _section(invoke(*args).stdout, "## When and where the runs were made")
+    assert rows[0][2] in text and "--rerun" in text  # where, and how to refresh them
     # runs from another machine: a table, one line per cell and session
     con = sqlite3.connect(db)
     con.execute("UPDATE runs SET machine = 'elsewhere', created_at = '2020-01-02T03:04:05+00:00' WHERE seed = 1")
@@ -849,14 +850,13 @@ def _settings(text: str) -> dict:
 def test_noise_and_plant_stand_in_the_settings_csv_and_json(tmp_path):
     db = tmp_path / "noisy.sqlite"
     settings = _settings(invoke("report", "--db", db, *NOISY).stdout)
-    assert "0.5 deg white Gaussian" in settings["noise"] and "seeds 0, 1" in settings["noise"]
-    assert settings["plant"].startswith("I1=0.044")
-    assert "noise-free" in settings["RMSE_rot against"]
+    assert {"noise", "plant"} <= settings.keys() and "noise-free" in settings["RMSE_rot against"]
     frame = read_csv(invoke("report", "--db", db, *NOISY, "-f", "csv").stdout)
     assert (frame.noise_deg == 0.5).all() and (frame.plant == "I1=0.044").all() and (frame.model == "forearm").all()
     assert list(frame.noise_seeds.astype(str)) == ["0", "0, 1"]  # PD control draws seed 0's noise
     cells = json.loads(invoke("report", "--db", db, *NOISY, "-f", "json").stdout)["cells"]
-    assert [(c["noise_deg"], c["plant"]) for c in cells] == [(0.5, "I1=0.044")] * 2
+    assert [(c["noise_deg"], c["plant"], c["noise_seeds"]) for c in cells] == [(0.5, "I1=0.044", "0"),
+                                                                                (0.5, "I1=0.044", "0, 1")]
 
 
 def test_a_motion_file_stands_with_its_digest_convention_and_filtered_reference(tmp_path):
