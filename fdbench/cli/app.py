@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from contextlib import contextmanager
 from typing import Annotated
 
 import typer
@@ -16,30 +17,26 @@ from ..registry import PluginError
 
 
 STARTED = time.perf_counter()
-
-
-FORMATS = ("table", "json", "csv")
-
-
-MAX_SEEDS = 1000  # runs per cell of a report
-
-
-MAX_JOBS = 256  # worker processes
-
-
-KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper; the default), "
-                   "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
-                   "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
-                   "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With another model (--model arm2, leg3 or a file): "
-                   "one of the motions its file declares (the library's: 'fdbench models show NAME'; the first is the default) or a "
-                   "CSV file t,<joint>... with one angle column per joint (optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
-
-
-INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
+FORMATS = ("table", "json", "csv")  # of the commands of one run
+SWEEP_FORMATS = ("md", "csv", "json")  # of report and study
 
 
 class BadInput(Exception):
     """Bad usage or input: exit code 2 with this one-line message."""
+
+
+@contextmanager
+def bad_input(errors=ValueError, wording=str):
+    """The library's ``errors`` raised inside as bad input, their message worded by ``wording``."""
+    try:
+        yield
+    except errors as exc:
+        raise BadInput(wording(exc)) from None
+
+
+# the library's errors that are bad input wherever a command lets them out (by name: none is imported
+# before a command needs it), with the words put before their message
+LIBRARY_BAD_INPUT = {"StoreError": "--db: ", "BadFile": "", "BackendError": "", "BadQuery": ""}
 
 
 class FdbenchGroup(TyperGroup):
@@ -68,9 +65,7 @@ class FdbenchGroup(TyperGroup):
             code = returned if isinstance(returned, int) else 0
             if code == 130:
                 error("interrupted")
-        except BadInput as exc:
-            code = error(str(exc), 2)
-        except PluginError as exc:
+        except (BadInput, PluginError) as exc:
             code = error(str(exc), 2)
         except KeyboardInterrupt:
             code = error("interrupted", 130)
@@ -84,10 +79,8 @@ class FdbenchGroup(TyperGroup):
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
                 code = error(where + message, exc.exit_code)
-            elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
-                code = error(f"--db: {exc}", 2)
-            elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
-                code = error(str(exc), 2)
+            elif type(exc).__name__ in LIBRARY_BAD_INPUT:  # e.g. an output found unwritable only when written
+                code = error(LIBRARY_BAD_INPUT[type(exc).__name__] + str(exc), 2)
             elif _output_full(exc):  # help text into '> /dev/full': as any full output
                 _closed_stdout()
                 code = error(f"standard output: cannot write: {exc.strerror}", 2)
@@ -96,7 +89,6 @@ class FdbenchGroup(TyperGroup):
             else:
                 code = error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(_flush_stdout(code))
-
 
     def resolve_command(self, ctx, args):
         # the command about to run (not each one listed by --help, which stays fast)
@@ -119,6 +111,13 @@ class SubcommandGroup(TyperGroup):
         if command is not None and getattr(ctx.find_root().command, "help_requested", False):
             _show_choices(command, ctx)
         return name, command, rest
+
+
+def subcommands(name: str, help: str, **settings) -> typer.Typer:
+    """A group of subcommands of ``fdbench`` (``fdbench runs ...``)."""
+    group = typer.Typer(cls=SubcommandGroup, help=help, **settings)
+    app.add_typer(group, name=name)
+    return group
 
 
 # options whose valid values are registered names: (module, name of its registry), read for --help
@@ -295,16 +294,9 @@ def _root(
     """fdbench: trajectory tracking in forward dynamics, benchmarked."""
 
 
-MAX_THREADS = 1024
-
-
-REPORT_FORMATS = ("md", "csv", "json")
-STUDY_FORMATS = ("md", "csv", "json")
-
-
 def formats_of(command: str) -> tuple:
     """The --format values ``command`` accepts (its help lists exactly these)."""
-    return {"report": REPORT_FORMATS, "study": STUDY_FORMATS}.get(command, FORMATS)
+    return SWEEP_FORMATS if command in ("report", "study") else FORMATS
 
 
 def _compile_spinner(notice):

@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .app import BadInput
+from .app import BadInput, bad_input
 
 MOTION_PANEL = "Motion and model"
 
@@ -55,10 +55,8 @@ def with_conditions(command):
         if kwargs.get("kinematics") is None:
             from ..models import default_motion
 
-            try:
+            with bad_input():
                 kwargs["kinematics"] = default_motion(conditions["model_name"])
-            except ValueError as exc:
-                raise BadInput(str(exc)) from None
         returned = command(conditions=conditions, **kwargs)
         warn_opensim(conditions["model_name"], kwargs.get("kinematics"), kwargs.get("quiet", False))
         return returned
@@ -122,28 +120,22 @@ def _loads_inputs(loads) -> dict:
     """{'--loads': the file, '--loads data': its data file}: inputs the outputs must not overwrite."""
     if loads is None:
         return {}
-    from ..files import BadFile
     from ..multibody.loads import data_file
 
-    try:
-        return {"--loads": Path(loads), "--loads (its data file)": data_file(loads)}
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
+    return {"--loads": Path(loads), "--loads (its data file)": data_file(loads)}
 
 
 def _model_name(names: list) -> str:
     """The one model named by --model (default: forearm): a library name or a model file."""
-    from ..models import check_name
+    from ..models import check_name, names as library_names
 
     if len(set(names)) > 1:
         raise BadInput(f"--model: name one model, got {', '.join(names)}")
     name = names[0] if names else "forearm"
-    from ..models import names
-
     try:
         return check_name(name)
     except ValueError as exc:
-        known = name in names() or not name or not any(c in name for c in "./")
+        known = name in library_names() or not name or not any(c in name for c in "./")
         message = str(exc) if str(exc).startswith("--model") else f"--model: {exc}"
         raise BadInput(message + (" (or KEY=VALUE)" if known else "")) from None
 
@@ -171,12 +163,9 @@ def _key_values(option: str, items) -> list:
 
 def _model_file(path: Path) -> list:
     """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
-    from ..files import BadFile, parse_json, read_input_text
+    from ..files import parse_json, read_input_text
 
-    try:
-        text = read_input_text(path, "--model-file", 2**20)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
+    text = read_input_text(path, "--model-file", 2**20)
     try:
         if path.suffix.lower() == ".json":
             data = parse_json(text)
@@ -222,9 +211,8 @@ def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditi
     loads file enter by their digests)."""
     import os
 
-    from ..run_inputs import model_digest, motion_digest
-    from ..files import BadFile
     from ..models import is_file, named_motions
+    from ..run_inputs import model_digest, motion_digest
 
     fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
                   omega=omega, **_fields(conditions or {}))
@@ -243,12 +231,8 @@ def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditi
         from ..multibody.loads import loads_digest  # only with loads: it imports the engine
 
         files.append(("--loads", loads_digest, fields["loads"]))
-    try:
-        digests = [(option, digest(path)) for option, digest, path in files]
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
-    if digests:
-        fields["inputs"] = tuple(sorted(digests))
+    if files:  # a file that cannot be read: BadFile, bad input
+        fields["inputs"] = tuple(sorted((option, digest(path)) for option, digest, path in files))
     return fields
 
 

@@ -9,27 +9,19 @@ from typing import Annotated
 
 import typer
 
-from .app import BadInput, SubcommandGroup, app
-from .common import check_outputs, emit, say
+from .app import FORMATS, bad_input, subcommands
+from .common import check_outputs, emit, render, say, text_table
 from .options import Output, format_option
 
-
-models_app = typer.Typer(
-    cls=SubcommandGroup,
-    help="The library of models (bodies, joints, loads as TOML files); 'fdbench models show NAME|FILE' checks and "
-    "shows one, your own file included.",
-    invoke_without_command=True,
-)
-app.add_typer(models_app, name="models")
-
-LIST_FORMATS = ("table", "json", "csv")
+models_app = subcommands("models", "The library of models (bodies, joints, loads as TOML files); 'fdbench models show "
+                         "NAME|FILE' checks and shows one, your own file included.", invoke_without_command=True)
 SHOW_FORMATS = ("table", "json", "toml")
 
 
 @models_app.callback()
 def list_models(
     ctx: typer.Context,
-    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per library model: its name, bodies, joints (its coordinates), total mass and what it is."""
@@ -37,7 +29,7 @@ def list_models(
         return
     from ..models import library
 
-    check_outputs(fmt, LIST_FORMATS, output=output)
+    check_outputs(fmt, FORMATS, output=output)
     rows = [_summary(_checked(name)) for name in library()]
     if fmt == "json":
         text = json.dumps(rows, indent=2) + "\n"
@@ -46,8 +38,6 @@ def list_models(
 
         text = csv_text(list(rows[0]), [[" ".join(v) if isinstance(v, list) else v for v in row.values()] for row in rows])
     else:
-        from .store_commands import text_table
-
         columns = ("name", "bodies", "coordinates", "mass_kg", "description")
         shown = [{k: ", ".join(v) if isinstance(v, list) else v for k, v in row.items()} | {"mass_kg": f"{row['mass_kg']:.6g}"}
                  for row in rows]
@@ -79,10 +69,9 @@ def show_model(
 
 
 def _checked(name_or_path: str):
-    from ..models import is_osim
-    from ..models import find_model
+    from ..models import find_model, is_osim
 
-    try:
+    with bad_input():
         if is_osim(name_or_path):  # an OpenSim model: its import's notes as warnings
             from ..multibody.osim import import_osim
 
@@ -91,8 +80,6 @@ def _checked(name_or_path: str):
                 say(False, f"[yellow]warning:[/] {note}")
             return found
         return find_model(name_or_path, "NAME|FILE")
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
 
 
 def _summary(model) -> dict:
@@ -116,8 +103,6 @@ def _point(point) -> str:
 
 def _show_text(model, source: str) -> str:
     from ..multibody.model import end_of
-    from .common import render
-    from .store_commands import text_table
 
     header = {"name": model.name, "description": model.description, "source": source,
               "gravity (m/s^2)": _point(model.gravity), "total mass (kg)": f"{model.total_mass:.6g}",
@@ -154,8 +139,6 @@ def _motions_text(model) -> str:
     angle) or metres (a translation)."""
     import math
 
-    from .store_commands import text_table
-
     kinds = dict(zip(model.coordinates, model.coordinate_kinds))
 
     def span(joint, a, b):
@@ -179,8 +162,6 @@ def _path_values(model) -> dict:
 
 
 def _paths_text(model) -> str:
-    from .store_commands import text_table
-
     rows = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
     return text_table("paths (--model PATH=VALUE)", rows, ["path", "value"])
 
@@ -188,7 +169,6 @@ def _paths_text(model) -> str:
 def _keys_text(model) -> str:
     """The short keys of --model KEY=VALUE: the path each sets and its value in this model."""
     from ..multibody.model_changes import short_key_values
-    from .store_commands import text_table
 
     values = short_key_values(model)
     rows = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
