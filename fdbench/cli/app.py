@@ -39,7 +39,18 @@ def bad_input(errors=ValueError, wording=str):
 LIBRARY_BAD_INPUT = {"StoreError": "--db: ", "BadFile": "", "BackendError": "", "BadQuery": ""}
 
 
-class FdbenchGroup(TyperGroup):
+class HelpGroup(TyperGroup):
+    """A group of commands whose --help shows choices (registered names; no type noise on flags)."""
+
+    def resolve_command(self, ctx, args):
+        # the command about to run (not each one listed by --help, which stays fast)
+        name, command, rest = super().resolve_command(ctx, args)
+        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
+            _show_choices(command, ctx)
+        return name, command, rest
+
+
+class FdbenchGroup(HelpGroup):
     """Routes every error to one line on stderr with the contract's exit codes."""
 
     def invoke(self, ctx):
@@ -50,8 +61,9 @@ class FdbenchGroup(TyperGroup):
 
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
-        self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
-        if any(a in ("-q", "--quiet") for a in (sys.argv[1:] if args is None else args)):
+        given = sys.argv[1:] if args is None else args
+        self.help_requested = any(a in ("-h", "--help") for a in given)
+        if any(a in ("-q", "--quiet") for a in given):
             from ..jit import quiet
 
             quiet()  # no notice of compilation either
@@ -90,32 +102,14 @@ class FdbenchGroup(TyperGroup):
                 code = error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(_flush_stdout(code))
 
-    def resolve_command(self, ctx, args):
-        # the command about to run (not each one listed by --help, which stays fast)
-        name, command, rest = super().resolve_command(ctx, args)
-        if command is not None and getattr(self, "help_requested", False):
-            _show_choices(command, ctx)
-        return name, command, rest
-
     def format_help(self, ctx, formatter):
         _show_choices(self, ctx)
         return super().format_help(ctx, formatter)
 
 
-class SubcommandGroup(TyperGroup):
-    """A group of subcommands (``runs``, ``models``) whose --help shows choices as the other
-    commands' do (no type noise on flags)."""
-
-    def resolve_command(self, ctx, args):
-        name, command, rest = super().resolve_command(ctx, args)
-        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
-            _show_choices(command, ctx)
-        return name, command, rest
-
-
 def subcommands(name: str, help: str, **settings) -> typer.Typer:
     """A group of subcommands of ``fdbench`` (``fdbench runs ...``)."""
-    group = typer.Typer(cls=SubcommandGroup, help=help, **settings)
+    group = typer.Typer(cls=HelpGroup, help=help, **settings)
     app.add_typer(group, name=name)
     return group
 
@@ -139,8 +133,8 @@ def _choices(name: str, command: str):
 
         found = [motion for model in names() for motion in named_motions(model)]  # the library's, in order
         return list(dict.fromkeys(found)) + ["FILE"]
-    if name == "fmt":
-        return list(formats_of(command))
+    if name == "fmt":  # the --format values the command accepts (its help lists exactly these)
+        return list(SWEEP_FORMATS if command in ("report", "study") else FORMATS)
     return None
 
 
@@ -292,11 +286,6 @@ def _root(
     version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")] = False,
 ):
     """fdbench: trajectory tracking in forward dynamics, benchmarked."""
-
-
-def formats_of(command: str) -> tuple:
-    """The --format values ``command`` accepts (its help lists exactly these)."""
-    return SWEEP_FORMATS if command in ("report", "study") else FORMATS
 
 
 def _compile_spinner(notice):

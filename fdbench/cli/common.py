@@ -276,19 +276,13 @@ def check_gradient(gradient: str, optimizers=None) -> None:
                            f"none is selected by --opt {' --opt '.join(optimizers)}")
 
 
-def bracketed(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
-    """``NAME[KEY=VALUE,...]`` of --torque, --opt or --controller: (NAME, ``flags`` (the command's
-    own option flags of that kind) with the bracket's options on top), so that a method, a plugin's
-    included, receives any option its class takes. A key it does not take, or one also given as its
-    own flag on the command line, is bad input."""
-    name, given_here = _bracket_options(ctx, text, option, flags, registry, kind)
-    return name, {**flags, **given_here}
-
-
-def bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
-    """``bracketed`` for a repeatable selection (report, study): the names (None: the default
-    selection) and one set of options for them all, each method keeping those it takes; one key
-    given two values in two brackets is bad input."""
+def bracketed(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
+    """The ``NAME[KEY=VALUE,...]`` entries of --torque, --opt or --controller: their names (None:
+    the default selection) and one set of options for them all, ``flags`` (the command's own
+    option flags of that kind) with the brackets' options on top, so that a method, a plugin's
+    included, receives any option its class takes (each keeps those it takes). A key it does not
+    take, one also given as its own flag on the command line, or one given two values in two
+    brackets is bad input."""
     if not entries:
         return entries, flags
     names, merged, given_by = [], dict(flags), {}
@@ -362,16 +356,26 @@ def methods_text() -> str:
     return "\n".join(lines) + "\n"
 
 
-def check_names(torques, optimizers) -> None:
+def shooting_methods(ctx, torques, optimizers, flags: dict, penalty_weight: float) -> tuple:
+    """The torques and optimisers selected (``NAME[KEY=VALUE,...]`` entries; None: the default
+    set) and their options, {registry: {option: value}} in ``flags``, checked before any work:
+    (torque names, optimiser names, torque options, optimiser options)."""
     from ..optimizers import OPTIMIZERS
     from ..registry import UnknownName
     from ..torques import TORQUES
 
+    check_finite(**{k: v for k, v in flags["optimizers"].items() if isinstance(v, float)},
+                 penalty_weight=penalty_weight)
+    torques, torque_options = bracketed(ctx, torques, "--torque", flags["torques"], TORQUES, "torque")
+    optimizers, optimizer_options = bracketed(ctx, optimizers, "--opt", flags["optimizers"], OPTIMIZERS, "optimizer")
     with bad_input(UnknownName, with_option):
         for name in torques or ():
             TORQUES[name]
         for name in optimizers or ():
             OPTIMIZERS[name]
+    check_method_ranges(TORQUES, torque_options)
+    check_method_ranges(OPTIMIZERS, optimizer_options)
+    return torques, optimizers, torque_options, optimizer_options
 
 
 class Progress:

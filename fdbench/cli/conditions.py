@@ -102,17 +102,16 @@ def warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
             sys.stderr.write(f"fdbench: warning: {note}\n")
 
 
-def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
-                loads, model_file) -> dict:
+def _conditions(plant, model, loads, model_file, **motion) -> dict:
     """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
+    from ..models import is_file
+
     names = [item.strip() for item in model or [] if "=" not in item]
     pairs = _model_file(model_file) if model_file is not None else []
     pairs += _key_values("--model", [item for item in model or [] if "=" in item])
-    name = _model_name(names)
-    return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
-                sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
-                plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file, **_model_input(name), **_loads_inputs(loads)}, model_name=name,
+    name, plant = _model_name(names), tuple(_key_values("--plant", plant or []))
+    inputs = {"--model-file": model_file, **({"--model": Path(name)} if is_file(name) else {}), **_loads_inputs(loads)}
+    return dict(motion, plant=plant, model=tuple(pairs), _inputs=inputs, model_name=name,
                 **({"loads": str(loads)} if loads is not None else {}))
 
 
@@ -138,13 +137,6 @@ def _model_name(names: list) -> str:
         known = name in library_names() or not name or not any(c in name for c in "./")
         message = str(exc) if str(exc).startswith("--model") else f"--model: {exc}"
         raise BadInput(message + (" (or KEY=VALUE)" if known else "")) from None
-
-
-def _model_input(name: str) -> dict:
-    """{'--model': path} for a model file (an input the outputs must not overwrite), else {}."""
-    from ..models import is_file
-
-    return {"--model": Path(name)} if is_file(name) else {}
 
 
 def _key_values(option: str, items) -> list:
@@ -202,10 +194,6 @@ def spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
     return {**inputs, **others}
 
 
-def _fields(conditions: dict) -> dict:
-    return {k: v for k, v in conditions.items() if not k.startswith("_")}
-
-
 def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions: dict | None = None) -> dict:
     """RunSpec fields shared by every command that simulates (a motion file, a model file and a
     loads file enter by their digests)."""
@@ -215,7 +203,7 @@ def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditi
     from ..run_inputs import model_digest, motion_digest
 
     fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
-                  omega=omega, **_fields(conditions or {}))
+                  omega=omega, **{k: v for k, v in (conditions or {}).items() if not k.startswith("_")})
     model = fields.get("model_name", "forearm")
     files = []  # (option, digest of its file, the file)
     if kinematics not in named_motions(model):

@@ -42,7 +42,7 @@ def list_models(
         shown = [{k: ", ".join(v) if isinstance(v, list) else v for k, v in row.items()} | {"mass_kg": f"{row['mass_kg']:.6g}"}
                  for row in rows]
         text = text_table(f"{len(rows)} models in the library ('fdbench models show NAME' for one)", shown, columns,
-                      {"mass_kg": "mass (kg)", "coordinates": "joints (coordinates)"})
+                          {"mass_kg": "mass (kg)", "coordinates": "joints (coordinates)"})
     emit(text, output)
 
 
@@ -101,8 +101,14 @@ def _point(point) -> str:
     return f"({point[0]:.6g}, {point[1]:.6g})"
 
 
+def _table(title: str, rows: list[dict], columns=None) -> str:
+    """A person's table of ``rows`` (columns: the first row's keys); nothing without rows or columns."""
+    return text_table(title, rows, columns or list(rows[0])) if rows or columns else ""
+
+
 def _show_text(model, source: str) -> str:
     from ..multibody.model import end_of
+    from ..multibody.model_changes import short_key_values
 
     header = {"name": model.name, "description": model.description, "source": source,
               "gravity (m/s^2)": _point(model.gravity), "total mass (kg)": f"{model.total_mass:.6g}",
@@ -118,13 +124,14 @@ def _show_text(model, source: str) -> str:
                "limits": "" if j.limits is None else _point(j.limits)} for k, j in enumerate(model.joints)]
     loads = [{"#": str(i), "body": load.body, "at": _point(load.at), "force": _point(load.force)}
              for i, load in enumerate(model.loads)]
-    text = render(header, "table", f"model {model.name}")
-    text += text_table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)",
-                   bodies, list(bodies[0]))
-    text += text_table("joints in order (m, rad)", joints, list(joints[0]))
-    if loads:
-        text += text_table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
-    return text + _motions_text(model) + _keys_text(model) + _paths_text(model)
+    values = short_key_values(model)
+    keys = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
+    paths = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
+    return (render(header, "table", f"model {model.name}")
+            + _table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)", bodies)
+            + _table("joints in order (m, rad)", joints)
+            + _table("loads (m in the body's frame, N in world axes)", loads) + _motions_text(model)
+            + _table("short keys (--model KEY=VALUE)", keys) + _table("paths (--model PATH=VALUE)", paths, ["path", "value"]))
 
 
 def _joint_type(joint) -> str:
@@ -149,7 +156,7 @@ def _motions_text(model) -> str:
     rows = [{"name": m.name + (" (default)" if i == 0 else ""), "type": m.type, "duration (s)": f"{m.duration:.6g}"}
             | {key: value for (joint, a), (_, b) in zip(m.start, m.goal) for key, value in span(joint, a, b).items()}
             for i, m in enumerate(model.motions)]
-    return text_table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
+    return _table("motions (--motion NAME; from rest to rest)", rows)
 
 
 def _path_values(model) -> dict:
@@ -159,20 +166,6 @@ def _path_values(model) -> dict:
     from ..multibody.model_changes import path_value
 
     return {path: path_value(model, path) for path in change_paths(model)}
-
-
-def _paths_text(model) -> str:
-    rows = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
-    return text_table("paths (--model PATH=VALUE)", rows, ["path", "value"])
-
-
-def _keys_text(model) -> str:
-    """The short keys of --model KEY=VALUE: the path each sets and its value in this model."""
-    from ..multibody.model_changes import short_key_values
-
-    values = short_key_values(model)
-    rows = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
-    return text_table("short keys (--model KEY=VALUE)", rows, list(rows[0])) if rows else ""
 
 
 _END_ORIGIN = {"joint": "first child joint", "load": "farthest load", "com": "centre of mass",

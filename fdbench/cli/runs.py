@@ -10,7 +10,7 @@ import typer
 from .app import BadInput, app, bad_input
 from .common import (
     OUTPUT_LABELS, Progress, applicable_options, bracketed, check_count, check_finite, check_gradient,
-    check_method_ranges, check_outputs, emit, finish, history_csv, methods_text, say, validated,
+    check_method_ranges, check_outputs, emit, finish, history_csv, methods_text, say, shooting_methods, validated,
 )
 from .conditions import noise_seed, spec_inputs, with_conditions
 from .options import (
@@ -104,7 +104,8 @@ def control(
     from ..registry import UnknownName
 
     one.check(conditions)
-    controller, options = bracketed(ctx, controller, "--controller", methods["controllers"], CONTROLLERS, "controller")
+    (controller,), options = bracketed(ctx, [controller], "--controller", methods["controllers"], CONTROLLERS,
+                                       "controller")
     with bad_input(UnknownName, lambda exc: f"--controller: {exc}"):
         CONTROLLERS[controller]
     check_method_ranges(CONTROLLERS, options)
@@ -213,17 +214,13 @@ def optimize(
         emit(methods_text(), None)
         return
     from ..method_runs import run
-    from ..spec import optimize_spec
     from ..optimizers import OPTIMIZERS
+    from ..spec import optimize_spec
     from ..torques import TORQUES
 
     out.check(spec_inputs(conditions, kinematics), history=history, save_params=save_params)
-    check_finite(**{k: v for k, v in methods["optimizers"].items() if isinstance(v, float)},
-                 penalty_weight=optim.penalty_weight)
-    torque, torque_options = bracketed(ctx, torque, "--torque", methods["torques"], TORQUES, "torque")
-    opt, optimizer_options = bracketed(ctx, opt, "--opt", methods["optimizers"], OPTIMIZERS, "optimizer")
-    check_method_ranges(TORQUES, torque_options)
-    check_method_ranges(OPTIMIZERS, optimizer_options)
+    (torque,), (opt,), torque_options, optimizer_options = shooting_methods(ctx, [torque], [opt], methods,
+                                                                            optim.penalty_weight)
     torque_options = applicable_options(ctx, torque_options, TORQUES, torque, "--torque")
     optimizer_options = applicable_options(ctx, optimizer_options, OPTIMIZERS, opt, "--opt")
     check_gradient(optim.gradient)

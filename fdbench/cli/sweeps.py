@@ -13,8 +13,8 @@ import typer
 
 from .app import SWEEP_FORMATS, BadInput, app, bad_input, error
 from .common import (
-    Progress, bracketed_all, check_choice, check_count, check_finite, check_gradient, check_method_ranges, check_names,
-    check_outputs, emit, given, say, validated, with_option, wrote,
+    Progress, check_choice, check_count, check_gradient, check_outputs, emit, given, say, shooting_methods, validated,
+    with_option, wrote,
 )
 from .conditions import spec_inputs, with_conditions
 from .options import (
@@ -133,14 +133,10 @@ def report(
                                   figures=figures, fmt=fmt, inputs=inputs)
     if figures is not None:
         _check_figures_dir(figures, batch, inputs)
-    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, batch, flags)
-    executor = batch.run.executor()
+    cells, torque_options, optimizer_options, executor = _selected(ctx, seeds, batch, flags)
     optim, control, (kp, kd) = batch.optim, batch.selection.control, _gains(flags)
-    cells = batch.cells(torque, opt)
     if not cells and not control and not beyond and not peers:
         raise BadInput("nothing to run: the options select no cell, --no-control and --no-beyond")
-    check_gradient(optim.gradient, opt)
-    peer_names = _peer_names(peers)
     fields = batch.fields(conditions)
     plan = make_plan(cells, seeds, optim.budget, control, kp, kd, torque_options=torque_options,
                      optimizer_options=optimizer_options, penalty_weight=optim.penalty_weight, **fields)
@@ -155,12 +151,7 @@ def report(
                                                            optimizer_options, optim.penalty_weight, **fields)
         for method in methods:
             validated(method.spec)
-    with bad_input():
-        peer_methods = _peer_methods(peer_names, kp, kd, fields)
-    for method in peer_methods:
-        validated(method.spec)
-    if peer_methods:
-        _check_peers_available()
+    peer_methods = _peer_methods(peers, kp, kd, fields)
     extra = [m.spec for m in methods or []] + [m.spec for m in peer_methods]
     runs = batch.carry_out(plan.all_specs() + extra, executor)
     from ..report import build_rows
@@ -213,13 +204,10 @@ def study(
         check_choice("--param", param, model_keys(conditions["model_name"]))
     if figures is not None:
         _check_figures_dir(figures, batch, inputs, studies.FIGURE_NAMES)
-    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, batch, flags)
-    executor = batch.run.executor()
+    cells, torque_options, optimizer_options, executor = _selected(ctx, seeds, batch, flags)
     optim, control, (kp, kd) = batch.optim, batch.selection.control, _gains(flags)
-    cells = batch.cells(torque, opt)
     if not cells and not control:
         raise BadInput("nothing to run: the options select no cell and --no-control")
-    check_gradient(optim.gradient, opt)
     with bad_input(wording=with_option):
         sweep = studies.make_sweep(kind, parsed, seeds, cells, control, kp, kd, optim.budget, torque_options,
                                    optimizer_options, optim.penalty_weight, param if kind == "mismatch" else None,
@@ -271,33 +259,26 @@ def _comparison_report(ctx, conditions: dict, batch: Batch, flags: MethodValues,
 
     if figures is not None:
         _check_figures_dir(figures, batch, inputs, MODEL_FIGURE_FILES)
-    torque, opt, torque_options, optimizer_options = _sweep_options(ctx, seeds, batch, flags)
-    optim = batch.optim
-    check_gradient(optim.gradient, opt)
-    executor = batch.run.executor()
-    (kp, kd), popsize = _gains(flags), flags["optimizers"].get("popsize")
+    cells, torque_options, optimizer_options, executor = _selected(ctx, seeds, batch, flags)
+    optim, (kp, kd), popsize = batch.optim, _gains(flags), flags["optimizers"].get("popsize")
     weight = optim.penalty_weight if given(ctx, "penalty_weight") else FLOATING_BASE_PENALTY
     options = Options(optim.budget, SHOOTING_POPSIZE if popsize is None else popsize, flags["optimizers"].get("sigma0"),
                       flags["torques"].get("knots"), kp, kd)
     studied, forearm = batch.fields(conditions), batch.sim.spec_fields("paper", None)
-    selected = any(given(ctx, name) for name in ("torque", "opt", "feedforward", "all_cells"))
     with bad_input(wording=with_option):
         plan = comparison.make_plan(studied, forearm, options, collocation=beyond, control=batch.selection.control,
                                     penalty_weight=weight)
-        if selected:
-            cells = batch.cells(torque, opt)
+        if any(given(ctx, name) for name in ("torque", "opt", "feedforward", "all_cells")):
             common = plan.datasets[0].common
             plan.cells = make_plan(cells, seeds, optim.budget, False, kp, kd, torque_options=torque_options,
                                    optimizer_options=optimizer_options, penalty_weight=weight, **common)
             if optim.gradient == "exact":
                 plan.extra = exact_gradient_methods(cells, optim.budget, torque_options, optimizer_options, weight,
                                                     **common)
-        peer_methods = _peer_methods(_peer_names(peers), kp, kd, plan.datasets[0].common)
-    specs = plan.all_specs() + [m.spec for m in peer_methods]
-    for spec in specs:
+    for spec in plan.all_specs():
         validated(spec)
-    if peer_methods:
-        _check_peers_available()
+    peer_methods = _peer_methods(peers, kp, kd, plan.datasets[0].common)
+    specs = plan.all_specs() + [m.spec for m in peer_methods]
     warn_opensim(conditions["model_name"], batch.kinematics, batch.quiet)  # the import's notes before the work
     runs = batch.carry_out(specs, executor)
     found = comparison.report_rows(plan, runs, batch.provenance(runs), peer_methods)
@@ -309,52 +290,33 @@ def _comparison_report(ctx, conditions: dict, batch: Batch, flags: MethodValues,
     batch.wrote(len(runs))
 
 
-def _peer_methods(names: list, kp, kd, common: dict) -> list:
-    """The peers ``names`` as methods on the settings ``common`` with the report's PD gains."""
-    if not names:
-        return []
-    from ..report.peers import peer_methods
-
-    return peer_methods(names, kp, kd, **common)
-
-
-def _sweep_options(ctx, seeds: int, batch: Batch, flags: MethodValues):
-    """The checks shared by the commands that run many specs (report, study), before any work;
-    returns the torque and optimiser names (their NAME[KEY=VALUE,...] options taken out) and the
-    (torque options, optimizer options) of their cells."""
-    from ..optimizers import OPTIMIZERS
-    from ..torques import TORQUES
-
-    check_count("--seeds", seeds, MAX_SEEDS)
-    check_count("--jobs", batch.run.jobs, MAX_JOBS)
-    check_finite(**{k: v for k, v in flags["optimizers"].items() if isinstance(v, float)},
-                 penalty_weight=batch.optim.penalty_weight)
-    selection = batch.selection
-    torques, torque_options = bracketed_all(ctx, selection.torque, "--torque", flags["torques"], TORQUES, "torque")
-    optimizers, optimizer_options = bracketed_all(ctx, selection.opt, "--opt", flags["optimizers"], OPTIMIZERS,
-                                                  "optimizer")
-    check_names(torques, optimizers)
-    check_method_ranges(TORQUES, torque_options)
-    check_method_ranges(OPTIMIZERS, optimizer_options)
-    return torques, optimizers, torque_options, optimizer_options
-
-
-def _peer_names(text: Optional[str]) -> list:
-    """The peers of --peers (none without it); an unknown one is bad input listing the valid."""
+def _peer_methods(text: Optional[str], kp, kd, common: dict) -> list:
+    """The peers of --peers (none without it) as methods on the settings ``common`` with the
+    report's PD gains, checked: an unknown peer is bad input listing the valid, and so are peers
+    where the opensim package cannot be imported."""
     if text is None:
         return []
-    from ..peers import parse_names
+    from ..peers import check_available, parse_names
+    from ..report.peers import peer_methods
 
-    with bad_input():
-        return parse_names(text)
-
-
-def _check_peers_available() -> None:
-    """Refuse --peers, before any run, where the opensim package cannot be imported."""
-    from ..peers import check_available
-
+    with bad_input(wording=with_option):
+        methods = peer_methods(parse_names(text), kp, kd, **common)
+    for method in methods:
+        validated(method.spec)
     with bad_input():
         check_available()
+    return methods
+
+
+def _selected(ctx, seeds: int, batch: Batch, flags: MethodValues) -> tuple:
+    """The checks shared by report and study before any work; returns the paper's cells selected,
+    the torque and optimiser options of their cells and the execution backend."""
+    check_count("--seeds", seeds, MAX_SEEDS)
+    check_count("--jobs", batch.run.jobs, MAX_JOBS)
+    torques, optimizers, torque_options, optimizer_options = shooting_methods(
+        ctx, batch.selection.torque, batch.selection.opt, flags, batch.optim.penalty_weight)
+    check_gradient(batch.optim.gradient, optimizers)
+    return batch.cells(torques, optimizers), torque_options, optimizer_options, batch.run.executor()
 
 
 def _write_figures(figures: Path, batch: Batch, write) -> dict:
