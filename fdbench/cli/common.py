@@ -283,35 +283,25 @@ def bracketed(ctx, entries, option: str, flags: dict, registry, kind: str) -> tu
     included, receives any option its class takes (each keeps those it takes). A key it does not
     take, one also given as its own flag on the command line, or one given two values in two
     brackets is bad input."""
+    from ..method_options import check_method_options
+    from ..registry import parse_method
+
     if not entries:
         return entries, flags
     names, merged, given_by = [], dict(flags), {}
     for entry in entries:
-        name, given_here = _bracket_options(ctx, entry, option, flags, registry, kind)
+        with bad_input(wording=lambda exc: str(exc) if str(exc).startswith(option) else f"{option}: {exc}"):
+            name, options = parse_method(entry, option)
+            check_method_options(registry, name, options, kind)
         names.append(name)
-        for key, value in given_here.items():
+        for key, value in options.items():
+            if key in flags and given(ctx, key):
+                raise BadInput(f"{option}: {key} is given both in {name}[...] and as --{key.replace('_', '-')}")
             if key in given_by and merged[key] != value:
                 raise BadInput(f"{option}: {key} is {merged[key]} in {given_by[key]}[...] and {value} in "
                                f"{name}[...]; give one value")
             merged[key], given_by[key] = value, name
     return names, merged
-
-
-def _bracket_options(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
-    """(NAME, the options of its brackets) of ``NAME[KEY=VALUE,...]``, checked (see ``bracketed``)."""
-    from ..method_options import check_method_options
-    from ..registry import parse_method
-
-    def worded(exc) -> str:
-        return str(exc) if str(exc).startswith(option) else f"{option}: {exc}"
-
-    with bad_input(wording=worded):
-        name, options = parse_method(text, option)
-        check_method_options(registry, name, options, kind)
-    for key in options:
-        if ctx is not None and key in flags and given(ctx, key):
-            raise BadInput(f"{option}: {key} is given both in {name}[...] and as --{key.replace('_', '-')}")
-    return name, options
 
 
 def check_method_ranges(registry, options: dict) -> None:

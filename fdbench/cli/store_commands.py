@@ -40,11 +40,15 @@ class RunFilter:
         return select(runs, dataclasses.asdict(self), present_in)
 
 
-def _database(db: Optional[Path]) -> tuple[Path, str]:
-    """The database to read and how errors name it."""
+def _database(db: Optional[Path], fmt: str, formats: tuple, output: Optional[Path]) -> tuple[Path, str]:
+    """The database to read and how errors name it, once --format and --output are checked."""
     from ..store import default_path
 
-    return (db, "--db") if db is not None else (default_path(), "--db (default)")
+    path, label = (db, "--db") if db is not None else (default_path(), "--db (default)")
+    check_outputs(fmt, formats, db=path, output=output)
+    if fmt == "parquet":
+        _check_parquet(output)
+    return path, label
 
 
 def _read(path: Path, label: str, superseded: bool = False, damaged: dict | None = None) -> list[dict]:
@@ -64,17 +68,20 @@ HEADINGS = {"created_at": "date (UTC)", "rmse_rot_deg": "rot (deg)", "rmse_torqu
 
 
 def _write(fmt: str, output, rows, columns, what: str, table=None, document=None) -> None:
-    """``rows`` as JSON (``document`` in their place if given), as CSV of ``columns`` or as the
-    person's table ``table()``; then the line saying what an output file holds."""
-    if fmt == "json":
-        text = json.dumps(rows if document is None else document, indent=2) + "\n"
+    """``rows`` as JSON (``document`` in their place if given), as CSV of ``columns``, as Parquet or
+    as the person's table ``table()``; then the line saying what an output file holds."""
+    if fmt == "parquet":
+        from ..files import write_atomic
+
+        write_atomic(output, _parquet_bytes(rows))
+    elif fmt == "json":
+        emit(json.dumps(rows if document is None else document, indent=2) + "\n", output)
     elif fmt == "csv":
         from ..files import csv_text
 
-        text = csv_text(list(columns), [[row.get(c) for c in columns] for row in rows])
+        emit(csv_text(list(columns), [[row.get(c) for c in columns] for row in rows]), output)
     else:
-        text = table()
-    emit(text, output)
+        emit(table(), output)
     wrote(output, False, what)
 
 
@@ -89,8 +96,7 @@ def list_runs(
     """One line per stored run: id, date, command, model, method, seed, the three indicators, t_end and status."""
     from ..store_queries import LIST_COLUMNS, list_row
 
-    path, label = _database(db)
-    check_outputs(fmt, FORMATS, db=path, output=output)
+    path, label = _database(db, fmt, FORMATS, output)
     rows = [list_row(run) for run in only.select(_read(path, label))]
     _write(fmt, output, rows, LIST_COLUMNS, f"{len(rows)} runs",
            lambda: text_table(f"{len(rows)} runs in {path}", rows, LIST_COLUMNS, HEADINGS))
@@ -107,8 +113,7 @@ def show_run(
     from ..store import StoreError
     from ..store_queries import BadQuery, find_run, read_run_data, show
 
-    path, label = _database(db)
-    check_outputs(fmt, SHOW_FORMATS, db=path, output=output)
+    path, label = _database(db, fmt, SHOW_FORMATS, output)
     damaged = {}
     runs = _read(path, label, superseded=True, damaged=damaged)  # an id a report cites may have been replaced since
     if run.strip() in {str(key) for key in damaged}:
@@ -148,20 +153,11 @@ def export_runs(
     output: Output = None,
 ):
     """Every field of the stored records, one row per run, with its provenance and settings: for pandas, R or a spreadsheet."""
-    path, label = _database(db)
-    check_outputs(fmt, EXPORT_FORMATS, db=path, output=output)
-    if fmt == "parquet":
-        _check_parquet(output)
     from ..store_queries import export_rows
 
+    path, label = _database(db, fmt, EXPORT_FORMATS, output)
     rows = export_rows(only.select(_read(path, label)), nested=fmt == "json")
-    if fmt == "parquet":
-        from ..files import write_atomic
-
-        write_atomic(output, _parquet_bytes(rows))
-        wrote(output, False, f"{len(rows)} runs")
-    else:
-        _write(fmt, output, rows, list(dict.fromkeys(k for row in rows for k in row)), f"{len(rows)} runs")
+    _write(fmt, output, rows, list(dict.fromkeys(k for row in rows for k in row)), f"{len(rows)} runs")
 
 
 def _check_parquet(output: Optional[Path]) -> None:

@@ -127,8 +127,12 @@ def report(
     Every run is stored in the results database; stored runs are reused, so an interrupted report resumes and a repeated one returns at once. On a model with a floating base (a recorded walk, with --loads) it gives the walk's comparison instead: one run per method, the same methods on the forearm, the paper's claim tested; --torque, --opt, --feedforward or --all-cells add the paper's cells on the model."""
     from ..report.paper_methods import make_plan
 
+    from ..report.comparison import has_floating_base
+
     inputs = batch.check(fmt, conditions)
-    if _floating_base(conditions):  # compared with the forearm (report.comparison)
+    with bad_input():
+        floating = has_floating_base(conditions["model_name"], conditions.get("model", ()))
+    if floating:  # compared with the forearm (report.comparison)
         return _comparison_report(ctx, conditions, batch, flags, beyond=beyond, peers=peers, seeds=seeds,
                                   figures=figures, fmt=fmt, inputs=inputs)
     if figures is not None:
@@ -231,14 +235,6 @@ def study(
             text = studies.markdown(sweep, rows, settings, links)
     emit(text, batch.output)
     batch.wrote(len(sweep.all_specs()))
-
-
-def _floating_base(conditions: dict) -> bool:
-    """Whether the report's model has a floating base (a free joint on ground)."""
-    from ..report.comparison import has_floating_base
-
-    with bad_input():
-        return has_floating_base(conditions["model_name"], conditions.get("model", ()))
 
 
 def _gains(flags: MethodValues) -> tuple:
