@@ -3,7 +3,7 @@
 - Single options (``Kinematics``, ``Output``, ``Quiet``...): ``Annotated`` types a command's
   parameter takes.
 - Option groups (``Simulation``, ``RunOutputs``, ``Execution``, ``Cells``, ``Optimisation``):
-  frozen dataclasses whose fields are options or other groups (``runs.OneRun``, ``sweeps.Sweep``).
+  frozen dataclasses whose fields are options or other groups (``runs.OneRun``, ``sweeps.Batch``).
   A command takes one by a parameter annotated with it; ``with_groups`` puts the group's options in
   the command's signature (typer reads ``__signature__``), shown under the group's panel in --help,
   and hands the command one instance.
