@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from contextlib import contextmanager
 from typing import Annotated
 
 import typer
@@ -16,33 +17,40 @@ from ..registry import PluginError
 
 
 STARTED = time.perf_counter()
-
-
-FORMATS = ("table", "json", "csv")
-
-
-MAX_SEEDS = 1000  # runs per cell of a report
-
-
-MAX_JOBS = 256  # worker processes
-
-
-KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper; the default), "
-                   "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
-                   "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
-                   "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With another model (--model arm2, leg3 or a file): "
-                   "one of the motions its file declares (the library's: 'fdbench models show NAME'; the first is the default) or a "
-                   "CSV file t,<joint>... with one angle column per joint (optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
-
-
-INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
+FORMATS = ("table", "json", "csv")  # of the commands of one run
+SWEEP_FORMATS = ("md", "csv", "json")  # of report and study
 
 
 class BadInput(Exception):
     """Bad usage or input: exit code 2 with this one-line message."""
 
 
-class FdbenchGroup(TyperGroup):
+@contextmanager
+def bad_input(errors=ValueError, wording=str):
+    """The library's ``errors`` raised inside as bad input, their message worded by ``wording``."""
+    try:
+        yield
+    except errors as exc:
+        raise BadInput(wording(exc)) from None
+
+
+# the library's errors that are bad input wherever a command lets them out (by name: none is imported
+# before a command needs it), with the words put before their message
+LIBRARY_BAD_INPUT = {"StoreError": "--db: ", "BadFile": "", "BackendError": "", "BadQuery": ""}
+
+
+class HelpGroup(TyperGroup):
+    """A group of commands whose --help shows choices (registered names; no type noise on flags)."""
+
+    def resolve_command(self, ctx, args):
+        # the command about to run (not each one listed by --help, which stays fast)
+        name, command, rest = super().resolve_command(ctx, args)
+        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
+            _show_choices(command, ctx)
+        return name, command, rest
+
+
+class FdbenchGroup(HelpGroup):
     """Routes every error to one line on stderr with the contract's exit codes."""
 
     def invoke(self, ctx):
@@ -53,8 +61,9 @@ class FdbenchGroup(TyperGroup):
 
     def main(self, args=None, prog_name=None, **extra):
         extra.pop("standalone_mode", None)
-        self.help_requested = any(a in ("-h", "--help") for a in (sys.argv[1:] if args is None else args))
-        if any(a in ("-q", "--quiet") for a in (sys.argv[1:] if args is None else args)):
+        given = sys.argv[1:] if args is None else args
+        self.help_requested = any(a in ("-h", "--help") for a in given)
+        if any(a in ("-q", "--quiet") for a in given):
             from ..jit import quiet
 
             quiet()  # no notice of compilation either
@@ -68,9 +77,7 @@ class FdbenchGroup(TyperGroup):
             code = returned if isinstance(returned, int) else 0
             if code == 130:
                 error("interrupted")
-        except BadInput as exc:
-            code = error(str(exc), 2)
-        except PluginError as exc:
+        except (BadInput, PluginError) as exc:
             code = error(str(exc), 2)
         except KeyboardInterrupt:
             code = error("interrupted", 130)
@@ -84,10 +91,8 @@ class FdbenchGroup(TyperGroup):
                 context = getattr(exc, "ctx", None)
                 where = f"{context.command_path}: " if context is not None else ""
                 code = error(where + message, exc.exit_code)
-            elif type(exc).__name__ == "StoreError":  # the database became unusable during the work
-                code = error(f"--db: {exc}", 2)
-            elif type(exc).__name__ == "BadFile":  # an output found unwritable only when written
-                code = error(str(exc), 2)
+            elif type(exc).__name__ in LIBRARY_BAD_INPUT:  # e.g. an output found unwritable only when written
+                code = error(LIBRARY_BAD_INPUT[type(exc).__name__] + str(exc), 2)
             elif _output_full(exc):  # help text into '> /dev/full': as any full output
                 _closed_stdout()
                 code = error(f"standard output: cannot write: {exc.strerror}", 2)
@@ -97,28 +102,16 @@ class FdbenchGroup(TyperGroup):
                 code = error(f"{type(exc).__name__}: {exc}", 1)
         sys.exit(_flush_stdout(code))
 
-
-    def resolve_command(self, ctx, args):
-        # the command about to run (not each one listed by --help, which stays fast)
-        name, command, rest = super().resolve_command(ctx, args)
-        if command is not None and getattr(self, "help_requested", False):
-            _show_choices(command, ctx)
-        return name, command, rest
-
     def format_help(self, ctx, formatter):
         _show_choices(self, ctx)
         return super().format_help(ctx, formatter)
 
 
-class SubcommandGroup(TyperGroup):
-    """A group of subcommands (``runs``, ``models``) whose --help shows choices as the other
-    commands' do (no type noise on flags)."""
-
-    def resolve_command(self, ctx, args):
-        name, command, rest = super().resolve_command(ctx, args)
-        if command is not None and getattr(ctx.find_root().command, "help_requested", False):
-            _show_choices(command, ctx)
-        return name, command, rest
+def subcommands(name: str, help: str, **settings) -> typer.Typer:
+    """A group of subcommands of ``fdbench`` (``fdbench runs ...``)."""
+    group = typer.Typer(cls=HelpGroup, help=help, **settings)
+    app.add_typer(group, name=name)
+    return group
 
 
 # options whose valid values are registered names: (module, name of its registry), read for --help
@@ -140,8 +133,8 @@ def _choices(name: str, command: str):
 
         found = [motion for model in names() for motion in named_motions(model)]  # the library's, in order
         return list(dict.fromkeys(found)) + ["FILE"]
-    if name == "fmt":
-        return list(formats_of(command))
+    if name == "fmt":  # the --format values the command accepts (its help lists exactly these)
+        return list(SWEEP_FORMATS if command in ("report", "study") else FORMATS)
     return None
 
 
@@ -293,18 +286,6 @@ def _root(
     version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True, help="Print the version and exit.")] = False,
 ):
     """fdbench: trajectory tracking in forward dynamics, benchmarked."""
-
-
-MAX_THREADS = 1024
-
-
-REPORT_FORMATS = ("md", "csv", "json")
-STUDY_FORMATS = ("md", "csv", "json")
-
-
-def formats_of(command: str) -> tuple:
-    """The --format values ``command`` accepts (its help lists exactly these)."""
-    return {"report": REPORT_FORMATS, "study": STUDY_FORMATS}.get(command, FORMATS)
 
 
 def _compile_spinner(notice):

@@ -11,8 +11,7 @@ import time
 from pathlib import Path
 from typing import Optional
 
-
-from .app import BadInput, FORMATS, STARTED, write_stdout
+from .app import FORMATS, STARTED, BadInput, bad_input, write_stdout
 
 
 def check_choice(option: str, value: str, valid) -> str:
@@ -23,6 +22,23 @@ def check_choice(option: str, value: str, valid) -> str:
     return value
 
 
+def check_count(option: str, value: int | None, most: int) -> None:
+    """A count given to ``option`` (None: its default) in [1, ``most``]."""
+    if value is not None and not 1 <= value <= most:
+        raise BadInput(f"{option} must be an integer in [1, {most}], got {value}")
+
+
+def check_finite(**values) -> None:
+    for name, value in values.items():
+        if not math.isfinite(value):
+            raise BadInput(f"--{name.replace('_', '-')} must be a finite number, got {value}")
+
+
+def given(ctx, name: str) -> bool:
+    """Whether the option ``name`` was given (on the command line or by an environment variable)."""
+    return getattr(ctx.get_parameter_source(name), "name", None) in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
+
+
 # output options with two names: errors name both
 OUTPUT_LABELS = {"save_history": "--save-trajectory (--save-history)", "history": "--save-convergence (--history)"}
 
@@ -30,29 +46,20 @@ OUTPUT_LABELS = {"save_history": "--save-trajectory (--save-history)", "history"
 def check_outputs(fmt: str, valid=FORMATS, inputs: dict | None = None, db=None, **paths) -> None:
     """Validate --format and every output path before any work starts: each can be written, and
     none names an input file, the results database ``db`` or another output."""
-    from ..files import BadFile, check_distinct, check_writable
+    from ..files import check_distinct, check_writable
 
     check_choice("--format", fmt, valid)
     outputs = {OUTPUT_LABELS.get(option, "--" + option.replace("_", "-")): path for option, path in paths.items()
-               if not (option == "output" and str(path) == "-")}  # '-o -' is stdout
-    try:
-        for option, path in outputs.items():
-            if path is not None:
-                check_writable(path, option)
-        check_distinct(outputs, inputs, db)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
+               if option != "output" or str(path) != "-"}  # '-o -' is stdout
+    for option, path in outputs.items():
+        if path is not None:
+            check_writable(path, option)
+    check_distinct(outputs, inputs, db)
 
 
-def validated(spec):
-    try:
-        return spec.validate()
-    except ValueError as exc:
-        raise BadInput(with_option(str(exc))) from None
-
-
-def with_option(message: str) -> str:
+def with_option(message) -> str:
     """Messages from the library name parameters plainly (dt, kp); name them as options."""
+    message = str(message)
     for name in ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd"):
         if message.startswith(name + " "):
             return f"--{name}: " + message[len(name) + 1 :]
@@ -61,6 +68,11 @@ def with_option(message: str) -> str:
             option = "--opt" if name == "optimizer" else f"--{name}"
             return f"{option}: {message}"
     return message
+
+
+def validated(spec):
+    with bad_input(wording=with_option):
+        return spec.validate()
 
 
 def _console(stderr: bool = True):
@@ -74,7 +86,6 @@ def text_console():
     as wide as the terminal, with its colours, when stdout is one; otherwise plain text of
     $COLUMNS (default 80) columns, as a script reading a pipe or a file expects."""
     import io
-    import os
 
     from rich.console import Console
 
@@ -85,59 +96,128 @@ def text_console():
     return Console(file=io.StringIO(), width=width, color_system=None, highlight=False)
 
 
+def _printed(table, console=None) -> str:
+    console = console or text_console()
+    with console.capture() as capture:
+        console.print(table)
+    return capture.get()
+
+
 def say(quiet: bool, text: str) -> None:
     if not quiet:
         _console().print(text, soft_wrap=True)
 
 
-def _jsonable(record: dict) -> dict:
-    from ..files import finite_or_none
-
-    return {k: finite_or_none(float(v)) if isinstance(v, float) else v for k, v in record.items()}
-
-
 def render(record: dict, fmt: str, title: str) -> str:
-    if fmt == "json":
-        return json.dumps(_jsonable(record), indent=2) + "\n"
-    if fmt == "csv":
-        from ..files import csv_text
+    """A record {field: value} as JSON, CSV (a header and one row) or a person's table."""
+    from ..files import csv_text, finite_or_none
 
-        return csv_text(list(record), [["" if v is None else v for v in record.values()]])
+    if fmt == "json":
+        return json.dumps({k: finite_or_none(float(v)) if isinstance(v, float) else v for k, v in record.items()},
+                          indent=2) + "\n"
+    if fmt == "csv":
+        return csv_text(list(record), [list(record.values())])
     from rich.table import Table
 
     table = Table(title=title, show_header=True)
     table.add_column("field")
     table.add_column("value", overflow="fold")
     for key, value in record.items():
-        if value is None or value == "":
-            continue
-        table.add_row(key, _format_value(value))
+        if value is not None and value != "":
+            table.add_row(key, f"{value:.6g}" if isinstance(value, float) else str(value))
+    return _printed(table)
+
+
+def _cell(column: str, value) -> str:
+    if column == "created_at" and value:
+        return str(value)[:16].replace("T", " ")  # to the minute
+    return number_text(value)
+
+
+def number_text(value) -> str:
+    """A table's cell: 4 significant digits of a float, nothing for None."""
+    if value is None:
+        return ""
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+
+LONG_WORD = 24  # characters: a longer word (a file path) may be folded to fit a table
+
+
+def text_table(title: str, rows: list[dict], columns, headings: dict | None = None) -> str:
+    """A person's table of ``rows`` as text, as wide as the terminal (off a terminal: $COLUMNS or
+    80 columns), ``headings`` naming columns: its words wrap within their columns (one longer
+    than LONG_WORD is folded); a number is never cut, so a table that cannot fit is as wide as its
+    numbers need."""
+    from rich import box
+    from rich.table import Table
+
+    titles = [(headings or {}).get(c, c) for c in columns]
+    cells = [[_cell(c, row.get(c)) for c in columns] for row in rows]
+    texts = [[title] + [row[i] for row in cells] for i, title in enumerate(titles)]
+    widest = [max(len(text) for text in column) for column in texts]
+    numbers = [all(_is_number(text) for text in column[1:]) for column in texts]
+    narrowest = [max(len(word) for j, text in enumerate(column) for word in
+                     ([text] if numbers[i] and j else text.split() or [""])) for i, column in enumerate(texts)]
+    narrowest = [n if numbers[i] else min(n, LONG_WORD) for i, n in enumerate(narrowest)]
+    table = Table(title=title, show_header=True, box=box.SIMPLE_HEAD, pad_edge=False)
+    for heading in titles:
+        table.add_column(heading, overflow="fold")  # a word longer than LONG_WORD (a path) is folded
+    for row in cells:
+        table.add_row(*row)
     console = text_console()
-    with console.capture() as capture:
-        console.print(table)
-    return capture.get()
+    target, console.width = console.width, 10_000  # measured without a bound
+    room = target - (console.measure(table).maximum - sum(widest))  # less padding and rules
+    for column, width in zip(table.columns, _fit(widest, narrowest, room)):
+        column.width = width
+    console.width = max(target, console.measure(table).maximum)
+    return _printed(table, console)
 
 
-def _format_value(value) -> str:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return str(value)
+def _fit(widest: list, narrowest: list, room: int) -> list:
+    """Column widths (characters) from ``widest`` down to no less than ``narrowest``, the widest
+    column narrowed first, until they sum to ``room`` or can be narrowed no more."""
+    widths = list(widest)
+    while sum(widths) > room:
+        shrinkable = [k for k in range(len(widths)) if widths[k] > narrowest[k]]
+        if not shrinkable:
+            break
+        widths[max(shrinkable, key=lambda k: widths[k])] -= 1
+    return widths
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return text == ""
+    return True
+
+
+def to_file(output: Optional[Path]) -> bool:
+    """Whether --output names a file (not None, nor '-': standard output)."""
+    return output is not None and str(output) != "-"
 
 
 def emit(text: str, output: Optional[Path]) -> None:
-    if output is None or str(output) == "-":
-        write_stdout(text)
-    else:
+    if to_file(output):
         from ..files import write_atomic
 
         write_atomic(output, text)
+    else:
+        write_stdout(text)
+
+
+def wrote(output: Optional[Path], quiet: bool, what: str = "") -> None:
+    """One line on stderr once an output file is written (``what`` it holds), as every command says."""
+    if to_file(output):
+        say(quiet, f"wrote {output}" + (f" ({what})" if what else ""))
 
 
 def finish(record: dict, fmt: str, output, title: str, quiet: bool) -> None:
     record["command_time_s"] = time.perf_counter() - STARTED
     emit(render(record, fmt, title), output)
-    if output is not None and str(output) != "-":
-        say(quiet, f"wrote {output}")
+    wrote(output, quiet)
     if record.get("status") not in (None, "success"):
         say(quiet, f"[yellow]warning:[/] {record['message']}")
 
@@ -150,45 +230,34 @@ def history_csv(header, rows) -> str:
     return csv_text(header, ([repr(float(v)) for v in row] for row in rows))
 
 
-def _history_text(outcome) -> str:
-    return history_csv(*outcome.trajectory())
-
-
 def write_trajectory(outcome, path) -> None:
     if path is not None:
         from ..files import write_atomic
 
-        write_atomic(path, _history_text(outcome), OUTPUT_LABELS["save_history"])
+        write_atomic(path, history_csv(*outcome.trajectory()), OUTPUT_LABELS["save_history"])
 
 
 def check_store(db: Optional[Path]) -> None:
     """Refuse an unusable --db before any work starts: not a database, damaged, read-only,
-    locked, planted by another user. A new name is only checked: the database is made when the
-    run is stored, so a command that fails leaves none behind."""
+    locked, planted by another user (a StoreError, bad input). A new name is only checked: the
+    database is made when the run is stored, so a command that fails leaves none behind."""
     if db is not None:
-        from ..store import StoreError, check_path, open_store
+        from ..store import check_path, open_store
 
-        try:
-            if not os.path.lexists(db):
-                check_path(db)
-                return
-            with open_store(db) as store:
-                store.check_usable()
-        except StoreError as exc:
-            raise BadInput(f"--db: {exc}") from None
+        if not os.path.lexists(db):
+            check_path(db)
+            return
+        with open_store(db) as store:
+            store.check_usable()
 
 
 def store_run(outcome, spec, db: Optional[Path], quiet: bool) -> None:
-    if db is None:
-        return
-    from ..store import StoreError, open_store
+    if db is not None:
+        from ..store import open_store
 
-    try:
         with open_store(db) as store:
             store.add(spec, outcome)
-    except StoreError as exc:
-        raise BadInput(f"--db: {exc}") from None
-    say(quiet, f"stored in {db}")
+        say(quiet, f"stored in {db}")
 
 
 def check_gradient(gradient: str, optimizers=None) -> None:
@@ -207,49 +276,32 @@ def check_gradient(gradient: str, optimizers=None) -> None:
                            f"none is selected by --opt {' --opt '.join(optimizers)}")
 
 
-def bracketed(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
-    """``NAME[KEY=VALUE,...]`` of --torque, --opt or --controller: (NAME, ``flags`` (the command's
-    own option flags of that kind) with the bracket's options on top), so that a method, a plugin's
-    included, receives any option its class takes. A key it does not take, or one also given as its
-    own flag on the command line, is bad input."""
-    name, given = _bracket_options(ctx, text, option, flags, registry, kind)
-    return name, {**flags, **given}
+def bracketed(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
+    """The ``NAME[KEY=VALUE,...]`` entries of --torque, --opt or --controller: their names (None:
+    the default selection) and one set of options for them all, ``flags`` (the command's own
+    option flags of that kind) with the brackets' options on top, so that a method, a plugin's
+    included, receives any option its class takes (each keeps those it takes). A key it does not
+    take, one also given as its own flag on the command line, or one given two values in two
+    brackets is bad input."""
+    from ..method_options import check_method_options
+    from ..registry import parse_method
 
-
-def bracketed_all(ctx, entries, option: str, flags: dict, registry, kind: str) -> tuple[list | None, dict]:
-    """``bracketed`` for a repeatable selection (report, study): the names (None: the default
-    selection) and one set of options for them all, each method keeping those it takes; one key
-    given two values in two brackets is bad input."""
     if not entries:
         return entries, flags
     names, merged, given_by = [], dict(flags), {}
     for entry in entries:
-        name, given = _bracket_options(ctx, entry, option, flags, registry, kind)
+        with bad_input(wording=lambda exc: str(exc) if str(exc).startswith(option) else f"{option}: {exc}"):
+            name, options = parse_method(entry, option)
+            check_method_options(registry, name, options, kind)
         names.append(name)
-        for key, value in given.items():
+        for key, value in options.items():
+            if key in flags and given(ctx, key):
+                raise BadInput(f"{option}: {key} is given both in {name}[...] and as --{key.replace('_', '-')}")
             if key in given_by and merged[key] != value:
                 raise BadInput(f"{option}: {key} is {merged[key]} in {given_by[key]}[...] and {value} in "
                                f"{name}[...]; give one value")
             merged[key], given_by[key] = value, name
     return names, merged
-
-
-def _bracket_options(ctx, text: str, option: str, flags: dict, registry, kind: str) -> tuple[str, dict]:
-    """(NAME, the options of its brackets) of ``NAME[KEY=VALUE,...]``, checked (see ``bracketed``)."""
-    from ..method_options import check_method_options
-    from ..registry import parse_method
-
-    try:
-        name, given = parse_method(text, option)
-        check_method_options(registry, name, given, kind)
-    except ValueError as exc:
-        message = str(exc)
-        raise BadInput(message if message.startswith(option) else f"{option}: {message}") from None
-    for key in given:
-        source = ctx.get_parameter_source(key) if ctx is not None and key in flags else None
-        if getattr(source, "name", None) in ("COMMANDLINE", "ENVIRONMENT"):
-            raise BadInput(f"{option}: {key} is given both in {name}[...] and as --{key.replace('_', '-')}")
-    return name, given
 
 
 def check_method_ranges(registry, options: dict) -> None:
@@ -260,12 +312,10 @@ def check_method_ranges(registry, options: dict) -> None:
 
     for name, cls in registry.items():
         taken = taken_options(registry, name)
-        given = {k: v for k, v in options.items() if k in taken and v is not None and v != "auto"}
-        if given:
-            try:
-                cls(**given)
-            except ValueError as exc:
-                raise BadInput(str(exc)) from None
+        chosen = {k: v for k, v in options.items() if k in taken and v is not None and v != "auto"}
+        if chosen:
+            with bad_input():
+                cls(**chosen)
 
 
 def applicable_options(ctx, options: dict, registry, name: str, choice: str) -> dict:
@@ -276,49 +326,46 @@ def applicable_options(ctx, options: dict, registry, name: str, choice: str) -> 
 
     taken = taken_options(registry, name)
     for key in options:
-        source = ctx.get_parameter_source(key)
-        if key not in taken and getattr(source, "name", None) in ("COMMANDLINE", "ENVIRONMENT"):
+        if key not in taken and given(ctx, key):
             allowed = ", ".join("--" + k.replace("_", "-") for k in taken if k in options) or "no options"
             raise BadInput(f"--{key.replace('_', '-')} does not apply to {choice} {name} (it takes {allowed})")
     return {k: v for k, v in options.items() if k in taken}
-
-
-def check_finite(**values) -> None:
-    for name, value in values.items():
-        if not math.isfinite(value):
-            raise BadInput(f"--{name.replace('_', '-')} must be a finite number, got {value}")
 
 
 def methods_text() -> str:
     from ..optimizers import OPTIMIZERS
     from ..torques import TORQUES
 
-    lines = ["torques (--torque):"]
-    lines += [f"  {name:<12} {cls.summary}" for name, cls in TORQUES.items()]
-    lines += ["optimizers (--opt):"]
-    lines += [f"  {name:<12} {cls.summary}" for name, cls in OPTIMIZERS.items()]
+    lines = ["torques (--torque):"] + [f"  {name:<12} {cls.summary}" for name, cls in TORQUES.items()]
+    lines += ["optimizers (--opt):"] + [f"  {name:<12} {cls.summary}" for name, cls in OPTIMIZERS.items()]
     from ..controllers import CONTROLLERS
-
-    lines += ["controllers (control --controller):"]
-    lines += [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
     from ..models import names, summary
 
+    lines += ["controllers (control --controller):"] + [f"  {name:<15} {cls.summary}" for name, cls in CONTROLLERS.items()]
     lines += ["models (--model NAME, or a model file):"] + [f"  {name:<12} {summary(name)}" for name in names()]
     return "\n".join(lines) + "\n"
 
 
-def check_names(torques, optimizers) -> None:
+def shooting_methods(ctx, torques, optimizers, flags: dict, penalty_weight: float) -> tuple:
+    """The torques and optimisers selected (``NAME[KEY=VALUE,...]`` entries; None: the default
+    set) and their options, {registry: {option: value}} in ``flags``, checked before any work:
+    (torque names, optimiser names, torque options, optimiser options)."""
     from ..optimizers import OPTIMIZERS
     from ..registry import UnknownName
     from ..torques import TORQUES
 
-    try:
+    check_finite(**{k: v for k, v in flags["optimizers"].items() if isinstance(v, float)},
+                 penalty_weight=penalty_weight)
+    torques, torque_options = bracketed(ctx, torques, "--torque", flags["torques"], TORQUES, "torque")
+    optimizers, optimizer_options = bracketed(ctx, optimizers, "--opt", flags["optimizers"], OPTIMIZERS, "optimizer")
+    with bad_input(UnknownName, with_option):
         for name in torques or ():
             TORQUES[name]
         for name in optimizers or ():
             OPTIMIZERS[name]
-    except UnknownName as exc:
-        raise BadInput(with_option(str(exc))) from None
+    check_method_ranges(TORQUES, torque_options)
+    check_method_ranges(OPTIMIZERS, optimizer_options)
+    return torques, optimizers, torque_options, optimizer_options
 
 
 class Progress:

@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .app import BadInput
+from .app import BadInput, bad_input
 
 MOTION_PANEL = "Motion and model"
 
@@ -55,10 +55,8 @@ def with_conditions(command):
         if kwargs.get("kinematics") is None:
             from ..models import default_motion
 
-            try:
+            with bad_input():
                 kwargs["kinematics"] = default_motion(conditions["model_name"])
-            except ValueError as exc:
-                raise BadInput(str(exc)) from None
         returned = command(conditions=conditions, **kwargs)
         warn_opensim(conditions["model_name"], kwargs.get("kinematics"), kwargs.get("quiet", False))
         return returned
@@ -104,17 +102,16 @@ def warn_opensim(model_name: str, kinematics: str, quiet: bool) -> None:
             sys.stderr.write(f"fdbench: warning: {note}\n")
 
 
-def _conditions(radians, cutoff_hz, smoothing, spline_lambda, sample_dt, noise_deg, capture_hz, plant, model,
-                loads, model_file) -> dict:
+def _conditions(plant, model, loads, model_file, **motion) -> dict:
     """RunSpec fields from the CONDITIONS options (KEY=VALUE pairs parsed, the model file read)."""
+    from ..models import is_file
+
     names = [item.strip() for item in model or [] if "=" not in item]
     pairs = _model_file(model_file) if model_file is not None else []
     pairs += _key_values("--model", [item for item in model or [] if "=" in item])
-    name = _model_name(names)
-    return dict(radians=radians, cutoff_hz=cutoff_hz, smoothing=smoothing, spline_lambda=spline_lambda,
-                sample_dt=sample_dt, noise_deg=noise_deg, capture_hz=capture_hz,
-                plant=tuple(_key_values("--plant", plant or [])), model=tuple(pairs),
-                _inputs={"--model-file": model_file, **_model_input(name), **_loads_inputs(loads)}, model_name=name,
+    name, plant = _model_name(names), tuple(_key_values("--plant", plant or []))
+    inputs = {"--model-file": model_file, **({"--model": Path(name)} if is_file(name) else {}), **_loads_inputs(loads)}
+    return dict(motion, plant=plant, model=tuple(pairs), _inputs=inputs, model_name=name,
                 **({"loads": str(loads)} if loads is not None else {}))
 
 
@@ -122,37 +119,24 @@ def _loads_inputs(loads) -> dict:
     """{'--loads': the file, '--loads data': its data file}: inputs the outputs must not overwrite."""
     if loads is None:
         return {}
-    from ..files import BadFile
     from ..multibody.loads import data_file
 
-    try:
-        return {"--loads": Path(loads), "--loads (its data file)": data_file(loads)}
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
+    return {"--loads": Path(loads), "--loads (its data file)": data_file(loads)}
 
 
 def _model_name(names: list) -> str:
     """The one model named by --model (default: forearm): a library name or a model file."""
-    from ..models import check_name
+    from ..models import check_name, names as library_names
 
     if len(set(names)) > 1:
         raise BadInput(f"--model: name one model, got {', '.join(names)}")
     name = names[0] if names else "forearm"
-    from ..models import names
-
     try:
         return check_name(name)
     except ValueError as exc:
-        known = name in names() or not name or not any(c in name for c in "./")
+        known = name in library_names() or not name or not any(c in name for c in "./")
         message = str(exc) if str(exc).startswith("--model") else f"--model: {exc}"
         raise BadInput(message + (" (or KEY=VALUE)" if known else "")) from None
-
-
-def _model_input(name: str) -> dict:
-    """{'--model': path} for a model file (an input the outputs must not overwrite), else {}."""
-    from ..models import is_file
-
-    return {"--model": Path(name)} if is_file(name) else {}
 
 
 def _key_values(option: str, items) -> list:
@@ -171,12 +155,9 @@ def _key_values(option: str, items) -> list:
 
 def _model_file(path: Path) -> list:
     """(key, value) pairs of a TOML or JSON model file (a table of numbers, or one table of them)."""
-    from ..files import BadFile, parse_json, read_input_text
+    from ..files import parse_json, read_input_text
 
-    try:
-        text = read_input_text(path, "--model-file", 2**20)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
+    text = read_input_text(path, "--model-file", 2**20)
     try:
         if path.suffix.lower() == ".json":
             data = parse_json(text)
@@ -213,21 +194,16 @@ def spec_inputs(conditions: dict, kinematics: str, **others) -> dict:
     return {**inputs, **others}
 
 
-def _fields(conditions: dict) -> dict:
-    return {k: v for k, v in conditions.items() if not k.startswith("_")}
-
-
 def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions: dict | None = None) -> dict:
     """RunSpec fields shared by every command that simulates (a motion file, a model file and a
     loads file enter by their digests)."""
     import os
 
-    from ..run_inputs import model_digest, motion_digest
-    from ..files import BadFile
     from ..models import is_file, named_motions
+    from ..run_inputs import model_digest, motion_digest
 
     fields = dict(kinematics=kinematics, integrator=integrator, dt=dt, rtol=rtol, atol=atol, alpha=alpha, xi=xi,
-                  omega=omega, **_fields(conditions or {}))
+                  omega=omega, **{k: v for k, v in (conditions or {}).items() if not k.startswith("_")})
     model = fields.get("model_name", "forearm")
     files = []  # (option, digest of its file, the file)
     if kinematics not in named_motions(model):
@@ -243,12 +219,8 @@ def run_fields(kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditi
         from ..multibody.loads import loads_digest  # only with loads: it imports the engine
 
         files.append(("--loads", loads_digest, fields["loads"]))
-    try:
-        digests = [(option, digest(path)) for option, digest, path in files]
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
-    if digests:
-        fields["inputs"] = tuple(sorted(digests))
+    if files:  # a file that cannot be read: BadFile, bad input
+        fields["inputs"] = tuple(sorted((option, digest(path)) for option, digest, path in files))
     return fields
 
 

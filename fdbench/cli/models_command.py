@@ -9,27 +9,19 @@ from typing import Annotated
 
 import typer
 
-from .app import BadInput, SubcommandGroup, app
-from .common import check_outputs, emit, say
+from .app import FORMATS, bad_input, subcommands
+from .common import check_outputs, emit, render, say, text_table
 from .options import Output, format_option
 
-
-models_app = typer.Typer(
-    cls=SubcommandGroup,
-    help="The library of models (bodies, joints, loads as TOML files); 'fdbench models show NAME|FILE' checks and "
-    "shows one, your own file included.",
-    invoke_without_command=True,
-)
-app.add_typer(models_app, name="models")
-
-LIST_FORMATS = ("table", "json", "csv")
+models_app = subcommands("models", "The library of models (bodies, joints, loads as TOML files); 'fdbench models show "
+                         "NAME|FILE' checks and shows one, your own file included.", invoke_without_command=True)
 SHOW_FORMATS = ("table", "json", "toml")
 
 
 @models_app.callback()
 def list_models(
     ctx: typer.Context,
-    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    fmt: Annotated[str, format_option(FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per library model: its name, bodies, joints (its coordinates), total mass and what it is."""
@@ -37,7 +29,7 @@ def list_models(
         return
     from ..models import library
 
-    check_outputs(fmt, LIST_FORMATS, output=output)
+    check_outputs(fmt, FORMATS, output=output)
     rows = [_summary(_checked(name)) for name in library()]
     if fmt == "json":
         text = json.dumps(rows, indent=2) + "\n"
@@ -46,13 +38,11 @@ def list_models(
 
         text = csv_text(list(rows[0]), [[" ".join(v) if isinstance(v, list) else v for v in row.values()] for row in rows])
     else:
-        from .store_commands import text_table
-
         columns = ("name", "bodies", "coordinates", "mass_kg", "description")
         shown = [{k: ", ".join(v) if isinstance(v, list) else v for k, v in row.items()} | {"mass_kg": f"{row['mass_kg']:.6g}"}
                  for row in rows]
         text = text_table(f"{len(rows)} models in the library ('fdbench models show NAME' for one)", shown, columns,
-                      {"mass_kg": "mass (kg)", "coordinates": "joints (coordinates)"})
+                          {"mass_kg": "mass (kg)", "coordinates": "joints (coordinates)"})
     emit(text, output)
 
 
@@ -79,10 +69,9 @@ def show_model(
 
 
 def _checked(name_or_path: str):
-    from ..models import is_osim
-    from ..models import find_model
+    from ..models import find_model, is_osim
 
-    try:
+    with bad_input():
         if is_osim(name_or_path):  # an OpenSim model: its import's notes as warnings
             from ..multibody.osim import import_osim
 
@@ -91,8 +80,6 @@ def _checked(name_or_path: str):
                 say(False, f"[yellow]warning:[/] {note}")
             return found
         return find_model(name_or_path, "NAME|FILE")
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
 
 
 def _summary(model) -> dict:
@@ -114,10 +101,14 @@ def _point(point) -> str:
     return f"({point[0]:.6g}, {point[1]:.6g})"
 
 
+def _table(title: str, rows: list[dict], columns=None) -> str:
+    """A person's table of ``rows`` (columns: the first row's keys); nothing without rows or columns."""
+    return text_table(title, rows, columns or list(rows[0])) if rows or columns else ""
+
+
 def _show_text(model, source: str) -> str:
     from ..multibody.model import end_of
-    from .common import render
-    from .store_commands import text_table
+    from ..multibody.model_changes import short_key_values
 
     header = {"name": model.name, "description": model.description, "source": source,
               "gravity (m/s^2)": _point(model.gravity), "total mass (kg)": f"{model.total_mass:.6g}",
@@ -133,28 +124,25 @@ def _show_text(model, source: str) -> str:
                "limits": "" if j.limits is None else _point(j.limits)} for k, j in enumerate(model.joints)]
     loads = [{"#": str(i), "body": load.body, "at": _point(load.at), "force": _point(load.force)}
              for i, load in enumerate(model.loads)]
-    text = render(header, "table", f"model {model.name}")
-    text += text_table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)",
-                   bodies, list(bodies[0]))
-    text += text_table("joints in order (m, rad)", joints, list(joints[0]))
-    if loads:
-        text += text_table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
-    return text + _muscles_text(model) + _motions_text(model) + _keys_text(model) + _paths_text(model)
+    values = short_key_values(model)
+    keys = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
+    paths = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
+    return (render(header, "table", f"model {model.name}")
+            + _table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)", bodies)
+            + _table("joints in order (m, rad)", joints)
+            + _table("loads (m in the body's frame, N in world axes)", loads) + _muscles_text(model) + _motions_text(model)
+            + _table("short keys (--model KEY=VALUE)", keys) + _table("paths (--model PATH=VALUE)", paths, ["path", "value"]))
 
 
 def _muscles_text(model) -> str:
     """The muscles: constants and path (the bodies of its points, or the coordinates of its polynomial)."""
-    from .store_commands import text_table
-
     rows = [{"name": m.name, "F_max (N)": f"{m.max_isometric_force:.6g}",
              "l_opt (m)": f"{m.optimal_fiber_length:.6g}", "l_slack (m)": f"{m.tendon_slack_length:.6g}",
              "tendon": m.tendon, "path": (f"points on {', '.join(p.body for p in m.path.points)}"
                                           if hasattr(m.path, "points") else
                                           f"polynomial in {', '.join(m.path.coordinates)} ({len(m.path.terms)} terms)")}
             for m in model.muscles]
-    if not rows:
-        return ""
-    return text_table("muscles (max isometric force, optimal fibre length, tendon slack length)", rows, list(rows[0]))
+    return _table("muscles (max isometric force, optimal fibre length, tendon slack length)", rows)
 
 
 def _joint_type(joint) -> str:
@@ -169,8 +157,6 @@ def _motions_text(model) -> str:
     angle) or metres (a translation)."""
     import math
 
-    from .store_commands import text_table
-
     kinds = dict(zip(model.coordinates, model.coordinate_kinds))
 
     def span(joint, a, b):
@@ -181,7 +167,7 @@ def _motions_text(model) -> str:
     rows = [{"name": m.name + (" (default)" if i == 0 else ""), "type": m.type, "duration (s)": f"{m.duration:.6g}"}
             | {key: value for (joint, a), (_, b) in zip(m.start, m.goal) for key, value in span(joint, a, b).items()}
             for i, m in enumerate(model.motions)]
-    return text_table("motions (--motion NAME; from rest to rest)", rows, list(rows[0])) if rows else ""
+    return _table("motions (--motion NAME; from rest to rest)", rows)
 
 
 def _path_values(model) -> dict:
@@ -191,23 +177,6 @@ def _path_values(model) -> dict:
     from ..multibody.model_changes import path_value
 
     return {path: path_value(model, path) for path in change_paths(model)}
-
-
-def _paths_text(model) -> str:
-    from .store_commands import text_table
-
-    rows = [{"path": path, "value": f"{value:.6g}"} for path, value in _path_values(model).items()]
-    return text_table("paths (--model PATH=VALUE)", rows, ["path", "value"])
-
-
-def _keys_text(model) -> str:
-    """The short keys of --model KEY=VALUE: the path each sets and its value in this model."""
-    from ..multibody.model_changes import short_key_values
-    from .store_commands import text_table
-
-    values = short_key_values(model)
-    rows = [{"key": name, "path": target, "value": f"{values[name]:.6g}"} for name, target in model.keys]
-    return text_table("short keys (--model KEY=VALUE)", rows, list(rows[0])) if rows else ""
 
 
 _END_ORIGIN = {"joint": "first child joint", "load": "farthest load", "com": "centre of mass",

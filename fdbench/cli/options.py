@@ -3,9 +3,10 @@
 - Single options (``Kinematics``, ``Output``, ``Quiet``...): ``Annotated`` types a command's
   parameter takes.
 - Option groups (``Simulation``, ``RunOutputs``, ``Execution``, ``Cells``, ``Optimisation``):
-  frozen dataclasses whose fields are options. A command takes one by a parameter annotated with
-  it; ``with_groups`` puts the group's options in the command's signature (typer reads
-  ``__signature__``), shown under the group's panel in --help, and hands the command one instance.
+  frozen dataclasses whose fields are options or other groups (``runs.OneRun``, ``sweeps.Batch``).
+  A command takes one by a parameter annotated with it; ``with_groups`` puts the group's options in
+  the command's signature (typer reads ``__signature__``), shown under the group's panel in --help,
+  and hands the command one instance.
 - Method options (``--kp``, ``--knots``, ``--sigma0``...): generated from what the registered
   methods declare (``fdbench.method_options.MethodOption``), by ``methods_command``, when the
   command runs or shows its help: a method registered by a plugin gets its flags without a change
@@ -25,10 +26,18 @@ from typing import Annotated, Optional
 import typer
 from typer.core import TyperCommand
 
-from .app import BadInput, INTEGRATOR_HELP, KINEMATICS_HELP, MAX_THREADS
+from .app import BadInput
 from .common import check_outputs, check_store, finish, store_run, write_trajectory
 from .conditions import MOTION_PANEL, run_fields
 
+MAX_THREADS = 1024
+KINEMATICS_HELP = ("Desired motion: 'paper' (eq. 5 with its derivatives as printed; reproduces the paper; the default), "
+                   "'exact' (eq. 5 differentiated by the chain rule through t*), or a CSV file of a recorded joint angle: "
+                   "columns t (s) and theta (deg; --radians), optionally theta_vel and theta_acc (deg/s, deg/s^2), any "
+                   "duration and sampling, as 'fdbench inverse --format csv' and --save-trajectory write them. With another model (--model arm2, leg3 or a file): "
+                   "one of the motions its file declares (the library's: 'fdbench models show NAME'; the first is the default) or a "
+                   "CSV file t,<joint>... with one angle column per joint (optionally <joint>_vel, <joint>_acc). --kinematics is an older name.")
+INTEGRATOR_HELP = "rk4 (compiled, fixed step) or a scipy solve_ivp method: rk45, dop853, lsoda, radau, bdf."
 
 Kinematics = Annotated[Optional[str], typer.Option("--motion", "--kinematics", help=KINEMATICS_HELP, show_default=False,
                                                    rich_help_panel=MOTION_PANEL)]
@@ -42,6 +51,8 @@ SaveHistory = Annotated[Optional[Path], typer.Option("--save-trajectory", "--sav
 Quiet = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or messages on stderr.")]
 NoiseSeed = Annotated[int, typer.Option("--seed", help="Seed of the --noise-deg noise; the same seed gives the same noisy motion.")]
 Db = Annotated[Optional[Path], typer.Option("--db", help="Also store the run in this results database (SQLite).")]
+
+
 def format_option(choices, help_text: str):
     """--format of a command whose formats are fixed (its help lists them as choices)."""
     return typer.Option("--format", "-f", metavar="[" + "|".join(choices) + "]", help=help_text)
@@ -52,9 +63,10 @@ Threads = Annotated[Optional[int], typer.Option("--threads", help=f"Threads eval
 
 # ---- option groups ------------------------------------------------------------------------------
 
-def option_group(panel: str):
+def option_group(panel: str | None):
     """Class decorator: a frozen dataclass whose fields are options (``Annotated[type,
-    typer.Option(...)] = default``), shown under ``panel`` in --help."""
+    typer.Option(...)] = default``) or groups, shown under ``panel`` in --help (None: an option's own
+    panel, or none)."""
 
     def make(cls):
         cls = dataclasses.dataclass(frozen=True)(cls)
@@ -64,17 +76,30 @@ def option_group(panel: str):
     return make
 
 
-def _group_parameters(group) -> list:
-    """The group's fields as keyword-only parameters, each option under the group's panel."""
+def _is_group(annotation) -> bool:
+    return isinstance(annotation, type) and hasattr(annotation, "panel") and dataclasses.is_dataclass(annotation)
+
+
+def _group_parameters(group, panel: str | None = None) -> tuple[list, typing.Callable]:
+    """The options of ``group`` and of the groups among its fields as keyword-only parameters, each
+    under its own panel, else its group's, else ``panel``; and the function that makes the group
+    from the command's keyword arguments (taking its options out of them)."""
     hints = typing.get_type_hints(group, include_extras=True)
-    parameters = []
+    panel = group.panel or panel
+    parameters, makers = [], {}
     for field in dataclasses.fields(group):
+        if _is_group(hints[field.name]):
+            inner, makers[field.name] = _group_parameters(hints[field.name], panel)
+            parameters += inner
+            continue
         kind, info = typing.get_args(hints[field.name])
         info = copy.copy(info)  # an option shared with a command outside the group keeps its own panel
-        info.rich_help_panel = info.rich_help_panel or group.panel
+        info.rich_help_panel = info.rich_help_panel or panel
         parameters.append(inspect.Parameter(field.name, inspect.Parameter.KEYWORD_ONLY, default=field.default,
                                             annotation=Annotated[kind, info]))
-    return parameters
+        makers[field.name] = None  # an option: its value as given
+    return parameters, lambda kwargs: group(**{name: kwargs.pop(name) if make is None else make(kwargs)
+                                               for name, make in makers.items()})
 
 
 class MethodValues(dict):
@@ -92,9 +117,8 @@ def with_groups(command):
     flat, groups, methods, context = [], {}, None, None
     for parameter in signature.parameters.values():
         annotation = parameter.annotation
-        if isinstance(annotation, type) and hasattr(annotation, "panel") and dataclasses.is_dataclass(annotation):
-            fields = _group_parameters(annotation)
-            groups[parameter.name] = (annotation, [p.name for p in fields])
+        if _is_group(annotation):
+            fields, groups[parameter.name] = _group_parameters(annotation)
             flat += fields
             continue
         if annotation is MethodValues:
@@ -106,8 +130,8 @@ def with_groups(command):
 
     @functools.wraps(command)
     def wrapper(**kwargs):
-        for name, (group, names) in groups.items():
-            kwargs[name] = group(**{field: kwargs.pop(field) for field in names})
+        for name, make in groups.items():
+            kwargs[name] = make(kwargs)
         if methods is not None:
             kwargs[methods] = kwargs[context].meta.get(METHOD_VALUES, MethodValues())
         return command(**kwargs)
@@ -129,12 +153,9 @@ class Simulation:
     xi: Xi = 1.0
     omega: Omega = 10.0
 
-    def fields(self) -> dict:
-        return dataclasses.asdict(self)
-
     def spec_fields(self, kinematics: str, conditions: dict | None) -> dict:
         """RunSpec fields of a run on ``kinematics`` under ``conditions`` (see ``run_fields``)."""
-        return run_fields(kinematics, **self.fields(), conditions=conditions)
+        return run_fields(kinematics, **dataclasses.asdict(self), conditions=conditions)
 
 
 @option_group("Output")
@@ -182,12 +203,9 @@ class Execution:
 
     def executor(self):
         """The execution backend of --backend/--jobs/--scheduler, checked before any work."""
-        from ..execution import BackendError, make_backend
+        from ..execution import make_backend
 
-        try:
-            return make_backend(self.backend, jobs=self.jobs, scheduler=self.scheduler)
-        except BackendError as exc:
-            raise BadInput(str(exc)) from None
+        return make_backend(self.backend, jobs=self.jobs, scheduler=self.scheduler)
 
 
 @option_group("Cells")

@@ -7,8 +7,8 @@ from typing import Annotated
 
 import typer
 
-from .app import BadInput, app
-from .common import check_outputs, emit, say
+from .app import BadInput, app, bad_input
+from .common import check_outputs, emit, say, wrote
 from .options import Output, Quiet
 
 MAX_TILT_HELP = ("Largest angle (deg, in [0, 45]) by which a joint axis, a child frame or gravity may be off the "
@@ -28,15 +28,12 @@ def import_osim_command(
         raise BadInput(f"--max-tilt: must be in [0, 45] deg, got {max_tilt:g}")
     from ..multibody.osim import import_osim, toml_text
 
-    try:
+    with bad_input():
         found, notes = import_osim(model, max_tilt, option="MODEL.osim")
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
     emit(toml_text(found, notes, model), output)
     for note in notes:
         say(quiet, f"[yellow]warning:[/] {note}")
-    if output is not None and str(output) != "-":
-        say(quiet, f"wrote {output}")
+    wrote(output, quiet)
 
 
 @app.command("export-osim")
@@ -52,11 +49,8 @@ def export_osim_command(
     check_outputs("osim", ("osim",), inputs={"NAME|FILE": library().get(model, Path(model))}, output=output)
     from ..multibody.osim import check_exportable, to_osim
 
-    try:
+    with bad_input():
         found = find_model(model, "NAME|FILE")
         check_exportable(found)
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
     emit(to_osim(found), output)
-    if output is not None and str(output) != "-":
-        say(quiet, f"wrote {output}")
+    wrote(output, quiet)

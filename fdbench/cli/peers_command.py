@@ -7,8 +7,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from .app import BadInput, app
-from .common import validated
+from .app import BadInput, app, bad_input
+from .common import given, validated
 from .conditions import noise_seed, run_fields, spec_inputs, with_conditions
 from .options import Alpha, Dt, Kinematics, NoiseSeed, Omega, RunOutputs, Xi, with_groups
 
@@ -41,29 +41,21 @@ def peer(
     from ..spec import peer_spec
 
     out.check(spec_inputs(conditions, kinematics))
-    try:
+    with bad_input():
         (name,) = parse_names(name, "PEER")
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
-    given = {key for key in ("kp", "kd", *PEER_OPTIONS)
-             if getattr(ctx.get_parameter_source(key), "name", None) in ("COMMANDLINE", "ENVIRONMENT")}
     takes = {"opensim": {"kp", "kd"}, "opensim-cmc": set()}.get(name, set(PEER_OPTIONS))
-    if given - takes:
-        wrong = sorted(given - takes)[0]
-        raise BadInput(f"--{wrong.replace('_', '-')} does not apply to peer {name} (it takes "
+    wrong = [key for key in ("kp", "kd", *PEER_OPTIONS) if key not in takes and given(ctx, key)]
+    if wrong:
+        raise BadInput(f"--{min(wrong).replace('_', '-')} does not apply to peer {name} (it takes "
                        f"{', '.join('--' + k.replace('_', '-') for k in sorted(takes)) or 'none of the peer options'})")
     options = dict(nodes=nodes, regularization=regularization, tolerance=tolerance, max_iter=max_iter)
-    try:
+    with bad_input():
         spec = peer_spec(name, options if name == "moco" else None, kp, kd, **noise_seed(conditions, seed),
                          **run_fields(kinematics, "rk4", dt, 1e-6, 1e-9, alpha, xi, omega, conditions))
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
     spec = validated(spec)
     out.check_store()
-    try:
+    with bad_input():
         check_available()
-    except ValueError as exc:
-        raise BadInput(str(exc)) from None
     from ..method_runs import run
 
     outcome = run(spec)

@@ -7,16 +7,35 @@ from typing import Annotated, Optional
 
 import typer
 
-from .app import BadInput, MAX_THREADS, app
+from .app import BadInput, app, bad_input
 from .common import (
-    OUTPUT_LABELS, applicable_options, bracketed, check_finite, check_gradient, check_method_ranges, check_outputs,
-    emit, finish, history_csv, methods_text, Progress, say, validated,
+    OUTPUT_LABELS, Progress, applicable_options, bracketed, check_count, check_finite, check_gradient,
+    check_method_ranges, check_outputs, emit, finish, history_csv, methods_text, say, shooting_methods, validated,
 )
 from .conditions import noise_seed, spec_inputs, with_conditions
 from .options import (
-    Format, Kinematics, MethodValues, NoiseSeed, Optimisation, Output, Quiet, RunOutputs, Simulation, Threads,
-    methods_command, with_groups,
+    MAX_THREADS, Format, Kinematics, MethodValues, NoiseSeed, Optimisation, Output, Quiet, RunOutputs, Simulation,
+    Threads, methods_command, option_group, with_groups,
 )
+
+
+@option_group(None)
+class OneRun:
+    """A command of one run: its motion, the seed of its noise, how it integrates, where it writes."""
+
+    kinematics: Kinematics = None
+    seed: NoiseSeed = 0
+    sim: Simulation = None
+    out: RunOutputs = None
+
+    def check(self, conditions: dict, inputs: dict | None = None, **paths) -> None:
+        """The outputs ``out`` and ``paths`` checked before any work, against the motion's, the
+        model's and the command's ``inputs`` files."""
+        self.out.check(spec_inputs(conditions, self.kinematics, **(inputs or {})), **paths)
+
+    def fields(self, conditions: dict) -> dict:
+        """The RunSpec fields of the run under ``conditions``."""
+        return {**noise_seed(conditions, self.seed), **self.sim.spec_fields(self.kinematics, conditions)}
 
 
 @app.command()
@@ -51,28 +70,21 @@ def inverse(
 def simulate(
     torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and the joint's torque (N m): theta, theta_torque or torque for the forearm, one column per joint (<joint> or <joint>_torque) for another model; covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
     params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
-    kinematics: Kinematics = None,
-    seed: NoiseSeed = 0,
-    sim: Simulation = None,
-    out: RunOutputs = None,
+    one: OneRun = None,
     conditions: dict = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from ..spec import RunSpec
 
-    out.check(spec_inputs(conditions, kinematics, **{"--torque-file": torque_file, "--params": params}))
+    one.check(conditions, {"--torque-file": torque_file, "--params": params})
     if torque_file is not None and params is not None:
         raise BadInput("--torque-file and --params: give one of them, not both")
-    spec = validated(RunSpec(command="simulate", **noise_seed(conditions, seed), **sim.spec_fields(kinematics, conditions)))
+    spec = validated(RunSpec(command="simulate", **one.fields(conditions)))
     from ..method_runs import run_simulation
-    from ..files import BadFile
 
-    out.check_store()
-    try:
-        outcome = run_simulation(spec, torque_file=torque_file, params_file=params)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
-    out.deliver(outcome, outcome.extra.get("spec", spec), "fdbench simulate")
+    one.out.check_store()
+    outcome = run_simulation(spec, torque_file=torque_file, params_file=params)
+    one.out.deliver(outcome, outcome.extra.get("spec", spec), "fdbench simulate")
 
 
 @app.command(cls=methods_command("controllers"))
@@ -81,10 +93,7 @@ def simulate(
 def control(
     ctx: typer.Context,
     controller: Annotated[str, typer.Option("--controller", help="pd (the paper's), computed-torque, lqr, or one registered by a plugin (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'lqr[q_angle=1e5]'.")] = "pd",
-    kinematics: Kinematics = None,
-    seed: NoiseSeed = 0,
-    sim: Simulation = None,
-    out: RunOutputs = None,
+    one: OneRun = None,
     methods: MethodValues = None,
     conditions: dict = None,
 ):
@@ -94,21 +103,18 @@ def control(
     from ..spec import control_spec
     from ..registry import UnknownName
 
-    out.check(spec_inputs(conditions, kinematics))
-    controller, options = bracketed(ctx, controller, "--controller", methods["controllers"], CONTROLLERS, "controller")
-    try:
+    one.check(conditions)
+    (controller,), options = bracketed(ctx, [controller], "--controller", methods["controllers"], CONTROLLERS,
+                                       "controller")
+    with bad_input(UnknownName, lambda exc: f"--controller: {exc}"):
         CONTROLLERS[controller]
-    except UnknownName as exc:
-        raise BadInput(f"--controller: {exc}") from None
     check_method_ranges(CONTROLLERS, options)
     options = applicable_options(ctx, options, CONTROLLERS, controller, "--controller")
-    spec = validated(control_spec(options.get("kp"), options.get("kd"), controller, options,
-                                  **noise_seed(conditions, seed), **sim.spec_fields(kinematics, conditions)))
+    spec = validated(control_spec(options.get("kp"), options.get("kd"), controller, options, **one.fields(conditions)))
     if controller == "lqr":
         _casadi_ready("control --controller lqr")
-    out.check_store()
-    outcome = run(spec)
-    out.deliver(outcome, spec, "fdbench control")
+    one.out.check_store()
+    one.out.deliver(run(spec), spec, "fdbench control")
 
 
 def _casadi_ready(command: str) -> None:
@@ -118,7 +124,7 @@ def _casadi_ready(command: str) -> None:
 
     try:
         casadi()
-    except CasadiClash as exc:
+    except CasadiClash as exc:  # an ImportError too
         raise BadInput(str(exc)) from None
     except ImportError as exc:
         raise ImportError(f"'fdbench {command}' needs casadi (pip install casadi): {exc}") from None
@@ -136,22 +142,18 @@ def collocate(
     residual_force_weight: Annotated[Optional[float], typer.Option("--residual-force-weight", help="A floating base's residual force: weight of the integral of FX^2 + FY^2 beside the squared errors (deg^2, and cm^2 of translations), deg^2/N^2; default 1e-3 with --loads, the --regularization without (the residuals then carry the body's weight).", show_default=False)] = None,
     residual_moment_weight: Annotated[Optional[float], typer.Option("--residual-moment-weight", help="A floating base's residual moment: weight of the integral of MZ^2, deg^2/(N m)^2; default 1e-3 with --loads, the --regularization without.", show_default=False)] = None,
     save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; another model: t and one column per joint, e.g. t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
-    kinematics: Kinematics = None,
-    seed: NoiseSeed = 0,
-    sim: Simulation = None,
-    out: RunOutputs = None,
+    one: OneRun = None,
     conditions: dict = None,
 ):
     """Direct-collocation tracking (as OpenSim Moco, bioptim, Drake): states and accelerations are the unknowns of one sparse problem solved by IPOPT, the torque their inverse dynamics (external loads of --loads included); the torque found is then replayed by fdbench's forward simulation, whose indicators are reported."""
     from ..method_runs import run
     from ..spec import collocate_spec
 
-    out.check(spec_inputs(conditions, kinematics), save_torque=save_torque)
+    one.check(conditions, save_torque=save_torque)
     spec = validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
-                                    residual_moment_weight, **noise_seed(conditions, seed),
-                                    **sim.spec_fields(kinematics, conditions)))
+                                    residual_moment_weight, **one.fields(conditions)))
     _casadi_ready("collocate")
-    out.check_store()
+    one.out.check_store()
     outcome = run(spec)
 
     def write_torque():
@@ -160,7 +162,7 @@ def collocate(
 
             write_atomic(save_torque, _collocation_torque_text(outcome.extra["collocation"], spec), "--save-torque")
 
-    out.deliver(outcome, spec, "fdbench collocate", write_torque)
+    one.out.deliver(outcome, spec, "fdbench collocate", write_torque)
 
 
 def _collocation_torque_text(solution, spec) -> str:
@@ -212,22 +214,17 @@ def optimize(
         emit(methods_text(), None)
         return
     from ..method_runs import run
-    from ..spec import optimize_spec
     from ..optimizers import OPTIMIZERS
+    from ..spec import optimize_spec
     from ..torques import TORQUES
 
     out.check(spec_inputs(conditions, kinematics), history=history, save_params=save_params)
-    check_finite(**{k: v for k, v in methods["optimizers"].items() if isinstance(v, float)},
-                 penalty_weight=optim.penalty_weight)
-    torque, torque_options = bracketed(ctx, torque, "--torque", methods["torques"], TORQUES, "torque")
-    opt, optimizer_options = bracketed(ctx, opt, "--opt", methods["optimizers"], OPTIMIZERS, "optimizer")
-    check_method_ranges(TORQUES, torque_options)
-    check_method_ranges(OPTIMIZERS, optimizer_options)
+    (torque,), (opt,), torque_options, optimizer_options = shooting_methods(ctx, [torque], [opt], methods,
+                                                                            optim.penalty_weight)
     torque_options = applicable_options(ctx, torque_options, TORQUES, torque, "--torque")
     optimizer_options = applicable_options(ctx, optimizer_options, OPTIMIZERS, opt, "--opt")
     check_gradient(optim.gradient)
-    if threads is not None and not 1 <= threads <= MAX_THREADS:
-        raise BadInput(f"--threads must be an integer in [1, {MAX_THREADS}], got {threads}")
+    check_count("--threads", threads, MAX_THREADS)
     spec = validated(optimize_spec(
         torque, opt, feedforward, seed, optim.budget, torque_options=torque_options, optimizer_options=optimizer_options,
         penalty_weight=optim.penalty_weight, gradient=optim.gradient, **_residual(residual_weight),

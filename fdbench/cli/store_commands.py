@@ -3,47 +3,52 @@ export them all, compare two databases cell by cell."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from .app import BadInput, SubcommandGroup, app
-from .common import check_outputs, emit, render, say
-from .options import Output, format_option
+from .app import FORMATS, BadInput, subcommands
+from .common import check_outputs, emit, number_text, render, text_table, to_file, wrote
+from .options import Output, format_option, option_group, with_groups
 
-
-runs_app = typer.Typer(
-    cls=SubcommandGroup,
-    help="Look at stored runs without changing the database: list, show, export, compare.",
-    no_args_is_help=True,
-)
-app.add_typer(runs_app, name="runs")
-
-LIST_FORMATS = ("table", "json", "csv")
+runs_app = subcommands("runs", "Look at stored runs without changing the database: list, show, export, compare.",
+                       no_args_is_help=True)
 SHOW_FORMATS = ("table", "json")
 EXPORT_FORMATS = ("csv", "json", "parquet")
 
 ReadDb = Annotated[Optional[Path], typer.Option("--db", help="Results database, opened read-only (default: $FDBENCH_DB or ./fdbench-results.sqlite).", show_default=False)]
-Command = Annotated[Optional[str], typer.Option("--command", metavar="NAME", help="Only runs of this command: control, optimize, collocate, ...", show_default=False)]
-Model = Annotated[Optional[str], typer.Option("--model", metavar="NAME", help="Only runs of this model: forearm, arm2, leg3 or a model file's path, as stored", show_default=False)]
-Torque = Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help="Only optimisations of this torque parameterisation: ann, cs, pf, ...", show_default=False)]
-Opt = Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)]
-Controller = Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)]
-Status = Annotated[Optional[str], typer.Option("--status", metavar="NAME", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)]
 
 
-def _filters(command, model, torque, opt, controller, status) -> dict:
-    return {"command": command, "model": model, "torque": torque, "opt": opt, "controller": controller,
-            "status": status}
+@option_group(None)
+class RunFilter:
+    """The stored runs a command looks at: those of a command, model, method or status (None: any)."""
+
+    command: Annotated[Optional[str], typer.Option("--command", metavar="NAME", help="Only runs of this command: control, optimize, collocate, ...", show_default=False)] = None
+    model: Annotated[Optional[str], typer.Option("--model", metavar="NAME", help="Only runs of this model: forearm, arm2, leg3 or a model file's path, as stored", show_default=False)] = None
+    torque: Annotated[Optional[str], typer.Option("--torque", metavar="NAME", help="Only optimisations of this torque parameterisation: ann, cs, pf, ...", show_default=False)] = None
+    opt: Annotated[Optional[str], typer.Option("--opt", metavar="NAME", help="Only optimisations by this optimiser: cmaes, bfgs, ...", show_default=False)] = None
+    controller: Annotated[Optional[str], typer.Option("--controller", metavar="NAME", help="Only control runs of this controller: pd, computed-torque, lqr, ...", show_default=False)] = None
+    status: Annotated[Optional[str], typer.Option("--status", metavar="NAME", help="Only runs that ended with this status: success, singular, constraint, ...", show_default=False)] = None
+
+    def select(self, runs: list[dict], present_in=None) -> list[dict]:
+        """The ``runs`` that pass; a value no run of ``present_in`` (default: ``runs``) has is bad input."""
+        from ..store_queries import select
+
+        return select(runs, dataclasses.asdict(self), present_in)
 
 
-def _database(db: Optional[Path]) -> tuple[Path, str]:
-    """The database to read and how errors name it."""
+def _database(db: Optional[Path], fmt: str, formats: tuple, output: Optional[Path]) -> tuple[Path, str]:
+    """The database to read and how errors name it, once --format and --output are checked."""
     from ..store import default_path
 
-    return (db, "--db") if db is not None else (default_path(), "--db (default)")
+    path, label = (db, "--db") if db is not None else (default_path(), "--db (default)")
+    check_outputs(fmt, formats, db=path, output=output)
+    if fmt == "parquet":
+        _check_parquet(output)
+    return path, label
 
 
 def _read(path: Path, label: str, superseded: bool = False, damaged: dict | None = None) -> list[dict]:
@@ -57,129 +62,44 @@ def _read(path: Path, label: str, superseded: bool = False, damaged: dict | None
         raise BadInput(f"{label}: {exc}{hint}") from None
 
 
-def _select(runs: list[dict], filters: dict, present_in=None) -> list[dict]:
-    from ..store_queries import BadQuery, select
-
-    try:
-        return select(runs, filters, present_in)
-    except BadQuery as exc:
-        raise BadInput(str(exc)) from None
-
-
-def _number(value) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return f"{value:.4g}"
-    return str(value)
-
-
 # a person's table names its columns in a few words (json and csv keep the fields' names)
 HEADINGS = {"created_at": "date (UTC)", "rmse_rot_deg": "rot (deg)", "rmse_torque_nm": "torque (N m)",
             "runtime_s": "runtime (s)", "t_end": "t_end (s)"}
 
 
-def _cell(column: str, value) -> str:
-    if column == "created_at" and value:
-        return str(value)[:16].replace("T", " ")  # to the minute
-    return _number(value)
+def _write(fmt: str, output, rows, columns, what: str, table=None, document=None) -> None:
+    """``rows`` as JSON (``document`` in their place if given), as CSV of ``columns``, as Parquet or
+    as the person's table ``table()``; then the line saying what an output file holds."""
+    if fmt == "parquet":
+        from ..files import write_atomic
 
+        write_atomic(output, _parquet_bytes(rows))
+    elif fmt == "json":
+        emit(json.dumps(rows if document is None else document, indent=2) + "\n", output)
+    elif fmt == "csv":
+        from ..files import csv_text
 
-def text_table(title: str, rows: list[dict], columns, headings=HEADINGS) -> str:
-    """A person's table of ``rows`` as text, as wide as the terminal (off a terminal: $COLUMNS or
-    80 columns): its words wrap within their columns (one longer than LONG_WORD is folded); a
-    number is never cut, so a table that cannot fit is as wide as its numbers need."""
-    from rich import box
-    from rich.table import Table
-
-    from .common import text_console
-
-    titles = [headings.get(c, c) for c in columns]
-    cells = [[_cell(c, row.get(c)) for c in columns] for row in rows]
-    texts = [[title] + [row[i] for row in cells] for i, title in enumerate(titles)]
-    widest = [max(len(text) for text in column) for column in texts]
-    numbers = [all(_is_number(text) for text in column[1:]) for column in texts]
-    narrowest = [max(len(word) for j, text in enumerate(column) for word in
-                     ([text] if numbers[i] and j else text.split() or [""])) for i, column in enumerate(texts)]
-    narrowest = [n if numbers[i] else min(n, LONG_WORD) for i, n in enumerate(narrowest)]
-    table = Table(title=title, show_header=True, box=box.SIMPLE_HEAD, pad_edge=False)
-    for heading in titles:
-        table.add_column(heading, overflow="fold")  # a word longer than LONG_WORD (a path) is folded
-    for row in cells:
-        table.add_row(*row)
-    console = text_console()
-    target, console.width = console.width, 10_000  # measured without a bound
-    room = target - (console.measure(table).maximum - sum(widest))  # less padding and rules
-    for column, width in zip(table.columns, _fit(widest, narrowest, room)):
-        column.width = width
-    console.width = max(target, console.measure(table).maximum)
-    with console.capture() as capture:
-        console.print(table)
-    return capture.get()
-
-
-LONG_WORD = 24  # characters: a longer word (a file path) may be folded to fit a table
-
-
-def _fit(widest: list, narrowest: list, room: int) -> list:
-    """Column widths (characters) from ``widest`` down to no less than ``narrowest``, the widest
-    column narrowed first, until they sum to ``room`` or can be narrowed no more."""
-    widths = list(widest)
-    while sum(widths) > room:
-        shrinkable = [k for k in range(len(widths)) if widths[k] > narrowest[k]]
-        if not shrinkable:
-            break
-        widths[max(shrinkable, key=lambda k: widths[k])] -= 1
-    return widths
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return text == ""
-    return True
-
-
-def _wrote(output: Optional[Path], what: str) -> None:
-    """One line on stderr once an output file is written, as every command says."""
-    if output is not None and str(output) != "-":
-        say(False, f"wrote {output} ({what})")
-
-
-def _csv(rows: list[dict], columns) -> str:
-    from ..files import csv_text
-
-    return csv_text(list(columns), [["" if row.get(c) is None else row.get(c) for c in columns] for row in rows])
+        emit(csv_text(list(columns), [[row.get(c) for c in columns] for row in rows]), output)
+    else:
+        emit(table(), output)
+    wrote(output, False, what)
 
 
 @runs_app.command("list")
+@with_groups
 def list_runs(
     db: ReadDb = None,
-    command: Command = None,
-    model: Model = None,
-    torque: Torque = None,
-    opt: Opt = None,
-    controller: Controller = None,
-    status: Status = None,
-    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    only: RunFilter = None,
+    fmt: Annotated[str, format_option(FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """One line per stored run: id, date, command, model, method, seed, the three indicators, t_end and status."""
     from ..store_queries import LIST_COLUMNS, list_row
 
-    path, label = _database(db)
-    check_outputs(fmt, LIST_FORMATS, db=path, output=output)
-    runs = _select(_read(path, label), _filters(command, model, torque, opt, controller, status))
-    rows = [list_row(run) for run in runs]
-    if fmt == "json":
-        text = json.dumps(rows, indent=2) + "\n"
-    elif fmt == "csv":
-        text = _csv(rows, LIST_COLUMNS)
-    else:
-        text = text_table(f"{len(rows)} runs in {path}", rows, LIST_COLUMNS)
-    emit(text, output)
-    _wrote(output, f"{len(rows)} runs")
+    path, label = _database(db, fmt, FORMATS, output)
+    rows = [list_row(run) for run in only.select(_read(path, label))]
+    _write(fmt, output, rows, LIST_COLUMNS, f"{len(rows)} runs",
+           lambda: text_table(f"{len(rows)} runs in {path}", rows, LIST_COLUMNS, HEADINGS))
 
 
 @runs_app.command("show")
@@ -193,8 +113,7 @@ def show_run(
     from ..store import StoreError
     from ..store_queries import BadQuery, find_run, read_run_data, show
 
-    path, label = _database(db)
-    check_outputs(fmt, SHOW_FORMATS, db=path, output=output)
+    path, label = _database(db, fmt, SHOW_FORMATS, output)
     damaged = {}
     runs = _read(path, label, superseded=True, damaged=damaged)  # an id a report cites may have been replaced since
     if run.strip() in {str(key) for key in damaged}:
@@ -207,8 +126,7 @@ def show_run(
     except StoreError as exc:
         raise BadInput(f"{label}: {exc}") from None
     shown = show(found, history, params)
-    emit(json.dumps(shown, indent=2) + "\n" if fmt == "json" else _show_text(shown), output)
-    _wrote(output, f"run {shown['id']}")
+    _write(fmt, output, shown, (), f"run {shown['id']}", lambda: _show_text(shown))
 
 
 def _show_text(shown: dict) -> str:
@@ -227,41 +145,25 @@ def _show_text(shown: dict) -> str:
 
 
 @runs_app.command("export")
+@with_groups
 def export_runs(
     db: ReadDb = None,
-    command: Command = None,
-    model: Model = None,
-    torque: Torque = None,
-    opt: Opt = None,
-    controller: Controller = None,
-    status: Status = None,
+    only: RunFilter = None,
     fmt: Annotated[str, format_option(EXPORT_FORMATS, "csv, json, or parquet (needs pyarrow or fastparquet, and -o).")] = "csv",
     output: Output = None,
 ):
     """Every field of the stored records, one row per run, with its provenance and settings: for pandas, R or a spreadsheet."""
-    path, label = _database(db)
-    check_outputs(fmt, EXPORT_FORMATS, db=path, output=output)
-    if fmt == "parquet":
-        _check_parquet(output)
-    runs = _select(_read(path, label), _filters(command, model, torque, opt, controller, status))
     from ..store_queries import export_rows
 
-    rows = export_rows(runs, nested=fmt == "json")
-    if fmt == "parquet":
-        from ..files import write_atomic
-
-        write_atomic(output, _parquet_bytes(rows))
-    elif fmt == "json":
-        emit(json.dumps(rows, indent=2) + "\n", output)
-    else:
-        emit(_csv(rows, list(dict.fromkeys(k for row in rows for k in row))), output)
-    _wrote(output, f"{len(rows)} runs")
+    path, label = _database(db, fmt, EXPORT_FORMATS, output)
+    rows = export_rows(only.select(_read(path, label)), nested=fmt == "json")
+    _write(fmt, output, rows, list(dict.fromkeys(k for row in rows for k in row)), f"{len(rows)} runs")
 
 
 def _check_parquet(output: Optional[Path]) -> None:
     import importlib.util
 
-    if output is None or str(output) == "-":
+    if not to_file(output):
         raise BadInput("--format parquet: Parquet is binary; name a file with -o")
     if not any(importlib.util.find_spec(name) for name in ("pyarrow", "fastparquet")):
         raise BadInput("--format parquet needs pyarrow or fastparquet, which are not installed: pip install pyarrow "
@@ -289,40 +191,28 @@ def _parquet_bytes(rows: list[dict]) -> bytes:
 
 
 @runs_app.command("compare")
+@with_groups
 def compare_runs(
     database_a: Annotated[Path, typer.Argument(metavar="A", help="The first results database (the reference).", show_default=False)],
     database_b: Annotated[Path, typer.Argument(metavar="B", help="The second results database.", show_default=False)],
-    command: Command = None,
-    model: Model = None,
-    torque: Torque = None,
-    opt: Opt = None,
-    controller: Controller = None,
-    status: Status = None,
-    fmt: Annotated[str, format_option(LIST_FORMATS, "Output: table (for a person), json or csv.")] = "table",
+    only: RunFilter = None,
+    fmt: Annotated[str, format_option(FORMATS, "Output: table (for a person), json or csv.")] = "table",
     output: Output = None,
 ):
     """The same cells of two databases side by side: per cell, the median RMSE_rot, RMSE_torque and runtime in A and in B and the ratio B/A.
 
     Cells are matched by their settings (the seed aside) or, failing that, by method and conditions; cells found in one database only are listed as such."""
-    from ..files import BadFile, check_distinct
+    from ..files import check_distinct
     from ..store_queries import COMPARE_COLUMNS, compare
 
-    check_outputs(fmt, LIST_FORMATS, db=database_a, output=output)
-    try:
-        check_distinct({"--output": output} if output is not None and str(output) != "-" else {}, None, database_b)
-    except BadFile as exc:
-        raise BadInput(str(exc)) from None
+    check_outputs(fmt, FORMATS, db=database_a, output=output)
+    check_distinct({"--output": output} if to_file(output) else {}, None, database_b)
     runs_a, runs_b = _read(database_a, "A"), _read(database_b, "B")
-    filters = _filters(command, model, torque, opt, controller, status)
-    rows = compare(_select(runs_a, filters, runs_a + runs_b), _select(runs_b, filters, runs_a + runs_b))
-    if fmt == "json":
-        emit(json.dumps({"a": str(database_a), "b": str(database_b), "cells": rows}, indent=2) + "\n", output)
-    elif fmt == "csv":
-        emit(_csv(rows, COMPARE_COLUMNS), output)
-    else:
-        emit(text_table(f"A = {database_a}, B = {database_b}", [_side_by_side(row) for row in rows],
-                     ("method", "conditions", "found", "runs", *INDICATOR_HEADINGS.values())), output)
-    _wrote(output, f"{len(rows)} cells")
+    rows = compare(only.select(runs_a, runs_a + runs_b), only.select(runs_b, runs_a + runs_b))
+    _write(fmt, output, rows, COMPARE_COLUMNS, f"{len(rows)} cells",
+           lambda: text_table(f"A = {database_a}, B = {database_b}", [_side_by_side(row) for row in rows],
+                              ("method", "conditions", "found", "runs", *INDICATOR_HEADINGS.values())),
+           {"a": str(database_a), "b": str(database_b), "cells": rows})
 
 
 INDICATOR_HEADINGS = {"rmse_rot_deg": "RMSE rot (deg): A -> B", "rmse_torque_nm": "RMSE torque (N m): A -> B",
@@ -334,6 +224,6 @@ def _side_by_side(row: dict) -> dict:
     out = {"method": row["method"], "conditions": row["conditions"], "found": row["found"],
            "runs": f"{row['runs_a']}/{row['runs_b']}"}
     for name, heading in INDICATOR_HEADINGS.items():
-        a, b, ratio = (_number(row[f"{name}_{side}"]) or "-" for side in ("a", "b", "ratio"))
+        a, b, ratio = (number_text(row[f"{name}_{side}"]) or "-" for side in ("a", "b", "ratio"))
         out[heading] = f"{a} -> {b}" + (f" (x{ratio})" if ratio != "-" else "")
     return out
