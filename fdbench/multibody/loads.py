@@ -1,23 +1,13 @@
-"""External loads from data: measured forces such as a walk's ground reactions, applied to the
-model's bodies at the integrator's stage times and in inverse dynamics.
+"""External loads from data (a walk's ground reactions): on one body each, a force (N) at a point
+(m) and a free moment (N m) about z, force and point in ground's axes or a body's frame, sampled at
+the data's times and linear between them. The file is OpenSim's ExternalLoads (``--loads FILE.xml``)
+and the storage file its ``datafile`` names; a force without a point acts at the body's origin; a
+body welded into another on import is found as the host's named frame (``Model.frames``).
 
-A load acts on one body: a force (N) at a point (m) and a free moment (N m) about the plane's
-normal z. The force is given in ground's axes or in a body's frame, the point likewise, each
-sampled at the data's times and interpolated linearly between them. The file is OpenSim's
-ExternalLoads (``--loads FILE.xml``): per ExternalForce the body it is applied to, the bodies its
-force and point are expressed in, and the column prefixes of its force (``<id>x``, ``<id>y``), point
-and torque in the storage file (.mot, .sto) its ``datafile`` names (a path relative to the XML
-file); as in OpenSim, a force without a point acts at the origin of the body it is applied to.
-A model is planar (x, y): the force's and point's z and the torque's x and y do no work on its
-coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn) is
-found as the host's named frame (``Model.frames``).
-
-How a load enters the equations: its generalised force on the coordinates z is
-Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F + M ] on m's angle
-(d_m: the direction of a path joint's point per radian) and F on a free joint's x and y, i.e.
-J_P(z)^T F with P taken as the body's material point at that instant (``generalized_forces``).
-In the mixed coordinates of eq. 12 the same load is F on the body's joint point i and the moment
-(P - r_i) x F + M on its angle (``fdbench.multibody.kernels``).
+A load's generalised force on z is Q = sum over the joints m from ground to the body of
+[(P - r_m) x F + d_m . F + M] on m's angle (d_m: a path joint's point direction per radian) and F
+on a free joint's x and y: J_P(z)^T F, P the body's material point at that instant. In eq. 12's
+mixed coordinates it is F on the body's joint point i and (P - r_i) x F + M on its angle.
 """
 
 from __future__ import annotations
