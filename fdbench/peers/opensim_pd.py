@@ -25,22 +25,16 @@ SUMMARY = ("OpenSim's forward simulation of the same model (exported with Coordi
            "motion; its feedforward OpenSim's inverse dynamics")
 
 
-def gains(spec) -> tuple[np.ndarray, np.ndarray]:
-    """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,): fdbench's PD's for this spec."""
-    from ..run_inputs import pd_gains  # lazy: OpenSim's child imports this module, not the engine
-
-    return pd_gains(spec)
-
-
 def run(spec):
     """The peer's run (``RunOutcome``): OpenSim's PD simulation in a child process, its indicators
     on the motion's samples against the same reference as fdbench's PD."""
     from ..models import joints  # lazy: OpenSim's child imports this module, not the engine
     from ..records import RunOutcome, base_record
+    from ..run_inputs import pd_gains
     from .common import desired, grid, indicators, loads_request, osim_texts
 
     names = joints(spec.model_name)
-    kp, kd = gains(spec)
+    kp, kd = pd_gains(spec)  # N m/rad, N m s/rad per joint: fdbench's PD's
     nominal, plant = osim_texts(spec)
     t = grid(spec)
     z, zd, zdd = desired(spec, t)
