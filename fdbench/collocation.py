@@ -17,25 +17,13 @@ The points are the N + 1 nodes t_k = k h, h = T / N, and for Hermite-Simpson the
   points; with it, z is a cubic spline through the points (the forearm's replay error: 4e-5 deg
   instead of 1.5e-4). The torque is piecewise quadratic through tau_k, tau_m, tau_{k+1}.
 
-The objective is the integral over the motion's span, by the scheme's quadrature (Simpson or
-trapezoid), of sum_j tracking_j (z_j - z_dj)^2 + effort_j tau_j^2 (``objective_weights``): errors of
-angles in deg and of translations in cm (1 cm counts as 1 deg, as eq. 18 does), ``regularization``
-times the squared torques (N m; N on a translation), and on a floating base (``Model.floating_base``)
-its residuals, the force FX, FY (N) and moment MZ (N m) weighted by ``residual_force_weight`` and
-``residual_moment_weight`` (``residual_weights``: 1e-3 deg^2/N^2 and deg^2/(N m)^2 with external
-loads, the regularization without them). Every term depends on one point's unknowns only, so the
-Hessian of the Lagrangian is block diagonal (3J x 3J per point); the integrand is one SX Function
-mapped over the points of an MX graph, built in a second for the 10-coordinate gait model.
-
-External loads (``multibody.loads.ExternalLoads``) enter symbolically in z: the loads' force, point
-and free moment at each point's time are parameters of the actuation Function, and their generalised
-force J_P(z)^T F + J_phi(z)^T M is that of the body's material point at P in the point's own
-configuration, as the engine applies them (``symbolic.MinimalDynamics.actuation``).
-
-The initial state is fixed to the desired motion's at t = 0; the final state is free; the initial
-guess is the desired motion (z, z', z''). A motion is anything with ``duration`` (s) and
-``motion(t) -> (z, z', z'')`` (rad, rad/s, rad/s^2), each of shape t.shape + (J,). ``casadi`` is
-imported only when the transcription is built.
+The objective is the scheme's quadrature (Simpson or trapezoid) of sum_j tracking_j (z_j - z_dj)^2
++ effort_j tau_j^2 (``objective_weights``). Every term depends on one point's unknowns only, so the
+Hessian of the Lagrangian is block diagonal (3J x 3J per point): one SX Function mapped over the
+points of an MX graph. External loads enter symbolically in z, as the engine applies them
+(``symbolic.MinimalDynamics.actuation``). The initial state is fixed to the desired motion's at
+t = 0, the final state is free, the guess is the desired motion. A motion is anything with
+``duration`` (s) and ``motion(t) -> (z, z', z'')``, each of shape t.shape + (J,).
 """
 
 from __future__ import annotations
@@ -136,16 +124,6 @@ class CollocationResult:
     residual_weights: tuple | None = None  # a floating base's (force deg^2/N^2, moment deg^2/(N m)^2)
 
     @property
-    def theta(self) -> np.ndarray:
-        """The forearm's name of ``angles``: theta (rad) at the nodes."""
-        return self.angles
-
-    @property
-    def theta_dot(self) -> np.ndarray:
-        """The forearm's name of ``velocities``: theta' (rad/s) at the nodes."""
-        return self.velocities
-
-    @property
     def success(self) -> bool:
         return self.ipopt_status in SOLVED
 
@@ -196,12 +174,9 @@ def residual_weights(regularization: float, residual_force_weight: float | None,
 
 
 def objective_weights(model, regularization: float, residual_force_weight: float, residual_moment_weight: float):
-    """(tracking (J,), effort (J,)): the objective's weights of each coordinate's squared error,
-    deg^2/rad^2 on an angle and cm^2/m^2 on a translation (1 cm counts as 1 deg, as eq. 18 does),
-    and of its squared generalised force: ``regularization`` on every actuated coordinate (deg^2
-    per (N m)^2, or per N^2 on a translation), the residual weights on a floating base's three
-    coordinates (``residual_moment_weight`` on MZ, deg^2/(N m)^2; ``residual_force_weight`` on FX
-    and FY, deg^2/N^2)."""
+    """(tracking (J,), effort (J,)): the weights of each coordinate's squared error (deg^2/rad^2, or
+    cm^2/m^2 on a translation: 1 cm counts as 1 deg, as eq. 18) and squared generalised force
+    (``regularization``; on a floating base's MZ, FX, FY the residual moment and force weights)."""
     kinds = model.coordinate_kinds
     tracking = np.array([CM2 if kind == "translation" else DEG2 for kind in kinds])
     effort = np.full(len(kinds), float(regularization))
@@ -214,11 +189,8 @@ def objective_weights(model, regularization: float, residual_force_weight: float
 
 @dataclass
 class Track:
-    """What the transcription tracks, J coordinates at its points in time order: the nodes t_k = k h
-    and, for Hermite-Simpson, the interval midpoints between them (2N + 1 points; N + 1 for the
-    trapezoidal scheme). t (s), shape (m,); the desired z, z', z'' at the points, shape (m, J) each
-    (rad or m based; z', z'' are the guess); the external loads' parameters at the points, shape
-    (m, P) (``symbolic.load_parameters``; P = 0 without loads)."""
+    """What the transcription tracks at its m points in time order: t (s), (m,); the desired z, z',
+    z'' (the guess), (m, J) each; the loads' parameters (``symbolic.load_parameters``), (m, P)."""
 
     t: np.ndarray
     z: np.ndarray
@@ -279,13 +251,8 @@ _SOLVERS: dict = {}
 
 def _solver(ca, actuation, m: int, J: int, P: int, h: float, scheme: str, tracking: np.ndarray, effort: np.ndarray,
             max_iter: int, max_time: float):
-    """IPOPT's solver of the transcription (see ``transcribe``), built once per structure and kept
-    (``SOLVERS_KEPT``, the oldest dropped first): what changes from run to run, the desired z and
-    the load parameters at the points, are the NLP's parameters p = [loads, z_d] point by point,
-    and the initial state and the guess are the solver's inputs. The key is what the NLP's
-    structure depends on: the actuation Function (one per model and loads, ``symbolic``), the
-    number of points m, coordinates J and load parameters P, the step h (s), the scheme, the
-    weights and IPOPT's limits."""
+    """IPOPT's solver of the transcription, built once per structure and kept (``SOLVERS_KEPT``);
+    the desired z and load parameters are the NLP's parameters p = [loads, z_d] point by point."""
     key = (id(actuation), m, J, P, h, scheme, tracking.tobytes(), effort.tobytes(), max_iter, max_time)
     found = _SOLVERS.get(key)
     if found is not None and found[0] is actuation:
@@ -309,21 +276,10 @@ def _solver(ca, actuation, m: int, J: int, P: int, h: float, scheme: str, tracki
 
 def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray, scheme: str, max_iter: int,
                max_time: float, began: float | None = None) -> CollocationResult:
-    """Transcribe the tracking problem of a model with J coordinates at ``track``'s points with
-    implicit dynamics and solve it with IPOPT.
-
-    actuation: the CasADi Function (z, z', z'', p) -> tau of one point (columns (J, 1), p the
-    point's load parameters), ``MinimalDynamics.actuation``. The unknowns are y = [z, z', z''] at
-    every point, point by point; the defects are linear in them (``_defects``) and tau is
-    ``actuation`` at each point, so that the objective, sum over the points of the quadrature
-    weight times ``_point_cost``, is the only nonlinear part and its Hessian is block diagonal
-    (one 3J x 3J block per point): one mapped SX Function in an MX graph, no symbolic M^-1, no
-    expansion. The initial state is fixed to the desired one; the guess is the desired motion.
-    ``began``: the perf_counter time the transcription began (default now). The built solver is
-    kept for the next problem of the same structure (``_solver``): a repeated collocation of the
-    same model, mesh and options skips the transcription.
-
-    Never raises on a solver failure: IPOPT's status says what happened."""
+    """Transcribe the tracking problem at ``track``'s points and solve it with IPOPT. ``actuation``:
+    the CasADi Function (z, z', z'', p) -> tau of one point (``MinimalDynamics.actuation``);
+    ``began``: the perf_counter time the transcription began (default now). Never raises on a
+    solver failure: IPOPT's status says what happened."""
     ca = casadi()
 
     began = time.perf_counter() if began is None else began
@@ -375,12 +331,8 @@ def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-
               regularization: float = DEFAULT_REGULARIZATION, max_iter: int = DEFAULT_MAX_ITER,
               max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
               residual_moment_weight: float | None = None, loads=None) -> CollocationResult:
-    """Transcribe and solve the tracking problem of ``motion`` with ``model`` on ``nodes`` intervals
-    over the motion's span: node arrays of shape (N + 1, J) in the model's coordinate order.
-    ``loads``: external loads (``multibody.loads.ExternalLoads`` on the motion's clock) or None;
-    the residual weights of a floating base: ``residual_weights`` (None: the default).
-    ValueError (one line) for options out of range or a motion of other joints; never raises on a
-    solver failure: IPOPT's status says what happened."""
+    """Transcribe and solve the tracking of ``motion`` by ``model`` on ``nodes`` intervals (``loads``:
+    ``ExternalLoads`` or None). ValueError (one line) for bad options or a motion of other joints."""
     check_options(nodes, scheme, regularization, max_iter, max_time, residual_force_weight, residual_moment_weight)
     began = time.perf_counter()
     t = point_times(motion.duration, nodes, scheme)
@@ -394,12 +346,8 @@ def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-
 
 
 def own_fields(model, solution: CollocationResult, truth) -> dict:
-    """The collocation's own indicators at its nodes against the true motion ``truth`` (``truth(t)``
-    -> (z, ...)), angles and translations apart: ``collocation_rmse_rot_deg`` (deg) and, for a
-    model with translations, ``collocation_rmse_trans_cm`` (cm); for a floating base the RMS of its
-    residuals at the nodes, ``collocation_residual_force_rms_n`` (|(FX, FY)|, N) and
-    ``collocation_residual_moment_rms_nm`` (MZ, N m), over the whole motion even where the replay
-    stops early."""
+    """The collocation's own indicators at its nodes against ``truth`` (``truth(t)`` -> (z, ...)): RMS
+    error of angles (deg) and translations (cm), a floating base's residual force (N) and moment (N m)."""
     error = solution.angles - np.asarray(truth(solution.t)[0], dtype=float).reshape(solution.angles.shape)
     translation = np.array([kind == "translation" for kind in model.coordinate_kinds])
     fields = {"collocation_rmse_rot_deg": float(np.degrees(np.sqrt(np.mean(error[:, ~translation] ** 2))))
@@ -416,11 +364,8 @@ def own_fields(model, solution: CollocationResult, truth) -> dict:
 
 
 def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str) -> dict:
-    """The fields a collocate run adds to the record of its replay: the options (the residual
-    weights used for a model with a floating base), the collocation's own indicators at its nodes
-    (``own_fields``),
-    IPOPT's status, iterations, the transcription's build time and the solve time (s); status
-    'collocation_failed' when IPOPT did not solve the problem."""
+    """The fields a collocate run adds to its replay's record: options, ``own`` indicators, IPOPT's
+    status and iterations, build and solve times (s); status 'collocation_failed' if unsolved."""
     fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],
                   regularization=options["regularization"], **own, ipopt_status=solution.ipopt_status,
                   ipopt_iterations=solution.iterations, build_time_s=solution.build_time_s,

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import errno
-import hashlib
 import io
 import math
 import os
@@ -32,10 +31,8 @@ SHOWN_CHARACTERS = 80  # a name or label from a file, as an error line quotes it
 
 
 def shown(text, limit: int = SHOWN_CHARACTERS) -> str:
-    """``text`` (from a file, or from another program) as one line of a message: whitespace runs as
-    one space, other control and invisible characters escaped (``\\x1b``, ``\\u202e``), cut after
-    about ``limit`` characters on a word boundary (within the last quarter), else on a character's,
-    with '...'."""
+    """``text`` as one line of a message: whitespace runs as one space, other invisible characters
+    escaped (``\\x1b``), cut after about ``limit`` characters (on a word boundary if near) with '...'."""
     line = "".join(c if c.isprintable() else repr(c)[1:-1] for c in " ".join(str(text).split()))
     if len(line) <= limit:
         return line
@@ -99,10 +96,8 @@ def planted_link(path: Path, link: os.stat_result) -> str | None:
 
 
 def check_shared_folder(path: Path, option: str) -> None:
-    """Refuse what the kernel's ``fs.protected_symlinks`` and ``fs.protected_regular`` refuse in a
-    sticky folder writable by every user (/tmp), which the atomic writer's resolve-and-rename would
-    otherwise get past: following a symbolic link another user made there, and replacing a file
-    another user owns there (the folder's owner excepted, as for the kernel)."""
+    """Refuse, in a sticky folder writable by every user (/tmp), what the kernel's
+    ``fs.protected_symlinks`` and ``fs.protected_regular`` refuse: another user's link or file."""
     try:
         link = os.lstat(path)
     except OSError:
@@ -121,10 +116,8 @@ def check_shared_folder(path: Path, option: str) -> None:
 
 
 def check_writable(path: str | os.PathLike, option: str) -> Path:
-    """Fail early, before any work, if ``path`` cannot be written as an output: a directory, a
-    socket, a missing folder, a read-only, append-only or immutable file (even for root: the user
-    protected it), an unwritable folder, and in a shared folder (/tmp) a link or a file of another
-    user (see check_shared_folder)."""
+    """Fail before any work if ``path`` cannot be written as an output (a directory, a socket, a
+    missing or unwritable folder, a read-only, append-only or immutable file, see check_shared_folder)."""
     path = Path(path)
     if str(path) in ("", "."):
         raise BadFile(f"{option}: an empty file name")
@@ -151,9 +144,7 @@ def check_writable(path: str | os.PathLike, option: str) -> Path:
 
 
 def _probe_writable(path: Path, option: str) -> None:
-    """Open a regular file for writing, changing nothing (no truncation, no byte written): the
-    only test that also sees what permission bits do not say (append-only and immutable files,
-    read-only file systems)."""
+    """Open a regular file for writing, changing nothing: sees append-only and immutable files."""
     try:
         os.close(os.open(path, os.O_WRONLY | getattr(os, "O_NONBLOCK", 0)))
     except PermissionError as exc:
@@ -198,16 +189,9 @@ _TEMPORARY_NAME = re.compile(r"\.fdbench-[a-z0-9_]{8}\.tmp")  # tempfile.mkstemp
 
 
 def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--output") -> None:
-    """Write ``data`` to ``path`` as the shell's ``>`` would, made atomic where that is possible.
-
-    A regular file (or a new name) is replaced atomically by a rename, keeping its permission bits
-    (and owner, where allowed): a reader sees the old file or the whole new one. A symlink is
-    written through (its target is replaced, the link stays), except one another user made in a
-    shared folder such as /tmp (refused, see check_shared_folder). Devices, FIFOs, ``/dev/stdout``,
-    files with other hard links and files of an append-only folder are opened and written in
-    place. A write that fails raises BadFile naming ``option``; the temporary file is removed on
-    every exit but SIGKILL (Ctrl-C and SIGTERM wait for the write to end), and the next write
-    into that folder removes what a killed writer left behind."""
+    """Write ``data`` to ``path`` as the shell's ``>`` would: a regular file or new name replaced
+    atomically by a rename (mode and owner kept), a symlink written through, devices, FIFOs, files
+    with other hard links or in an append-only folder written in place. BadFile naming ``option``."""
     path = check_writable(path, option)  # checked again: a link may have been planted since the first check
     payload = data.encode() if isinstance(data, str) else bytes(data)
     try:
@@ -249,9 +233,7 @@ def _replace(target: Path, payload: bytes, st: os.stat_result | None) -> None:
 
 @contextmanager
 def _signals_deferred():
-    """Within the block, Ctrl-C (SIGINT) and SIGTERM are held back and delivered when it ends, so
-    that a write is never cut between creating its temporary file and renaming or removing it.
-    Outside the main thread, nothing changes."""
+    """Within the block (in the main thread), SIGINT and SIGTERM are held back until it ends."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -289,9 +271,7 @@ def _remove_stale_temporaries(folder: Path) -> None:
 
 @contextmanager
 def new_folder(directory: str | os.PathLike):
-    """Within the block, ``directory`` exists; if the block fails and the folder was created here,
-    it is removed again with what the block wrote into it (a full disk leaves no empty ``figs/``).
-    A folder that existed is kept as it is."""
+    """Within the block, ``directory`` exists; one created here is removed if the block fails."""
     import shutil
 
     directory = Path(directory)
@@ -319,10 +299,8 @@ def same_file(a: str | os.PathLike, b: str | os.PathLike) -> bool:
 
 
 def check_distinct(outputs: dict, inputs: dict | None = None, database=None) -> None:
-    """Refuse, before any work, an output that would destroy something the command needs or
-    another output: an output naming an input file, the results database (or its journal), or
-    another output, and a results database naming an input file. Keys are option names (``--output``), values paths or None. Devices such as
-    /dev/null may be named by several outputs."""
+    """Refuse, before any work, an output naming an input, the results database (or its journal)
+    or another output, and a database naming an input ({option: path or None}; devices may repeat)."""
     named = [(o, Path(p)) for o, p in outputs.items() if p is not None]
     protected = [(o, Path(p)) for o, p in (inputs or {}).items() if p is not None]
     if database is not None and str(database) != ":memory:":
@@ -350,11 +328,8 @@ _READ_CACHE_SIZE = 8
 
 
 def read_input_bytes(path: str | os.PathLike, option: str, limit: int = MAX_INPUT_BYTES) -> bytes:
-    """The bytes of an input file, read once per process: a later call for the same file (the same
-    inode, unchanged) returns them again, so that a pipe (``--motion <(cat f.csv)``,
-    ``/dev/stdin``) serves a digest and a parse. A pipe, FIFO or device is read without blocking:
-    if it sends nothing for INPUT_TIMEOUT_S s (a FIFO with no writer) it is refused. Refuses a
-    directory and more than ``limit`` bytes (``/dev/zero`` included)."""
+    """The bytes of an input file, read once per process (a pipe serves a digest and a parse); a
+    pipe silent for INPUT_TIMEOUT_S s, a directory and more than ``limit`` bytes are refused."""
     path = Path(path)
     try:
         st = os.stat(path)
@@ -428,9 +403,7 @@ def read_input_text(path: str | os.PathLike, option: str, limit: int = MAX_INPUT
 
 
 def parse_json(text: str):
-    """JSON text as Python objects, integers too large for a float read as floats (an infinity,
-    which the caller's finiteness checks refuse) rather than failing later. ValueError (one line)
-    for text that is not JSON or is nested too deeply."""
+    """JSON text as Python objects (integers beyond 2**63 as floats); ValueError (one line)."""
     import json
 
     def integer(digits: str):
@@ -443,11 +416,6 @@ def parse_json(text: str):
         raise ValueError("nested too deeply") from None
 
 
-def file_digest(path: str | os.PathLike) -> str:
-    """SHA-256 of a file's content (hex): inputs enter a run's identity by what they hold."""
-    return hashlib.sha256(read_input_bytes(path, str(path))).hexdigest()
-
-
 def csv_text(header: list[str], rows) -> str:
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
@@ -457,10 +425,8 @@ def csv_text(header: list[str], rows) -> str:
 
 
 def read_columns(path: str | os.PathLike, option: str, required: tuple, optional: tuple = ()) -> dict:
-    """Named columns of numbers from a CSV file with a header (names case-insensitive, any order,
-    other columns ignored; line endings LF, CRLF or CR): {name: array of shape (n,)}; optional
-    columns absent from the header are absent from the result. Raises BadFile with a one-line
-    message naming the file's line where there is one."""
+    """{name: array (n,)} of the named number columns of a CSV file with a header (names matched
+    ignoring case; absent optional ones left out). BadFile naming the file's line."""
     path = Path(path)
     rows = _csv_rows(path, option, read_input_text(path, option))
     expected = ",".join(required)
@@ -509,12 +475,8 @@ def _csv_rows(path: Path, option: str, text: str) -> list:
 
 def read_history_csv(path: str | os.PathLike, option: str, duration: float, columns: tuple, preferred: tuple = ()
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """A history from a CSV file with a header, a column ``t`` (s) and the named ``columns``, or
-    other names of the same columns where the file has them all: ``preferred``, one tuple of names
-    (tried first) or several (tried in order). Read once.
-
-    Times must be finite and strictly increasing and cover [0, duration] s; returns t, shape (n,),
-    and the columns' values, shape (n, len(columns))."""
+    """(t (n,) s, values (n, len(columns))) of a CSV file with columns ``t`` and ``columns`` (or the
+    names of ``preferred``: one tuple or several, tried first); t increasing over [0, duration] s."""
     path = Path(path)
     choices = [tuple(c) for c in preferred] if preferred and not isinstance(preferred[0], str) else [tuple(preferred)]
     choices = [c for c in choices if c] + [tuple(columns)]

@@ -1,16 +1,8 @@
-"""Compiled kernels: numba's ``njit`` with its on-disk cache kept in a user cache folder.
-
-numba caches a compiled kernel next to its source by default, which puts files inside the
-installed package (left behind by ``pip uninstall``, and failing on a read-only install). fdbench
-keeps them in ``$FDBENCH_CACHE_DIR``, else ``$XDG_CACHE_HOME/fdbench``, else ``~/.cache/fdbench``;
-when none of these can be used (a read-only home), in a folder of the temporary directory, and
-when not even that can, kernels are compiled on every run without a cache. Either fallback is
-said once on stderr.
-
-A cached kernel is code that this process loads and runs, so a cache folder must be the user's
-own: owned by the user and writable by nobody else (the folder fdbench creates is mode 0700).
-The fallback in the shared temporary directory must moreover not be a symbolic link; one that
-another user could have made (or redirected) is never used.
+"""Compiled kernels: numba's ``njit`` with its on-disk cache in ``$FDBENCH_CACHE_DIR``, else
+``$XDG_CACHE_HOME/fdbench``, else ``~/.cache/fdbench`` (not inside the installed package); failing
+that in a folder of the temporary directory (not a link), failing that no cache, said once on
+stderr. A cache folder holds code this process runs, so it must be the user's own and writable by
+nobody else (created mode 0700).
 """
 
 from __future__ import annotations
@@ -25,15 +17,11 @@ from pathlib import Path
 CACHE_VARIABLE = "FDBENCH_CACHE_DIR"
 
 
-def _candidates() -> list[Path]:
+def _candidate() -> Path:
     if os.environ.get(CACHE_VARIABLE):
-        return [Path(os.environ[CACHE_VARIABLE])]
+        return Path(os.environ[CACHE_VARIABLE])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return [Path(base) / "fdbench"]
-
-
-def _fallback() -> Path:
-    return Path(tempfile.gettempdir()) / f"fdbench-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
+    return Path(base) / "fdbench"
 
 
 def _not_private(folder: Path, follow_links: bool) -> str | None:
@@ -70,18 +58,16 @@ def _unusable(folder: Path, follow_links: bool = True) -> str | None:
 
 
 def _choose_cache_dir() -> Path | None:
-    problems = []
-    for folder in _candidates():
-        problem = _unusable(folder)
-        if problem is None:
-            return folder
-        problems.append(problem)
-    fallback = _fallback()
-    problem = _unusable(fallback, follow_links=False)
+    folder = _candidate()
+    problem = _unusable(folder)
     if problem is None:
-        _warn(f"cannot use a kernel cache in {'; '.join(problems)}; using {fallback} (set ${CACHE_VARIABLE} to choose)")
+        return folder
+    fallback = Path(tempfile.gettempdir()) / f"fdbench-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
+    again = _unusable(fallback, follow_links=False)
+    if again is None:
+        _warn(f"cannot use a kernel cache in {problem}; using {fallback} (set ${CACHE_VARIABLE} to choose)")
         return fallback
-    _warn(f"cannot use a kernel cache ({'; '.join(problems + [problem])}); kernels are compiled on every run")
+    _warn(f"cannot use a kernel cache ({problem}; {again}); kernels are compiled on every run")
     return None
 
 
@@ -94,10 +80,8 @@ CACHE_DIR = _choose_cache_dir()
 
 @functools.lru_cache(maxsize=None)
 def source_digest(package: Path | None = None) -> str:
-    """16 hex digits of SHA-256 over the Python sources of ``package`` (default: fdbench's). numba's
-    cache checks the modification time of the file of the function it loads, not of the files its
-    callees were inlined from (a changed callee would leave its caller's cached kernel stale), so
-    each version of the sources gets its own kernel folder."""
+    """16 hex digits of SHA-256 over the Python sources of ``package`` (default: fdbench's): each
+    version gets its own kernel folder (numba's cache does not see a changed inlined callee)."""
     import hashlib
 
     package = Path(__file__).resolve().parent if package is None else Path(package)
@@ -120,11 +104,8 @@ FIRST_RUN = "a first run takes from half a minute to a few minutes"  # measured:
 
 
 class _CompileNotice:  # state of the process, on the class
-    """On a terminal, says on stderr that the kernels are being compiled (they are cached
-    afterwards), with a spinner counting the kernels and the time while numba compiles: a machine's
-    first run would otherwise be silent for minutes. Nothing when stderr is not a terminal (scripts
-    keep a clean stderr) or once ``quiet()`` was called (``--quiet``). numba reports a compilation
-    (event ``numba:compile``) only when a kernel is not found in the cache."""
+    """On a terminal (and not ``quiet()``), says on stderr that kernels are being compiled, with a
+    spinner counting them while numba compiles (its ``numba:compile`` events: cache misses)."""
 
     _installed = False
     enabled = True

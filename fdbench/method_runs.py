@@ -1,15 +1,8 @@
 """The runs of a ``RunSpec`` on the multibody engine, one per command: inverse dynamics
 (``inverse_run``), open-loop simulation (``run_simulation``, ``replay``), control (the paper's PD
 per joint with computed feedforward, computed torque, LQR or a registered controller), shooting
-optimisation and direct collocation (``run``), each giving a flat record (``records.RECORD_FIELDS``
-plus the indicators of ``fdbench.outcomes``) and a trajectory table. What a spec stands for on the
-engine (its models, motions, loads, reference) is ``fdbench.run_inputs``.
-
-Files (CSV with a header, names case-insensitive, any order): a motion has ``t`` (s) and one angle
-column per joint (deg, or rad), with optional ``<joint>_vel`` and ``<joint>_acc``; a torque history
-has ``t`` (s) and one column per joint (N m), or ``<joint>_torque`` where the file has them (the
-history of ``inverse --format csv`` or ``--save-trajectory``, whose ``<joint>`` is an angle), and a
-one-joint model's may name its column ``torque``.
+optimisation and direct collocation (``run``), each giving a flat record and a trajectory table.
+What a spec stands for on the engine is ``fdbench.run_inputs``.
 """
 
 from __future__ import annotations
@@ -118,10 +111,10 @@ def _set_up(spec):
 
 
 # ---------------------------------------------------------------------- open loop
-def _open_loop(spec, torque_file=None, params_file=None, torque=None):
-    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
-    (``t,<joint>...``), saved parameters, or ``torque``, a function t (s), shape (k,) -> joint
-    torques (N m), shape (k, J); BadFile for a file that cannot be used."""
+def run_simulation(spec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
+    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history (``t``
+    and a column per joint or ``<joint>_torque``, N m), saved optimisation parameters or ``torque``
+    (t (s), (k,) -> N m, (k, J)). Bad files raise ``files.BadFile``."""
     names = joints(spec)
     desired, _ = motions(spec)
     label, drive = "id", sim.feedforward(engine(spec, nominal(spec)), desired)
@@ -148,7 +141,7 @@ def _open_loop(spec, torque_file=None, params_file=None, torque=None):
     record.update(torque=label, evaluations=1, runtime_s=runtime)
     done = outcome(spec, record, result, inverse)
     done.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
-    return done
+    return explained(done, spec)
 
 
 def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):
@@ -230,11 +223,8 @@ def _optimize(spec, on_evaluation, on_start):
 
 
 def _collocate(spec):
-    """Direct collocation of the nominal model on the desired motion under the spec's external loads
-    (``collocation``), then its torque replayed by the plant's forward simulation: the indicators are
-    the replay's; the collocation's own RMSE at its nodes (against the true motion), IPOPT's status,
-    iterations and solve time stand beside them. ``extra['collocation']`` holds the solution (node
-    arrays of shape (N + 1, J))."""
+    """Direct collocation of the nominal model, its torque replayed by the plant: the indicators are
+    the replay's, the collocation's own beside them; ``extra['collocation']`` holds the solution."""
     options = dict(spec.method_options)
     warm_up(spec)
     casadi()  # its import is not part of the runtime
@@ -264,10 +254,3 @@ def run(spec, on_evaluation=None, on_start=None) -> RunOutcome:
     if spec.command == "peer":  # OpenSim's, its CMC's and Moco's runs
         return explained(run_peer(spec), spec)
     return explained(_method_run(spec, on_evaluation, on_start), spec)
-
-
-def run_simulation(spec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
-    """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history
-    (``t,<joint>...``), saved optimisation parameters or ``torque`` (a function of t (s), shape (k,)
-    -> N m, shape (k,) or (k, J)). Bad files raise ``files.BadFile``."""
-    return explained(_open_loop(spec, torque_file, params_file, torque), spec)

@@ -1,12 +1,7 @@
 """The outcome of a simulated run (``records.RunOutcome``), as fdbench's runs and the peers' replays
-measure it: indicators over every coordinate and per coordinate, angles and translations apart,
-a floating base's residuals, the status's message and the trajectory table.
-
-Indicators for J joints: ``rmse_rot_deg`` is the root mean square over all angle coordinates and
-samples of the angle error (deg), ``rmse_torque_nm`` likewise of their torques (N m) against the
-inverse-dynamics torques; ``rmse_rot_deg_<joint>`` and ``rmse_torque_nm_<joint>`` give each joint's.
-Units are never pooled: a model with translations (a free joint's x, y) has ``rmse_trans_cm`` (cm)
-and ``rmse_force_n`` (N) over them, and ``rmse_trans_cm_<x>``, ``rmse_force_n_<x>`` per translation.
+measure it: ``rmse_rot_deg`` (deg) and ``rmse_torque_nm`` (N m, against the inverse dynamics) over
+the angle coordinates and per joint (``_<joint>``); translations apart (``rmse_trans_cm``,
+``rmse_force_n``); a floating base's residuals; the status's message and the trajectory table.
 """
 
 from __future__ import annotations
@@ -25,11 +20,9 @@ RESIDUAL_FIELDS = ("residual_force_rms_n", "residual_moment_rms_nm", "residual_f
 
 
 def residual_fields(model, forces: np.ndarray) -> dict:
-    """The residuals of a model with a floating base (a free joint on ground): the generalised
-    forces on its three coordinates, as OpenSim's RRA and CMC name them FX, FY (N, ground axes, at
-    the base's joint point) and MZ (N m), from the forces (n, J) on the samples reached. The fourth
-    indicator is their RMS, the force's magnitude and the moment apart (units never pooled); the
-    means are set beside RRA's averages. {} for a model without a floating base."""
+    """A floating base's residuals from the forces (n, J) on the samples reached: its coordinates'
+    generalised forces FX, FY (N, ground axes) and MZ (N m), as OpenSim's RRA names them, their RMS
+    (force magnitude and moment apart) and means; {} without a floating base."""
     base = model.floating_base
     if base is None:
         return {}
@@ -54,10 +47,8 @@ DRIFT_DEG = 10.0  # an angle this far from its motion: the torques, not --alpha 
 
 
 def drift_hint(message: str, result, desired, kinds) -> str:
-    """A constraint failure's message, its hint on --alpha and --dt replaced when an angle had
-    drifted more than DRIFT_DEG from its desired value (rad, shape (n, J)) by then: the penalty
-    then fails because the torques whirl the bodies far off the motion (an unstable open loop, or
-    a torque history made for another model or motion), which a larger --alpha does not cure."""
+    """A constraint failure's message, its hint on --alpha and --dt replaced when an angle had drifted
+    more than DRIFT_DEG from ``desired`` (rad, (n, J)) by then: the torques, not the penalty, failed."""
     angle = np.array([kind == "angle" for kind in kinds])
     reached = result.reached
     if not angle.any() or not reached.any():

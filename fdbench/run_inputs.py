@@ -1,9 +1,6 @@
-"""What a ``RunSpec`` stands for on the engine: the model the methods believe (``nominal``) and the
-simulated body (``plant``), their engines, the desired and true motions, the external loads, the
-reference (the nominal model's inverse dynamics on the true motion), the record fields that say
-which of them a run used, the engine's checks of a spec, the controller and what it designs from,
-and the content digests of the input files. Every function takes the spec's fields (a ``RunSpec``);
-nothing here imports the run layer above it (``spec``, the runs of ``method_runs``)."""
+"""What a ``RunSpec`` stands for on the engine: the believed model (``nominal``) and the simulated
+body (``plant``), their engines, motions, loads, reference (nominal inverse dynamics on the true
+motion), record fields, checks, controller and input digests. Imports nothing of the run layer."""
 
 from __future__ import annotations
 

@@ -159,11 +159,9 @@ class RunSpec:
         return {("kinematics" if name == "motion" else name): value for name, value in asdict(self).items()}
 
     def canonical(self) -> dict:
-        """The settings that determine the numbers, normalised so that equivalent specs compare
-        equal: -0.0 is 0.0, whole numbers in float fields are floats, the tolerances of the
-        adaptive integrators are left at their defaults for rk4 and the RK4 step for the others,
-        and fields added since the first results schema are left out at their defaults (so that
-        stored runs keep their identity)."""
+        """The settings that determine the numbers, normalised so that equivalent specs compare equal
+        (fields added since the first results schema left out at their defaults: stored runs keep
+        their identity)."""
         data = self.as_dict()
         defaults = RunSpec()
         if self.integrator == "rk4":
@@ -216,10 +214,8 @@ OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "r
 
 
 def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **common) -> RunSpec:
-    """A control spec: PD (kp, kd) or another registered controller with its options
-    (``controller_options``: names its class takes; another name is a ValueError). Gains not given
-    are the paper's (80, 0.3) for the forearm and, for every other model, None: each joint's scaled
-    to its inertia (``fdbench.run_inputs.pd_gains``)."""
+    """A control spec: PD (kp, kd; not given: the paper's for the forearm, else None, scaled per
+    joint by ``run_inputs.pd_gains``) or another registered controller with its options."""
     options = accepted_options(CONTROLLERS, controller or "pd", controller_options, "controller")
     if controller in (None, "pd"):
         kp, kd = dict(options).get("kp", kp), dict(options).get("kd", kd)
@@ -263,11 +259,9 @@ def peer_spec(name: str, options: dict | None = None, kp=None, kd=None, **common
 def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budget=200,
                   torque_options=None, optimizer_options=None, gradient="fd", *, shared_options=False,
                   **common) -> RunSpec:
-    """An optimisation spec. ``torque_options`` and ``optimizer_options`` name options the torque's
-    and the optimiser's classes take (another name is a ValueError), or, with ``shared_options``
-    (a sweep handing one set to several methods), each keeps those it takes; so the same run has
-    the same hash whichever command asks for it. ``gradient`` "exact" serves gradient-based
-    optimisers only (see ``gradient_for``)."""
+    """An optimisation spec. ``torque_options`` and ``optimizer_options`` name options their classes
+    take (another name is a ValueError), or, with ``shared_options`` (a sweep's), each keeps those
+    it takes."""
     if shared_options:
         torque_options = options_for(TORQUES, torque, torque_options)
         optimizer_options = options_for(OPTIMIZERS, optimizer, optimizer_options)
@@ -282,10 +276,8 @@ def optimize_spec(torque="cs", optimizer="bfgs", feedforward=False, seed=0, budg
 
 
 def with_motion_knots(spec: RunSpec, written_out: bool) -> RunSpec:
-    """A spline spec without --knots gets one knot every 0.1 s of its motion (``cs.knots_for``).
-    ``written_out`` (the command line's and the report's knots=None) puts the count among the
-    torque options whatever it is; else (the Python API's omitted knots) only where it differs from
-    the class default, so that every stored run keeps its hash."""
+    """A spline spec without --knots gets one knot every 0.1 s of its motion (``cs.knots_for``),
+    among its options if ``written_out`` (the command line's) or unlike the class default."""
     if spec.torque != "cs" or "knots" in dict(spec.torque_options):
         return spec
     try:

@@ -1,16 +1,10 @@
-"""The results store: an embedded SQLite database, one row per run.
+"""The results store: an embedded SQLite database, one row per run (settings and their hash,
+indicators, history, best parameters, versions, commit, machine, time).
 
-A row holds the run's full settings and their hash (the seed included), the indicators, the
-convergence history, the best parameters, the fdbench and dependency versions, the git commit if
-any, the machine and a timestamp. Every write is one transaction, so a process killed at any
-moment leaves every stored run intact; WAL journaling and a busy timeout let several processes
-write to one database. Only an empty file or a new name becomes a database: any other file
-without fdbench's metadata (another program's SQLite database included) is refused and never written.
-A database another local user could have planted or can change is refused before SQLite opens it
-(see :func:`check_path`); a new database is built beside its name and linked into place whole, so a
-creation that fails (a full disk) leaves nothing behind.
-A run replaced by ``--rerun`` is kept, with its id, in ``superseded_runs``: an id cited by a
-report always names a stored run.
+Every write is one transaction; WAL journaling and a busy timeout let several processes write.
+Only an empty file or a new name becomes a database; another program's file, or one another local
+user could have planted or can change, is refused before SQLite opens it. A run replaced by
+``--rerun`` is kept, with its id, in ``superseded_runs``: a cited id always names a stored run.
 """
 
 from __future__ import annotations
@@ -100,10 +94,8 @@ def open_store(path=None):
 
 
 def check_path(path) -> Path:
-    """Refuse, without touching anything, a name that cannot be or become a results database: an
-    empty name, ``:memory:``, a directory, a device or a pipe, a missing folder; for a new name, a
-    folder that cannot be written; and (see :func:`check_trusted`) a database another local user
-    could have planted or can change. Raises StoreError."""
+    """Refuse (StoreError), touching nothing, a name that cannot be or become a results database,
+    or one another local user could have planted or can change (:func:`check_trusted`)."""
     if str(path) in ("", ":memory:"):
         raise StoreError(f"{str(path) or 'an empty name'} is not a file: the results database must be a file "
                          "that keeps the runs")
@@ -131,11 +123,8 @@ def _lstat(path: Path) -> os.stat_result | None:
 
 
 def resolve(path: Path) -> Path:
-    """The file SQLite opens for the name ``path`` (a symbolic link followed; its ``-wal``,
-    ``-shm`` and ``-journal`` lie beside that file). StoreError for a link to nothing (fdbench
-    makes a new database only under the name it is given, never where a link points) and for a
-    link the kernel's ``fs.protected_symlinks`` would not follow: one owned by another user, in
-    a sticky world-writable folder (/tmp) that is not theirs."""
+    """The file SQLite opens for the name ``path`` (a link followed); StoreError for a link to
+    nothing and for one the kernel's ``fs.protected_symlinks`` would not follow."""
     st = _lstat(path)
     if st is None or not stat.S_ISLNK(st.st_mode):
         return path
@@ -151,9 +140,8 @@ def resolve(path: Path) -> Path:
 
 
 def companions(target: Path) -> list[tuple[Path, os.stat_result]]:
-    """The ``-wal``, ``-shm`` and ``-journal`` files present beside the database file ``target``,
-    with their lstat. StoreError for one that is a symbolic link or not a regular file: SQLite
-    would write through it (and then delete the link), so it is refused before SQLite opens."""
+    """[(file, lstat)] of the ``-wal``, ``-shm`` and ``-journal`` files beside ``target``;
+    StoreError for a link or a file that is not regular (SQLite would write through it)."""
     found = []
     for suffix in COMPANIONS:
         file = Path(f"{target}{suffix}")
@@ -180,9 +168,8 @@ def foreign(file: Path, st: os.stat_result) -> str | None:
 
 
 def check_trusted(target: Path) -> None:
-    """Refuse a database file (``target``, as resolved) or one of its companions that another
-    local user could have planted or can change: fdbench writes runs only into a database that
-    is the user's own (its ``runs`` commands may read any database they can read)."""
+    """Refuse a database file (``target``, resolved) or companion another local user could have
+    planted or can change."""
     files = companions(target)
     st = _lstat(target)
     for file, file_st in ([(target, st)] if st is not None else []) + files:
@@ -193,10 +180,8 @@ def check_trusted(target: Path) -> None:
 
 
 def _create_new(path: Path) -> None:
-    """Make a new, empty results database at ``path`` (its tables, WAL journaling): built in a
-    temporary file beside it and linked into place whole, so that other processes see no file
-    or a whole database, and a creation that fails (a full disk) leaves nothing behind. If
-    another process made ``path`` meanwhile, its database is kept."""
+    """Make a new, empty results database at ``path``: built beside it and linked into place whole
+    (a failure leaves nothing; one another process made meanwhile is kept)."""
     fd, name = tempfile.mkstemp(prefix=".fdbench-", suffix=".tmp", dir=path.parent)
     os.close(fd)
     temporary = Path(name)
@@ -206,9 +191,7 @@ def _create_new(path: Path) -> None:
 
         os.chmod(temporary, 0o666 & ~umask())  # as SQLite would create it
         db = sqlite3.connect(temporary, isolation_level=None)
-        db.executescript("BEGIN IMMEDIATE;" + _SCHEMA)
-        db.execute("INSERT INTO fdbench_meta VALUES ('schema', ?), ('version', ?)", (SCHEMA_NAME, SCHEMA_VERSION))
-        db.execute("COMMIT")
+        _write_schema(db)
         db.execute("PRAGMA journal_mode = WAL")  # kept in the file: every later connection uses it
         db.close()
         db = None
@@ -232,10 +215,16 @@ def _create_new(path: Path) -> None:
                 pass
 
 
+def _write_schema(db) -> None:
+    """The tables and metadata in one transaction: other processes see no database or a whole one."""
+    db.executescript("BEGIN IMMEDIATE;" + _SCHEMA)
+    db.execute("INSERT OR IGNORE INTO fdbench_meta VALUES ('schema', ?), ('version', ?)", (SCHEMA_NAME, SCHEMA_VERSION))
+    db.execute("COMMIT")
+
+
 def _remove_empty_companions(target: Path, before: set) -> None:
     """After a failed initialisation of the empty file ``target``: remove the companions it made
-    (those not in ``before``), provided the database and its journal still hold nothing, so that
-    a later open does not meet a half-made ``-shm`` ("disk I/O error")."""
+    (not in ``before``) while nothing was written, lest a later open meet a half-made ``-shm``."""
     made = [Path(f"{target}{suffix}") for suffix in COMPANIONS if Path(f"{target}{suffix}") not in before]
     try:
         if os.path.getsize(target) > 0 or any(f.exists() and f.stat().st_size > 0 for f in made if f.name[-4:] != "-shm"):
@@ -321,16 +310,8 @@ class Store:
             self.db.execute("PRAGMA busy_timeout = 60000")
 
     def _create(self):
-        """The tables in one transaction (other processes see no database or a whole one), then
-        WAL journaling."""
         try:
-            self.db.execute("BEGIN IMMEDIATE")
-            for statement in _SCHEMA.split(";"):
-                if statement.strip():
-                    self.db.execute(statement)
-            self.db.execute("INSERT OR IGNORE INTO fdbench_meta VALUES ('schema', ?), ('version', ?)",
-                            (SCHEMA_NAME, SCHEMA_VERSION))
-            self.db.execute("COMMIT")
+            _write_schema(self.db)
             self._set_wal()
         except sqlite3.Error as exc:
             raise StoreError(f"cannot create the results database {self.path}: {exc}") from None
@@ -409,10 +390,8 @@ class Store:
         return {row[0]: self._run(row) for row in self._rows_by_id("id, record_json, history_json, params_json", ids)}
 
     def provenance(self, runs) -> dict:
-        """{spec hash: {id, created_at, machine, jobs, git_commit, fdbench_version}}: when, where
-        and by what each run was made. ``runs`` is {spec hash: stored run} as
-        ``execution.execute_specs`` returns it (each run's own row, even if replaced since), or
-        an iterable of spec hashes (the rows stored now under them)."""
+        """{spec hash: {id, created_at, machine, jobs, git_commit, fdbench_version}} of ``runs``:
+        {spec hash: stored run} (each run's own row) or spec hashes (the rows stored now)."""
         fields = ("id", "created_at", "machine", "jobs", "git_commit", "fdbench_version")
         if isinstance(runs, dict) and all(isinstance(run, dict) and "id" in run for run in runs.values()):
             hash_of = {run["id"]: key for key, run in runs.items()}
@@ -450,13 +429,9 @@ class Store:
         return self.put(spec, record, history, params, jobs, replace) is not None
 
     def put(self, spec, record: dict, history, params=None, jobs: int = 1, replace: bool = False) -> int | None:
-        """Store one run; its row id, or None when a run with the same settings hash is stored
-        and kept (not ``replace``).
-
-        Replacing never deletes: the replaced row moves, with its id, to the table
-        ``superseded_runs`` in the same transaction, so a report that cited it (another report
-        running ``--rerun`` on the same database at the same time) still cites a stored run.
-        Row ids are never reused (AUTOINCREMENT), so an id names one run for good."""
+        """Store one run; its row id, or None when a run with its settings hash is kept (not
+        ``replace``). A replaced row moves, with its id, to ``superseded_runs`` in the same
+        transaction; ids are never reused (AUTOINCREMENT)."""
         record = dict(record, jobs=jobs)
         record.pop("command_time_s", None)
         values = (

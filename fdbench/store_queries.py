@@ -1,14 +1,7 @@
 """Reading a results database without changing it (``fdbench runs``): its stored runs as rows to
-list, show, export and compare.
-
-The database is opened read-only (an SQLite ``mode=ro`` URI): nothing is created, no journal
-mode is switched, nothing is written. SQLite itself may leave the ``-wal`` and ``-shm``
-companions of a WAL database behind, as any reader of one does; the next writer removes them.
-A database that is not the user's own (another user's, one in a folder the user cannot write,
-or one that others can write) is read as ``immutable``: SQLite then writes nothing at all, not
-even its shared index, and creates no file; changes another user's writer has not yet moved from
-its ``-wal`` into the database are not seen (a warning says so). A stored run whose JSON is
-damaged is skipped with a warning naming the database and its id.
+list, show, export and compare. The database is opened read-only (``mode=ro``); one that is not
+the user's own is read as ``immutable`` (SQLite writes nothing at all; changes still in another
+user's ``-wal`` are not seen, with a warning). A damaged run is skipped with a warning.
 """
 
 from __future__ import annotations
@@ -92,11 +85,8 @@ def open_read_only(path, say_unseen: bool = True) -> sqlite3.Connection:
 
 
 def _own(target: Path, say_unseen: bool = True) -> bool:
-    """Whether the database file ``target`` and its companions are the user's own, in a folder the
-    user can write: then SQLite reads it as usual (sharing its ``-wal`` and ``-shm`` with a writer
-    at work). Otherwise it is to be read as immutable, with a warning if its ``-wal`` holds
-    changes that are then not seen. StoreError for a companion that is a link (SQLite would write
-    through it)."""
+    """Whether ``target`` and its companions are the user's own, in a folder the user can write (else
+    it is read as immutable, with a warning if its ``-wal`` holds changes then not seen)."""
     files = companions(target)
     if all(foreign(file, st) is None for file, st in [(target, os.stat(target))] + files) and \
             os.access(target.parent, os.W_OK):
@@ -131,10 +121,8 @@ def _check_fdbench(db: sqlite3.Connection, path: Path) -> None:
 
 
 def read_runs(path, superseded: bool = False, damaged: dict | None = None) -> list[dict]:
-    """Every stored run of the database at ``path``, oldest first: its id, settings hash,
-    command, seed, settings (``spec``), record, when, where and by what it was made. With
-    ``superseded``, the runs replaced by a ``--rerun`` follow (``run["superseded"]`` True).
-    A damaged run is skipped: put in ``damaged`` ({id: why}) if given, else named in a warning."""
+    """Every stored run at ``path``, oldest first (with ``superseded``, the replaced ones after,
+    ``run["superseded"]`` True); a damaged one is skipped, into ``damaged`` ({id: why}) or a warning."""
     db = open_read_only(path)
     try:
         tables = ["runs"]
@@ -274,9 +262,8 @@ def show(run: dict, history: list, params) -> dict:
 
 
 def export_rows(runs: list[dict], nested: bool = False) -> list[dict]:
-    """One row per run: its id, when, its method, every field of its record (the union over the
-    runs, None where a run has none), where and by what it was made, and its dependency versions
-    and settings: as JSON text for a flat table, or as objects if ``nested``."""
+    """One row per run: id, time, method, the union of the records' fields, provenance and settings
+    (lists and objects as JSON text unless ``nested``)."""
     fields = list(dict.fromkeys(k for run in runs for k in run["record"]))
     rows = []
     for run in runs:
@@ -335,10 +322,8 @@ def _cells(runs: list[dict]) -> dict:
 
 
 def compare(runs_a: list[dict], runs_b: list[dict]) -> list[dict]:
-    """The cells of two databases side by side: matched by their settings (seed aside) or, failing
-    that, by method and conditions where that pairs one cell with one; per cell the runs, the
-    median of each indicator in A and in B and the ratio B / A; cells of one database only are
-    listed with ``found`` saying so."""
+    """The cells of two databases side by side, matched by settings (seed aside) or else by method
+    and conditions one to one: per cell each indicator's median in A and B and B / A."""
     cells_a, cells_b = _cells(runs_a), _cells(runs_b)
     pairs = [(key, key, "settings") for key in cells_a if key in cells_b]
     alone_a = [k for k in cells_a if k not in cells_b]

@@ -1,11 +1,7 @@
-"""Studies: one condition swept over the methods. ``noise``: the desired motion captured with
-white noise of each level (deg), one noise realisation per seed; ``mismatch``: one constant of the
-simulated body (the plant) changed by each level (percent) while inverse dynamics and every
-model-based method keep the nominal model.
-
-A study is a list of run specifications (``Sweep``) carried out and stored like a report's, so it
-resumes and reuses stored runs; its summary has the median and interquartile range of each
-indicator per method and level.
+"""Studies: one condition swept over the methods, ``noise`` (the captured motion's white noise, deg,
+one realisation per seed) or ``mismatch`` (one plant constant changed by each level, %). A study's
+specs (``Sweep``) are run and stored like a report's; its summary has each indicator's median and
+interquartile range per method and level.
 """
 
 from __future__ import annotations

@@ -1,24 +1,13 @@
-"""External loads from data: measured forces such as a walk's ground reactions, applied to the
-model's bodies at the integrator's stage times and in inverse dynamics.
+"""External loads from data (a walk's ground reactions): on one body each, a force (N) at a point
+(m) and a free moment (N m) about z, force and point in ground's axes or a body's frame, sampled at
+the data's times and linear between them. The file is OpenSim's ExternalLoads (``--loads FILE.xml``)
+and the storage file its ``datafile`` names; a force without a point acts at the body's origin; a
+body welded into another on import is found as the host's named frame (``Model.frames``).
 
-A load acts on one body: a force (N) at a point (m) and a free moment (N m) about the plane's
-normal z. The force is given in ground's axes or in a body's frame, the point likewise, each
-sampled at the data's times and interpolated linearly between them. The file is OpenSim's
-ExternalLoads (``--loads FILE.xml``): per ExternalForce the body it is applied to, the bodies its
-force and point are expressed in, and the column prefixes of its force (``<id>x``, ``<id>y``), point
-and torque in the storage file (.mot, .sto) its ``datafile`` names (a path relative to the XML
-file); as in OpenSim, a force without a point acts at the origin of the body it is applied to.
-A model is planar (x, y): the force's and point's z and the torque's x and y do no work on its
-coordinates and are not read. A body welded into another on import (an OpenSim foot's calcn) is
-found as the host's named frame (``Model.frames``).
-
-How a load enters the equations: its generalised force on the coordinates z is
-Q = sum over the joints m from ground to the body of [ (P - r_m) x F + d_m . F + M ] on m's angle
-(d_m: the direction of a path joint's point per radian) and F on a free joint's x and y, i.e.
-J_P(z)^T F with P taken as the body's material point at that instant (compiled in eq. 3,
-``fdbench.multibody.inverse``).
-In the mixed coordinates of eq. 12 the same load is F on the body's joint point i and the moment
-(P - r_i) x F + M on its angle (``fdbench.multibody.kernels``).
+A load's generalised force on z is Q = sum over the joints m from ground to the body of
+[(P - r_m) x F + d_m . F + M] on m's angle (d_m: a path joint's point direction per radian) and F
+on a free joint's x and y: J_P(z)^T F, P the body's material point at that instant. In eq. 12's
+mixed coordinates it is F on the body's joint point i and (P - r_i) x F + M on its angle.
 """
 
 from __future__ import annotations
@@ -97,6 +86,50 @@ class ExternalLoads:
     def shifted(self, t0: float) -> "ExternalLoads":
         """The loads on a clock starting at t0 (s): the motion's time 0 is the file's t0."""
         return ExternalLoads(self.loads, self.t - t0, self.force, self.point, self.moment, self.source)
+
+
+# ---------------------------------------------------------------------- generalised forces
+def _rotate(angle, v):
+    """R(angle) v for angles (n,) and vectors v (n, 2)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
+
+
+def _cross(a, b):
+    """z of a x b for vectors (n, 2)."""
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def world_loads(engine, loads: ExternalLoads, phi, origins, t):
+    """Forces and points in ground's axes (each (n, L, 2)) and moments (n, L) at times t (n,), for
+    body angles phi (n, B) (rad) and body frame origins (n, B, 2) (m)."""
+    force, point, moment = loads.at(t)
+    body = {name: b for b, name in enumerate(engine.body_names)}
+    for k, load in enumerate(loads.loads):
+        if load.force_frame != GROUND:
+            force[:, k] = _rotate(phi[:, body[load.force_frame]], force[:, k])
+        if load.point_frame != GROUND:
+            b = body[load.point_frame]
+            point[:, k] = origins[:, b] + _rotate(phi[:, b], point[:, k])
+    return force, point, moment
+
+
+def generalized_forces(engine, loads: ExternalLoads, z, t) -> np.ndarray:
+    """The loads' generalised forces (n, J) on the coordinates z (n, J) at times t (s, (n,)): N m on
+    angles, N on a free joint's x and y."""
+    z = np.atleast_2d(np.asarray(z, dtype=float))
+    zero = np.zeros_like(z)
+    phi, _, _, origins, _, _, joint_at, path_dir = engine._kinematics(z, zero, zero)
+    force, point, moment = world_loads(engine, loads, phi, origins, np.asarray(t, dtype=float).reshape(-1))
+    Q = np.zeros_like(z)
+    for k, load in enumerate(loads.loads):
+        f = force[:, k]
+        for m in engine.model.path(load.body):
+            c = engine.joint_column[m]
+            Q[:, c] += _cross(point[:, k] - joint_at[:, m], f) + np.sum(path_dir[:, m] * f, axis=1) + moment[:, k]
+            if engine.model.joints[m].type == "free":
+                Q[:, c + 1:c + 3] += f
+    return Q
 
 
 # ---------------------------------------------------------------------- reading OpenSim's ExternalLoads

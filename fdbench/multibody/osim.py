@@ -1,56 +1,24 @@
-"""OpenSim models and motions in: an ``.osim`` model as fdbench's planar description, and OpenSim's
-storage files (``.mot``, ``.sto``) as the columns of a motion.
+"""OpenSim models and motions in: an ``.osim`` model as fdbench's planar description (what comes in,
+what is dropped or refused: README, "OpenSim models"), OpenSim's storage files (``.mot``, ``.sto``)
+as the columns of a motion; and ``to_osim``, a description as an ``.osim`` (XML, no OpenSim needed).
 
-The model is read through the ``opensim`` package (``pip install 'fdbench[opensim]'``), imported
-inside the functions that need it. OpenSim builds the model (``initSystem``) and gives its frames'
-transforms at the default pose; the planar description follows from them:
+OpenSim (``pip install 'fdbench[opensim]'``, imported in a child process) builds the model and gives
+its frames' transforms at the default pose. The plane is ground's x-y plane, its normal ground's z.
+A one-coordinate joint whose child turns about a fixed axis through a fixed point becomes a pin
+named after its coordinate. The axis is found numerically: the child offset frame M's rotation in
+the parent offset frame F, at two values of the coordinate, turns by exactly the coordinate's change
+about one axis, and M's origin does not move in F. With h the kept body (or ground) the parent is
+welded to:
 
-* The plane is ground's x-y plane (x forward, y up) and its normal ground's z axis. Gravity's
-  x and y are kept.
-* Each one-coordinate joint whose child turns about a fixed axis through a fixed point (a
-  ``PinJoint``, or a ``CustomJoint`` with one rotation by its coordinate and constant translations)
-  becomes a pin joint named after its coordinate (file columns keep OpenSim's names). The axis is
-  found numerically: the child offset frame M's rotation in the parent offset frame F, taken at two
-  values of the coordinate, turns by exactly the change of the coordinate about one axis, and M's
-  origin does not move in F. Then, with h the retained body (or ground) the parent is welded to:
+    at_parent = xy of X_hF * p_FM        (the joint point in the parent's frame)
+    at_child  = xy of p_CM               (M's origin in the child's frame)
+    offset    = planar angle of R_hF R_FM(q0) R_CM^T  -  q0
 
-      at_parent = xy of X_hF * p_FM        (the joint point in the parent's frame)
-      at_child  = xy of p_CM               (M's origin in the child's frame)
-      offset    = planar angle of R_hF R_FM(q0) R_CM^T  -  q0
-
-  so that the child frame's angle relative to the parent's is coordinate + offset, as in the
-  description. Offsets along the normal are dropped: they do not change a planar motion. An axis
-  (or a child frame's z axis, or gravity) off the normal by at most ``max_tilt_deg`` is projected
-  onto it, the largest angle said in one note; beyond, the import stops naming the joint.
-* A ``WeldJoint``, or a joint whose coordinates are all locked (at their default values), merges
-  its child into the parent's body: masses add, the centre of mass is the mass-weighted mean and
-  the inertia about the normal adds by the parallel-axis theorem. Bodies welded to ground vanish.
-* Each body keeps its mass, centre of mass (x, y in its frame) and inertia about its z axis at the
-  centre of mass. Coordinate ranges become joint limits; the model gets one named motion,
-  ``mid_range``: minimum jerk in 1 s from the default values to the middle of the ranges.
-* A ``PrescribedForce`` of constant functions, its force in ground (``forceIsGlobal``), its point
-  in its frame (not ``pointIsGlobal``) and no torque, on a kept body (or one welded to it), becomes
-  a constant load (its x and y; the point moved into the host body's frame).
-* Left out, said in one note: muscles and every other force, markers, wrap objects, contact
-  geometry, controllers and probes (the imported model is driven by joint torques).
-* A ``CustomJoint`` whose translations are functions of its one coordinate (``SimmSpline``,
-  ``Constant``, ``LinearFunction``, each maybe scaled by a ``MultiplierFunction``: the knee of
-  OpenSim's gait models) becomes a pin joint on a path: at_parent + (x(q), y(q)) in the parent's
-  frame, the same splines (a line is the spline through two of its points; x and y keep their own
-  knots). The path is checked against OpenSim's placement of the child over the coordinate's range
-  (1e-9 m) before it is accepted.
-* A joint on ground with three coordinates, one turning the child about the normal and two moving
-  it along ground's x and y by their values (OpenSim's ``PlanarJoint``, or the ``CustomJoint``
-  pelvis of the gait models), becomes a ``free`` joint with the coordinates (angle, x, y) under
-  OpenSim's names; its translations are held at their defaults in the ``mid_range`` motion.
-* Refused in one line naming the joint or constraint: other joints with two or more free
-  coordinates (3D joints), a translation by another function or another coordinate, a rotation
-  that is not the coordinate itself, an axis beyond the tilt tolerance or pointing along -z,
-  constraints (closed loops, couplers).
-
-``to_osim`` writes the other way: a description as an OpenSim model file (XML text, no OpenSim
-needed), one ``Body``, ``PinJoint`` and ``CoordinateActuator`` per body and joint, each load a
-``PrescribedForce``; its import gives the description back.
+so that the child frame's angle relative to the parent's is coordinate + offset. Offsets along the
+normal are dropped; an axis (or child frame's z, or gravity) within ``max_tilt_deg`` of the normal
+is projected onto it. Welded and locked joints merge their child into the parent (parallel axes); a
+CustomJoint whose translations are splines of its coordinate becomes a pin on a path (checked
+against OpenSim's placement); a three-coordinate planar joint on ground becomes a ``free`` joint.
 """
 
 from __future__ import annotations
@@ -86,20 +54,16 @@ def _fail(source: str, problem: str):
 
 
 def import_osim(path, max_tilt_deg: float = 5.0, option: str = "--model"):
-    """(Model, notes): the planar description of the OpenSim model file ``path`` and the notes of
-    the import (what was dropped, welded or projected; one line each). ``max_tilt_deg``: the
-    largest angle (deg) by which a joint axis may be off the plane's normal. ModelError or
-    files.BadFile (ValueErrors, one line naming the file) when the model cannot be imported."""
+    """(Model, notes): the planar description of the OpenSim model file ``path`` and the import's
+    notes (one line each); ModelError or files.BadFile (one line) when it cannot be imported."""
     source = str(path)
     content = read_input_bytes(path, option, MAX_OSIM_BYTES)
     return import_osim_content(content, source, max_tilt_deg)
 
 
 def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
-    """``import_osim`` of a file's bytes (``source`` names it in messages). OpenSim runs in a child
-    process: its libraries bundle their own CasADi, which cannot share a process with the casadi
-    package that fdbench's collocation and LQR use (whichever loads second fails on missing
-    symbols)."""
+    """``import_osim`` of a file's bytes (``source`` names it), in a child process: OpenSim's own
+    CasADi cannot share a process with the casadi package."""
     import base64
     import json
     import subprocess
@@ -395,10 +359,8 @@ PATH_TOLERANCE = 1e-9  # m
 
 
 def _path(osim, model, state, joint, coordinate, X_hF):
-    """(at_parent, path) of a CustomJoint whose translations are functions of its coordinate
-    (SimmSpline, Constant, LinearFunction, each maybe inside a MultiplierFunction): the child's point
-    in the host's frame at the coordinate q is at_parent + path(q). The path is checked against
-    OpenSim's own placement of the child at PATH_CHECKS values over the coordinate's range."""
+    """(at_parent, path) of a CustomJoint whose translations are functions of its coordinate q: the
+    child's point in the host's frame is at_parent + path(q), checked against OpenSim's."""
     custom = osim.CustomJoint.safeDownCast(joint)
     name = coordinate.getName()
     if custom is None:
@@ -730,11 +692,8 @@ def is_storage(path) -> bool:
 
 
 def read_storage(path, option: str, joints) -> tuple[dict, bool, list]:
-    """An OpenSim storage file (.mot, .sto): header lines up to ``endheader`` (``inDegrees=yes|no``,
-    default no), then a tab- or space-separated table with a ``time`` column and columns named by
-    coordinate (or a state's path, ``/jointset/<joint>/<coordinate>/value``). Returns ({'t' and
-    each of ``joints`` (lower case) present: arrays}, in_degrees, labels of the columns not used).
-    Raises files.BadFile in one line."""
+    """({'t' and each of ``joints`` (lower case) present: arrays}, in_degrees, unused labels) of an
+    OpenSim storage file (columns by coordinate or state path); files.BadFile in one line."""
     path = Path(path)
     lines = read_input_text(path, option).splitlines()
     end = next((i for i, line in enumerate(lines) if line.strip().lower() == "endheader"), None)
@@ -814,13 +773,9 @@ def check_exportable(model) -> None:
 
 
 def to_osim(model) -> str:
-    """The description ``model`` as an OpenSim model file (XML text): per body a ``Body`` (mass kg,
-    centre of mass (x, y, 0) m, inertia kg m^2 about it, Ixx = Iyy = Izz); per joint a ``PinJoint``
-    ``<joint>_joint`` about z whose coordinate is named as the joint (default 0 rad, range its
-    limits or one turn), its parent frame at ``at_parent`` turned by the offset, its child frame at
-    ``at_child``, and a ``CoordinateActuator`` ``<joint>_actuator`` (optimal force 1 N m); per load
-    a ``PrescribedForce`` ``load<k>`` of constant functions (force in ground, point in the body).
-    Pin joints only (``check_exportable``)."""
+    """The description ``model`` (pin joints only) as an OpenSim model file (XML text): a ``Body``
+    per body, a ``PinJoint`` about z and a ``CoordinateActuator`` (1 N m) per joint, a constant
+    ``PrescribedForce`` per load."""
     check_exportable(model)
 
     credits = _text(f"written by fdbench {__version__} export-osim from the model {model.name}"

@@ -1,17 +1,9 @@
-"""Inverse and forward dynamics of any model on a desired joint motion, through the multibody
-engine: compiled fixed-step RK4 (torques and references on the half-step grid) or scipy's adaptive
-methods (``fdbench.integrate.solve_adaptive``) on the same compiled feedback laws (per-joint PD
-plus feedforward, computed torque, a gain matrix).
+"""Inverse and forward dynamics of any model on a desired joint motion through the engine: compiled
+RK4 or scipy's adaptive methods on the same compiled feedback laws (PD, computed torque, gains).
 
-A motion is any object with ``samples`` (s, shape (n,)), ``duration`` (s), ``name``, ``joints``
-(the joint names, in the model's order) and ``motion(t) -> (z, zd, zdd)``, the angles (rad),
-velocities (rad/s) and accelerations (rad/s^2) of every joint, each of shape t.shape + (J,).
-A torque function maps times (s), shape (k,), to joint torques (N m), shape (k, J).
-
-A simulation never raises on a physical failure: it stops where it cannot go on and says why in
-``status`` (``fdbench.integrate.Status``); ``t_end`` is the time reached. The engine has no singular
-configuration, so a simulation stops on a non-finite state or torque, a constraint violation
-beyond its tolerance, or an adaptive solver's failure.
+A motion has ``samples`` (s, (n,)), ``duration``, ``name``, ``joints`` and ``motion(t) -> (z, zd,
+zdd)`` (rad, rad/s, rad/s^2; t.shape + (J,)); a torque function maps times (k,) to N m (k, J).
+A simulation never raises on a physical failure: it stops and says why in ``status``.
 """
 
 from __future__ import annotations
@@ -152,21 +144,13 @@ def on_half_steps(torque, grid: HalfSteps, n_joints: int):
 def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3, start=None,
              computed: bool = False, nominal: Engine | None = None, gains=None, integrator: str = "rk4",
              rtol: float = 1e-6, atol: float = 1e-9, grid: HalfSteps | None = None) -> Simulation:
-    """Forward dynamics of ``engine`` (the plant) over the motion's span, driven by the feedforward
-    ``torque`` (a torque function, or None for zero) plus feedback towards the motion, the results
-    on the motion's samples.
-
-    kp (N m/rad), kd (N m s/rad): one number for every joint or one per joint (zero: open loop).
-    ``computed``: computed-torque control instead of PD, the inverse dynamics of ``nominal`` (an
-    Engine of the same joints; None: the plant) at the current state for the accelerations
-    z''_d + kp e + kd e' (kp in 1/s^2, kd in 1/s), plus torque. ``gains``: instead of kp and kd (and
-    before ``computed``), a full gain matrix K(t) as a function of times (s), shape (k,) ->
-    (k, J, 2J), applied to [z_d - z, z'_d - z'] (N m/rad, N m s/rad), e.g. time-varying LQR.
-    ``start``: the initial state (n_state,) (default: on the motion at t = 0).
-    ``integrator``: 'rk4' (compiled, a fixed step of about ``dt`` s, torques and references on its
-    half-step grid) or one of scipy's adaptive methods (``fdbench.integrate.SCIPY_METHODS``) with
-    the relative and absolute tolerances ``rtol`` and ``atol``. ``grid``: the motion's
-    ``HalfSteps`` for this dt, made beforehand (default: made here; rk4 only)."""
+    """Forward dynamics of ``engine`` (the plant) over the motion's span on its samples, driven by
+    ``torque`` (a torque function, or None) plus feedback: PD (kp N m/rad, kd N m s/rad, scalars or
+    (J,)), with ``computed`` computed torque through ``nominal`` (None: the plant; kp 1/s^2, kd 1/s),
+    or ``gains`` K(t): (k,) -> (k, J, 2J) on [z_d - z, z'_d - z']. ``start``: the state (n_state,)
+    (default: on the motion at t = 0). ``integrator``: 'rk4' (a fixed step of about ``dt`` s) or a
+    scipy method (``integrate.SCIPY_METHODS``, tolerances ``rtol``, ``atol``). ``grid``: the motion's ``HalfSteps`` for this dt,
+    made beforehand (default: made here; rk4 only)."""
     check_integrator(integrator)
     if integrator != "rk4":
         check_tolerances(rtol, atol)
@@ -336,30 +320,21 @@ class Feedforward:
         return self._last[1]
 
 
-def feedforward(engine: Engine, motion) -> Feedforward:
-    """The inverse-dynamics joint torques of ``engine`` on ``motion`` as a torque function."""
-    return Feedforward(engine, motion)
+feedforward = Feedforward
 
 
 def rmse_deg(result: Simulation, desired: np.ndarray) -> tuple[float, np.ndarray]:
-    """RMSE (deg) of the joint angles against ``desired`` (rad, shape (n, J)) over the samples
-    reached: over all joints and samples, and per joint (shape (J,)); every coordinate taken as an
-    angle (``rmse_coordinates`` keeps translations apart)."""
-    reached = result.reached
-    if not reached.any():
-        return float("nan"), np.full(result.z.shape[1], np.nan)
-    error = np.degrees(result.angles[reached] - desired[reached])
-    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+    """RMSE (deg) of the joint angles against ``desired`` (rad, (n, J)) over the samples reached,
+    overall and per joint (J,); every coordinate taken as an angle."""
+    overall, _, per_joint = rmse_coordinates(result, desired, ("angle",) * result.z.shape[1])
+    return overall, per_joint
 
 
 def rmse_torque_nm(result: Simulation, torque: np.ndarray) -> tuple[float, np.ndarray]:
-    """RMSE (N m) of the applied joint torques against ``torque`` (shape (n, J)), overall and per
-    joint; every coordinate taken as an angle (``rmse_generalized_forces`` keeps forces apart)."""
-    reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
-    if not reached.any():
-        return float("nan"), np.full(result.torque.shape[1], np.nan)
-    error = result.torque[reached] - torque[reached]
-    return float(np.sqrt(np.mean(error**2))), np.sqrt(np.mean(error**2, axis=0))
+    """RMSE (N m) of the applied joint torques against ``torque`` ((n, J)), overall and per joint;
+    every coordinate taken as an angle."""
+    overall, _, per_joint = rmse_generalized_forces(result, torque, ("angle",) * result.torque.shape[1])
+    return overall, per_joint
 
 
 CM_PER_M = 100.0
@@ -374,32 +349,29 @@ def _rmse_over(error: np.ndarray, columns: np.ndarray) -> float:
     return float(np.sqrt(np.mean(part**2)))
 
 
-def rmse_coordinates(result: Simulation, desired: np.ndarray, kinds) -> tuple[float, float, np.ndarray]:
-    """The coordinates' RMSE against ``desired`` (rad or m, shape (n, J)) over the samples reached,
-    ``kinds`` per coordinate 'angle' or 'translation' (``Model.coordinate_kinds``), units never
-    pooled: (over the angles, deg; over the translations, cm; per coordinate in its unit, shape (J,)).
-    NaN for a kind the model lacks or when no sample was reached."""
-    translation = np.array([kind == "translation" for kind in kinds])
-    reached = result.reached
+def _rmse_by_kind(values, reference, reached, translation, scale):
+    """(RMSE over the angles, over the translations, per coordinate (J,)) of ``scale`` (a function of
+    the error) over the rows ``reached``; NaN for a kind the model lacks or with no row reached."""
     if not reached.any():
-        return float("nan"), float("nan"), np.full(result.z.shape[1], np.nan)
-    error = result.angles[reached] - desired[reached]
-    error = np.where(translation, error * CM_PER_M, np.degrees(error)) if translation.any() else np.degrees(error)
-    return (_rmse_over(error, ~translation), _rmse_over(error, translation),
-            np.sqrt(np.mean(error**2, axis=0)))
+        return float("nan"), float("nan"), np.full(values.shape[1], np.nan)
+    error = scale(values[reached] - reference[reached])
+    return _rmse_over(error, ~translation), _rmse_over(error, translation), np.sqrt(np.mean(error**2, axis=0))
+
+
+def rmse_coordinates(result: Simulation, desired: np.ndarray, kinds) -> tuple[float, float, np.ndarray]:
+    """The coordinates' RMSE against ``desired`` (rad or m, (n, J)) over the samples reached, ``kinds``
+    per coordinate 'angle' or 'translation': (angles, deg; translations, cm; per coordinate, (J,))."""
+    translation = np.array([kind == "translation" for kind in kinds])
+    scale = (lambda e: np.where(translation, e * CM_PER_M, np.degrees(e))) if translation.any() else np.degrees
+    return _rmse_by_kind(result.angles, desired, result.reached, translation, scale)
 
 
 def rmse_generalized_forces(result: Simulation, reference: np.ndarray, kinds) -> tuple[float, float, np.ndarray]:
-    """The applied generalized forces' RMSE against ``reference`` (shape (n, J)) over the samples
-    reached: (over the angles' torques, N m; over the translations' forces, N; per coordinate,
-    shape (J,)). NaN for a kind the model lacks or when no sample was reached."""
+    """The applied generalized forces' RMSE against ``reference`` ((n, J)) over the samples reached:
+    (angles' torques, N m; translations' forces, N; per coordinate, (J,))."""
     translation = np.array([kind == "translation" for kind in kinds])
     reached = result.reached & np.all(np.isfinite(result.torque), axis=1)
-    if not reached.any():
-        return float("nan"), float("nan"), np.full(result.torque.shape[1], np.nan)
-    error = result.torque[reached] - reference[reached]
-    return (_rmse_over(error, ~translation), _rmse_over(error, translation),
-            np.sqrt(np.mean(error**2, axis=0)))
+    return _rmse_by_kind(result.torque, reference, reached, translation, lambda e: e)
 
 
 class _Still:
@@ -416,11 +388,9 @@ class _Still:
 
 
 def warm_up(adaptive: bool = False, engines=()) -> list:
-    """Load (or compile) the engine's kernels (RK4, inverse dynamics) on a small library model of
-    pin joints, and on each of ``engines`` of another kind (free or path joints, loads: the kernels
-    compile one variant per kind), and with ``adaptive`` the adaptive integrators' right-hand side
-    and scipy's integrators, so that later timings exclude it. Returns the engines warmed, one per
-    kind (the shooting problem warms its population kernel on them: ``fdbench.tracking.warm_up``)."""
+    """Load (or compile) the engine's kernels on the forearm and each kind of ``engines`` (and with
+    ``adaptive`` the adaptive right-hand side and scipy), so that timings exclude it; the engines
+    warmed, one per kind."""
     from ..compile_guard import compiling
 
     with compiling():  # Ctrl-C while a kernel compiles ends the command at once

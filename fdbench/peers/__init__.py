@@ -1,17 +1,8 @@
-"""Peers: the tools fdbench's methods are compared with, run on the same model, motion and
-indicators and giving the same flat record as fdbench's runs (plus their own fields).
-
-* ``opensim``: OpenSim's forward simulation under fdbench's PD law with computed feedforward, the
-  law inside OpenSim, one integrate (``fdbench.peers.opensim_pd``), beside ``fdbench control``.
-* ``opensim-cmc``: OpenSim's CMCTool on the torque-driven model (``fdbench.peers.cmc``), beside
-  ``fdbench control``.
-* ``moco``: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation
-  (``fdbench.peers.moco``), beside ``fdbench collocate``.
-
-A peer run is a ``RunSpec`` of command "peer" whose ``method_options`` hold the peer's name and
-its options, so it is stored, resumed and reported like every run. OpenSim runs in a child
-process (``fdbench.peers.child``); without the opensim package a peer is refused in one line
-naming ``pip install 'fdbench[opensim]'``."""
+"""Peers: the tools fdbench's methods are compared with (``opensim``: OpenSim's forward simulation
+under the PD law; ``opensim-cmc``: OpenSim's CMCTool; ``moco``: MocoTrack, replayed by fdbench), run
+on the same model, motion and indicators and giving the same flat record. A peer run is a
+``RunSpec`` of command "peer" (``method_options``: the peer's name and options); OpenSim runs in a
+child process (``fdbench.peers.child``)."""
 
 from __future__ import annotations
 
@@ -46,26 +37,22 @@ class Peer:
         return importlib.import_module(self.module).run(spec)
 
 
-def _peers() -> dict:
-    return {
-        "opensim": Peer("opensim", "OpenSim forward simulation, PD + feedforward", OPENSIM, {},
-                        "fdbench.peers.opensim_pd"),
-        "opensim-cmc": Peer("opensim-cmc", "OpenSim CMCTool (Computed Muscle Control), torque-driven", CMC, {},
-                            "fdbench.peers.cmc"),
-        "moco": Peer("moco", "MocoTrack (Hermite-Simpson) + forward replay", MOCO,
-                     {"nodes": 100, "regularization": 1e-6, "tolerance": DEFAULT_TOLERANCE, "max_iter": 1000},
-                     "fdbench.peers.moco"),
-    }
-
-
-NAMES = ("opensim", "opensim-cmc", "moco")
+PEERS = {
+    "opensim": Peer("opensim", "OpenSim forward simulation, PD + feedforward", OPENSIM, {}, "fdbench.peers.opensim_pd"),
+    "opensim-cmc": Peer("opensim-cmc", "OpenSim CMCTool (Computed Muscle Control), torque-driven", CMC, {},
+                        "fdbench.peers.cmc"),
+    "moco": Peer("moco", "MocoTrack (Hermite-Simpson) + forward replay", MOCO,
+                 {"nodes": 100, "regularization": 1e-6, "tolerance": DEFAULT_TOLERANCE, "max_iter": 1000},
+                 "fdbench.peers.moco"),
+}
+NAMES = tuple(PEERS)
 
 
 def peer(name: str) -> Peer:
     """The peer ``name``; ValueError (one line listing the valid names) for another."""
     if name not in NAMES:
         raise ValueError(unknown_name_message("peer", name, list(NAMES)))
-    return _peers()[name]
+    return PEERS[name]
 
 
 def parse_names(text: str, option: str = "--peers") -> list[str]:

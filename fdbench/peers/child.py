@@ -1,11 +1,6 @@
-"""OpenSim in a child process: a peer's request (JSON on stdin) in, its answer (one JSON line on
-stdout) out. OpenSim's libraries bundle their own CasADi, which cannot share a process with the
-casadi package fdbench's collocation uses (see ``fdbench.multibody.osim``), so OpenSim is never
-imported into fdbench's own process.
-
-Parent side: ``call(request)``. Child side: ``main()`` dispatches on ``request["peer"]`` to the
-peer module's ``solve(osim, request)``, and offers the helpers the peers share (``model_from``,
-``torque_driven``, and for external loads ``loads_file`` and ``with_loads``)."""
+"""OpenSim in a child process (its own CasADi cannot share fdbench's): a peer's request (JSON on
+stdin) in, one JSON line out. Parent side: ``call(request)``; child side: ``main()`` dispatches to
+the peer module's ``solve(osim, request)``, with the helpers the peers share."""
 
 from __future__ import annotations
 
@@ -146,3 +141,19 @@ def coordinate_paths(model, coordinates) -> list[str]:
     """The state paths of the coordinates' values, '/jointset/<joint>/<coordinate>' (after initSystem)."""
     found = model.getCoordinateSet()
     return [found.get(name).getAbsolutePathString() for name in coordinates]
+
+
+def radians_table(osim, labels, t, values):
+    """A TimeSeriesTable in radians: columns ``labels``, rows ``values`` (m, len(labels)) at t (s)."""
+    table = osim.TimeSeriesTable()
+    names = osim.StdVectorString()
+    for label in labels:
+        names.append(label)
+    table.setColumnLabels(names)
+    table.addTableMetaDataString("inDegrees", "no")
+    for k in range(len(t)):
+        row = osim.RowVector(len(labels), 0.0)
+        for j, value in enumerate(values[k]):
+            row[j] = float(value)
+        table.appendRow(float(t[k]), row)
+    return table

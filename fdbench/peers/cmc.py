@@ -1,17 +1,9 @@
 """The ``opensim-cmc`` peer: OpenSim's Computed Muscle Control (``CMCTool``) on the torque-driven
-model, the tracking controller OpenSim's users run, beside ``fdbench control``.
-
-The model is the plant with a CoordinateActuator per coordinate (optimal force ``OPTIMAL_FORCE``
-N m, controls within +-``CONTROL_BOUND``: CMC's static optimisation minimises the squared
-controls, so the torque is reached at a small cost); the desired kinematics are the desired
-motion's angles at its samples (a .sto in radians, not filtered again); one CMC_Joint task per
-coordinate with OpenSim's usual gains (kp ``TASK_KP`` 1/s^2, kv ``TASK_KV`` 1/s: critically
-damped), CMC's default time window ``TIME_WINDOW`` and its fast target. CMC looks one window ahead,
-so it ends one window before the motion does; the indicators are taken over the samples it
-reached, as for any run that stops early. Runtime: the whole
-``CMCTool.run()`` (its set-up, optimisations, forward integration and result files; OpenSim's
-start-up and the model's building excluded). The indicators are measured on CMC's own states
-(cubic Hermite between its steps) and its actuators' forces, as fdbench's runs are."""
+model, beside ``fdbench control``: a CoordinateActuator per coordinate (``OPTIMAL_FORCE`` N m,
+controls within +-``CONTROL_BOUND``), the desired angles as a .sto in radians, one CMC_Joint task
+per coordinate (kp ``TASK_KP``, kv ``TASK_KV``: critically damped), window ``TIME_WINDOW``. CMC
+ends one window before the motion; the indicators are taken over the samples it reached, on its
+own states and actuator forces. Runtime: the whole ``CMCTool.run()``."""
 
 from __future__ import annotations
 
@@ -19,7 +11,7 @@ import time
 
 import numpy as np
 
-from .child import call, coordinate_paths, loads_file, model_from, torque_driven
+from .child import call, coordinate_paths, loads_file, model_from, radians_table, torque_driven
 from .opensim_pd import _hermite
 
 OPTIMAL_FORCE = 100.0  # N m per unit control
@@ -36,7 +28,7 @@ def run(spec):
     samples against the same reference as fdbench's control."""
     from ..models import joints  # lazy: OpenSim's child imports this module, not the engine
     from ..records import RunOutcome, base_record
-    from .common import desired, grid, indicators, loads_request, osim_texts, reference
+    from .common import desired, grid, indicators, loads_request, osim_texts
 
     names = joints(spec.model_name)
     _, plant = osim_texts(spec)
@@ -58,18 +50,15 @@ def run(spec):
                   status="success" if done else "error", message=message, peer="opensim-cmc",
                   opensim_version=answer["version"], cmc_time_window_s=TIME_WINDOW, cmc_task_kp=TASK_KP,
                   cmc_task_kv=TASK_KV, cmc_optimal_force_nm=OPTIMAL_FORCE, opensim_steps=answer["steps"])
-    return RunOutcome(record, None, reference(spec)[0], table=table)
+    return RunOutcome(record, None, spec.reference(), table=table)
 
 
 # ---------------------------------------------------------------------------------------- the child
 
 
 def solve(osim, request: dict) -> dict:
-    """In OpenSim's process: CMCTool on the plant made torque-driven; angles (rad) and actuator
-    torques (N m) at the step times reached, shape (m, J), the last time reached (s, on the
-    request's clock), its integration steps and the run's wall time (s). External loads are given
-    to CMCTool as its users give them (``setExternalLoadsFileName``), on their own clock (the
-    request's times shifted by theirs)."""
+    """In OpenSim's process: CMCTool on the torque-driven plant (external loads on their own clock);
+    angles (rad) and torques (N m) at the step times reached (m, J), the last time, steps, wall time."""
     import os
     import tempfile
 
@@ -87,18 +76,7 @@ def solve(osim, request: dict) -> dict:
     paths = coordinate_paths(model, names)
     with tempfile.TemporaryDirectory(prefix="fdbench-cmc-") as folder:
         kinematics = os.path.join(folder, "desired.sto")
-        table = osim.TimeSeriesTable()
-        labels = osim.StdVectorString()
-        for name in names:
-            labels.append(name)
-        table.setColumnLabels(labels)
-        table.addTableMetaDataString("inDegrees", "no")
-        for k in range(len(t)):
-            row = osim.RowVector(len(names), 0.0)
-            for j in range(len(names)):
-                row[j] = float(z[k, j])
-            table.appendRow(float(t[k]), row)
-        osim.STOFileAdapter.write(table, kinematics)
+        osim.STOFileAdapter.write(radians_table(osim, names, t, z), kinematics)
         tasks = osim.CMC_TaskSet()
         for name in names:
             task = osim.CMC_Joint()

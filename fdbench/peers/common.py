@@ -18,7 +18,7 @@ from ..multibody.loads import data_file
 from ..multibody.osim import MAX_OSIM_BYTES, to_osim
 from ..outcomes import in_file_units, outcome, per_coordinate_fields, residual_fields
 from ..records import RunOutcome, base_record
-from ..run_inputs import loads, motions
+from ..run_inputs import loads, motions, warm_up  # noqa: F401 - warm_up: the peers'
 
 
 def osim_texts(spec) -> tuple[str, str]:
@@ -39,11 +39,8 @@ LOADS_DATA = "loads_data"  # the name (before its suffix) of the loads' data fil
 
 
 def loads_request(spec) -> dict | None:
-    """The spec's external loads (``--loads``) as OpenSim is given them, or None without: ``xml``,
-    the ExternalLoads element (as fdbench parsed it) in an OpenSimDocument whose ``<datafile>`` is
-    ``data_name``, the copy of the data file's text ``data`` that OpenSim's process writes beside
-    it; ``shift_s``, the motion's first time on the loads' clock (s), which OpenSim's times add.
-    Checked as fdbench's runs check them (unchanged, spanning the motion: files.BadFile)."""
+    """The spec's external loads as OpenSim is given them (None without): ``xml`` naming ``data_name``,
+    the data file's text ``data``, and ``shift_s`` (s), the motion's start on the loads' clock."""
     if spec.loads is None:
         return None
     import xml.etree.ElementTree as ElementTree
@@ -76,18 +73,6 @@ def desired(spec, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return tuple(np.asarray(v, dtype=float).reshape(len(t), -1) for v in values)
 
 
-def reference(spec):
-    """(inverse, angles (n, J) rad, torque (n, J) N m, t (n,) s): the indicators' reference, the
-    nominal model's inverse dynamics on the true motion at its samples."""
-    inverse = spec.reference()
-    return inverse, inverse.angles, inverse.torque, inverse.t
-
-
-def warm_up(spec) -> None:
-    """Load (or compile) fdbench's simulation kernels, so that a replay's runtime excludes it."""
-    run_inputs.warm_up(spec)
-
-
 def replay(spec, torque) -> RunOutcome:
     """fdbench's forward simulation of the plant under ``torque``, a function t (s), shape (k,) ->
     N m, shape (k, J), open loop, as ``collocate`` replays its own solution: the run's outcome with
@@ -96,14 +81,12 @@ def replay(spec, torque) -> RunOutcome:
 
 
 def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_end: float) -> tuple[dict, tuple]:
-    """The record's indicators of a trajectory simulated elsewhere (OpenSim's) on the grid ``t``
-    (s, shape (m,)): ``angles`` (rad, m) and applied generalised forces ``torque`` (N m, N), shape
-    (m, J), up to ``t_end``; measured on the motion's samples reached, against the reference, as
-    fdbench's runs are (angles and translations apart, a floating base's residuals):
-    (fields, (CSV header, rows) of the trajectory in a motion file's units)."""
+    """(fields, (CSV header, rows)) of a trajectory simulated elsewhere on the grid ``t`` (s, (m,)):
+    ``angles`` (rad, m) and ``torque`` (N m, N), (m, J), up to ``t_end``, measured as fdbench's."""
     from types import SimpleNamespace
 
-    inverse, truth, torque_ref, samples = reference(spec)
+    inverse = spec.reference()  # the nominal model's inverse dynamics on the true motion
+    truth, torque_ref, samples = inverse.angles, inverse.torque, inverse.t
     names, kinds = joints(spec.model_name), run_inputs.nominal(spec).coordinate_kinds
     z, tau = _on_samples(samples, t, angles), _on_samples(samples, t, torque)
     reached = samples <= t_end + 1e-12

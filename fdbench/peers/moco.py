@@ -1,16 +1,10 @@
-"""The ``moco`` peer: OpenSim Moco's MocoTrack, torque-driven, on the same model, motion and mesh as
-``fdbench collocate``; its torque replayed by fdbench's forward simulation exactly as
-``collocate``'s solution is, so that both collocations are judged the same way.
+"""The ``moco`` peer: OpenSim Moco's MocoTrack, torque-driven, on ``fdbench collocate``'s model,
+motion and mesh, its torque replayed by fdbench's forward simulation as ``collocate``'s is.
 
-The problem is fdbench's collocation's: CoordinateActuators (optimal force 1 N m, unbounded) at
-every coordinate; the desired motion's states written to a temporary .sto file (values and speeds, the
-speeds weighted 0 and used for the initial guess only); the integral of the squared angle errors
-(rad^2, weight 1) plus ``regularization`` / (180/pi)^2 times that of the squared torques (so that,
-in fdbench's units, 1 N m weighs as much as sqrt(regularization) deg, as in ``collocate``); the
-initial state fixed to the desired motion's; Hermite-Simpson on ``nodes`` mesh intervals; IPOPT
-through CasADi with ``tolerance`` as convergence and constraint tolerance, serial (``parallel``
-0, as fdbench's collocation). Moco's controls at its mesh points and interval midpoints give the
-torque history, interpolated as ``collocate``'s (piecewise quadratic)."""
+CoordinateActuators (1 N m, unbounded); the desired states in a .sto (speeds weighted 0, the guess
+only); squared angle errors (rad^2) plus ``regularization`` / (180/pi)^2 times squared torques (as
+``collocate`` in deg); initial state fixed; Hermite-Simpson on ``nodes`` intervals; IPOPT with
+``tolerance``, serial. The torque is interpolated as ``collocate``'s (piecewise quadratic)."""
 
 from __future__ import annotations
 
@@ -19,7 +13,7 @@ import time
 
 import numpy as np
 
-from .child import call, coordinate_paths, loads_file, model_from, torque_driven
+from .child import call, coordinate_paths, loads_file, model_from, radians_table, torque_driven
 
 DEG2 = (180.0 / math.pi) ** 2
 DEFAULT_TOLERANCE = 1e-4  # IPOPT's convergence and constraint tolerance in MocoTrack (Moco's own default is 1e-2)
@@ -30,11 +24,8 @@ SUMMARY = ("OpenSim Moco's MocoTrack, torque-driven (CoordinateActuators), Hermi
 
 
 def run(spec):
-    """The peer's run (``RunOutcome``): MocoTrack in a child process, then its torque replayed by
-    fdbench's forward simulation; Moco's own RMSE_rot at its mesh points, status, iterations, solve
-    time and whole run's time (``moco_run_s``: set-up, initialize and solve) stand beside the
-    replay's indicators. Runtime: the whole run and the replay, as collocate's is its
-    transcription, solve and replay."""
+    """The peer's run (``RunOutcome``): MocoTrack in a child process, its torque replayed by fdbench;
+    Moco's own RMSE_rot, status, iterations and times beside the replay's indicators."""
     from ..collocation import CollocationResult  # lazy: OpenSim's child imports this module, not the engine
     from ..models import joints
     from .common import desired, loads_request, osim_texts, replay, warm_up
@@ -96,12 +87,9 @@ def _as_collocation(result_class, times: np.ndarray, controls: np.ndarray, answe
 
 
 def solve(osim, request: dict) -> dict:
-    """In OpenSim's process: MocoTrack of the desired states; its times (s), controls (N m),
-    angles (rad) and speeds (rad/s) at the mesh points and midpoints, shape (m, J), status,
-    iterations, objective, solve time (s: the wall time of ``solve``; Moco's own
-    ``getSolverDuration`` beside it) and the whole run's (s: from MocoTrack's creation on, the
-    model's loading excluded). External loads are added as Moco's users add them
-    (``ModOpAddExternalLoads``), on their own clock (the request's times shifted by theirs)."""
+    """In OpenSim's process: MocoTrack of the desired states (external loads on their own clock);
+    times (s), controls (N m), angles (rad), speeds (rad/s) at its points (m, J), status,
+    iterations, objective, solve and whole-run times (s)."""
     import os
     import tempfile
 
@@ -124,7 +112,8 @@ def solve(osim, request: dict) -> dict:
     track.setModel(processor)
     folder = tempfile.TemporaryDirectory(prefix="fdbench-moco-")
     reference = os.path.join(folder.name, "states.sto")  # the desired states, as MocoTrack reads them
-    osim.STOFileAdapter.write(_states_table(osim, paths, t, z, zd), reference)
+    labels = [path + suffix for suffix in ("/value", "/speed") for path in paths]
+    osim.STOFileAdapter.write(radians_table(osim, labels, t, np.hstack([z, zd])), reference)
     track.setStatesReference(osim.TableProcessor(reference))
     track.set_states_global_tracking_weight(1.0)
     weights = osim.MocoWeightSet()
@@ -169,20 +158,3 @@ def solve(osim, request: dict) -> dict:
             "status": solution.getStatus(), "iterations": int(solution.getNumIterations()),
             "objective": float(solution.getObjective()), "solve_s": solve_s, "run_s": run_s,
             "solver_duration_s": float(solution.getSolverDuration())}
-
-
-def _states_table(osim, paths, t, z, zd):
-    """The desired states as a TimeSeriesTable (radians): '<path>/value' and '<path>/speed' columns."""
-    table = osim.TimeSeriesTable()
-    labels = osim.StdVectorString()
-    for suffix in ("/value", "/speed"):
-        for path in paths:
-            labels.append(path + suffix)
-    table.setColumnLabels(labels)
-    table.addTableMetaDataString("inDegrees", "no")
-    for k in range(len(t)):
-        row = osim.RowVector(2 * len(paths), 0.0)
-        for j in range(len(paths)):
-            row[j], row[len(paths) + j] = float(z[k, j]), float(zd[k, j])
-        table.appendRow(float(t[k]), row)
-    return table

@@ -1,22 +1,13 @@
-"""The ``opensim`` peer: OpenSim's forward simulation of the same model under the same PD law with
-computed feedforward as ``fdbench control``, set up as OpenSim's users run a simulation: one
-Manager, one ``integrate`` over the whole motion, the control law inside OpenSim's model.
+"""The ``opensim`` peer: OpenSim's forward simulation of the same model under ``fdbench control``'s
+PD law with computed feedforward, one Manager and one ``integrate`` over the whole motion.
 
-The law tau = tau_ff(t) + kp (z_d(t) - z) + kd (z_d'(t) - z') splits into a part of time alone,
-u(t) = tau_ff(t) + kp z_d(t) + kd z_d'(t), applied by a PrescribedController through a
-CoordinateActuator per coordinate (optimal force 1 N m, u linear between the step times), and a
-part of the state alone, -kp z - kd z', which is OpenSim's SpringGeneralizedForce (stiffness kp,
-viscosity kd, rest length 0): the feedback acts continuously, as fdbench's does. The feedforward
-is OpenSim's own inverse dynamics (its InverseDynamicsSolver on the nominal model) of the desired
-motion at the step times. The Manager integrates with Runge-Kutta-Merson at OpenSim's default
-accuracy ``ACCURACY`` over its own steps; the states are interpolated onto the step times by
-cubic Hermite interpolation (angle and rate at each of its steps). The gains are fdbench's PD's for
-the model (``fdbench.run_inputs.pd_gains``; the forearm's 80 and 0.3). With ``--loads`` both
-models are given the same ExternalLoads file and data as an OpenSim component of the model, and a
-floating base's coordinates get their CoordinateActuators (the residuals) under the same law.
-Runtime: the ``integrate`` call, best of ``REPEATS`` (start-up, model building and the
-inverse dynamics excluded, as fdbench excludes compilation; the inverse dynamics' time is
-recorded apart as ``opensim_inverse_s``)."""
+tau = tau_ff(t) + kp (z_d - z) + kd (z_d' - z') splits into u(t) = tau_ff + kp z_d + kd z_d',
+a PrescribedController on a CoordinateActuator per coordinate (1 N m, linear between the step
+times), and -kp z - kd z', a SpringGeneralizedForce (stiffness kp, viscosity kd): the feedback acts
+continuously. tau_ff is OpenSim's InverseDynamicsSolver on the nominal model. Runge-Kutta-Merson at
+``ACCURACY``; states cubic-Hermite onto the step times. With ``--loads`` both models get the same
+ExternalLoads. Runtime: the ``integrate`` call, best of ``REPEATS`` (inverse dynamics apart as
+``opensim_inverse_s``)."""
 
 from __future__ import annotations
 
@@ -34,22 +25,16 @@ SUMMARY = ("OpenSim's forward simulation of the same model (exported with Coordi
            "motion; its feedforward OpenSim's inverse dynamics")
 
 
-def gains(spec) -> tuple[np.ndarray, np.ndarray]:
-    """Kp (N m/rad) and Kd (N m s/rad) per joint, shape (J,): fdbench's PD's for this spec."""
-    from ..run_inputs import pd_gains  # lazy: OpenSim's child imports this module, not the engine
-
-    return pd_gains(spec)
-
-
 def run(spec):
     """The peer's run (``RunOutcome``): OpenSim's PD simulation in a child process, its indicators
     on the motion's samples against the same reference as fdbench's PD."""
     from ..models import joints  # lazy: OpenSim's child imports this module, not the engine
     from ..records import RunOutcome, base_record
-    from .common import desired, grid, indicators, loads_request, osim_texts, reference
+    from ..run_inputs import pd_gains
+    from .common import desired, grid, indicators, loads_request, osim_texts
 
     names = joints(spec.model_name)
-    kp, kd = gains(spec)
+    kp, kd = pd_gains(spec)  # N m/rad, N m s/rad per joint: fdbench's PD's
     nominal, plant = osim_texts(spec)
     t = grid(spec)
     z, zd, zdd = desired(spec, t)
@@ -74,19 +59,16 @@ def run(spec):
                   **({"kp": spec.kp, "kd": spec.kd} if len(names) == 1 else {
                       "kp": spec.kp, "kd": spec.kd, **{f"kp_{j}": float(v) for j, v in zip(names, kp)},
                       **{f"kd_{j}": float(v) for j, v in zip(names, kd)}}))
-    return RunOutcome(record, None, reference(spec)[0], table=table)
+    return RunOutcome(record, None, spec.reference(), table=table)
 
 
 # ---------------------------------------------------------------------------------------- the child
 
 
 def solve(osim, request: dict) -> dict:
-    """In OpenSim's process: inverse dynamics of the desired motion on the nominal model, then the
-    plant's forward simulation under the PD law inside OpenSim, one integrate from the desired
-    initial state (timed ``REPEATS`` times), both models under the request's external loads (on
-    their own clock, the request's times shifted by theirs); angles (rad) and applied torques (N m)
-    at the step times reached, shape (m, J), the last time reached (s, on the request's clock) and
-    the times taken (s)."""
+    """In OpenSim's process: the nominal model's inverse dynamics, then the plant's integrate under
+    the PD law (timed ``REPEATS`` times); angles (rad) and torques (N m) at the step times reached
+    (m, J), the last time reached (s) and the times taken (s)."""
     names = request["coordinates"]
     shift = float((request.get("loads") or {}).get("shift_s", 0.0))
     t = np.array(request["t"]) + shift

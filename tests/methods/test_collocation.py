@@ -45,7 +45,7 @@ def f(theta, omega, tau):
 
 def defects(sol) -> np.ndarray:
     h = sol.t[1] - sol.t[0]
-    th, w, u = column(sol.theta), column(sol.theta_dot), column(sol.torque)
+    th, w, u = column(sol.angles), column(sol.velocities), column(sol.torque)
     d0, a0 = f(th[:-1], w[:-1], u[:-1])
     d1, a1 = f(th[1:], w[1:], u[1:])
     if sol.torque_mid is None:
@@ -68,7 +68,7 @@ def replay_gap(sol, kinematics="paper") -> float:
     assert replay.success
     index = np.round(sol.t * 1000).astype(int)
     assert np.allclose(index / 1000, sol.t)
-    return float(np.max(np.abs(replay.z[index, 0] - column(sol.theta))))
+    return float(np.max(np.abs(replay.z[index, 0] - column(sol.angles))))
 
 
 @pytest.mark.parametrize("scheme", ["hermite-simpson", "trapezoidal"])
@@ -78,8 +78,8 @@ def test_defects_vanish_and_the_initial_state_is_the_motions(scheme, nodes):
     assert sol.success, sol.message
     assert np.max(np.abs(defects(sol))) < 1e-8
     theta0, w0, _ = desired_motion(0.0, "paper")
-    assert column(sol.theta)[0] == pytest.approx(theta0, abs=1e-12)
-    assert column(sol.theta_dot)[0] == pytest.approx(w0, abs=1e-12)
+    assert column(sol.angles)[0] == pytest.approx(theta0, abs=1e-12)
+    assert column(sol.velocities)[0] == pytest.approx(w0, abs=1e-12)
 
 
 def test_hermite_simpson_torque_replayed_reproduces_its_states():

@@ -1,14 +1,6 @@
-"""Desired motions of a model's joints, the one motion layer of fdbench: objects that know their
-duration, their sample times and the angles (rad), velocities (rad/s) and accelerations (rad/s^2)
-of every joint at any time t (s).
-
-* ``base``: ``Motion`` (one coordinate), ``JointMotion`` (a model's joints), ``PerJoint`` and
-  ``Resampled`` (``--sample-dt``).
-* ``eq5``: the paper's eq. 5, the forearm's named motions ``paper`` and ``exact``.
-* ``recorded``: recordings (CSV, OpenSim storage files), their derivatives' estimate (a zero-lag
-  Butterworth filter or a smoothing spline), noisy captures.
-* ``named``: a model's named motions (minimum-jerk, eq. 5) and ``joint_motion``, the dispatch of
-  ``--motion`` (a name of the model or a file).
+"""Desired motions of a model's joints: ``base`` (``Motion``, ``JointMotion``, ``PerJoint``,
+``Resampled``), ``eq5`` (the paper's eq. 5), ``recorded`` (recordings, their derivatives' estimate,
+noisy captures) and ``named`` (a model's named motions, the dispatch of ``--motion``).
 """
 
 from __future__ import annotations

@@ -1,12 +1,6 @@
-"""What every desired motion is: an object that knows its duration, its sample times and the
-angles (rad), velocities (rad/s) and accelerations (rad/s^2) of its joints at any time t (s) of
-[0, duration].
-
-* ``Motion``: one coordinate's motion (eq. 5, a recording, a noisy capture); ``theta``, ``theta'``
-  and ``theta''`` each shaped like t.
-* ``JointMotion``: the motion of a model's joints, each value of shape t.shape + (n_joints,);
-  ``PerJoint`` builds one from one ``Motion`` or a constant angle per joint, ``Resampled``
-  reports one on another grid (``--sample-dt``).
+"""What every desired motion is: its duration, sample times and the angles (rad), velocities
+(rad/s) and accelerations (rad/s^2) of its joints at any time t (s) of [0, duration]: ``Motion``
+for one coordinate (shaped like t), ``JointMotion`` for a model's joints (t.shape + (J,)).
 """
 
 from __future__ import annotations

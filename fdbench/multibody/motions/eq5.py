@@ -1,12 +1,6 @@
 """The paper's desired motion, eq. 5: the elbow from -45 deg to 0 over [0, 1] s along the warped
-time t* = a1 t + (1 - a1) t^2, sampled every 1 ms. A model declares it as a named motion
-(``[[motions]]`` of type 'eq5-paper' or 'eq5-exact' on a one-angle model: the forearm's ``paper``
-and ``exact``).
-
-* 'paper' takes the velocity and acceleration exactly as eq. 5 prints them, derivatives with
-  respect to the warped time t* (this reproduces the paper's figures);
-* 'exact' takes derivatives with respect to t by the chain rule through t*(t) (kinematically
-  consistent).
+time t* = a1 t + (1 - a1) t^2, sampled every 1 ms (the forearm's named motions). 'paper' takes the
+rates as eq. 5 prints them (derivatives in t*: the paper's figures); 'exact' by the chain rule in t.
 """
 
 from __future__ import annotations

@@ -1,11 +1,5 @@
-"""A model's named motions (``[[motions]]`` of its file, ``Model.motions``) and the dispatch of
-``--motion``: a named motion of the model or a motion file of its joints.
-
-* 'minimum-jerk' (``MinimumJerk``): every joint from rest at its start angle to rest at its goal
-  angle in ``duration`` s, sampled every 1 ms, z(t) = z0 + (z1 - z0)(10 u^3 - 15 u^4 + 6 u^5),
-  u = t / duration.
-* 'eq5-paper', 'eq5-exact' (``eq5.Eq5``): the paper's eq. 5 of a one-angle model's joint (the
-  forearm's ``paper`` and ``exact``).
+"""A model's named motions (``Model.motions``: 'minimum-jerk', z0 + (z1 - z0)(10 u^3 - 15 u^4 + 6 u^5)
+with u = t / duration, or eq. 5's 'eq5-paper', 'eq5-exact') and the dispatch of ``--motion``.
 """
 
 from __future__ import annotations

@@ -1,14 +1,7 @@
-"""Recorded motions: joint angles known at sample times, their velocities and accelerations
-either given or estimated as biomechanics does, once, on the motion's own samples: a zero-lag
-Butterworth low-pass then the derivatives of an interpolating spline, or a smoothing spline.
-
-* ``SampledMotion``: one coordinate's recording; ``read_joint_motion_csv`` reads one per joint
-  from a CSV or OpenSim storage file (``read_motion_csv``: the one column ``theta``).
-* ``noisy_joints`` (``noisy`` for one coordinate): a motion sampled on a capture grid, with white
-  Gaussian noise added, then estimated like a recording: what captured data looks like.
-
-Times of a recording are counted from its first sample. The engine's angle constraints stay
-regular at any angle, so no angle is refused here.
+"""Recorded motions: joint angles at sample times, their rates given or estimated once on the
+samples (a zero-lag Butterworth low-pass then an interpolating spline's derivatives, or a smoothing
+spline): ``SampledMotion``, read from CSV or OpenSim storage files (``read_joint_motion_csv``), and
+``noisy_joints``, a motion captured with white noise. A recording's times count from its first sample.
 """
 
 from __future__ import annotations
@@ -36,14 +29,10 @@ MIN_SAMPLES = 10
 
 
 class SampledMotion(Motion):
-    """A motion known at sample times: angles, and velocities and accelerations given or
-    estimated. Between samples (and for the integrator's stages) it is a smooth function of t.
-
-    t: times (s), increasing, shape (n,), n >= 10; theta: angles (rad), shape (n,); theta_vel,
-    theta_acc: rad/s and rad/s^2 (None: estimated). ``cutoff_hz``: the -3 dB frequency of the whole
-    zero-lag Butterworth filter; ``smoothing``: 'butterworth' or 'spline' (a smoothing spline whose
-    factor ``spline_lambda`` is chosen by generalised cross-validation when None). ``samples``:
-    the reporting grid (default: t)."""
+    """A motion known at times t (s, increasing, (n,), n >= 10): angles theta (rad, (n,)), rates
+    theta_vel, theta_acc (rad/s, rad/s^2) given or None (estimated: ``smoothing`` 'butterworth',
+    -3 dB at ``cutoff_hz``, or 'spline', ``spline_lambda`` None by cross-validation); smooth
+    between samples. ``samples``: the reporting grid (default: t)."""
 
     def __init__(self, t, theta, theta_vel=None, theta_acc=None, *, name: str = "sampled",
                  cutoff_hz: float = DEFAULT_CUTOFF_HZ, smoothing: str = "butterworth", spline_lambda=None,
@@ -146,13 +135,9 @@ def butterworth_design_hz(cutoff_hz: float, rate_hz: float, passes: int = 2, ord
 
 
 def zero_lag_lowpass(values: np.ndarray, rate_hz: float, cutoff_hz: float) -> np.ndarray:
-    """Winter's zero-lag 4th-order Butterworth low-pass: a 2nd-order filter forward then backward
-    (scipy's butter + filtfilt), its design cutoff corrected so that the -3 dB point of the whole
-    is ``cutoff_hz``. values: shape (n,) sampled at ``rate_hz``. Each end is extended by its point
-    reflection (value and slope continuous; repeated as far as needed, as OpenSim's Signal::Pad
-    once) for as long as the filter takes to forget its start (``settling_samples``): the ends
-    carry no start-up transient. The reflection reverses the curvature, so at an end that is not at
-    rest the acceleration is drawn towards 0 over about 1 / (2 cutoff_hz) s."""
+    """Winter's zero-lag 4th-order Butterworth low-pass of ``values`` ((n,) at ``rate_hz``), -3 dB at
+    ``cutoff_hz``; each end padded by its point reflection (as OpenSim's Signal::Pad) for as long
+    as the filter takes to forget its start (``settling_samples``)."""
     from scipy.signal import butter, filtfilt
 
     if not 0 < cutoff_hz < rate_hz / 2:
@@ -252,12 +237,9 @@ def read_motion_csv(path, option: str = "--motion", radians: bool = False, **est
 
 def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: float, kinds=None,
                  **estimate) -> PerJoint:
-    """``motion``'s joint angles captured with white Gaussian noise of ``sigma_deg`` degrees,
-    independent per joint (seeded), and estimated like a recording (``estimate``: options of
-    ``SampledMotion``). ``kinds``: per joint 'angle' or 'translation'
-    (``Model.coordinate_kinds``; default all angles): translations are captured without noise (the
-    angles draw the same numbers as without them). A recording keeps its own samples; an analytic
-    motion is captured every 1 / capture_hz s. The result reports on ``motion``'s samples."""
+    """``motion`` captured (a recording on its samples, else every 1 / capture_hz s) with seeded white
+    Gaussian noise of ``sigma_deg`` deg per joint (none on the translations of ``kinds``) and
+    estimated like a recording (``estimate``: options of ``SampledMotion``)."""
     recorded = isinstance(motion, PerJoint) and all(isinstance(p, SampledMotion) for p in motion.parts)
     if not recorded:
         check_grid(motion.duration, 1 / capture_hz, "--capture-hz", len(motion.joints), VALUES_PER_CAPTURED_SAMPLE)
@@ -278,16 +260,9 @@ def noisy_joints(motion: JointMotion, sigma_deg: float, seed: int, capture_hz: f
 
 def read_joint_motion_csv(path, joints, option: str = "--motion", radians: bool = False, kinds=None,
                           **estimate) -> PerJoint:
-    """A recorded motion of ``joints`` from a CSV file with a header: ``t`` (s) and one angle column
-    per joint (deg, or rad with ``radians``), names case-insensitive, any order, other columns
-    ignored; optional ``<joint>_vel`` and ``<joint>_acc`` (deg/s, deg/s^2, or rad units), the
-    derivatives otherwise estimated (``estimate``: options of ``SampledMotion``).
-    An OpenSim storage file (.mot, .sto: ``fdbench.multibody.osim.read_storage``) gives its own
-    unit by its header's ``inDegrees`` (``radians`` is not used). ``kinds``: per joint 'angle' or
-    'translation' (``Model.coordinate_kinds``; default all angles): a translation's column is in m
-    (m/s, m/s^2) whatever the angles' unit, as OpenSim writes it.
-    Raises files.BadFile naming the file (and the joint) in one line."""
-
+    """A recorded motion of ``joints`` from a CSV file (``t`` s, an angle column per joint in deg,
+    or rad with ``radians``, optional ``<joint>_vel``, ``<joint>_acc``) or an OpenSim storage file
+    (its unit by ``inDegrees``); translations (``kinds``) in m. BadFile in one line."""
     path, names = Path(path), [joint.lower() for joint in joints]
     optional = tuple(names) + tuple(rate for name in names for rate in rate_column_names(name))
     if is_storage(path):
