@@ -77,6 +77,7 @@ PROBE_STEP = 0.5  # rad: the change of a coordinate that reveals its joint's axi
 SAME_POINT = 1e-9  # m: a joint's point that moves less than this is fixed
 SAME_ANGLE = 1e-9  # rad
 CHILD_TIMEOUT_S = 300  # s: OpenSim's import of one model (its start-up included)
+ONE_THREAD = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}  # the fits' lstsq
 
 
 def _fail(source: str, problem: str):
@@ -104,6 +105,7 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0, 
     symbols)."""
     import base64
     import json
+    import os
     import subprocess
     import tempfile
 
@@ -116,7 +118,8 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0, 
                           "max_tilt_deg": max_tilt_deg, "max_path_error": max_path_error})
     with tempfile.TemporaryDirectory(prefix="fdbench-osim-") as folder:  # a private working directory
         done = subprocess.run(python_command("from fdbench.multibody.osim import _child; _child()"),
-                              input=request, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S, cwd=folder)
+                              input=request, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S, cwd=folder,
+                              env=os.environ | ONE_THREAD)
     try:
         answer = json.loads(done.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):

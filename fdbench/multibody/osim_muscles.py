@@ -17,8 +17,10 @@
 * Any other path becomes its length as a polynomial (all monomials up to a total degree) in the
   coordinates it spans (those whose change changes its length), fitted by least squares to
   OpenSim's lengths and slopes dl/dq (central differences of its lengths) on a grid over the
-  coordinates' ranges; the degree is the lowest whose worst error between the grid's points is a
-  tenth of the tolerance (or the best one).
+  coordinates' ranges; the degree is the lowest whose worst error between the grid's points is
+  FIT_TARGET or a tenth of the tolerance (or the best one). Where OpenSim's length jumps (its
+  wrapping switching: arm26's TRIlong by 8 mm), each side of the jump is fitted with its own level,
+  the path keeps the largest side's, and the check counts a state's error from its side's level.
 * Every muscle's path, as fdbench computes it (``muscle_paths``), is checked against OpenSim's
   ``getLength`` and ``computeMomentArm`` at CHECK_STATES random states within the ranges; a note
   gives each muscle's worst errors. A worst length error above ``max_path_error`` stops the import
@@ -36,7 +38,9 @@ from ..files import quoted, shown
 from .model import GROUND, ModelError, model_from_dict
 from .muscle_paths import muscle_geometry
 
-MAX_PATH_ERROR = 1e-3  # m: the default tolerance of a path against OpenSim's lengths
+MAX_PATH_ERROR = 3e-3  # m: the default tolerance of a path against OpenSim's lengths (arm26's kinks: 1.9 mm)
+FIT_TARGET = 1e-4  # m: the fit's degree rises until its worst error between the grid's points is this
+SLOPE_TARGET = 2e-4  # m/rad: ... and its worst slope error at the grid's points this
 CHECK_STATES = 200  # random states at which each path is checked against OpenSim
 CHECK_SEED = 20160101
 SLOPE_STEP = 1e-5  # rad or m: the central difference's half step for OpenSim's slopes
@@ -46,6 +50,7 @@ GRID = {1: 81, 2: 25, 3: 13, 4: 7, 5: 5, 6: 4}  # grid points per coordinate, by
 MAX_DEGREE = 14
 MAX_TERMS = 1000
 JUMP = 1e-3  # m: a step of OpenSim's length this far off its slopes' is a jump (of its wrapping)
+SMALL_SEGMENT = 0.02  # of the grid's samples: a segment between jumps smaller than this has no level of its own
 SLOPE_OUTLIER = 1e-3  # m/rad: beyond ten times the median misfit and this, a slope is across a jump
 SAME_Z = 1e-9  # m: path points this close to one plane z = constant are planar
 DEFAULT_RANGE = (-math.pi, math.pi)
@@ -273,7 +278,7 @@ def _fit(sampler: _Sampler, columns: tuple, members: list, max_path_error: float
     lengths, slopes = sampler.lengths(grid, members), sampler.slopes(grid, members, columns)
     middle_lengths = sampler.lengths(middle, members)
     x, x_middle = grid[:, list(columns)], middle[:, list(columns)]
-    target = min(max_path_error, MAX_PATH_ERROR) / 10
+    target = min(max_path_error / 10, FIT_TARGET)
     out = []
     for m in range(len(members)):
         segments = _segments(axes, lengths[:, m], slopes[:, m, :])
@@ -282,10 +287,10 @@ def _fit(sampler: _Sampler, columns: tuple, members: list, max_path_error: float
             powers = _powers(len(columns), degree)
             if len(powers) > MAX_TERMS or len(powers) * 2 > len(x) * (1 + len(columns)):
                 break
-            coefficients, levels = _segmented_fit(x, lengths[:, m], slopes[:, m, :], powers, segments)
+            coefficients, levels, slope_error = _segmented_fit(x, lengths[:, m], slopes[:, m, :], powers, segments)
             jumps = _Jumps(columns, axes, levels)
             off = middle_lengths[:, m] - _basis(x_middle, powers)[0] @ coefficients
-            error = np.max(jumps.error(x_middle, off))
+            error = max(np.max(jumps.error(x_middle, off)), slope_error * FIT_TARGET / SLOPE_TARGET)
             if best is None or error < best[0]:
                 best = (error, powers, coefficients, jumps)
             if error <= target:
@@ -351,25 +356,32 @@ class _Jumps:
         return int(np.count_nonzero((np.abs(residuals) > JUMP) & (self.error(x, residuals) <= JUMP)))
 
 
-def _segmented_fit(x, lengths, slopes, powers, segments) -> tuple[np.ndarray, np.ndarray]:
-    """(coefficients, levels (n,)) of the monomials ``powers`` fitted to OpenSim's lengths and
+def _segmented_fit(x, lengths, slopes, powers, segments) -> tuple[np.ndarray, np.ndarray, float]:
+    """(coefficients, levels (n,), worst slope misfit m/rad) of the monomials ``powers`` fitted to OpenSim's lengths and
     slopes, each segment but the largest with its own level (the jump's); slopes far off the others'
     fit (differences across a jump) are left out."""
     values, derivatives = _basis(x, powers)
-    count = int(segments.max()) + 1
-    indicators = (segments[:, None] == np.arange(1, count)[None, :]).astype(float)
+    sizes = np.bincount(segments)
+    large = np.flatnonzero(sizes >= max(SMALL_SEGMENT * len(x), 4))  # 0 first: the largest
+    small = ~np.isin(segments, large)  # a few samples between jumps: their lengths are left out
+    indicators = (segments[:, None] == large[None, 1:]).astype(float)
+    count = len(large)
     A_slopes = np.hstack([derivatives.transpose(1, 0, 2).reshape(-1, len(powers)),
                           np.zeros((derivatives.shape[1] * len(x), count - 1))])
     b_slopes = slopes.T.ravel()
     A = np.vstack([np.hstack([values, indicators]), A_slopes])
     b = np.concatenate([lengths, b_slopes])
     keep = np.ones(len(b), bool)
+    keep[:len(x)] = ~small
     for _ in range(2):  # a slope whose difference straddles a jump is huge: leave it out
         solution = _solve(A[keep], b[keep])
         misfit = np.abs(A @ solution - b)
         keep[len(x):] = misfit[len(x):] <= 10 * np.median(misfit[len(x):]) + SLOPE_OUTLIER
     solution = _solve(A[keep], b[keep])
-    return solution[:len(powers)], indicators @ solution[len(powers):]
+    levels = indicators @ solution[len(powers):]
+    levels[small] = lengths[small] - values[small] @ solution[:len(powers)]
+    slope_error = float(np.max(np.abs(A[len(x):] @ solution - b[len(x):])[keep[len(x):]], initial=0.0))
+    return solution[:len(powers)], levels, slope_error
 
 
 def _solve(A, b) -> np.ndarray:
