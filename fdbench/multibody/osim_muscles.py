@@ -51,7 +51,9 @@ MAX_DEGREE = 14
 MAX_TERMS = 1000
 JUMP = 1e-3  # m: a step of OpenSim's length this far off its slopes' is a jump (of its wrapping)
 SMALL_SEGMENT = 0.02  # of the grid's samples: a segment between jumps smaller than this has no level of its own
-SLOPE_OUTLIER = 1e-3  # m/rad: beyond ten times the median misfit and this, a slope is across a jump
+HUBER_LENGTH, HUBER_SLOPE = 2e-4, 1e-3  # m, m/rad: misfits beyond these weigh less (Huber), as at a kink
+HUBER_STEPS = 4
+ROBUST_PERCENTILE = 98  # the degree's errors: a percentile of the misfits, not their worst (a kink)
 SAME_Z = 1e-9  # m: path points this close to one plane z = constant are planar
 DEFAULT_RANGE = (-math.pi, math.pi)
 
@@ -290,7 +292,7 @@ def _fit(sampler: _Sampler, columns: tuple, members: list, max_path_error: float
             coefficients, levels, slope_error = _segmented_fit(x, lengths[:, m], slopes[:, m, :], powers, segments)
             jumps = _Jumps(columns, axes, levels)
             off = middle_lengths[:, m] - _basis(x_middle, powers)[0] @ coefficients
-            error = max(np.max(jumps.error(x_middle, off)), slope_error * FIT_TARGET / SLOPE_TARGET)
+            error = max(np.percentile(jumps.error(x_middle, off), ROBUST_PERCENTILE), slope_error * FIT_TARGET / SLOPE_TARGET)
             if best is None or error < best[0]:
                 best = (error, powers, coefficients, jumps)
             if error <= target:
@@ -357,7 +359,7 @@ class _Jumps:
 
 
 def _segmented_fit(x, lengths, slopes, powers, segments) -> tuple[np.ndarray, np.ndarray, float]:
-    """(coefficients, levels (n,), worst slope misfit m/rad) of the monomials ``powers`` fitted to OpenSim's lengths and
+    """(coefficients, levels (n,), the ROBUST_PERCENTILE of the slope misfits m/rad) of the monomials ``powers`` fitted to OpenSim's lengths and
     slopes, each segment but the largest with its own level (the jump's); slopes far off the others'
     fit (differences across a jump) are left out."""
     values, derivatives = _basis(x, powers)
@@ -371,16 +373,16 @@ def _segmented_fit(x, lengths, slopes, powers, segments) -> tuple[np.ndarray, np
     b_slopes = slopes.T.ravel()
     A = np.vstack([np.hstack([values, indicators]), A_slopes])
     b = np.concatenate([lengths, b_slopes])
-    keep = np.ones(len(b), bool)
-    keep[:len(x)] = ~small
-    for _ in range(2):  # a slope whose difference straddles a jump is huge: leave it out
-        solution = _solve(A[keep], b[keep])
-        misfit = np.abs(A @ solution - b)
-        keep[len(x):] = misfit[len(x):] <= 10 * np.median(misfit[len(x):]) + SLOPE_OUTLIER
-    solution = _solve(A[keep], b[keep])
+    tolerance = np.concatenate([np.full(len(x), HUBER_LENGTH), np.full(len(b) - len(x), HUBER_SLOPE)])
+    weights = np.ones(len(b))
+    for _ in range(HUBER_STEPS):  # Huber's weights: a kink of OpenSim's path weighs less than the rest
+        weights[:len(x)][small] = 0.0
+        root = np.sqrt(weights)
+        solution = _solve(A * root[:, None], b * root)
+        weights = np.minimum(1.0, tolerance / np.maximum(np.abs(A @ solution - b), 1e-300))
     levels = indicators @ solution[len(powers):]
     levels[small] = lengths[small] - values[small] @ solution[:len(powers)]
-    slope_error = float(np.max(np.abs(A[len(x):] @ solution - b[len(x):])[keep[len(x):]], initial=0.0))
+    slope_error = float(np.percentile(np.abs(A[len(x):] @ solution - b[len(x):]), ROBUST_PERCENTILE))
     return solution[:len(powers)], levels, slope_error
 
 
