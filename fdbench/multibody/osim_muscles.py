@@ -17,8 +17,9 @@
 * Any other path becomes its length as a polynomial (all monomials up to a total degree) in the
   coordinates it spans (those whose change changes its length), fitted by least squares to
   OpenSim's lengths and slopes dl/dq (central differences of its lengths) on a grid over the
-  coordinates' ranges; the degree is the lowest whose worst error between the grid's points is
-  FIT_TARGET or a tenth of the tolerance (or the best one). Where OpenSim's length jumps (its
+  coordinates' ranges, Huber-weighted (a kink of OpenSim's path weighs less); the degree is the
+  lowest whose errors (their ROBUST_PERCENTILE) between the grid's points are within FIT_TARGET
+  or a tenth of the tolerance and at its points within SLOPE_TARGET (or the best one). Where OpenSim's length jumps (its
   wrapping switching: arm26's TRIlong by 8 mm), each side of the jump is fitted with its own level,
   the path keeps the largest side's, and the check counts a state's error from its side's level.
 * Every muscle's path, as fdbench computes it (``muscle_paths``), is checked against OpenSim's
@@ -35,12 +36,12 @@ from itertools import combinations_with_replacement
 import numpy as np
 
 from ..files import quoted, shown
-from .model import GROUND, ModelError, model_from_dict
+from .model import ModelError, model_from_dict, to_dict
 from .muscle_paths import muscle_geometry
 
-MAX_PATH_ERROR = 3e-3  # m: the default tolerance of a path against OpenSim's lengths (arm26's kinks: 1.9 mm)
-FIT_TARGET = 1e-4  # m: the fit's degree rises until its worst error between the grid's points is this
-SLOPE_TARGET = 2e-4  # m/rad: ... and its worst slope error at the grid's points this
+MAX_PATH_ERROR = 3e-3  # m: the default tolerance of a path against OpenSim's lengths (arm26's TRIlong: 2.2 mm)
+FIT_TARGET = 1e-4  # m: the fit's degree rises until its length errors between the grid's points are below this
+SLOPE_TARGET = 2e-4  # m/rad: ... and its slope errors at the grid's points below this (ROBUST_PERCENTILE)
 CHECK_STATES = 200  # random states at which each path is checked against OpenSim
 CHECK_SEED = 20160101
 SLOPE_STEP = 1e-5  # rad or m: the central difference's half step for OpenSim's slopes
@@ -99,8 +100,7 @@ def imported_muscles(osim, model, state, description, hosts: dict, source: str,
 
 
 def _data(description, entries: list) -> dict:
-    from .model import to_dict
-
+    """The description's data with the muscles ``entries``."""
     return to_dict(description) | {"muscles": entries}
 
 
