@@ -33,6 +33,7 @@ from ..files import BadFile, quoted, read_input_bytes, read_input_text, shown
 from ..isolation import python_command
 from .model import GROUND, MIN_SEGMENT, ModelError, model_from_dict, to_dict
 from .model_files import to_toml
+from .osim_muscles import MAX_PATH_ERROR, imported_muscles
 from .spline import fit
 
 INSTALL_HINT = "pip install 'fdbench[opensim]'"
@@ -44,6 +45,7 @@ PROBE_STEP = 0.5  # rad: the change of a coordinate that reveals its joint's axi
 SAME_POINT = 1e-9  # m: a joint's point that moves less than this is fixed
 SAME_ANGLE = 1e-9  # rad
 CHILD_TIMEOUT_S = 300  # s: OpenSim's import of one model (its start-up included)
+ONE_THREAD = {name: "1" for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}  # the fits' lstsq
 
 
 def _fail(source: str, problem: str):
@@ -53,19 +55,22 @@ def _fail(source: str, problem: str):
 # ---------------------------------------------------------------------------------------- the model
 
 
-def import_osim(path, max_tilt_deg: float = 5.0, option: str = "--model"):
+def import_osim(path, max_tilt_deg: float = 5.0, option: str = "--model", max_path_error: float = MAX_PATH_ERROR):
     """(Model, notes): the planar description of the OpenSim model file ``path`` and the import's
-    notes (one line each); ModelError or files.BadFile (one line) when it cannot be imported."""
+    notes (one line each); ``max_path_error``: the largest error (m) of a muscle's path against
+    OpenSim's lengths (``osim_muscles``). ModelError or files.BadFile (one line) when it cannot be
+    imported."""
     source = str(path)
     content = read_input_bytes(path, option, MAX_OSIM_BYTES)
-    return import_osim_content(content, source, max_tilt_deg)
+    return import_osim_content(content, source, max_tilt_deg, max_path_error)
 
 
-def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
+def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0, max_path_error: float = MAX_PATH_ERROR):
     """``import_osim`` of a file's bytes (``source`` names it), in a child process: OpenSim's own
     CasADi cannot share a process with the casadi package."""
     import base64
     import json
+    import os
     import subprocess
     import tempfile
 
@@ -75,10 +80,11 @@ def import_osim_content(content: bytes, source: str, max_tilt_deg: float = 5.0):
     if importlib.util.find_spec("opensim") is None:
         _fail(source, f"reading an OpenSim model needs the opensim package: {INSTALL_HINT}")
     request = json.dumps({"content": base64.b64encode(content).decode(), "source": source,
-                          "max_tilt_deg": max_tilt_deg})
+                          "max_tilt_deg": max_tilt_deg, "max_path_error": max_path_error})
     with tempfile.TemporaryDirectory(prefix="fdbench-osim-") as folder:  # a private working directory
         done = subprocess.run(python_command("from fdbench.multibody.osim import _child; _child()"),
-                              input=request, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S, cwd=folder)
+                              input=request, capture_output=True, text=True, timeout=CHILD_TIMEOUT_S, cwd=folder,
+                              env=os.environ | ONE_THREAD)
     try:
         answer = json.loads(done.stdout.strip().splitlines()[-1])
     except (IndexError, ValueError):
@@ -104,7 +110,7 @@ def _child() -> None:
         osim = _opensim(source)
         model, state = _built(osim, content, source)
         found, notes = _describe(osim, model, state, source, _model_element(content, source),
-                                 request["max_tilt_deg"])
+                                 request["max_tilt_deg"], request["max_path_error"])
         answer = {"model": to_dict(found), "notes": list(notes)}
     except ModelError as exc:
         answer = {"error": [exc.source, exc.key, exc.problem]}
@@ -155,7 +161,7 @@ def _built(osim, content: bytes, source: str):
     return model, state
 
 
-def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
+def _describe(osim, model, state, source: str, element, max_tilt_deg: float, max_path_error: float = MAX_PATH_ERROR):
     _refuse_constraints(model, source)
     joints = _joints_by_child(model, source)
     kept, welded, tilts, refused = [], [], [], []
@@ -192,8 +198,12 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float):
             "bodies": _with_ends(bodies, kept), "joints": kept, "loads": list(loads.values()),
             "motions": [_mid_range(kept)], "frames": _welded_frames(hosts, {pin["child"] for pin in kept})}
     description = model_from_dict(data, source, default_name=Path(source).stem)
-    notes = [note for note in (_dropped_note(osim, model, set(loads)), _welded_note(welded),
-                               _tilt_note(tilts + gravity_tilt)) if note]
+    data["muscles"], muscle_notes = imported_muscles(osim, model, state, description, hosts, source, max_path_error)
+    if data["muscles"]:
+        description = model_from_dict(data, source, default_name=Path(source).stem)
+    kept_forces = set(loads) | {muscle["name"] for muscle in data["muscles"]}
+    notes = [note for note in (_dropped_note(osim, model, kept_forces), _welded_note(welded),
+                               _tilt_note(tilts + gravity_tilt), *muscle_notes) if note]
     return description, tuple(notes)
 
 
@@ -653,7 +663,7 @@ def _description(model, source: str, element) -> str:
 
 
 def _dropped_note(osim, model, kept: set) -> str:
-    """One line: what the import left out (empty if nothing); ``kept``: the forces made loads."""
+    """One line: what the import left out (empty if nothing); ``kept``: the forces made loads or muscles."""
     muscles, forces = {}, {}
     for force in model.getForceSet():
         if force.getName() in kept:
@@ -663,13 +673,16 @@ def _dropped_note(osim, model, kept: set) -> str:
         kind[name] = kind.get(name, 0) + 1
     wraps = sum(body.getWrapObjectSet().getSize() for body in model.getBodySet())
     wraps += model.getGround().getWrapObjectSet().getSize()
+    imported = any(muscle.getName() in kept for muscle in model.getMuscles())  # wraps live on in their paths
+    wraps = 0 if imported else wraps
     counts = [(sum(muscles.values()), "muscle", muscles), (sum(forces.values()), "other force", forces),
               (model.getMarkerSet().getSize(), "marker", {}), (wraps, "wrap object", {}),
               (model.getContactGeometrySet().getSize(), "contact geometry", {}),
               (model.getControllerSet().getSize(), "controller", {}), (model.getProbeSet().getSize(), "probe", {})]
     parts = [f"{n} {what}{'s' if n > 1 and what != 'contact geometry' else ''}"
              + (f" ({', '.join(kinds)})" if kinds else "") for n, what, kinds in counts if n]
-    return f"dropped {', '.join(parts)}: the imported model is driven by joint torques" if parts else ""
+    tail = "" if imported else ": the imported model is driven by joint torques"
+    return f"dropped {', '.join(parts)}{tail}" if parts else ""
 
 
 def _welded_note(welded: list) -> str:

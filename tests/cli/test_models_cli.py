@@ -178,7 +178,7 @@ def test_the_forearm_is_the_default_model():
 
 
 @pytest.mark.parametrize("args, word", [
-    (["--model", "arm3"], "valid: forearm, arm2, leg3"), (["--model", "arm2", "--model", "forearm"], "one model"),
+    (["--model", "arm3"], "valid: forearm, arm2, arm26, leg3"), (["--model", "arm2", "--model", "forearm"], "one model"),
     (["--model", "arm2", "--model", "L0G=0.5"], "L0G"), (["--model", "arm2", "--model", "mass=1"], "unknown key of model 'arm2' 'mass'"),
     (["--model", "arm2", "--motion", "exact"], "reach"), (["--model", "arm2", "--integrator", "rk45", "--rtol", "0"], "--rtol"),
     (["--model", "arm2", "--controller", "mpc"], "unknown controller 'mpc'"),
