@@ -139,7 +139,20 @@ def _show_text(model, source: str) -> str:
     text += text_table("joints in order (m, rad)", joints, list(joints[0]))
     if loads:
         text += text_table("loads (m in the body's frame, N in world axes)", loads, list(loads[0]))
-    return text + _motions_text(model) + _keys_text(model) + _paths_text(model)
+    return text + _muscles_text(model) + _motions_text(model) + _keys_text(model) + _paths_text(model)
+
+
+def _muscles_text(model) -> str:
+    """The muscles: constants and path (the bodies of its points, or the coordinates of its polynomial)."""
+    from .store_commands import text_table
+
+    rows = [{"name": m.name, "F_max (N)": f"{m.max_isometric_force:.6g}",
+             "l_opt (m)": f"{m.optimal_fiber_length:.6g}", "l_slack (m)": f"{m.tendon_slack_length:.6g}",
+             "tendon": m.tendon, "path": (f"points on {', '.join(p.body for p in m.path.points)}"
+                                          if hasattr(m.path, "points") else
+                                          f"polynomial in {', '.join(m.path.coordinates)} ({len(m.path.terms)} terms)")}
+            for m in model.muscles]
+    return text_table("muscles (max isometric force, optimal fibre length, tendon slack length)", rows, list(rows[0])) if rows else ""
 
 
 def _joint_type(joint) -> str:

@@ -44,6 +44,9 @@ Choices made here (documented in the README's "Your own model"):
   duration, from rest to rest, with ``duration`` (s, at least 0.01), ``start`` and ``goal``
   (tables {joint = angle}, rad, naming every joint and no other); or 'eq5-paper', 'eq5-exact':
   the paper's eq. 5 of a one-angle model, its span fixed (``fdbench.multibody.motions.eq5``).
+* ``[[muscles]]`` (optional): Hill-type muscles, their constants and paths (points fixed to bodies
+  or a polynomial length), read, checked and written by ``fdbench.multibody.muscles``; their
+  lengths and moment arms are ``fdbench.multibody.muscle_paths``.
 * ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
   a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
   ``<body>.inertia`` an ``@<joint>`` of the body for the inertia about the joint's point (inertia +
@@ -60,6 +63,7 @@ from pathlib import Path
 
 from ..files import quoted
 from ..registry import unknown_name_message
+from .muscles import Muscle, muscle_dict, read_muscles
 from .spline import fit
 
 GROUND = "ground"
@@ -182,8 +186,8 @@ class MotionSpec:
 @dataclass(frozen=True)
 class Model:
     """A planar tree of bodies hanging from ground through pin joints (in topological order),
-    gravity (m/s^2, world axes), constant loads, named motions (the first the default) and short
-    keys ((name, target) pairs: see ``with_short_keys``)."""
+    gravity (m/s^2, world axes), constant loads, named motions (the first the default), short
+    keys ((name, target) pairs: see ``with_short_keys``), frames and muscles (``fdbench.multibody.muscles``)."""
 
     name: str
     gravity: tuple[float, float]
@@ -194,6 +198,7 @@ class Model:
     motions: tuple[MotionSpec, ...] = ()
     keys: tuple[tuple[str, str], ...] = ()
     frames: tuple[Frame, ...] = ()
+    muscles: tuple[Muscle, ...] = ()
 
     def frame(self, name: str) -> tuple[str, tuple[float, float], float]:
         """(body, origin (m), angle (rad)) of a body's own frame or of a named frame fixed to a body;
@@ -312,7 +317,7 @@ def distance(a, b) -> float:
 # ---------------------------------------------------------------- checking values
 
 TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": True, "joints": True, "loads": False,
-            "motions": False, "keys": False, "frames": False}
+            "motions": False, "keys": False, "frames": False, "muscles": False}
 BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
 JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
               "offset": False, "limits": False, "path": False, "coordinates": False}
@@ -343,6 +348,7 @@ ALLOWED = {
     "coordinates": "three names [angle, x, y] of a free joint's coordinates",
     "angles": "a list of angles (rad), strictly increasing", "x": "a list of x values (m)",
     "y": "a list of y values (m)", "y_angles": "a list of angles (rad), strictly increasing: y's own",
+    "muscles": "a list of tables ([[muscles]] in TOML)",
 }
 
 
@@ -365,6 +371,8 @@ def _kind(value) -> str:
 
 class _Checker:
     """Reads the values of one description, raising ModelError naming ``source`` and the key."""
+
+    kind = staticmethod(_kind)  # how a value of the wrong type is named
 
     def __init__(self, source: str):
         self.source = source
@@ -458,7 +466,8 @@ def model_from_dict(data, source: str, default_name: str | None = None) -> Model
     named = set()
     frames = tuple(_frame(check, entry, f"frames[{i}]", model, named)
                    for i, entry in enumerate(check.entries(data, "frames")))
-    return replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model), frames=frames)
+    model = replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model), frames=frames)
+    return replace(model, muscles=read_muscles(check, check.entries(data, "muscles"), model))
 
 
 def _body(check: _Checker, entry, key: str) -> Body:
@@ -787,6 +796,8 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
         data["keys"] = dict(model.keys)
     if model.frames:
         data["frames"] = [{"name": f.name, "body": f.body, "at": list(f.at), "angle": f.angle} for f in model.frames]
+    if model.muscles:
+        data["muscles"] = [muscle_dict(m) for m in model.muscles]
     return data
 
 

@@ -62,7 +62,7 @@ def to_toml(model: Model, explicit_ends: bool = False) -> str:
     """The model as a TOML file that load_model reads back to an equal Model."""
     data = to_dict(model, explicit_ends)
     lines = [f"{key} = {_toml_value(data[key])}" for key in ("name", "description", "gravity") if key in data]
-    for section in ("bodies", "joints", "loads", "motions", "frames"):
+    for section in ("bodies", "joints", "loads", "motions", "frames", "muscles"):
         for entry in data.get(section, []):
             lines += ["", f"[[{section}]]"] + [f"{key} = {_toml_value(value)}" for key, value in entry.items()]
     if "keys" in data:
@@ -79,4 +79,6 @@ def _toml_value(value) -> str:
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     if isinstance(value, dict):  # names of joints: bare keys
         return "{ " + ", ".join(f"{key} = {_toml_value(v)}" for key, v in value.items()) + " }"
+    if isinstance(value, int) and not isinstance(value, bool):  # a muscle path's powers
+        return str(value)
     return repr(float(value))

@@ -1,0 +1,229 @@
+"""Muscle-tendon lengths and moment arms of a model's muscles (``fdbench.multibody.muscles``) at its
+coordinates q, exact: a path of points by the planar kinematics of the bodies' frames and their
+derivatives by the coordinates (pin angles, a free joint's angle and translations, a joint's path
+spline), a polynomial path by its closed-form derivative. A moment arm is -dl/dq (m; for a
+translation, dimensionless), OpenSim's ``computeMomentArm`` sign.
+
+The frames follow ``fdbench.multibody.model``: a body's angle is the sum of (coordinate + offset)
+along its path from ground; its joint point sits at the parent's ``at_parent`` (plus the path's
+(x, y)(angle) in the parent's frame, plus (x, y) for a free joint) and at its own ``at_child``.
+
+One compiled kernel (``geometry``, numba, cached) over one named layout (``MusclePaths``, built once
+per model by ``muscle_layout``) computes both path forms, for later use inside the compiled dynamics.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ..jit import njit
+from .inverse import _spline_at
+from .layout import (AT_CHILD_X, AT_CHILD_Y, AT_PARENT_X, AT_PARENT_Y, COLUMN, FIXED, FREE, N_BODY_FLOAT, N_BODY_INT,
+                     OFFSET, PARENT, PATH)
+from .model import GROUND, Model
+from .muscles import MAX_COORDINATES, PointPath
+
+POINTS, POLYNOMIAL = 0, 1  # MusclePaths.kind
+PHI, ORIGIN_X, ORIGIN_Y, N_FRAME = range(4)  # the kernel's per-body scratch: angle (rad), origin (m)
+
+
+class MusclePaths(NamedTuple):
+    """A model's bodies and muscle paths as arrays. Bodies (the model's joints' children, in its
+    order): body_int (B, N_BODY_INT) with PARENT (FIXED: ground), COLUMN, FREE and PATH (-1: none);
+    body_float (B, N_BODY_FLOAT) with OFFSET (rad), AT_PARENT_X/Y and AT_CHILD_X/Y (m); knots
+    (n_knots, 5) and start (2 n_paths + 1,) the joint paths' splines (``layout.Paths``'s). Muscles:
+    kind (M,) POINTS or POLYNOMIAL, first (M + 1,) muscle m's rows first[m] to first[m + 1] of
+    point_body (FIXED: ground), point_local (m, in the body's frame) or of coefficient (m),
+    powers (terms, MAX_COORDINATES); columns (M, MAX_COORDINATES) a polynomial's coordinates (-1: none)."""
+    body_int: np.ndarray
+    body_float: np.ndarray
+    knots: np.ndarray
+    start: np.ndarray
+    kind: np.ndarray
+    first: np.ndarray
+    point_body: np.ndarray
+    point_local: np.ndarray
+    coefficient: np.ndarray
+    powers: np.ndarray
+    columns: np.ndarray
+
+
+def muscle_geometry(model: Model, q, layout: MusclePaths | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(lengths, moment_arms) of ``model.muscles`` at the coordinates q (rad, m in the model's order):
+    for q of shape (J,) lengths (M,) (m) and moment arms (M, J) (-dl/dq: m per rad, m/m for a
+    translation); for q of shape (n, J) shapes (n, M) and (n, M, J). ValueError for another shape.
+    Where two consecutive points of a path meet, its moment arms are NaN (the length has no slope).
+    ``layout``: ``muscle_layout(model)``, made here if not given."""
+    q = np.asarray(q, dtype=float)
+    n_coordinates = model.n_joints
+    if q.ndim not in (1, 2) or q.shape[-1] != n_coordinates:
+        raise ValueError(f"coordinates must have shape ({n_coordinates},) or (n, {n_coordinates}), got {q.shape}")
+    single, q = q.ndim == 1, np.ascontiguousarray(np.atleast_2d(q))
+    layout = muscle_layout(model) if layout is None else layout
+    n, n_bodies = q.shape[0], layout.body_int.shape[0]
+    lengths, arms = np.zeros((n, len(model.muscles))), np.zeros((n, len(model.muscles), n_coordinates))
+    geometry(q, layout, lengths, arms, np.zeros((n_bodies + 1, N_FRAME)),
+             np.zeros((n_bodies + 1, N_FRAME, n_coordinates)), np.zeros((2, 3, max(2, n_coordinates))))
+    return (lengths[0], arms[0]) if single else (lengths, arms)
+
+
+def muscle_layout(model: Model) -> MusclePaths:
+    """The arrays of ``MusclePaths`` for ``model`` (a frame's points carried into its body's frame)."""
+    index = {joint.child: b for b, joint in enumerate(model.joints)}
+    n_bodies = len(model.joints)
+    body_int = np.full((n_bodies, N_BODY_INT), FIXED, dtype=np.int64)
+    body_float = np.zeros((n_bodies, N_BODY_FLOAT))
+    pieces, start, column = [np.zeros((0, 5))], [0], 0
+    for b, joint in enumerate(model.joints):
+        body_int[b, PARENT], body_int[b, COLUMN] = index.get(joint.parent, FIXED), column
+        body_int[b, FREE] = joint.type == "free"
+        body_float[b, OFFSET] = joint.offset
+        body_float[b, [AT_PARENT_X, AT_PARENT_Y]] = joint.at_parent
+        body_float[b, [AT_CHILD_X, AT_CHILD_Y]] = joint.at_child
+        column += len(joint.coordinate_names)
+        if joint.path is not None:
+            body_int[b, PATH] = (len(start) - 1) // 2
+            for spline in joint.path.splines():
+                pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
+                start.append(start[-1] + len(spline.x))
+    kind, first, point_body, point_local, coefficient, powers = [], [0], [], [], [], []
+    columns = np.full((len(model.muscles), MAX_COORDINATES), -1, dtype=np.int64)
+    for m, muscle in enumerate(model.muscles):
+        if isinstance(muscle.path, PointPath):
+            kind.append(POINTS)
+            for point in muscle.path.points:
+                body, origin, angle = (GROUND, (0.0, 0.0), 0.0) if point.body == GROUND else model.frame(point.body)
+                c, s = math.cos(angle), math.sin(angle)
+                point_body.append(index.get(body, FIXED))
+                point_local.append((origin[0] + c * point.at[0] - s * point.at[1],
+                                    origin[1] + s * point.at[0] + c * point.at[1]))
+            first.append(len(point_body))
+        else:
+            kind.append(POLYNOMIAL)
+            path = muscle.path
+            columns[m, :len(path.coordinates)] = [model.coordinates.index(name) for name in path.coordinates]
+            for term in path.terms:
+                coefficient.append(term.coefficient)
+                powers.append(list(term.powers) + [0] * (MAX_COORDINATES - len(term.powers)))
+            first.append(len(coefficient))
+    return MusclePaths(body_int, body_float, np.concatenate(pieces), np.array(start, dtype=np.int64),
+                       np.array(kind, dtype=np.int64), np.array(first, dtype=np.int64),
+                       np.array(point_body, dtype=np.int64), np.array(point_local, dtype=float).reshape(-1, 2),
+                       np.array(coefficient, dtype=float), np.array(powers, dtype=np.int64).reshape(-1, MAX_COORDINATES),
+                       columns)
+
+
+@njit(error_model="numpy")
+def geometry(q, layout, lengths, arms, frames, slopes, points):
+    """Into lengths (n, M) (m) and arms (n, M, J) (-dl/dq) at the coordinates q (n, J), for the
+    muscles of ``layout`` (a ``MusclePaths``). Scratch: frames (B + 1, N_FRAME) each body's angle
+    and origin, slopes (B + 1, N_FRAME, J) their derivatives by the coordinates (row B: ground,
+    zero), points (2, 3, max(2, J)) a segment's two points (x, y in row 0, their derivatives in rows 1, 2)."""
+    n_bodies = layout.body_int.shape[0]
+    for i in range(q.shape[0]):
+        _frames(q[i], layout, frames, slopes)
+        for m in range(layout.kind.shape[0]):
+            if layout.kind[m] == POINTS:
+                lengths[i, m] = _points_length(layout, m, frames, slopes, points, arms[i, m], n_bodies)
+            else:
+                lengths[i, m] = _polynomial_length(q[i], layout, m, arms[i, m])
+
+
+@njit(error_model="numpy", inline="always")
+def _frames(q, layout, frames, slopes):
+    """Each body's angle and origin (frames) and their derivatives by the coordinates (slopes), from
+    ground out; row B (ground) stays zero."""
+    body_int, body_float, n_bodies = layout.body_int, layout.body_float, layout.body_int.shape[0]
+    for k in range(n_bodies):
+        p, col = body_int[k, PARENT], body_int[k, COLUMN]
+        if p < 0:
+            p = n_bodies  # ground's row
+        pphi = frames[p, PHI]
+        pc, ps = math.cos(pphi), math.sin(pphi)
+        ax = body_float[k, AT_PARENT_X] * pc - body_float[k, AT_PARENT_Y] * ps
+        ay = body_float[k, AT_PARENT_X] * ps + body_float[k, AT_PARENT_Y] * pc
+        rx, ry = frames[p, ORIGIN_X] + ax, frames[p, ORIGIN_Y] + ay
+        for j in range(q.shape[0]):  # the joint point: the parent's origin and arm
+            slopes[k, ORIGIN_X, j] = slopes[p, ORIGIN_X, j] - ay * slopes[p, PHI, j]
+            slopes[k, ORIGIN_Y, j] = slopes[p, ORIGIN_Y, j] + ax * slopes[p, PHI, j]
+            slopes[k, PHI, j] = slopes[p, PHI, j]
+        if body_int[k, FREE] == 1:
+            rx, ry = rx + q[col + 1], ry + q[col + 2]
+            slopes[k, ORIGIN_X, col + 1] += 1.0
+            slopes[k, ORIGIN_Y, col + 2] += 1.0
+        path = body_int[k, PATH]
+        if path >= 0:  # the joint point moves along (x, y)(angle) in the parent's frame
+            sx0, sx1, _, _ = _spline_at(layout.knots, layout.start[2 * path], layout.start[2 * path + 1], q[col])
+            sy0, sy1, _, _ = _spline_at(layout.knots, layout.start[2 * path + 1], layout.start[2 * path + 2], q[col])
+            ax, ay = sx0 * pc - sy0 * ps, sx0 * ps + sy0 * pc
+            rx, ry = rx + ax, ry + ay
+            for j in range(q.shape[0]):
+                slopes[k, ORIGIN_X, j] -= ay * slopes[p, PHI, j]
+                slopes[k, ORIGIN_Y, j] += ax * slopes[p, PHI, j]
+            slopes[k, ORIGIN_X, col] += sx1 * pc - sy1 * ps
+            slopes[k, ORIGIN_Y, col] += sx1 * ps + sy1 * pc
+        phi = pphi + q[col] + body_float[k, OFFSET]
+        slopes[k, PHI, col] += 1.0
+        c, s = math.cos(phi), math.sin(phi)
+        ax = body_float[k, AT_CHILD_X] * c - body_float[k, AT_CHILD_Y] * s
+        ay = body_float[k, AT_CHILD_X] * s + body_float[k, AT_CHILD_Y] * c
+        frames[k, PHI], frames[k, ORIGIN_X], frames[k, ORIGIN_Y] = phi, rx - ax, ry - ay
+        for j in range(q.shape[0]):  # the origin: the joint point less the child's arm
+            slopes[k, ORIGIN_X, j] += ay * slopes[k, PHI, j]
+            slopes[k, ORIGIN_Y, j] -= ax * slopes[k, PHI, j]
+
+
+@njit(error_model="numpy", inline="always")
+def _points_length(layout, m, frames, slopes, points, arm, n_bodies):
+    """Muscle m's length through its points (m); -dl/dq into arm (J,)."""
+    total = 0.0
+    for j in range(arm.shape[0]):
+        arm[j] = 0.0
+    for row in range(layout.first[m], layout.first[m + 1]):
+        here = (row - layout.first[m]) % 2
+        b = layout.point_body[row]
+        if b < 0:
+            b = n_bodies
+        c, s = math.cos(frames[b, PHI]), math.sin(frames[b, PHI])
+        ax = layout.point_local[row, 0] * c - layout.point_local[row, 1] * s
+        ay = layout.point_local[row, 0] * s + layout.point_local[row, 1] * c
+        points[here, 0, 0], points[here, 0, 1] = frames[b, ORIGIN_X] + ax, frames[b, ORIGIN_Y] + ay
+        for j in range(arm.shape[0]):
+            points[here, 1, j] = slopes[b, ORIGIN_X, j] - ay * slopes[b, PHI, j]
+            points[here, 2, j] = slopes[b, ORIGIN_Y, j] + ax * slopes[b, PHI, j]
+        if row > layout.first[m]:
+            before = 1 - here
+            dx, dy = points[here, 0, 0] - points[before, 0, 0], points[here, 0, 1] - points[before, 0, 1]
+            segment = math.sqrt(dx * dx + dy * dy)
+            total += segment
+            ux, uy = dx / segment, dy / segment  # two points that meet: NaN
+            for j in range(arm.shape[0]):
+                arm[j] -= ux * (points[here, 1, j] - points[before, 1, j]) + uy * (points[here, 2, j] - points[before, 2, j])
+    return total
+
+
+@njit(error_model="numpy", inline="always")
+def _polynomial_length(q, layout, m, arm):
+    """Muscle m's length sum_t c_t prod_k x_k^p_tk (m); -dl/dq into arm (J,)."""
+    total = 0.0
+    for j in range(arm.shape[0]):
+        arm[j] = 0.0
+    for t in range(layout.first[m], layout.first[m + 1]):
+        value = layout.coefficient[t]
+        for k in range(MAX_COORDINATES):
+            if layout.columns[m, k] >= 0:
+                value *= q[layout.columns[m, k]] ** layout.powers[t, k]
+        total += value
+        for k in range(MAX_COORDINATES):
+            power = layout.powers[t, k]
+            if layout.columns[m, k] < 0 or power == 0:
+                continue
+            slope = layout.coefficient[t] * power
+            for other in range(MAX_COORDINATES):
+                if layout.columns[m, other] >= 0:
+                    slope *= q[layout.columns[m, other]] ** (layout.powers[t, other] - (1 if other == k else 0))
+            arm[layout.columns[m, k]] -= slope
+    return total
