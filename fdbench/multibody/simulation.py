@@ -26,6 +26,9 @@ from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrat
                          solve_adaptive, steps)
 from .engine import Engine
 from .layout import COMPUTED, GAINS, PD, VIOLATION
+from .muscle import (ALPHA_OPT, F0, L_OPT, L_SLACK, PASSIVE_STRAIN, TENDON_STRAIN, WIDTH, active_force_length,
+                     fiber_length, passive_force_length, rigid_tendon_force, tendon_force_length_inverse)
+from .muscle_paths import muscle_geometry
 
 STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # the kernels' codes
 
@@ -69,6 +72,11 @@ class Simulation:
     integrator: str = "rk4"
     detail: str = ""  # what made an adaptive integrator fail
     rhs_evaluations: int = 0  # adaptive integrators
+    # with excitations (``simulate``'s): per muscle on the samples, shape (n, M), the activation,
+    # the excitation (in [0, 1]) and the force along the path (N); None otherwise
+    activation: np.ndarray | None = None
+    excitation: np.ndarray | None = None
+    muscle_force: np.ndarray | None = None
 
     @property
     def angles(self) -> np.ndarray:
@@ -104,7 +112,7 @@ class FeedbackLaw:
 
 def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3, start=None,
              computed: bool = False, nominal: Engine | None = None, gains=None, integrator: str = "rk4",
-             rtol: float = 1e-6, atol: float = 1e-9) -> Simulation:
+             rtol: float = 1e-6, atol: float = 1e-9, excitation=None) -> Simulation:
     """Forward dynamics of ``engine`` (the plant) over the motion's span, driven by the feedforward
     ``torque`` (a torque function, or None for zero) plus feedback towards the motion, the results
     on the motion's samples.
@@ -118,8 +126,14 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     ``start``: the initial state (n_state,) (default: on the motion at t = 0).
     ``integrator``: 'rk4' (compiled, a fixed step of about ``dt`` s, torques and references on its
     half-step grid) or one of scipy's adaptive methods (``fdbench.integrate.SCIPY_METHODS``) with
-    the relative and absolute tolerances ``rtol`` and ``atol``."""
+    the relative and absolute tolerances ``rtol`` and ``atol``. ``excitation``: the muscles'
+    excitations as a function of times (s), shape (k,) -> (k, M) in [0, 1] (RK4 only; sampled on
+    its half-step grid): the muscles' generalised forces add to the torques, each activation starts
+    at its excitation at t = 0 and a compliant tendon's force at the fibre's static equilibrium
+    (fibre velocity zero); None: the muscles left out."""
     check_integrator(integrator)
+    if excitation is not None and integrator != "rk4":
+        raise ValueError(f"muscle excitations run on the compiled RK4 only, not --integrator {integrator}")
     if integrator != "rk4":
         check_tolerances(rtol, atol)
     if tuple(motion.joints) != engine.joints:
@@ -134,7 +148,7 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
         raise ValueError(f"the initial state must be {engine.n_state} finite numbers [q, q'], got shape {y0.shape}")
     law = _law(engine, kp, kd, computed, nominal, gains)
     if integrator == "rk4":
-        result = _simulate_rk4(torque, engine, motion, law, y0, dt)
+        result = _simulate_rk4(torque, engine, motion, law, y0, dt, excitation)
     else:
         result = _simulate_adaptive(torque, engine, motion, law, y0, integrator, rtol, atol)
     result.runtime_s = time.perf_counter() - began
@@ -155,18 +169,82 @@ def _torques(torque, t: np.ndarray, n_joints: int) -> np.ndarray:
     return np.array(torque(t), dtype=float).reshape(len(t), n_joints)
 
 
-def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, dt: float) -> Simulation:
-    """The compiled RK4 (``Engine.simulate``) with steps of about dt (s)."""
+def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, dt: float,
+                  excitation=None) -> Simulation:
+    """The compiled RK4 (``Engine.simulate``) with steps of about dt (s), with the muscles'
+    ``excitation`` (a function of times) or without muscles."""
     n = steps(dt, motion.duration)
     half = np.linspace(0.0, motion.duration, 2 * n + 1)
     ref, refd, refdd = motion(half)
+    excited = None if excitation is None else _excitations(excitation, half, engine)
+    if excited is not None:
+        y0 = np.concatenate([y0, muscle_start(engine, y0, excited[0])])
     result = engine.simulate(y0, motion.duration / n, n, _torques(torque, half, engine.n_joints), ref, refd, refdd,
-                             law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints), law.nominal)
+                             law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints), law.nominal,
+                             excitation_half=excited)
     grid = np.linspace(0.0, motion.duration, n + 1)
     y, applied = _on_samples(grid, result.states, result.rates, result.applied, result.steps_done, motion.samples)
-    z, zd = engine.joints_from_state(y)
-    return Simulation(motion.samples, z, zd, y, applied, result.steps_done * motion.duration / n,
+    z, zd = engine.joints_from_state(y[:, :engine.n_state])
+    done = Simulation(motion.samples, z, zd, y[:, :engine.n_state], applied, result.steps_done * motion.duration / n,
                       STATUS_OF_CODE[result.status], result.max_violation)
+    if excited is not None:
+        done.activation = y[:, engine.n_state:engine.n_state + engine.n_muscles]
+        done.excitation = _excitations(excitation, motion.samples, engine)
+        done.muscle_force = muscle_forces(engine, z, zd, y[:, engine.n_state:])
+    return done
+
+
+def _excitations(excitation, t: np.ndarray, engine: Engine) -> np.ndarray:
+    """The muscles' excitations at times t (s), shape (k, M); ValueError outside [0, 1]."""
+    values = np.array(excitation(t), dtype=float).reshape(len(t), engine.n_muscles)
+    if not np.all((values >= 0.0) & (values <= 1.0)):
+        raise ValueError("muscle excitations must lie in [0, 1]")
+    return values
+
+
+def muscle_start(engine: Engine, y0: np.ndarray, excitation: np.ndarray) -> np.ndarray:
+    """The muscle states at the mechanical state y0 (n_state,) as an OpenSim user sets them: each
+    activation at its excitation (M,), a compliant tendon's normalised force where the fibre is in
+    static equilibrium (fibre velocity zero: f_T = cos(alpha) (a f_L + f_PE), by bisection)."""
+    z, _ = engine.joints_from_state(y0)
+    lengths, _ = muscle_geometry(engine.model, z)
+    start = np.zeros(engine.n_muscle_states)
+    start[:engine.n_muscles] = excitation
+    for m, row in enumerate(engine.tendon_row):
+        if row >= 0:
+            start[row] = _static_tendon_force(excitation[m], lengths[m], engine.muscle_params[m])
+    return start
+
+
+def _static_tendon_force(activation: float, length: float, p: np.ndarray) -> float:
+    """The normalised tendon force f_T in [0, 5] where f_T = cos(alpha) (a f_L + f_PE) of the
+    fibre that the tendon's stretch leaves of ``length`` (m)."""
+    def excess(force):
+        l_m, cos_alpha = fiber_length(length - p[L_SLACK] * tendon_force_length_inverse(force, p[TENDON_STRAIN]),
+                                      p[L_OPT], p[ALPHA_OPT])
+        norm = l_m / p[L_OPT]
+        return force - cos_alpha * (activation * active_force_length(norm, p[WIDTH])
+                                    + passive_force_length(norm, p[PASSIVE_STRAIN]))
+    low, high = 0.0, 5.0
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if excess(middle) < 0.0 else (low, middle)
+    return 0.5 * (low + high)
+
+
+def muscle_forces(engine: Engine, z: np.ndarray, zd: np.ndarray, muscle_states: np.ndarray) -> np.ndarray:
+    """The muscles' forces along their paths (N), shape (n, M), at the coordinates z and rates zd
+    (n, J) with the muscle states (n, n_muscle_states); NaN where a state is not finite."""
+    out = np.full((len(z), engine.n_muscles), np.nan)
+    finite = np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(muscle_states), axis=1)
+    lengths, arms = muscle_geometry(engine.model, z[finite])
+    lengthening = -np.einsum("nmj,nj->nm", arms, zd[finite])
+    for i, k in enumerate(np.flatnonzero(finite)):
+        for m, row in enumerate(engine.tendon_row):
+            p = engine.muscle_params[m]
+            out[k, m] = (p[F0] * muscle_states[k, row] if row >= 0 else
+                         rigid_tendon_force(muscle_states[k, m], lengths[i, m], lengthening[i, m], p))
+    return out
 
 
 def _rates(torque, engine: Engine, motion, law: FeedbackLaw, t: np.ndarray, states: np.ndarray):
