@@ -131,7 +131,8 @@ def opensim_forward(tmp_path, samples) -> np.ndarray:
 
 
 # Largest differences over 0.5 s, OpenSim (Manager, accuracy 1e-7) against fdbench (RK4, dt 1e-4 s,
-# alpha 1e7), measured: see the assertion's bounds.
+# alpha 1e7), measured: coordinates 3.4e-6 deg (alpha 1e9: 1.2e-6 deg; dt 1e-3 s: 3.4e-6 deg),
+# activations 2.6e-8, forces 1.9e-5 N (of up to 270 N).
 @pytest.mark.skipif(importlib.util.find_spec("opensim") is None, reason="the opensim package is not installed")
 def test_muscles_under_prescribed_excitations_move_the_arm_as_opensim_s_forward_simulation(tmp_path):
     model = model_from_dict(arm_data(), "arm.toml")
@@ -140,9 +141,10 @@ def test_muscles_under_prescribed_excitations_move_the_arm_as_opensim_s_forward_
     theirs = opensim_forward(tmp_path, Held.samples)
     assert np.degrees(np.abs(theirs[:, :2] - Z0).max()) > 5.0  # the muscles and gravity move the arm
     difference = np.degrees(np.abs(ours.z - theirs[:, :2]).max())
-    assert difference < 0.01, difference
-    np.testing.assert_allclose(ours.activation, theirs[:, 2:6], rtol=0, atol=1e-5)
-    np.testing.assert_allclose(ours.muscle_force, theirs[:, 6:], rtol=0, atol=0.05 + 1e-3 * np.abs(theirs[:, 6:]))
+    assert difference < 1e-4, difference  # the issue asks for 0.01 deg
+    np.testing.assert_allclose(ours.activation, theirs[:, 2:6], rtol=0, atol=1e-6)
+    assert np.abs(theirs[:, 6:]).max() > 100.0
+    np.testing.assert_allclose(ours.muscle_force, theirs[:, 6:], rtol=0, atol=1e-3)
 
 
 def test_the_kernel_s_muscle_forces_are_moment_arms_times_force_at_random_states():
