@@ -152,7 +152,9 @@ def _muscles_text(model) -> str:
                                           if hasattr(m.path, "points") else
                                           f"polynomial in {', '.join(m.path.coordinates)} ({len(m.path.terms)} terms)")}
             for m in model.muscles]
-    return text_table("muscles (max isometric force, optimal fibre length, tendon slack length)", rows, list(rows[0])) if rows else ""
+    if not rows:
+        return ""
+    return text_table("muscles (max isometric force, optimal fibre length, tendon slack length)", rows, list(rows[0]))
 
 
 def _joint_type(joint) -> str:

@@ -201,7 +201,8 @@ def _points_length(layout, m, frames, slopes, points, arm, n_bodies):
             total += segment
             ux, uy = dx / segment, dy / segment  # two points that meet: NaN
             for j in range(arm.shape[0]):
-                arm[j] -= ux * (points[here, 1, j] - points[before, 1, j]) + uy * (points[here, 2, j] - points[before, 2, j])
+                arm[j] -= (ux * (points[here, 1, j] - points[before, 1, j])
+                           + uy * (points[here, 2, j] - points[before, 2, j]))
     return total
 
 

@@ -125,8 +125,8 @@ def read_muscles(check, entries: list, model) -> tuple[Muscle, ...]:
     """The checked muscles of the ``[[muscles]]`` tables ``entries`` of ``model`` (its bodies, joints
     and frames read); ``check`` is the model's checker (ModelError for the first problem)."""
     taken = {name.lower(): what for what, names in (
-        ("a body", [b.name for b in model.bodies]), ("a joint", [j.name for j in model.joints]),
-        ("a coordinate", model.coordinates), ("a frame", [f.name for f in model.frames])) for name in names}
+        ("a body", [b.name for b in model.bodies]), ("a coordinate", model.coordinates),
+        ("a joint", [j.name for j in model.joints]), ("a frame", [f.name for f in model.frames])) for name in names}
     muscles = []
     for i, entry in enumerate(entries):
         muscle = _muscle(check, entry, f"muscles[{i}]", model)

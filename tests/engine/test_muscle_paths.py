@@ -16,7 +16,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
@@ -178,8 +178,7 @@ def test_a_muscle_over_one_pin_is_the_closed_form():
 
 @st.composite
 def leg_paths(draw):
-    """Three to five points on random bodies and frames (ground included), 1 cm or more apart in
-    their own frame, and coordinates."""
+    """Three to five points on random bodies and frames (ground included), and coordinates."""
     owners = st.sampled_from(["ground", "thigh", "shank", "foot", "heel"])
     xy = st.floats(-0.3, 0.3)
     points = draw(st.lists(st.tuples(owners, xy, xy), min_size=3, max_size=5))
@@ -191,17 +190,16 @@ def leg_paths(draw):
 @given(leg_paths())
 def test_a_moment_arm_is_minus_the_length_s_slope(case):
     """-dl/dq by central differences (step 1e-6) equals the moment arm to 1e-7, for any points on any
-    bodies, frames or ground."""
+    bodies, frames or ground whose segments are 1 cm or longer."""
     points, q = case
     data = leg_with_muscles({"m": points})
     try:
         model = model_from_dict(data, "leg")
     except ModelError:  # two equal points in a row
-        return
+        assume(False)
     segments = [muscle_geometry(replace(model, muscles=(replace(model.muscles[0], path=PointPath(
         model.muscles[0].path.points[k:k + 2])),)), q)[0][0] for k in range(len(points) - 1)]
-    if min(segments) < 1e-3:  # a segment of (near) zero length: no slope
-        return
+    assume(min(segments) >= 1e-2)  # (near) zero length: no slope, or a finite difference far off
     length, arms = muscle_geometry(model, q)
     step = 1e-6
     for j in range(5):
