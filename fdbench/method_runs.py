@@ -159,6 +159,8 @@ def _excitation_history(spec, path, duration: float):
     muscles = [m.name for m in engine(spec).model.muscles]
     if not muscles:
         raise BadFile(f"{option}: the model {spec.model_name!r} has no muscles ([[muscles]] in its file) to excite")
+    if spec.integrator != "rk4":
+        raise BadFile(f"{option}: muscles run on the compiled RK4 only, not --integrator {spec.integrator}")
     header = next((line for line in read_input_text(path, option).splitlines() if line.strip()), "")
     known = {name.lower(): name for name in muscles}
     for column in (cell.strip() for cell in header.split(",")):
