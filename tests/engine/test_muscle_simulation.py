@@ -251,3 +251,6 @@ def test_a_missing_muscle_column_and_a_model_without_muscles_are_one_line(tmp_pa
     assert_one_line_error(done, "--excitation-file", "pectoral")
     done = runner.invoke(app, ["simulate", "--model", "arm2", "--excitation-file", str(excitation_file(tmp_path))])
     assert_one_line_error(done, "--excitation-file", "no muscles")
+    done = runner.invoke(app, ["simulate", "--model", str(arm_file), "--motion", str(motion_file(tmp_path)),
+                               "--excitation-file", str(excitation_file(tmp_path)), "--integrator", "rk45"])
+    assert_one_line_error(done, "--excitation-file", "RK4 only")
