@@ -3,6 +3,8 @@ one RK4 driver of eq. 12 under a feedback law, one inverse dynamics (eq. 3), one
 derivation, over one data layout (``fdbench.multibody.layout``: named tuples of arrays built once
 per ``Engine``, so numba compiles and caches each kernel once for every model of a kind).
 
+Muscles (``layout.Muscles``, entry ``rk4_muscles``: activations and compliant tendons' forces as
+states, their moment arms times force as generalised forces) are optional too.
 Paths, free joints and external loads are optional arguments, None when a model has none; numba
 resolves every ``is None`` test when it compiles, so each pattern of None is its own variant with
 none of the absent parts' code. A model of pin joints only (paths, free and loads all None) takes
