@@ -17,7 +17,7 @@ import numpy as np
 from . import __version__
 from .casadi_loader import casadi
 from .collocation import collocate, own_fields, record_fields
-from .files import BadFile, read_history_csv
+from .files import BadFile, read_history_csv, read_input_text
 from .method_options import options_text
 from .models import named_motions
 from .multibody import simulation as sim
@@ -30,6 +30,7 @@ from .problem import TrackingProblem, tracking_setup
 from .problem import residual_weight as problem_residual_weight
 from .peers import run as run_peer
 from .records import RunOutcome, base_record, explained
+from .registry import unknown_name_message
 from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, reference,
                          warm_up)
 from .torques import TORQUES
@@ -111,13 +112,19 @@ def _set_up(spec):
 
 
 # ---------------------------------------------------------------------- open loop
-def run_simulation(spec, torque_file=None, params_file=None, torque=None) -> RunOutcome:
+def run_simulation(spec, torque_file=None, params_file=None, torque=None, excitation_file=None) -> RunOutcome:
     """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history (``t``
     and a column per joint or ``<joint>_torque``, N m), saved optimisation parameters or ``torque``
-    (t (s), (k,) -> N m, (k, J)). Bad files raise ``files.BadFile``."""
+    (t (s), (k,) -> N m, (k, J)); with ``excitation_file`` (``t,<muscle>...``, in [0, 1]) the muscles
+    excited and the torques those given or zero. Bad files raise ``files.BadFile``."""
     names = joints(spec)
     desired, _ = motions(spec)
     label, drive = "id", sim.feedforward(engine(spec, nominal(spec)), desired)
+    excitation = None
+    if excitation_file is not None:
+        excitation, digest = _excitation_history(spec, excitation_file, desired.duration)
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--excitation-file", digest),))))
+        label, drive = "zero", None
     if params_file is not None:
         drive, label, digest, spec = _saved_torque(spec, params_file)
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
@@ -135,13 +142,46 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None) -> Run
     if grid is not None:
         drive = sim.on_half_steps(drive, grid, body.n_joints)
     began = time.perf_counter()
-    result = sim.simulate(drive, body, desired, grid=grid, **integration(spec))
+    result = sim.simulate(drive, body, desired, grid=grid, **integration(spec),
+                          **({} if excitation is None else {"excitation": excitation}))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
     done = outcome(spec, record, result, inverse)
+    if excitation is not None:  # each muscle's activation, excitation and force (N) beside the joints
+        muscles = [m.name for m in engine(spec).model.muscles]
+        header, rows = done.table
+        done.table = (header + [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")],
+                      np.column_stack([rows, np.stack([result.activation, result.excitation, result.muscle_force],
+                                                      axis=-1).reshape(len(rows), -1)]))
     done.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
     return explained(done, spec)
+
+
+def _excitation_history(spec, path, duration: float):
+    """The muscles' excitations of an ``--excitation-file`` (``t`` (s) and one column per muscle of
+    the model, names ignoring case, each in [0, 1], covering [0, duration] s) as a function of times
+    (linear between samples, OpenSim's PiecewiseLinearFunction) and the file's digest. BadFile for
+    a model without muscles, a column that names no muscle, a missing muscle or a value outside [0, 1]."""
+    option = "--excitation-file"
+    muscles = [m.name for m in engine(spec).model.muscles]
+    if not muscles:
+        raise BadFile(f"{option}: the model {spec.model_name!r} has no muscles ([[muscles]] in its file) to excite")
+    if spec.integrator != "rk4":
+        raise BadFile(f"{option}: muscles run on the compiled RK4 only, not --integrator {spec.integrator}")
+    header = next((line for line in read_input_text(path, option).splitlines() if line.strip()), "")
+    known = {name.lower(): name for name in muscles}
+    for column in (cell.strip() for cell in header.split(",")):
+        if column.lower() != "t" and column.lower() not in known:
+            raise BadFile(f"{option}: {path}: column {column!r}: {unknown_name_message('muscle', column, muscles)}")
+    t, values = read_history_csv(path, option, duration, tuple(known))
+    outside = np.argwhere((values < 0.0) | (values > 1.0))
+    if len(outside):
+        row, m = outside[0]
+        raise BadFile(f"{option}: {path}: {muscles[m]} at t = {t[row]:g} s is {values[row, m]:g}; an excitation "
+                      "lies in [0, 1]")
+    digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
+    return (lambda s: np.stack([np.interp(s, t, values[:, m]) for m in range(len(muscles))], axis=-1)), digest
 
 
 def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):

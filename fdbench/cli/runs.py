@@ -72,18 +72,19 @@ def simulate(
     params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
     one: OneRun = None,
     conditions: dict = None,
+    excitation_file: Annotated[Optional[Path], typer.Option("--excitation-file", help="CSV with columns t (s) and one per muscle of the model (its [[muscles]] names), each excitation in [0, 1], covering the motion's span, linear between samples: the muscles act on the joints, the torques are --torque-file's or zero; the run starts on the motion's first sample, each activation at its first excitation; --save-trajectory adds <muscle>_activation, _excitation and _force (N).")] = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from ..spec import RunSpec
 
-    one.check(conditions, {"--torque-file": torque_file, "--params": params})
+    one.check(conditions, {"--torque-file": torque_file, "--params": params, "--excitation-file": excitation_file})
     if torque_file is not None and params is not None:
         raise BadInput("--torque-file and --params: give one of them, not both")
     spec = validated(RunSpec(command="simulate", **one.fields(conditions)))
     from ..method_runs import run_simulation
 
     one.out.check_store()
-    outcome = run_simulation(spec, torque_file=torque_file, params_file=params)
+    outcome = run_simulation(spec, torque_file=torque_file, params_file=params, excitation_file=excitation_file)
     one.out.deliver(outcome, outcome.extra.get("spec", spec), "fdbench simulate")
 
 

@@ -73,10 +73,12 @@ import numpy as np
 
 from .model import Model, resolved_end
 from . import kernels
+from .muscle import PARAMETERS as MUSCLE_PARAMETERS, parameters as muscle_parameters
+from .muscle_paths import muscle_layout
 from .layout import (ALPHA, AT_CHILD_X, AT_CHILD_Y, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA_F as BETA, COLUMN,
                      COMPUTED, FIXED, FIXED_X, FIXED_Y, FREE, GAINS, KI, KJ, L_11, L_12, L_21, L_22, LENGTH, N_BODY_FLOAT,
                      N_BODY_INT, N_LOAD, N_LOAD_INT, N_PARAMS, N_PATH_FLOAT, OFFSET, OMEGA2, PARENT, PATH, PD, SWITCH_COS,
-                     TWO_XI_OMEGA, VIOLATION, VIOLATION_TOL, D, Law, Loads, Paths)
+                     TWO_XI_OMEGA, VIOLATION, VIOLATION_TOL, D, Law, Loads, Muscles, Paths)
 from .layout import Model as Layout
 
 SIN_FORM_MIN_COS = 0.2  # the sin form of a body's angle constraint while |cos(phi + beta)| >= this
@@ -163,6 +165,7 @@ class Engine:
         self.n_q = self.n_p + self.n_bodies  # the points and one angle per body
         self.n_state = 2 * self.n_q
         self._build_layout()
+        self._build_muscles()
         self._last_start = None  # (z and zd as bytes, the state) of the last ``state_from_joints``
 
     # ------------------------------------------------------------------ layout
@@ -350,6 +353,36 @@ class Engine:
     def kernel_args(self) -> tuple:
         """(model, paths, free): the kernels' layout arguments of this model (``layout``)."""
         return self.layout, self.paths, self.free
+
+    def _build_muscles(self) -> None:
+        """The muscles' part of the kernels' layout (``layout.Muscles`` less its excitations):
+        ``muscle_paths`` (None without muscles), ``muscle_params`` (M, len(muscle.PARAMETERS)),
+        ``tendon_row`` (M,) and ``n_muscle_states``: M activations, then one normalised force per
+        compliant tendon."""
+        muscles = self.model.muscles
+        self.n_muscles = len(muscles)
+        self.muscle_paths = muscle_layout(self.model) if muscles else None
+        self.muscle_params = np.array([muscle_parameters(
+            m.max_isometric_force, m.optimal_fiber_length, m.tendon_slack_length,
+            pennation_angle_at_optimal=m.pennation_angle, max_contraction_velocity=m.max_contraction_velocity,
+            passive_fiber_strain_at_one_norm_force=m.passive_strain, tendon_strain_at_one_norm_force=m.tendon_strain,
+            fiber_damping=m.fiber_damping, activation_time_constant=m.activation_time,
+            deactivation_time_constant=m.deactivation_time) for m in muscles]).reshape(-1, len(MUSCLE_PARAMETERS))
+        compliant = np.array([m.tendon == "compliant" for m in muscles], dtype=bool)
+        self.tendon_row = np.full(self.n_muscles, -1, dtype=np.int64)
+        self.tendon_row[compliant] = self.n_muscles + np.arange(compliant.sum())
+        self.n_muscle_states = self.n_muscles + int(compliant.sum())
+
+    def muscles_at(self, excitation_half) -> Muscles:
+        """The kernels' ``muscles`` argument (``layout.Muscles``) with the excitations (in [0, 1],
+        shape (rows, M), on the half-step grid). ValueError for a model without muscles or another
+        shape."""
+        if not self.n_muscles:
+            raise ValueError(f"the model {self.model.name!r} has no muscles to excite")
+        excitation = np.ascontiguousarray(excitation_half, dtype=float)
+        if excitation.ndim != 2 or excitation.shape[1] != self.n_muscles:
+            raise ValueError(f"excitations must have shape (rows, {self.n_muscles}), got {excitation.shape}")
+        return Muscles(self.muscle_paths, self.muscle_params, self.tendon_row, excitation)
 
     def _build_layout(self) -> None:
         """The kernels' layout (``fdbench.multibody.layout``), built once: ``layout`` (a ``Model``),
@@ -668,7 +701,7 @@ class Engine:
         return self.inverse_dynamics(z, zd, zdd, None if t is None else float(t))
 
     def simulate(self, y0, dt, n_steps, tau_half, ref_half, refd_half, refdd_half, kp, kd, mode=PD, gains=None,
-                 nominal: "Engine | None" = None) -> SimResult:
+                 nominal: "Engine | None" = None, excitation_half=None) -> SimResult:
         """Classical RK4 of eq. 12 (compiled, ``kernels.rk4``) over n_steps steps of dt (s) from the
         state y0 (n_state,) under a feedback law: ``mode`` PD, tau + kp (ref - z) + kd (refd - z')
         (kp N m/rad, kd N m s/rad); COMPUTED, the inverse dynamics of ``nominal`` (an Engine of the
@@ -676,27 +709,38 @@ class Engine:
         kd 1/s), plus tau; GAINS, tau + K_k [ref - z, refd - z'] with ``gains`` K of shape
         (2 n_steps + 1, J, 2J) (N m/rad, N m s/rad). tau_half (N m), ref_half (rad), refd_half
         (rad/s), refdd_half (rad/s^2): shape (2 n_steps + 1, J) on the half-step grid t_k = k dt / 2;
-        kp, kd: shape (J,) or one number."""
+        kp, kd: shape (J,) or one number. ``excitation_half``: the muscles' excitations (2 n_steps + 1,
+        M) on the grid (``kernels.rk4_muscles``): y0, states and rates then have n_state +
+        n_muscle_states columns (activations, compliant tendons' forces) and ``applied`` adds the
+        muscles' generalised forces; None: the muscles (if any) left out."""
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be a positive number of seconds, got {dt}")
-        y0 = self._vector(y0, self.n_state, "the initial state")
+        muscles = None if excitation_half is None else self.muscles_at(excitation_half)
+        if muscles is not None and muscles.excitation.shape[0] != 2 * n_steps + 1:
+            raise ValueError(f"excitation_half must have {2 * n_steps + 1} rows (the half-step grid), "
+                             f"got {muscles.excitation.shape[0]}")
+        width = self.n_state + (0 if muscles is None else self.n_muscle_states)
+        y0 = self._vector(y0, width, "the initial state")
         tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, copy=False, tau_half=tau_half,
                                                        ref_half=ref_half, refd_half=refd_half, refdd_half=refdd_half)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
-        states, rates = np.empty((n_steps + 1, self.n_state)), np.empty((n_steps + 1, self.n_state))
+        states, rates = np.empty((n_steps + 1, width)), np.empty((n_steps + 1, width))
         applied = np.empty((n_steps + 1, self.n_joints))
         law = Law(tau, ref, refd, refdd, kp, kd, mode, gains)
         loads, *believed = self.believed_args(nominal, np.arange(2 * n_steps + 1) * (0.5 * dt))
 
         def run(y, n, rows, out):
+            if muscles is not None:
+                return kernels.rk4_muscles(y, float(dt), n, rows.start, law, self.layout, self.paths, self.free, loads,
+                                           *believed, muscles, *out)
             return kernels.rk4(y, float(dt), n, rows.start, law, self.layout, self.paths, self.free, loads, *believed,
                                *out)
         code, done, max_viol = self._in_chunks(run, y0, int(n_steps), (states, rates, applied))
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
             array[done + 1:] = np.nan
-        z, zd = self.joints_from_state(states)
+        z, zd = self.joints_from_state(states[:, :self.n_state])
         return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
 
     def _in_chunks(self, run, y0, n_steps: int, out: tuple) -> tuple[int, int, float]:

@@ -3,6 +3,8 @@ one RK4 driver of eq. 12 under a feedback law, one inverse dynamics (eq. 3), one
 derivation, over one data layout (``fdbench.multibody.layout``: named tuples of arrays built once
 per ``Engine``, so numba compiles and caches each kernel once for every model of a kind).
 
+Muscles (``layout.Muscles``, entry ``rk4_muscles``: activations and compliant tendons' forces as
+states, their moment arms times force as generalised forces) are optional too.
 Paths, free joints and external loads are optional arguments, None when a model has none; numba
 resolves every ``is None`` test when it compiles, so each pattern of None is its own variant with
 none of the absent parts' code. A model of pin joints only (paths, free and loads all None) takes
@@ -51,6 +53,8 @@ import numpy as np
 from ..jit import njit
 from .inverse import N_KIN, _inverse, _no_loads, _spline_at
 from .inverse import inverse_torques  # noqa: F401 - eq. 3, one of the kernels
+from .muscle import SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, compliant_tendon, rigid_tendon_force
+from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_length
 from .tangents import (FORM, LAMBDA, MAX_ENTRIES, N_AUX, N_STAGE, PIVOT, VELOCITY_TERM, _load_in_ground,
                        _stage_sensitivity, _stage_tangents)
 from .layout import (ALPHA, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA, COLUMN, COMPUTED, CONSTRAINT, D, FREE,
@@ -70,7 +74,7 @@ def n_rows(model, paths):
 # ---------------------------------------------------------------------- the RK4 driver (eq. 12 under a feedback law)
 @njit(error_model="numpy")
 def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads, out,
-           residuals, G, param_col, every, dz):
+           residuals, G, param_col, every, dz, muscles):
     """Classical RK4 of eq. 12 over n_steps steps of dt (s) from the state y0 (n_state,) under the
     feedback ``law`` (``layout.Law``), its grid starting at row ``start`` (step i uses rows
     start + 2 i, start + 2 i + 1, start + 2 i + 2); with n_steps 0 the state derivative of y0 alone
@@ -87,6 +91,10 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     parameter q moving coordinate param_col[q]'s generalised force; dz (n_steps // every + 1, J, P)
     the derivatives of the coordinates at every ``every``-th step reached.
 
+    With muscles not None (``layout.Muscles``; dz None), the state is [q, q'] followed by the
+    muscles' activations and their compliant tendons' normalised forces (``rk4_muscles``), and each
+    stage adds the muscles' generalised forces (moment arms times force) to the law's torque.
+
     Speed: the stage code is written once, as closures over this function's arrays (numba inlines
     them without the reference counting that array arguments of inlined functions cost at every
     call), and runs in a loop over the four stages; ``state`` holds the stage's state, ``ks`` 0 to
@@ -100,7 +108,13 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     body_int, body_float, dense_first = model.body_int, model.body_float, model.dense_first
     n_b, n_p = body_int.shape[0], mass.shape[0]
     n_q = n_p + n_b
-    n = 2 * n_q
+    n_muscles, n = 0, 2 * n_q
+    if muscles is not None:  # the muscle states after [q, q']: activations, compliant tendons' forces
+        n_muscles = muscles.params.shape[0]
+        n += n_muscles
+        for m in range(n_muscles):
+            if muscles.tendon_row[m] >= 0:
+                n += 1
     J = tau.shape[1]
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
@@ -119,6 +133,11 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     y, state, ks = np.empty(n), np.empty(n), np.empty((4, n))
     torque, z, zd, v, err = np.empty(J), np.empty(J), np.empty(J), np.empty(J), np.empty(J)
     kin, points = np.zeros((believed.body_int.shape[0], N_KIN)), np.zeros((3, believed.mass.shape[0]))
+    # the muscles' scratch (``muscle_paths.geometry``'s) and their lengths (m) and moment arms (M, J)
+    framed = 0 if n_muscles == 0 else n_b + 1
+    muscle_frames, muscle_slopes = np.zeros((framed, N_FRAME)), np.zeros((framed, N_FRAME, J))
+    muscle_points = np.zeros((2 if n_muscles else 0, 3, max(2, J)))
+    muscle_length, muscle_arms = np.zeros(n_muscles), np.zeros((n_muscles, J))
     rhs = np.zeros(n_q)  # the right-hand side, then the solution (the banded solve: its first n_p)
     K, aux, q_phi = np.zeros((n_p, n_p)), np.zeros((n_b, N_AUX)), np.zeros(n_b)  # the banded solve's
     trig, shape, ends = np.zeros((n_b, 2)), np.zeros((n_b, 4)), np.empty((n_b, 2), dtype=np.int64)
@@ -494,6 +513,35 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 rhs[k] -= A[r, k] * x
         return OK
 
+    def muscle_forces(stage, half):
+        """The muscles at the stage's state: their generalised forces (moment arms times force, N m;
+        N for a translation) onto torque, their states' derivatives (activation dynamics under the
+        excitations of grid row half; a compliant tendon's normalised force) into ks[stage]."""
+        coordinates()
+        geometry = muscles.paths
+        _frames(z, geometry, muscle_frames, muscle_slopes)
+        after = 2 * n_q
+        for m in range(n_muscles):
+            arm = muscle_arms[m]
+            if geometry.kind[m] == POINTS:
+                length = _points_length(geometry, m, muscle_frames, muscle_slopes, muscle_points, arm, n_b)
+            else:
+                length = _polynomial_length(z, geometry, m, arm)
+            lengthening = 0.0
+            for j in range(J):
+                lengthening -= arm[j] * zd[j]
+            p = muscles.params[m]
+            activation, tendon = state[after + m], muscles.tendon_row[m]
+            if tendon < 0:
+                force = rigid_tendon_force(activation, length, lengthening, p)
+            else:
+                force, rate = compliant_tendon(activation, state[after + tendon], length, lengthening, p)
+                ks[stage, after + tendon] = rate
+            ks[stage, after + m] = activation_derivative(muscles.excitation[half, m], activation, p[TAU_ACT],
+                                                        p[TAU_DEACT], p[SMOOTHING])
+            for j in range(J):
+                torque[j] += arm[j] * force
+
     # ------------------------------------------------------------------ either solve
     def check():
         """max |Phi_i| (m^2 and m) of the stage's state (the value the steps check)."""
@@ -610,6 +658,8 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                     state[m] = y[m] + h * ks[stage - 1, m]
             half = j + (stage + 1) // 2
             law(half)
+            if muscles is not None:
+                muscle_forces(stage, half)
             code = derivative(stage, half)
             if stage == 0:
                 for m in range(n):
@@ -686,7 +736,17 @@ def rk4(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believ
     (the state and its derivative) and applied (n+1, J) up to the last step reached. Returns
     (status, steps_done, max constraint violation)."""
     return _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads,
-                  (states, rates, applied), None, None, None, 1, None)
+                  (states, rates, applied), None, None, None, 1, None, None)
+
+
+@njit(error_model="numpy")
+def rk4_muscles(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads,
+                muscles, states, rates, applied):
+    """``rk4`` of a model with muscles (``layout.Muscles``, its excitations on the law's grid): the
+    state (n_state,) is [q, q'] followed by the activations (M,) and the compliant tendons' normalised
+    forces, and the muscles' generalised forces add to the law's torque (``applied`` holds their sum)."""
+    return _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads,
+                  (states, rates, applied), None, None, None, 1, None, muscles)
 
 
 @njit(error_model="numpy")
@@ -699,7 +759,7 @@ def derivatives(states, law, model, paths, free, loads, believed, believed_paths
     for i in range(states.shape[0]):
         # np.int64(0), not 0: a literal argument would make numba compile the whole driver again
         code, _, _ = _drive(states[i], 0.0, np.int64(0), i, law, model, paths, free, loads, believed, believed_paths,
-                            believed_loads, (state, rate, torque), None, None, None, 1, None)
+                            believed_loads, (state, rate, torque), None, None, None, 1, None, None)
         out[i] = rate[0]
         applied[i] = torque[0]
         if code != OK:
@@ -717,7 +777,8 @@ def constraint_violation(y, model, paths, free, loads, residuals):
     law = Law(rows, rows, rows, rows, rows[0], rows[0], PD, gains)
     # np.int64, not literals: a literal argument would make numba compile the whole driver again
     _, _, worst = _drive(y, 0.0, np.int64(-1), np.int64(0), law, model, paths, free, loads, model, paths, loads,
-                         (np.empty((1, n)), np.empty((1, n)), np.empty((1, J))), residuals, None, None, 1, None)
+                         (np.empty((1, n)), np.empty((1, n)), np.empty((1, J))), residuals, None, None, 1, None,
+                         None)
     return worst
 
 
@@ -735,5 +796,5 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model,
     zero = np.zeros(J)
     law = Law(tau, ref, refd, ref, zero, zero, PD, np.zeros((1, J, 2 * J)))
     code, done, _ = _drive(y0, dt, n_steps, 0, law, model, paths, free, loads, model, paths, loads,
-                           (states, rates, applied), None, G, param_col, every, dz)
+                           (states, rates, applied), None, G, param_col, every, dz, None)
     return code, done

@@ -6,6 +6,8 @@ arrays built once per ``Engine`` (``Engine.layout``), their columns and constant
 * ``Paths``: the joint paths' point maps and splines, or None for a model without paths.
 * ``Loads``: the external loads' bodies and frames and their values on the half-step grid, or None.
 * ``Law``: a run's feedback law on the half-step grid.
+* ``Muscles``: the muscles' paths, constants and excitations on the half-step grid, or None (a
+  model without muscles, or run without excitations: the kernels then hold none of their code).
 
 A model's free joints are passed as ``free`` (the indices of their bodies) or None. numba compiles
 one variant of each kernel per pattern of None: a model of pin joints only (paths, free and loads
@@ -101,3 +103,14 @@ class Law(NamedTuple):
     kd: np.ndarray
     mode: int
     gains: np.ndarray
+
+
+class Muscles(NamedTuple):
+    """A model's muscles (``kernels.rk4_muscles``): paths (``muscle_paths.MusclePaths``), params
+    (M, len(muscle.PARAMETERS)) each muscle's constants, tendon_row (M,) the index among the muscle
+    states (after the M activations) of a compliant tendon's normalised force (-1: a rigid tendon),
+    excitation (rows, M) in [0, 1] on the half-step grid."""
+    paths: tuple
+    params: np.ndarray
+    tendon_row: np.ndarray
+    excitation: np.ndarray

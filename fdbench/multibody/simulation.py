@@ -18,6 +18,9 @@ from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrat
                          solve_adaptive, steps)
 from .engine import Engine
 from .layout import COMPUTED, GAINS, PD, VIOLATION
+from .muscle import (ALPHA_OPT, F0, L_OPT, L_SLACK, PASSIVE_STRAIN, TENDON_STRAIN, WIDTH, active_force_length,
+                     fiber_length, passive_force_length, rigid_tendon_force, tendon_force_length_inverse)
+from .muscle_paths import muscle_geometry
 
 STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # the kernels' codes
 
@@ -61,6 +64,11 @@ class Simulation:
     integrator: str = "rk4"
     detail: str = ""  # what made an adaptive integrator fail
     rhs_evaluations: int = 0  # adaptive integrators
+    # with excitations (``simulate``'s): per muscle on the samples, shape (n, M), the activation,
+    # the excitation (in [0, 1]) and the force along the path (N); None otherwise
+    activation: np.ndarray | None = None
+    excitation: np.ndarray | None = None
+    muscle_force: np.ndarray | None = None
 
     @property
     def angles(self) -> np.ndarray:
@@ -143,15 +151,20 @@ def on_half_steps(torque, grid: HalfSteps, n_joints: int):
 
 def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3, start=None,
              computed: bool = False, nominal: Engine | None = None, gains=None, integrator: str = "rk4",
-             rtol: float = 1e-6, atol: float = 1e-9, grid: HalfSteps | None = None) -> Simulation:
+             rtol: float = 1e-6, atol: float = 1e-9, grid: HalfSteps | None = None, excitation=None) -> Simulation:
     """Forward dynamics of ``engine`` (the plant) over the motion's span on its samples, driven by
     ``torque`` (a torque function, or None) plus feedback: PD (kp N m/rad, kd N m s/rad, scalars or
     (J,)), with ``computed`` computed torque through ``nominal`` (None: the plant; kp 1/s^2, kd 1/s),
     or ``gains`` K(t): (k,) -> (k, J, 2J) on [z_d - z, z'_d - z']. ``start``: the state (n_state,)
     (default: on the motion at t = 0). ``integrator``: 'rk4' (a fixed step of about ``dt`` s) or a
     scipy method (``integrate.SCIPY_METHODS``, tolerances ``rtol``, ``atol``). ``grid``: the motion's ``HalfSteps`` for this dt,
-    made beforehand (default: made here; rk4 only)."""
+    made beforehand (default: made here; rk4 only). ``excitation``: the muscles' excitations, a function
+    of times (s), shape (k,) -> (k, M) in [0, 1] (RK4 only, sampled on its half-step grid): the muscles'
+    generalised forces add to the torques, each activation starts at its excitation at t = 0 and a
+    compliant tendon's force at the fibre's static equilibrium; None: the muscles left out."""
     check_integrator(integrator)
+    if excitation is not None and integrator != "rk4":
+        raise ValueError(f"muscle excitations run on the compiled RK4 only, not --integrator {integrator}")
     if integrator != "rk4":
         check_tolerances(rtol, atol)
     if tuple(motion.joints) != engine.joints:
@@ -168,7 +181,7 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     if grid is not None and (grid.motion is not motion or grid.dt != dt):
         raise ValueError(f"the half-step grid is of another motion or step (dt {grid.dt} s, not {dt} s)")
     if integrator == "rk4":
-        result = _simulate_rk4(torque, engine, motion, law, y0, grid or half_steps(motion, dt))
+        result = _simulate_rk4(torque, engine, motion, law, y0, grid or half_steps(motion, dt), excitation)
     else:
         result = _simulate_adaptive(torque, engine, motion, law, y0, integrator, rtol, atol)
     result.runtime_s = time.perf_counter() - began
@@ -189,17 +202,80 @@ def _torques(torque, t: np.ndarray, n_joints: int) -> np.ndarray:
     return np.array(torque(t), dtype=float).reshape(len(t), n_joints)
 
 
-def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, grid: HalfSteps) -> Simulation:
-    """The compiled RK4 (``Engine.simulate``) on the half-step grid ``grid``."""
+def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarray, grid: HalfSteps,
+                  excitation=None) -> Simulation:
+    """The compiled RK4 (``Engine.simulate``) on the half-step grid ``grid``, with the muscles'
+    ``excitation`` (a function of times) or without muscles."""
     n, half = grid.n, grid.t
+    excited = None if excitation is None else _excitations(excitation, half, engine)
+    if excited is not None:
+        y0 = np.concatenate([y0, muscle_start(engine, y0, excited[0])])
     result = engine.simulate(y0, grid.step, n, _torques(torque, half, engine.n_joints), grid.ref, grid.refd,
                              grid.refdd, law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints),
-                             law.nominal)
+                             law.nominal, excitation_half=excited)
     y, applied = _on_samples(grid.t_steps, grid.every, result.states, result.rates, result.applied, result.steps_done,
                              motion.samples)
-    z, zd = engine.joints_from_state(y)
-    return Simulation(motion.samples, z, zd, y, applied, result.steps_done * motion.duration / n,
+    z, zd = engine.joints_from_state(y[:, :engine.n_state])
+    done = Simulation(motion.samples, z, zd, y[:, :engine.n_state], applied, result.steps_done * motion.duration / n,
                       STATUS_OF_CODE[result.status], result.max_violation)
+    if excited is not None:
+        done.activation = y[:, engine.n_state:engine.n_state + engine.n_muscles]
+        done.excitation = _excitations(excitation, motion.samples, engine)
+        done.muscle_force = muscle_forces(engine, z, zd, y[:, engine.n_state:])
+    return done
+
+
+def _excitations(excitation, t: np.ndarray, engine: Engine) -> np.ndarray:
+    """The muscles' excitations at times t (s), shape (k, M); ValueError outside [0, 1]."""
+    values = np.array(excitation(t), dtype=float).reshape(len(t), engine.n_muscles)
+    if not np.all((values >= 0.0) & (values <= 1.0)):
+        raise ValueError("muscle excitations must lie in [0, 1]")
+    return values
+
+
+def muscle_start(engine: Engine, y0: np.ndarray, excitation: np.ndarray) -> np.ndarray:
+    """The muscle states at the mechanical state y0 (n_state,) as an OpenSim user sets them: each
+    activation at its excitation (M,), a compliant tendon's normalised force where the fibre is in
+    static equilibrium (fibre velocity zero: f_T = cos(alpha) (a f_L + f_PE), by bisection)."""
+    z, _ = engine.joints_from_state(y0)
+    lengths, _ = muscle_geometry(engine.model, z)
+    start = np.zeros(engine.n_muscle_states)
+    start[:engine.n_muscles] = excitation
+    for m, row in enumerate(engine.tendon_row):
+        if row >= 0:
+            start[row] = _static_tendon_force(excitation[m], lengths[m], engine.muscle_params[m])
+    return start
+
+
+def _static_tendon_force(activation: float, length: float, p: np.ndarray) -> float:
+    """The normalised tendon force f_T in [0, 5] where f_T = cos(alpha) (a f_L + f_PE) of the
+    fibre that the tendon's stretch leaves of ``length`` (m)."""
+    def excess(force):
+        l_m, cos_alpha = fiber_length(length - p[L_SLACK] * tendon_force_length_inverse(force, p[TENDON_STRAIN]),
+                                      p[L_OPT], p[ALPHA_OPT])
+        norm = l_m / p[L_OPT]
+        return force - cos_alpha * (activation * active_force_length(norm, p[WIDTH])
+                                    + passive_force_length(norm, p[PASSIVE_STRAIN]))
+    low, high = 0.0, 5.0
+    for _ in range(60):
+        middle = 0.5 * (low + high)
+        low, high = (middle, high) if excess(middle) < 0.0 else (low, middle)
+    return 0.5 * (low + high)
+
+
+def muscle_forces(engine: Engine, z: np.ndarray, zd: np.ndarray, muscle_states: np.ndarray) -> np.ndarray:
+    """The muscles' forces along their paths (N), shape (n, M), at the coordinates z and rates zd
+    (n, J) with the muscle states (n, n_muscle_states); NaN where a state is not finite."""
+    out = np.full((len(z), engine.n_muscles), np.nan)
+    finite = np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(muscle_states), axis=1)
+    lengths, arms = muscle_geometry(engine.model, z[finite])
+    lengthening = -np.einsum("nmj,nj->nm", arms, zd[finite])
+    for i, k in enumerate(np.flatnonzero(finite)):
+        for m, row in enumerate(engine.tendon_row):
+            p = engine.muscle_params[m]
+            out[k, m] = (p[F0] * muscle_states[k, row] if row >= 0 else
+                         rigid_tendon_force(muscle_states[k, m], lengths[i, m], lengthening[i, m], p))
+    return out
 
 
 def _rates(torque, engine: Engine, motion, law: FeedbackLaw, t: np.ndarray, states: np.ndarray):
