@@ -35,15 +35,15 @@ class MusclePaths(NamedTuple):
     order): body_int (B, N_BODY_INT) with PARENT (FIXED: ground), COLUMN, FREE and PATH (-1: none);
     body_float (B, N_BODY_FLOAT) with OFFSET (rad), AT_PARENT_X/Y and AT_CHILD_X/Y (m); knots
     (n_knots, 5) and start (2 n_paths + 1,) the joint paths' splines (``layout.Paths``'s). Muscles:
-    kind (M,) POINTS or POLYNOMIAL, first (M + 1,) muscle m's rows first[m] to first[m + 1] of
-    point_body (FIXED: ground), point_local (m, in the body's frame) or of coefficient (m),
+    kind (M,) POINTS or POLYNOMIAL, rows (M, 2) muscle m's rows rows[m, 0] to rows[m, 1] (exclusive)
+    of point_body (FIXED: ground) and point_local (m, in the body's frame), or of coefficient (m) and
     powers (terms, MAX_COORDINATES); columns (M, MAX_COORDINATES) a polynomial's coordinates (-1: none)."""
     body_int: np.ndarray
     body_float: np.ndarray
     knots: np.ndarray
     start: np.ndarray
     kind: np.ndarray
-    first: np.ndarray
+    rows: np.ndarray
     point_body: np.ndarray
     point_local: np.ndarray
     coefficient: np.ndarray
@@ -89,28 +89,29 @@ def muscle_layout(model: Model) -> MusclePaths:
             for spline in joint.path.splines():
                 pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
                 start.append(start[-1] + len(spline.x))
-    kind, first, point_body, point_local, coefficient, powers = [], [0], [], [], [], []
+    kind, rows, point_body, point_local, coefficient, powers = [], [], [], [], [], []
     columns = np.full((len(model.muscles), MAX_COORDINATES), -1, dtype=np.int64)
     for m, muscle in enumerate(model.muscles):
         if isinstance(muscle.path, PointPath):
             kind.append(POINTS)
+            row0 = len(point_body)
             for point in muscle.path.points:
                 body, origin, angle = (GROUND, (0.0, 0.0), 0.0) if point.body == GROUND else model.frame(point.body)
                 c, s = math.cos(angle), math.sin(angle)
                 point_body.append(index.get(body, FIXED))
                 point_local.append((origin[0] + c * point.at[0] - s * point.at[1],
                                     origin[1] + s * point.at[0] + c * point.at[1]))
-            first.append(len(point_body))
+            rows.append((row0, len(point_body)))
         else:
             kind.append(POLYNOMIAL)
-            path = muscle.path
+            path, row0 = muscle.path, len(coefficient)
             columns[m, :len(path.coordinates)] = [model.coordinates.index(name) for name in path.coordinates]
             for term in path.terms:
                 coefficient.append(term.coefficient)
                 powers.append(list(term.powers) + [0] * (MAX_COORDINATES - len(term.powers)))
-            first.append(len(coefficient))
+            rows.append((row0, len(coefficient)))
     return MusclePaths(body_int, body_float, np.concatenate(pieces), np.array(start, dtype=np.int64),
-                       np.array(kind, dtype=np.int64), np.array(first, dtype=np.int64),
+                       np.array(kind, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, 2),
                        np.array(point_body, dtype=np.int64), np.array(point_local, dtype=float).reshape(-1, 2),
                        np.array(coefficient, dtype=float), np.array(powers, dtype=np.int64).reshape(-1, MAX_COORDINATES),
                        columns)
@@ -182,8 +183,8 @@ def _points_length(layout, m, frames, slopes, points, arm, n_bodies):
     total = 0.0
     for j in range(arm.shape[0]):
         arm[j] = 0.0
-    for row in range(layout.first[m], layout.first[m + 1]):
-        here = (row - layout.first[m]) % 2
+    for row in range(layout.rows[m, 0], layout.rows[m, 1]):
+        here = (row - layout.rows[m, 0]) % 2
         b = layout.point_body[row]
         if b < 0:
             b = n_bodies
@@ -194,7 +195,7 @@ def _points_length(layout, m, frames, slopes, points, arm, n_bodies):
         for j in range(arm.shape[0]):
             points[here, 1, j] = slopes[b, ORIGIN_X, j] - ay * slopes[b, PHI, j]
             points[here, 2, j] = slopes[b, ORIGIN_Y, j] + ax * slopes[b, PHI, j]
-        if row > layout.first[m]:
+        if row > layout.rows[m, 0]:
             before = 1 - here
             dx, dy = points[here, 0, 0] - points[before, 0, 0], points[here, 0, 1] - points[before, 0, 1]
             segment = math.sqrt(dx * dx + dy * dy)
@@ -212,7 +213,7 @@ def _polynomial_length(q, layout, m, arm):
     total = 0.0
     for j in range(arm.shape[0]):
         arm[j] = 0.0
-    for t in range(layout.first[m], layout.first[m + 1]):
+    for t in range(layout.rows[m, 0], layout.rows[m, 1]):
         value = layout.coefficient[t]
         for k in range(MAX_COORDINATES):
             if layout.columns[m, k] >= 0:

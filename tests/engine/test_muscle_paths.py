@@ -231,6 +231,28 @@ def test_a_polynomial_path_and_its_moment_arms_are_the_closed_form():
     assert at_zero[0][0] == 0.3 and at_zero[1][0].tolist() == [0.0, 0.0, 0.0, 0.02, 0.0]
 
 
+POLYNOMIAL = {"length": {"coordinates": ["knee_angle", "ankle_angle"], "terms": [
+    {"coefficient": 0.3, "powers": [0, 0]}, {"coefficient": -0.02, "powers": [1, 0]}, {"coefficient": 0.01, "powers": [1, 1]}]}}
+
+
+@settings(max_examples=30)
+@given(st.permutations(["long", "vasti", "soleus", "poly", "poly2"]))
+def test_a_muscle_s_geometry_does_not_depend_on_the_muscles_beside_it(order):
+    """Point and polynomial paths in any order: each muscle's length and moment arms are those of a
+    model with that muscle alone."""
+    data = leg_with_muscles({name: PATHS[name] for name in order if name in PATHS})
+    for name in ("poly", "poly2"):
+        data["muscles"].append(MUSCLE | {"name": name, "path": POLYNOMIAL})
+    data["muscles"].sort(key=lambda muscle: order.index(muscle["name"]))
+    model = model_from_dict(data, "leg")
+    q = random_q(np.random.default_rng(4), 6)
+    lengths, arms = muscle_geometry(model, q)
+    for m, muscle in enumerate(model.muscles):
+        alone = muscle_geometry(replace(model, muscles=(muscle,)), q)
+        np.testing.assert_array_equal(lengths[:, m], alone[0][:, 0])
+        np.testing.assert_array_equal(arms[:, m], alone[1][:, 0])
+
+
 def test_muscles_read_back_equal_and_models_without_muscles_write_no_key(tmp_path):
     data = leg_with_muscles()
     data["muscles"][1] |= {"tendon": "compliant", "tendon_strain": 0.04, "pennation_angle": 0.2,
