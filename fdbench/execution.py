@@ -396,9 +396,9 @@ class DaskBackend(Backend):
                 raise BackendError("the local Dask cluster is secured by TLS, which needs the cryptography package: "
                                    f"{DASK_INSTALL}")
             if not SAFE_PATH:
-                from .jit import _not_private
+                from .jit import why_not_private
 
-                problem = _not_private(Path.cwd(), follow_links=True)
+                problem = why_not_private(Path.cwd(), follow_links=True)
                 if problem:
                     raise BackendError(f"a local Dask cluster's processes import modules from the current folder "
                                        f"before Python 3.11, and {problem}: run fdbench from a folder of your own, "

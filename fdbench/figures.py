@@ -129,7 +129,7 @@ def _marked(label: str, left: set) -> str:
     return f"{label} (off scale)" if label in left else label
 
 
-def _pyplot():
+def agg_pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -138,7 +138,7 @@ def _pyplot():
     return plt
 
 
-def _save(fig, path: Path) -> None:
+def save_png(fig, path: Path) -> None:
     """Write the figure as a PNG file and close it."""
     import io
 
@@ -147,7 +147,7 @@ def _save(fig, path: Path) -> None:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=110, bbox_inches="tight")
     write_atomic(path, buffer.getvalue(), "--figures")
-    _pyplot().close(fig)
+    agg_pyplot().close(fig)
 
 
 def recorded_samples(motion) -> tuple | None:
@@ -166,7 +166,7 @@ def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str 
     samples of a recorded or noisy motion (see ``recorded_samples``), drawn as dots under the
     angle; ``note``: a line under the title (what the indicators are measured against); ``reference``:
     what the drawn angle is (e.g. 'filtered')."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7, 5.5), sharex=True)
     one_joint = len(inverse.joints) == 1
     angles, torques, joints = inverse.angles, inverse.torque, inverse.joints
@@ -188,7 +188,7 @@ def inverse_figure(inverse, path: Path, samples: tuple | None = None, note: str 
         top.legend(fontsize=7.5)
     for ax in (top, bottom):
         ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def tracking_figure(inverse, curves, path: Path, title: str) -> None:
@@ -198,7 +198,7 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
     angle (rad), torque (N m)), arrays of the motion's samples; ``style`` comes from ``method_style``.
     The axes span the desired rotation and the inverse-dynamics torque (``reference_limits``) and
     the errors of the runs within them: a run that leaves them is marked off scale."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     fig, (top, middle, bottom) = plt.subplots(3, 1, figsize=(8, 9), sharex=True,
                                               gridspec_kw={"height_ratios": [3, 2, 2]})
     t, desired = inverse.t, np.degrees(inverse.angles[:, 0])
@@ -224,7 +224,7 @@ def tracking_figure(inverse, curves, path: Path, title: str) -> None:
     bottom.legend(handles=[reference], fontsize=7.5, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     for ax in (top, middle, bottom):
         ax.grid(alpha=0.3)
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
@@ -233,7 +233,7 @@ def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
     ``curves`` are (label, style, angles (rad), torques (N m)), arrays of shape (samples, joints).
     The torque axes span the inverse-dynamics torque and the error axes the errors of the runs
     within every joint's (``reference_limits``): a run that leaves them is marked off scale."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     joints = inverse.joints
     fig, axes = plt.subplots(2, len(joints), figsize=(5 * len(joints), 7), sharex=True, squeeze=False)
     t = inverse.t
@@ -266,14 +266,14 @@ def joints_tracking_figure(inverse, curves, path: Path, title: str) -> None:
     axes[0, -1].legend(handles=axes[1, -1].get_lines()[-len(curves) - 1:], fontsize=7.5, loc="upper left",
                        bbox_to_anchor=(1.01, 1.0))
     fig.suptitle(title, fontsize=11)
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def convergence_figure(series, path: Path, title: str, reference: float | None = None) -> None:
     """Best objective (deg, eq. 18) against evaluations: series are (label, style, [history per
     seed]); the median over seeds is drawn with the interquartile range as a band. ``reference``
     (deg), PD control's RMSE of rotation, is drawn as a horizontal line."""
-    plt = _pyplot()
+    plt = agg_pyplot()
     fig, ax = plt.subplots(figsize=(8, 5))
     for (label, _, histories), style in zip(series, distinct_styles([style for _, style, _ in series])):
         length = max(len(h) for h in histories)
@@ -291,7 +291,7 @@ def convergence_figure(series, path: Path, title: str, reference: float | None =
     ax.set_title(title, fontsize=11)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7.5)
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def figure2_samples(spec) -> tuple:
@@ -566,7 +566,7 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
     method tracks (dashed), each method's simulation and collocation's own solution (dotted, at its
     nodes)."""
 
-    plt = _pyplot()
+    plt = agg_pyplot()
     columns = 2
     rows = (len(names) + 1) // columns
     fig, axes = plt.subplots(rows, columns, figsize=(11, 2.2 * rows), sharex=True, squeeze=False)
@@ -590,14 +590,14 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
     fig.suptitle("Every coordinate: the recording and each method's simulation", fontsize=11)
     fig.tight_layout()
     _legend_outside(fig, axes[0, 0])
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
     """FX, FY (N) and MZ (N m) of the floating base against time (s) over the gait cycle: the
     inverse dynamics', each method's and collocation's own solution's (dotted, at its nodes)."""
 
-    plt = _pyplot()
+    plt = agg_pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     for ax, (name, unit) in zip(axes, (("FX", "N"), ("FY", "N"), ("MZ", "N m"))):
         for key, (t, values) in curves[name].items():
@@ -611,7 +611,7 @@ def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
     axes[0].set_title("Residuals on the floating base over the gait cycle", fontsize=11)
     fig.tight_layout()
     _legend_outside(fig, axes[0])
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def _legend_outside(fig, ax) -> None:
@@ -628,7 +628,7 @@ def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Pat
     (``stops``: {row key: StoppedPose}) has its last pose reached (dashed) one more spacing to the
     right, beside the tracked motion's at that sample, marked with its t_end."""
 
-    plt = _pyplot()
+    plt = agg_pyplot()
     stops = stops or {}
     points = np.concatenate([frame.reshape(-1, 2) for frame in recorded])
     spacing = round(float(np.ptp(points[:, 0])) + 0.4, 1)
@@ -657,7 +657,7 @@ def stick_figure(recorded: list, simulated: dict, times, labels: dict, path: Pat
                  + " s: recorded (grey) and simulated" + (", then the last pose of a run that fell" if stops else ""),
                  fontsize=11)
     fig.tight_layout(rect=(0, 0, 1, 0.985))
-    _save(fig, path)
+    save_png(fig, path)
 
 
 def _draw(ax, frame: np.ndarray, **style) -> list:
@@ -675,7 +675,7 @@ def animation(data: tuple, labels: dict, t: np.ndarray, stops: dict, path: Path)
 
     from .files import write_atomic
 
-    plt = _pyplot()
+    plt = agg_pyplot()
     indices, recorded, simulated, held = data
     fig, axes = _animation_axes(plt, recorded, simulated)
     fig.canvas.draw()

@@ -24,7 +24,7 @@ def _candidate() -> Path:
     return Path(base) / "fdbench"
 
 
-def _not_private(folder: Path, follow_links: bool) -> str | None:
+def why_not_private(folder: Path, follow_links: bool) -> str | None:
     """Why another user could put code into folder (or None if nobody can): a symbolic link
     (unless ``follow_links``), not a directory, owned by another user, writable by group or others."""
     st = os.stat(folder) if follow_links else os.lstat(folder)
@@ -48,7 +48,7 @@ def _unusable(folder: Path, follow_links: bool = True) -> str | None:
             os.mkdir(folder, 0o700)
         except FileExistsError:
             pass
-        problem = _not_private(folder, follow_links)
+        problem = why_not_private(folder, follow_links)
         if problem is None:
             with tempfile.TemporaryFile(dir=folder):
                 pass

@@ -245,7 +245,7 @@ class Store:
             _create_new(self.path)
             check_trusted(resolve(self.path))  # the database made by another process meanwhile, if any
         elif self.path.stat().st_size > 0:
-            _check_header(self.path)
+            check_header(self.path)
         self.db = None
         try:
             self.db = sqlite3.connect(self.path, timeout=OPEN_PATIENCE_S, isolation_level=None)
@@ -480,7 +480,7 @@ def _contents(objects: list) -> str:
     return "; ".join(parts) or "no tables"
 
 
-def _check_header(path: Path) -> None:
+def check_header(path: Path) -> None:
     try:
         with open(path, "rb") as handle:
             header = handle.read(16)

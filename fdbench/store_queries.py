@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 from urllib.parse import quote
 
-from .store import (OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, SUPERSEDED, DamagedRow, StoreError, _check_header,
+from .store import (OPEN_PATIENCE_S, SCHEMA_NAME, SCHEMA_VERSION, SUPERSEDED, DamagedRow, StoreError, check_header,
                     companions, foreign, parse_stored, resolve)
 
 # the columns of ``fdbench runs list``, in order
@@ -60,7 +60,7 @@ def open_read_only(path, say_unseen: bool = True) -> sqlite3.Connection:
         raise StoreError(f"{path} is not a regular file (a device or a pipe holds no results)")
     if path.stat().st_size == 0:
         raise StoreError(f"{path} is empty: no runs are stored there")
-    _check_header(path)
+    check_header(path)
     target = resolve(path)
     uri = f"file:{quote(str(target.resolve()))}?mode=ro" + ("" if _own(target, say_unseen) else "&immutable=1")
     try:

@@ -229,9 +229,9 @@ def write_figures(sweep: Sweep, rows: list[dict], directory) -> dict:
     {title: path}."""
     from pathlib import Path
 
-    from .figures import _pyplot, _save
+    from .figures import agg_pyplot, save_png
 
-    plt = _pyplot()
+    plt = agg_pyplot()
     directory = Path(directory)
     directory.mkdir(exist_ok=True)
     labels = {"rmse_rot_deg": "RMSE of rotation (deg)", "rmse_torque_nm": "RMSE of torque (N m)",
@@ -256,7 +256,7 @@ def write_figures(sweep: Sweep, rows: list[dict], directory) -> dict:
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7, ncol=2)
         path = directory / f"study_{sweep.kind}_{name}.png"
-        _save(fig, path)
+        save_png(fig, path)
         plt.close(fig)
         written[labels[name]] = str(path)
     return written

@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from .child import call, coordinate_paths, loads_file, model_from, radians_table, torque_driven
-from .opensim_pd import _hermite
+from .opensim_pd import hermite
 
 OPTIMAL_FORCE = 100.0  # N m per unit control
 CONTROL_BOUND = 1e3  # CMC's controls' bounds: 1e5 N m, never reached
@@ -122,7 +122,7 @@ def solve(osim, request: dict) -> dict:
     force_times, force = forces
     applied = np.column_stack([force(name + "_torque") for name in names])
     reached = t[(t >= times[0] - 1e-12) & (t <= times[-1] + 1e-12)]
-    angles, _ = _hermite(times, values, rates, reached)
+    angles, _ = hermite(times, values, rates, reached)
     torque = np.stack([np.interp(reached, force_times, applied[:, j]) for j in range(len(names))], axis=-1)
     return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1] - shift), "run_s": run_s,
             "steps": int(len(times) - 1), "failure": failure}

@@ -111,13 +111,13 @@ def solve(osim, request: dict) -> dict:
     last = len(times) if finite.all() else int(np.argmin(finite))
     times, values, rates = times[:last], values[:last], rates[:last]
     reached = t[t <= times[-1] + 1e-12] if len(times) else t[:1]
-    angles, speeds = _hermite(times, values, rates, reached) if len(times) > 1 else (z[:1], zd[:1])
+    angles, speeds = hermite(times, values, rates, reached) if len(times) > 1 else (z[:1], zd[:1])
     torque = drive[: len(reached)] - kp * angles - kd * speeds
     return {"z": angles.tolist(), "torque": torque.tolist(), "t_end": float(reached[-1] - shift), "id_s": id_s,
             "forward_s": forward_s, "steps": int(len(times) - 1), "failure": failure}
 
 
-def _hermite(times, values, rates, at):
+def hermite(times, values, rates, at):
     """Angles and rates (shape (len(at), J)) at the times ``at`` (s) by cubic Hermite interpolation
     of the integrator's steps: ``values`` (rad) and ``rates`` (rad/s), shape (n, J), at ``times``
     (a time recorded twice counted once)."""

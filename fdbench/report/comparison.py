@@ -576,7 +576,7 @@ def _cells_lines(cells: list[Row], extra: list[Row]) -> list[str]:
     """The section of the paper's cells selected on the studied dataset (--torque, --opt,
     --feedforward, --all-cells; --seeds runs each): its Tables 2 and 3 without the paper's figures
     (it has none for this model), then the rows of their exact gradients (--gradient exact)."""
-    from .paper import _table, failure_lines
+    from .paper import results_table, failure_lines
 
     if not cells and not extra:
         return []
@@ -587,9 +587,9 @@ def _cells_lines(cells: list[Row], extra: list[Row]) -> list[str]:
         found = [row for row in cells if row.table == table]
         if found:
             out += ["", f"Table {table} ({'with' if table == 3 else 'without'} computed feedforward):", ""]
-            out += _table(found, with_success=True)
+            out += results_table(found, with_success=True)
     if extra:
-        out += ["", "The same cells with exact gradients (seed 0):", ""] + _table(extra, with_success=False)
+        out += ["", "The same cells with exact gradients (seed 0):", ""] + results_table(extra, with_success=False)
     failed = failure_lines(cells + extra)
     if failed:
         out += ["", "Runs that did not succeed:", ""] + failed

@@ -218,7 +218,7 @@ def rows(methods: list[Method], runs: dict, provenance: dict | None = None, tabl
 
 def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     """The section's Markdown lines: one sentence per method, then the table (PD's columns)."""
-    from .paper import _table, failure_lines, significant
+    from .paper import results_table, failure_lines, significant
 
     if not rows:
         return []
@@ -229,7 +229,7 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     for m in methods:  # one line per description (the exact-gradient rows share theirs)
         described.setdefault(m.description, []).append(m.name)
     out += [f"- {'; '.join(names)}: {description}." for description, names in described.items()]
-    out += [""] + _table(rows, with_success=False)
+    out += [""] + results_table(rows, with_success=False)
     collocation = [r for r in rows if r.records[0].get("command") == "collocate"]
     if collocation:
         rec = collocation[0].records[0]

@@ -386,7 +386,7 @@ def _control_section(p: PaperParts) -> list[str]:
     control = p.table("control")
     failures = failure_lines(control)
     return (["## PD control with computed feedforward (section 3)", ""] + p.legend + [""]
-            + [_gains_text(control[0].records[0], p.arm), ""] + _table(control, with_success=False) + [""]
+            + [_gains_text(control[0].records[0], p.arm), ""] + results_table(control, with_success=False) + [""]
             + (["Did not succeed:", ""] + failures + [""] if failures else []))
 
 
@@ -397,7 +397,7 @@ def _cells_section(p: PaperParts, table: int) -> list[str]:
     out = [f"## {titles[table]}", ""]
     if not p.table("control") and table == min(r.table for r in p.rows if r.table != "control"):
         out += p.legend + [""]
-    out += _table(cells, with_success=True)
+    out += results_table(cells, with_success=True)
     notes = []
     if any(r.cell and not r.cell.in_paper for r in cells):
         notes.append("Cells marked * are not in the paper.")
@@ -470,7 +470,7 @@ def _inverse_text(inverse, runtime_s: float) -> list[str]:
     return [f"Joint torques: {ranges}, over {span} (motion {inverse.motion}); {took}."]
 
 
-def _table(rows: list[Row], with_success: bool) -> list[str]:
+def results_table(rows: list[Row], with_success: bool) -> list[str]:
     """A table of rows: beside the paper's figures when some row has them, else our figures alone
     (three significant digits), with each joint's RMSE_rot where the model has several."""
     paper = any(row.paper for row in rows)

@@ -37,14 +37,14 @@ def peer_rows(methods: list[Method], runs: dict, provenance: dict | None = None)
 def peers_markdown(rows: list, methods: list[Method], ours: list) -> list[str]:
     """The section's Markdown lines: a sentence per peer, the table (PD's columns), then each peer
     beside its fdbench method among ``ours`` (the report's other rows)."""
-    from .paper import _table, failure_lines
+    from .paper import results_table, failure_lines
 
     if not rows:
         return []
     out = ["## Peers", "", "The tools fdbench's methods are compared with, on the same model, motion and indicators "
            "(one run each, stored and reused like every run):", ""]
     out += [f"- {m.name}: {m.description}." for m in methods]
-    out += [""] + _table(rows, with_success=False)
+    out += [""] + results_table(rows, with_success=False)
     pairs = side_by_side(rows, ours)
     if pairs:
         out += ["", f"Each peer beside the fdbench method it stands for. Time: the run's runtime_s (OpenSim: its "

@@ -233,12 +233,12 @@ def test_the_goal_is_ten_times_faster_at_equal_or_better_accuracy_and_each_pair_
 def test_the_integrator_s_steps_are_read_at_the_samples_exactly_for_a_cubic():
     """OpenSim's states come at its own steps (one recorded twice here); cubic Hermite
     interpolation of angle and rate is exact for a cubic, its rate too."""
-    from fdbench.peers.opensim_pd import _hermite
+    from fdbench.peers.opensim_pd import hermite
 
     times = np.array([0.0, 0.3, 0.3, 0.45, 1.0])
     angle = lambda t: np.stack([t**3 - t, 2 - t**2], axis=-1)  # noqa: E731
     rate = lambda t: np.stack([3 * t**2 - 1, -2 * t], axis=-1)  # noqa: E731
     at = np.linspace(0.0, 1.0, 11)
-    found, found_rate = _hermite(times, angle(times), rate(times), at)
+    found, found_rate = hermite(times, angle(times), rate(times), at)
     np.testing.assert_allclose(found, angle(at), atol=1e-12)
     np.testing.assert_allclose(found_rate, rate(at), atol=1e-12)

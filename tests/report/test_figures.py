@@ -23,9 +23,9 @@ T = np.linspace(0.0, 1.0, 201)
 
 @pytest.fixture
 def drawn(monkeypatch):
-    """The figures passed to ``figures._save`` (the one place a PNG is written), in order."""
+    """The figures passed to ``figures.save_png`` (the one place a PNG is written), in order."""
     caught = []
-    monkeypatch.setattr(figures, "_save", lambda fig, path: caught.append(fig))
+    monkeypatch.setattr(figures, "save_png", lambda fig, path: caught.append(fig))
     return caught
 
 
@@ -199,7 +199,7 @@ def test_animation_tick_labels_are_at_least_ten_pixels_high_in_its_frames(tmp_pa
     path = tmp_path / "walk.gif"
     figures.animation((np.arange(len(recorded)), recorded, simulated, held), {"pd": "PD", "lqr": "LQR"},
                            np.linspace(0, 0.35, len(recorded)), {}, path)
-    plt = figures._pyplot()
+    plt = figures.agg_pyplot()
     fig, axes = figures._animation_axes(plt, recorded, simulated)
     width, height = Image.open(path).size
     dpi = fig.get_dpi()
