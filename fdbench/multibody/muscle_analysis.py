@@ -96,4 +96,4 @@ def _forces(l_m: float, cos_alpha: float, fiber_rate: float, p: np.ndarray) -> t
     norm, velocity = l_m / p[L_OPT], fiber_rate / (p[V_MAX] * p[L_OPT])
     active = p[F0] * active_force_length(norm, p[WIDTH]) * force_velocity(velocity)
     passive = p[F0] * (passive_force_length(norm, p[PASSIVE_STRAIN]) + p[DAMPING] * velocity)
-    return l_m, math.acos(min(1.0, cos_alpha)), velocity, active, passive
+    return l_m, math.acos(min(cos_alpha, 1.0)), velocity, active, passive  # min: NaN stays NaN
