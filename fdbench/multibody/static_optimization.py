@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .muscle import rigid_tendon_force
+from .muscle import ALPHA_OPT, L_OPT, L_SLACK, fiber_length, rigid_tendon_force
 from .muscle_paths import muscle_geometry
 
 
@@ -44,16 +44,23 @@ class StaticOptimization:
     runtime_s: float
 
 
-def muscle_capacity(params: np.ndarray, lengths: np.ndarray, lengthening: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def muscle_capacity(params: np.ndarray, lengths: np.ndarray, lengthening: np.ndarray,
+                    along_tendon: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(active, passive), each (n, M) N: a rigid-tendon muscle's force along its path per unit
     activation and at zero activation, at muscle-tendon ``lengths`` (m) and ``lengthening`` speeds
-    (m/s), both (n, M); ``params`` (M, len(muscle.PARAMETERS))."""
+    (m/s), both (n, M); ``params`` (M, len(muscle.PARAMETERS)). ``along_tendon`` False: the active
+    force of the fibre itself, not times cos(alpha), as OpenSim 4.6's DeGrooteFregly2016Muscle gives
+    it to StaticOptimization (its calcInextensibleTendonActiveFiberForce; Thelen's and Millard's
+    muscles project it on the tendon)."""
     passive = np.empty(lengths.shape)
     full = np.empty(lengths.shape)
     for k in range(lengths.shape[0]):
         for m in range(lengths.shape[1]):
             passive[k, m] = rigid_tendon_force(0.0, lengths[k, m], lengthening[k, m], params[m])
             full[k, m] = rigid_tendon_force(1.0, lengths[k, m], lengthening[k, m], params[m])
+            if not along_tendon:
+                full[k, m] = passive[k, m] + (full[k, m] - passive[k, m]) / fiber_length(
+                    lengths[k, m] - params[m][L_SLACK], params[m][L_OPT], params[m][ALPHA_OPT])[1]
     return full - passive, passive
 
 
@@ -115,7 +122,8 @@ def box_qp(hessian: np.ndarray, linear: np.ndarray, start: np.ndarray | None = N
 
 def static_optimization(model, params: np.ndarray, t: np.ndarray, z: np.ndarray, zd: np.ndarray, torque: np.ndarray,
                         exponent: float = 2.0, reserve_optimal_force: float = 1.0,
-                        passive: bool = False) -> StaticOptimization:
+                        passive: bool = False, geometry: tuple | None = None,
+                        along_tendon: bool = True) -> StaticOptimization:
     """Static optimisation of ``model``'s muscles (``params`` (M, len(muscle.PARAMETERS)), the
     engine's ``muscle_params``) on the samples t (s, (n,)) with coordinates z, rates zd and the
     inverse-dynamics torques ``torque`` (N m), each (n, J); one reserve per coordinate of optimal
@@ -124,9 +132,12 @@ def static_optimization(model, params: np.ndarray, t: np.ndarray, z: np.ndarray,
         raise ValueError(f"the activation exponent must be a finite number > 0, not {exponent:g}")
     if not np.isfinite(reserve_optimal_force) or reserve_optimal_force <= 0:
         raise ValueError(f"the reserves' optimal force must be a finite number > 0, not {reserve_optimal_force:g}")
-    lengths, arms = muscle_geometry(model, z)
-    lengthening = -np.einsum("nmj,nj->nm", arms, zd)
-    active, passive_force = muscle_capacity(params, lengths, lengthening)
+    if geometry is None:
+        lengths, arms = muscle_geometry(model, z)
+        lengthening = -np.einsum("nmj,nj->nm", arms, zd)
+    else:
+        lengths, arms, lengthening = (np.asarray(g, dtype=float) for g in geometry)
+    active, passive_force = muscle_capacity(params, lengths, lengthening, along_tendon)
     passive_force = passive_force if passive else np.zeros_like(active)
     reserve_force = np.full(z.shape[1], float(reserve_optimal_force))
     activation = np.empty(active.shape)

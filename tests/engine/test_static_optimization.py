@@ -137,7 +137,19 @@ tool.setFinalTime(request["end"])
 tool.setResultsDir(request["out"])
 tool.setStatesFromMotion(state, osim.Storage(request["motion"]), True)
 tool.run()
-print(json.dumps({"done": True}))
+state = model.initSystem()  # OpenSim's paths at the motion's states, for the same problem on fdbench's side
+coordinates = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
+muscles = [model.getMuscles().get(i) for i in range(model.getMuscles().getSize())]
+lengths, arms, speeds = [], [], []
+for q, u in zip(request["q"], request["u"]):
+    for coordinate, value, speed in zip(coordinates, q, u):
+        coordinate.setValue(state, value, False)
+        coordinate.setSpeedValue(state, speed)
+    model.realizeVelocity(state)
+    lengths.append([m.getLength(state) for m in muscles])
+    speeds.append([m.getLengtheningSpeed(state) for m in muscles])
+    arms.append([[m.computeMomentArm(state, c) for c in coordinates] for m in muscles])
+print(json.dumps({"lengths": lengths, "arms": arms, "speeds": speeds}))
 """
 
 
@@ -161,22 +173,30 @@ def opensim_so(tmp_path_factory):
     rows = "\n".join("\t".join(f"{v:.12f}" for v in (ti, *zi)) for ti, zi in zip(t, z))
     (folder / "motion.mot").write_text(f"motion\nversion=1\nnRows={len(t)}\nnColumns=3\ninDegrees=yes\nendheader\n"
                                        f"time\t{chr(9).join(model.coordinates)}\n{rows}\n")
+    q, u, _ = motion(t)
     request = {"model": str(ARM26), "coordinates": list(model.coordinates), "reserve": 1.0, "end": motion.duration,
-               "motion": str(folder / "motion.mot"), "out": str(folder)}
+               "motion": str(folder / "motion.mot"), "out": str(folder), "q": q.tolist(), "u": u.tolist()}
     done = subprocess.run([sys.executable, "-c", OPENSIM_SO], input=json.dumps(request), capture_output=True,
                           text=True, timeout=300, cwd=folder)
     assert done.returncode == 0, done.stderr
+    paths = json.loads(done.stdout.strip().splitlines()[-1])
     names, table = _storage(folder / "so_StaticOptimization_activation.sto")
-    return table[:, 0], table[:, 1:7], table[:, 7:9], names[1:]
+    _, forces = _storage(folder / "so_StaticOptimization_force.sto")
+    np.testing.assert_allclose(table[:, 0], t, atol=1e-9)  # one row per row of the motion
+    geometry = tuple(np.array(paths[key]) for key in ("lengths", "arms", "speeds"))
+    # OpenSim's own inverse dynamics: its constraint, moment arms times its forces plus the reserves
+    torque = np.einsum("nmj,nm->nj", geometry[1], forces[:, 1:7]) + forces[:, 7:9]
+    return t, table[:, 1:7], table[:, 7:9], names[1:], geometry, torque
 
 
 def test_arm26_activations_agree_with_opensim_s_static_optimization(opensim_so):
-    t, theirs, their_reserves, names = opensim_so
+    t, theirs, their_reserves, names, _, _ = opensim_so
     model = find_model("arm26")
     body = Engine(model)
     motion = MinimumJerk(model.motions[0], model.coordinates)
     z, zd, zdd = motion(t)
-    ours = static_optimization(model, body.muscle_params, t, z, zd, body.inverse_dynamics(z, zd, zdd, t))
+    ours = static_optimization(model, body.muscle_params, t, z, zd, body.inverse_dynamics(z, zd, zdd, t),
+                               along_tendon=False)  # OpenSim's DeGroote muscle's force (the next test)
     assert list(ours.muscles) == names[:6] and names[6:] == [f"{j}_reserve" for j in model.coordinates]
     worst = np.abs(ours.activation - theirs)
     # OpenSim's optimiser stops once off its optimum (t = 0.585 s: BRA 0.2, a 4.8 N m reserve); left out
@@ -184,7 +204,26 @@ def test_arm26_activations_agree_with_opensim_s_static_optimization(opensim_so):
     assert failed.sum() <= 2
     per_muscle = worst[~failed].max(axis=0)
     # BIClong and TRIlong: fdbench's polynomial paths are within 15 mm of OpenSim's moment arms where it wraps
-    limits = {"TRIlong": 0.02, "TRIlat": 0.03, "TRImed": 0.03, "BIClong": 0.05, "BICshort": 0.02, "BRA": 0.02}
+    # and its projection of the axes moves the torques by up to 0.08 N m: 0.029, 0.027, 0.037, 0.011 measured
+    limits = {"TRIlong": 0.02, "TRIlat": 0.04, "TRImed": 0.04, "BIClong": 0.05, "BICshort": 0.02, "BRA": 0.02}
     assert all(per_muscle[i] < limits[m] for i, m in enumerate(ours.muscles)), dict(zip(ours.muscles, per_muscle))
     assert np.median(worst[~failed]) < 0.01
     np.testing.assert_allclose(ours.reserve[~failed], their_reserves[~failed], atol=0.05)
+
+
+def test_on_opensim_s_paths_and_torques_the_activations_are_opensim_s(opensim_so):
+    """The same problem as OpenSim's (its lengths, moment arms, lengthening speeds and inverse
+    dynamics): what remains is the optimisers' tolerance and the curves (fdbench's equal OpenSim's)."""
+    t, theirs, their_reserves, _, geometry, torque = opensim_so
+    model = find_model("arm26")
+    z, zd, _ = MinimumJerk(model.motions[0], model.coordinates)(t)
+    params = Engine(model).muscle_params
+    ours = static_optimization(model, params, t, z, zd, torque, geometry=geometry, along_tendon=False)
+    failed = np.abs(their_reserves[:, 0]) > 1.0
+    assert np.abs(ours.activation - theirs)[~failed].max() < 1e-4  # 5e-10 median
+    np.testing.assert_allclose(ours.reserve[~failed], their_reserves[~failed], atol=1e-4)
+    # OpenSim's DeGrooteFregly2016Muscle hands StaticOptimization its fibre's force, not times cos(alpha):
+    # fdbench's force along the tendon asks more of the pennated triceps (pennation 0.157 rad)
+    projected = static_optimization(model, params, t, z, zd, torque, geometry=geometry)
+    pennated = (params[:, 3] > 0.1) & (theirs.max(axis=0) > 0.05)  # TRIlat and TRImed (TRIlong rests)
+    assert pennated.sum() == 2 and np.mean((projected.activation - theirs)[~failed][:, pennated]) > 0.005
