@@ -78,7 +78,7 @@ RESERVE_NEEDED = 0.05  # a reserve is needed where its peak exceeds this share o
 
 
 def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
-                passive: bool = False) -> tuple[dict, list[str], np.ndarray]:
+                passive: bool = False, along_tendon: bool = True) -> tuple[dict, list[str], np.ndarray]:
     """Static optimisation of the nominal model's muscles on the desired motion's inverse dynamics
     (``fdbench.multibody.static_optimization``): (record, CSV header, rows), the columns t (s),
     <muscle>_activation, <muscle>_force (N) and <joint>_reserve (N m; N for a translation).
@@ -90,13 +90,13 @@ def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
     body = engine(spec, model)
     inv = sim.inverse_dynamics(None, body, desired)
     so = static_optimization(model, body.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque, exponent,
-                             reserve_optimal_force, passive)
+                             reserve_optimal_force, passive, along_tendon=along_tendon)
     peak_torque = np.abs(so.torque).max(axis=0)
     peak_reserve = np.abs(so.reserve).max(axis=0)
     needed = [j for j, r, q in zip(so.joints, peak_reserve, peak_torque) if r > RESERVE_NEEDED * q]
     record = {"command": "inverse --muscles", "kinematics": spec.motion, **describe(spec),
               "activation_exponent": exponent, "reserve_optimal_force": reserve_optimal_force,
-              "passive_forces": passive,
+              "passive_forces": passive, "force_along_tendon": along_tendon,
               **{f"{m}_activation_{k}": float(v) for i, m in enumerate(so.muscles)
                  for k, v in (("rms", np.sqrt(np.mean(so.activation[:, i] ** 2))),
                               ("peak", so.activation[:, i].max()))},

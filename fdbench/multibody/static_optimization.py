@@ -13,8 +13,8 @@ Fregly's curves, ``fdbench.multibody.muscle``) whatever the model's tendon.
 
 The reserves are unbounded, so r = (tau - arm (a F_act + F_pas)) / rho and each sample is a problem
 in a alone over the box [0, 1]^M: for p = 2 a strictly convex bounded least-squares problem, solved
-exactly by a primal active-set method (``box_qp``); for another p, L-BFGS-B with the exact gradient,
-started from the previous sample's solution.
+exactly by a primal active-set method (``box_qp``); for p > 2 projected Newton (a box QP a step);
+for p < 2 L-BFGS-B with the exact gradient; each started from the previous sample's solution.
 """
 
 from __future__ import annotations
@@ -73,19 +73,42 @@ def solve_sample(gain: np.ndarray, need: np.ndarray, reserve_force: np.ndarray, 
     n_muscles = gain.shape[1]
     if exponent == 2.0:  # 1/2 a' H a - c' a with H = I + G'G, c = G' need (G, need scaled)
         return box_qp(np.eye(n_muscles) + scaled_gain.T @ scaled_gain, scaled_gain.T @ scaled_need, start)
+    x0 = np.full(n_muscles, 0.1) if start is None else np.clip(start, 0.0, 1.0)
+    if exponent > 2.0:
+        return _newton(scaled_gain, scaled_need, exponent, x0)
     from scipy.optimize import minimize  # heavy: scipy
 
-    def objective(a):
-        reserve = scaled_need - scaled_gain @ a
-        value = np.sum(a**exponent) + np.sum(np.abs(reserve) ** exponent)
-        slope = exponent * (a ** (exponent - 1.0)
-                            - scaled_gain.T @ (np.sign(reserve) * np.abs(reserve) ** (exponent - 1.0)))
-        return value, slope
-
-    x0 = np.full(n_muscles, 0.1) if start is None else np.clip(start, 0.0, 1.0)
-    found = minimize(objective, x0, jac=True, method="L-BFGS-B", bounds=[(0.0, 1.0)] * n_muscles,
-                     options={"ftol": 1e-15, "gtol": 1e-12, "maxiter": 2000})
+    found = minimize(lambda a: _objective(a, scaled_gain, scaled_need, exponent)[:2], x0, jac=True,
+                     method="L-BFGS-B", bounds=[(0.0, 1.0)] * n_muscles,
+                     options={"ftol": 1e-13, "gtol": 1e-10, "maxiter": 2000})
     return np.clip(found.x, 0.0, 1.0)
+
+
+def _objective(a, gain, need, p):
+    """sum a^p + sum |need - gain a|^p, its gradient (M,) and (p > 2) its Hessian (M, M)."""
+    reserve = need - gain @ a
+    value = np.sum(a**p) + np.sum(np.abs(reserve) ** p)
+    slope = p * (a ** (p - 1.0) - gain.T @ (np.sign(reserve) * np.abs(reserve) ** (p - 1.0)))
+    if p <= 2.0:
+        return value, slope, None
+    curvature = p * (p - 1.0) * (np.diag(a ** (p - 2.0)) + gain.T @ (np.abs(reserve)[:, None] ** (p - 2.0) * gain))
+    return value, slope, curvature
+
+
+def _newton(gain, need, p, a, max_iterations=100):
+    """Projected Newton for p > 2: each step the box QP of the objective's second-order model
+    (``box_qp``), then backtracking; stops when a step moves a by less than 1e-13."""
+    for _ in range(max_iterations):
+        value, slope, curvature = _objective(a, gain, need, p)
+        curvature = curvature + 1e-12 * (1.0 + np.trace(curvature)) * np.eye(len(a))
+        step = box_qp(curvature, curvature @ a - slope, a) - a
+        if np.abs(step).max() < 1e-13:
+            return a
+        t = 1.0
+        while t > 1e-10 and _objective(a + t * step, gain, need, p)[0] > value + 1e-4 * t * (slope @ step):
+            t *= 0.5
+        a = np.clip(a + t * step, 0.0, 1.0)
+    return a
 
 
 def box_qp(hessian: np.ndarray, linear: np.ndarray, start: np.ndarray | None = None,
