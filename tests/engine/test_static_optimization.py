@@ -20,6 +20,7 @@ from fdbench.cli import app
 from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions.named import MinimumJerk
+from fdbench.multibody.muscle_paths import muscle_geometry
 from fdbench.multibody.static_optimization import box_qp, solve_sample, static_optimization
 
 ARM26 = ROOT / "examples" / "opensim" / "arm26.osim"
@@ -227,3 +228,31 @@ def test_on_opensim_s_paths_and_torques_the_activations_are_opensim_s(opensim_so
     projected = static_optimization(model, params, t, z, zd, torque, geometry=geometry)
     pennated = (params[:, 3] > 0.1) & (theirs.max(axis=0) > 0.05)  # TRIlat and TRImed (TRIlong rests)
     assert pennated.sum() == 2 and np.mean((projected.activation - theirs)[~failed][:, pennated]) > 0.005
+
+
+def test_the_csv_s_forces_and_reserves_meet_the_inverse_dynamics_torques(tmp_path):
+    """``inverse --muscles -f csv`` on arm26 (every 50th ms): its muscle forces times the moment arms
+    plus its reserves are the torques of plain ``inverse -f csv``; activations in [0, 1]."""
+    import csv
+
+    def table(*args):
+        result = runner.invoke(app, ["inverse", "--model", "arm26", "--sample-dt", "0.05", "-f", "csv", *args])
+        assert result.exit_code == 0, result.output
+        rows = list(csv.reader(result.output.strip().splitlines()))
+        return rows[0], np.array(rows[1:], dtype=float)
+
+    header, so = table("--muscles")
+    plain_header, plain = table()
+    model = find_model("arm26")
+    muscles, joints = [m.name for m in model.muscles], list(model.coordinates)
+    assert header == ["t", *(f"{m}_{k}" for m in muscles for k in ("activation", "force")),
+                      *(f"{j}_reserve" for j in joints)]
+    np.testing.assert_array_equal(so[:, 0], plain[:, 0])
+    angles = np.radians(plain[:, [plain_header.index(j) for j in joints]])
+    torque = plain[:, [plain_header.index(f"{j}_torque") for j in joints]]
+    _, arms = muscle_geometry(model, angles)
+    force = so[:, [header.index(f"{m}_force") for m in muscles]]
+    reserve = so[:, [header.index(f"{j}_reserve") for j in joints]]
+    np.testing.assert_allclose(np.einsum("nmj,nm->nj", arms, force) + reserve, torque, atol=1e-9)
+    activation = so[:, [header.index(f"{m}_activation") for m in muscles]]
+    assert np.all((activation >= 0) & (activation <= 1)) and activation.max() > 0.5
