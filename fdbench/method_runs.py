@@ -22,6 +22,7 @@ from .method_options import options_text
 from .models import named_motions
 from .multibody import simulation as sim
 from .multibody.sensitivity import warm_up as warm_up_sensitivities
+from .multibody.static_optimization import static_optimization
 from .optimizers import make_optimizer
 from .optimizers.base import NO_ITERATION
 from .outcomes import in_file_units, outcome, residual_fields
@@ -70,6 +71,44 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
     header = ["t"] + [f"{j}{s}" for s in ("", "_vel", "_acc", "_torque") for j in names]
     rows = np.column_stack([inv.t, *(in_file_units(v, kinds) for v in (inv.angles, inv.velocities, inv.accelerations)),
                             inv.torque])
+    return record, header, rows
+
+
+RESERVE_NEEDED = 0.05  # a reserve is needed where its peak exceeds this share of its joint's peak torque
+
+
+def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
+                passive: bool = False, along_tendon: bool = True) -> tuple[dict, list[str], np.ndarray]:
+    """Static optimisation of the nominal model's muscles on the desired motion's inverse dynamics
+    (``fdbench.multibody.static_optimization``): (record, CSV header, rows), the columns t (s),
+    <muscle>_activation, <muscle>_force (N) and <joint>_reserve (N m; N for a translation).
+    ValueError for a model without muscles or a bad exponent or optimal force."""
+    model = nominal(spec)
+    if not model.muscles:
+        raise ValueError(f"--muscles: model {spec.model_name} has no muscles (no [[muscles]] tables)")
+    desired, _ = motions(spec)
+    body = engine(spec, model)
+    inv = sim.inverse_dynamics(None, body, desired)
+    so = static_optimization(model, body.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque, exponent,
+                             reserve_optimal_force, passive, along_tendon=along_tendon)
+    peak_torque = np.abs(so.torque).max(axis=0)
+    peak_reserve = np.abs(so.reserve).max(axis=0)
+    needed = [j for j, r, q in zip(so.joints, peak_reserve, peak_torque) if r > RESERVE_NEEDED * q]
+    record = {"command": "inverse --muscles", "kinematics": spec.motion, **describe(spec),
+              "activation_exponent": exponent, "reserve_optimal_force": reserve_optimal_force,
+              "passive_forces": passive, "force_along_tendon": along_tendon,
+              **{f"{m}_activation_{k}": float(v) for i, m in enumerate(so.muscles)
+                 for k, v in (("rms", np.sqrt(np.mean(so.activation[:, i] ** 2))),
+                              ("peak", so.activation[:, i].max()))},
+              **{f"{j}_reserve_{k}_nm": float(v) for i, j in enumerate(so.joints)
+                 for k, v in (("rms", np.sqrt(np.mean(so.reserve[:, i] ** 2))), ("peak", peak_reserve[i]))},
+              "reserves_needed": ", ".join(needed) if needed else "none",
+              "runtime_s": so.runtime_s, "runtime_per_sample_ms": 1e3 * so.runtime_s / len(so.t),
+              "fdbench_version": __version__}
+    header = ["t", *(f"{m}_{k}" for m in so.muscles for k in ("activation", "force")),
+              *(f"{j}_reserve" for j in so.joints)]
+    rows = np.column_stack([so.t, *(c for i in range(len(so.muscles))
+                                    for c in (so.activation[:, i], so.force[:, i])), so.reserve])
     return record, header, rows
 
 

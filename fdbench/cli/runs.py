@@ -46,6 +46,11 @@ def inverse(
     fmt: Format = "table",
     output: Output = None,
     quiet: Quiet = False,
+    muscles: Annotated[bool, typer.Option("--muscles", help="Static optimisation of the model's muscles, as OpenSim's StaticOptimization: at each sample the activations in [0, 1] minimising the sum of activation^p (reserves' controls included) such that muscles plus one reserve per coordinate meet the inverse-dynamics torques; each muscle's force is its active force at the motion's length and speed with a rigid tendon. --format csv: t, <muscle>_activation, <muscle>_force (N), <joint>_reserve (N m).")] = False,
+    activation_exponent: Annotated[Optional[float], typer.Option("--activation-exponent", help="With --muscles: the exponent p of the objective, > 0 (default 2: a quadratic programme solved exactly).", show_default=False)] = None,
+    reserve_optimal_force: Annotated[Optional[float], typer.Option("--reserve-optimal-force", help="With --muscles: each reserve's torque per unit control (N m; N for a translation), > 0 (default 1, as OpenSim's arm26 examples).", show_default=False)] = None,
+    passive_forces: Annotated[bool, typer.Option("--passive-forces", help="With --muscles: count the muscles' passive forces, which OpenSim's StaticOptimization leaves out.")] = False,
+    fiber_force: Annotated[bool, typer.Option("--fiber-force", help="With --muscles: a muscle's active force as the fibre's, not times cos(pennation), as OpenSim 4.6's DeGrooteFregly2016Muscle gives it to StaticOptimization (to compare with OpenSim).")] = False,
     conditions: dict = None,
 ):
     """Inverse dynamics (eq. 3): the joint torques that should produce the desired motion, with the nominal model.
@@ -55,13 +60,38 @@ def inverse(
     from ..spec import RunSpec
 
     check_outputs(fmt, output=output, inputs=spec_inputs(conditions, kinematics))
+    so_options = _static_optimization_options(muscles, activation_exponent, reserve_optimal_force, passive_forces,
+                                              fiber_force)
     spec = validated(RunSpec(command="simulate", **noise_seed(conditions, seed),
                              **Simulation().spec_fields(kinematics, conditions)))
-    record, header, rows = inverse_run(spec)
+    if muscles:
+        from ..method_runs import muscles_run
+
+        with bad_input(ValueError):
+            record, header, rows = muscles_run(spec, **so_options)
+        title = "fdbench inverse --muscles"
+    else:
+        record, header, rows = inverse_run(spec)
+        title = "fdbench inverse"
     if fmt == "csv":
         emit(history_csv(header, rows), output)
         return
-    finish(record, fmt, output, "fdbench inverse", quiet)
+    finish(record, fmt, output, title, quiet)
+
+
+def _static_optimization_options(muscles: bool, exponent, reserve, passive: bool, fiber: bool) -> dict:
+    """The options of ``inverse --muscles``, checked (bad input: given without --muscles, or <= 0)."""
+    given = [name for name, value in (("--activation-exponent", exponent), ("--reserve-optimal-force", reserve),
+                                      ("--passive-forces", passive or None), ("--fiber-force", fiber or None))
+             if value is not None]
+    if given and not muscles:
+        raise BadInput(f"{given[0]} needs --muscles")
+    exponent, reserve = 2.0 if exponent is None else exponent, 1.0 if reserve is None else reserve
+    check_finite(activation_exponent=exponent, reserve_optimal_force=reserve)
+    for name, value in (("--activation-exponent", exponent), ("--reserve-optimal-force", reserve)):
+        if not value > 0:
+            raise BadInput(f"{name} must be > 0, got {value:g}")
+    return {"exponent": exponent, "reserve_optimal_force": reserve, "passive": passive, "along_tendon": not fiber}
 
 
 @app.command()
