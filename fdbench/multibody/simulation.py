@@ -466,9 +466,9 @@ class _Still:
 
 
 def warm_up(adaptive: bool = False, engines=()) -> list:
-    """Load (or compile) the engine's kernels on the forearm and each kind of ``engines`` (and with
-    ``adaptive`` the adaptive right-hand side and scipy), so that timings exclude it; the engines
-    warmed, one per kind."""
+    """Load (or compile) the engine's kernels on the forearm and each kind of ``engines``, the
+    muscles' kernel for those with muscles (and with ``adaptive`` the adaptive right-hand side and
+    scipy), so that timings exclude it; the engines warmed, one per kind."""
     from ..compile_guard import compiling
 
     with compiling():  # Ctrl-C while a kernel compiles ends the command at once
@@ -484,7 +484,12 @@ def _warm_up(adaptive: bool, others) -> list:
     from ..models import find_model
 
     warmed = {}
+    muscled = set()
     for engine in (Engine(find_model("forearm")), *others):  # the banded kernels, then the others
+        if engine.n_muscles and kind(engine) not in muscled:  # the muscles' kernel (``rk4_muscles``)
+            muscled.add(kind(engine))
+            simulate(None, engine, _Still(engine.joints), dt=0.05,
+                     excitation=lambda t, m=engine.n_muscles: np.full((len(t), m), 0.1))
         if kind(engine) in warmed:
             continue
         warmed[kind(engine)] = engine

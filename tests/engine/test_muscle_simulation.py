@@ -235,6 +235,20 @@ def test_compliant_tendons_start_and_run_at_excitation_zero():
     assert np.all(run.activation[0] == 0.0) and np.all(run.activation[1:] > 0.0)
 
 
+def test_the_warm_up_runs_the_muscles_kernel_of_a_model_with_muscles(monkeypatch):
+    """``warm_up`` (what a run calls before its clock) simulates a model with muscles under
+    excitations too, once per kind, so that ``rk4_muscles`` is compiled before the clock."""
+    from fdbench.multibody import simulation
+
+    calls = []
+    real = simulation.simulate
+    monkeypatch.setattr(simulation, "simulate", lambda *args, **kw: calls.append(
+        (args[1].n_muscles, kw.get("excitation") is not None)) or real(*args, **kw))
+    muscled = Engine(model_from_dict(arm_data(), "arm.toml"))
+    simulation.warm_up(False, (muscled, Engine(model_from_dict(arm_data("compliant"), "arm.toml"))))
+    assert calls.count((4, True)) == 1 and (0, False) in calls
+
+
 @pytest.fixture(scope="module")
 def arm_file(tmp_path_factory):
     path = tmp_path_factory.mktemp("muscles") / "arm.toml"
