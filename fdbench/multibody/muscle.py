@@ -30,6 +30,11 @@ D1, D2, D3, D4 = -0.3211346127989808, -8.149, -0.374, 0.8825327733249912
 KPE = 4.0  # passive force-length: exponential shape factor
 MIN_FIBER_LENGTH = 0.2  # normalised; the passive curve is 0 there (negative below)
 C1, C2, C3 = 0.2, 1.0, 0.2  # tendon force-length: c1 exp(kT (l - c2)) - c3, 0 at l = 1
+# The activation a compliant tendon's fibre velocity divides by is at least this: the explicit form
+# (f_V's inverse at (f_T / cos(alpha) - f_PE) / (a f_L)) is singular at a = 0, where OpenSim's
+# DeGrooteFregly2016Muscle gives NaN; OpenSim's Millard2012EquilibriumMuscle demands the same floor
+# (its minimum_activation, at least 0.01 with a compliant tendon and no fibre damping).
+MIN_ACTIVATION = 0.01
 
 # The parameters of one muscle, in this order in the array the path functions take
 # (``parameters`` builds it; OpenSim's property names and defaults).
@@ -200,15 +205,15 @@ def rigid_tendon_force(activation, length, lengthening, p):
 def compliant_tendon(activation, tendon_force, length, lengthening, p):
     """A muscle with a compliant tendon in explicit form, its state the normalised tendon force
     ``tendon_force``: the tendon's force (N) and d(tendon_force)/dt (1/s), at ``activation``,
-    muscle-tendon ``length`` (m) and ``lengthening`` speed (m/s); ``p``: its ``parameters``;
-    activation > 0 (a f_L divides). As OpenSim's: the fibre velocity is f_V's inverse at
-    (tendon_force / cos(alpha) - f_PE) / (a f_L), the fibre damping not counted (it is in the
-    fibre force alone)."""
+    muscle-tendon ``length`` (m) and ``lengthening`` speed (m/s); ``p``: its ``parameters``.
+    As OpenSim's: the fibre velocity is f_V's inverse at (tendon_force / cos(alpha) - f_PE) / (a f_L),
+    the fibre damping not counted (it is in the fibre force alone); a at least MIN_ACTIVATION there
+    (OpenSim divides by 0 at a = 0)."""
     norm_tendon = tendon_force_length_inverse(tendon_force, p[TENDON_STRAIN])
     l_m, cos_alpha = fiber_length(length - p[L_SLACK] * norm_tendon, p[L_OPT], p[ALPHA_OPT])
     norm_length = l_m / p[L_OPT]
     multiplier = ((tendon_force / cos_alpha - passive_force_length(norm_length, p[PASSIVE_STRAIN]))
-                  / (activation * active_force_length(norm_length, p[WIDTH])))
+                  / (max(activation, MIN_ACTIVATION) * active_force_length(norm_length, p[WIDTH])))
     fiber_velocity = force_velocity_inverse(multiplier) * p[V_MAX] * p[L_OPT]  # m/s
     tendon_velocity = lengthening - fiber_velocity / cos_alpha
     return (p[F0] * tendon_force,

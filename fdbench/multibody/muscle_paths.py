@@ -24,7 +24,7 @@ from .inverse import _spline_at
 from .layout import (AT_CHILD_X, AT_CHILD_Y, AT_PARENT_X, AT_PARENT_Y, COLUMN, FIXED, FREE, N_BODY_FLOAT, N_BODY_INT,
                      OFFSET, PARENT, PATH)
 from .model import GROUND, Model
-from .muscles import MAX_COORDINATES, PointPath
+from .muscles import MAX_COORDINATES, MAX_POWER, PointPath
 
 POINTS, POLYNOMIAL = 0, 1  # MusclePaths.kind
 PHI, ORIGIN_X, ORIGIN_Y, N_FRAME = range(4)  # the kernel's per-body scratch: angle (rad), origin (m)
@@ -124,13 +124,14 @@ def geometry(q, layout, lengths, arms, frames, slopes, points):
     and origin, slopes (B + 1, N_FRAME, J) their derivatives by the coordinates (row B: ground,
     zero), points (2, 3, max(2, J)) a segment's two points (x, y in row 0, their derivatives in rows 1, 2)."""
     n_bodies = layout.body_int.shape[0]
+    table = np.empty((MAX_COORDINATES, MAX_POWER + 1))
     for i in range(q.shape[0]):
         _frames(q[i], layout, frames, slopes)
         for m in range(layout.kind.shape[0]):
             if layout.kind[m] == POINTS:
                 lengths[i, m] = _points_length(layout, m, frames, slopes, points, arms[i, m], n_bodies)
             else:
-                lengths[i, m] = _polynomial_length(q[i], layout, m, arms[i, m])
+                lengths[i, m] = _polynomial_length(q[i], layout, m, arms[i, m], table)
 
 
 @njit(error_model="numpy", inline="always")
@@ -208,24 +209,47 @@ def _points_length(layout, m, frames, slopes, points, arm, n_bodies):
 
 
 @njit(error_model="numpy", inline="always")
-def _polynomial_length(q, layout, m, arm):
-    """Muscle m's length sum_t c_t prod_k x_k^p_tk (m); -dl/dq into arm (J,)."""
+def _polynomial_length(q, layout, m, arm, table):
+    """Muscle m's length sum_t c_t prod_k x_k^p_tk (m); -dl/dq into arm (J,). Scratch: table
+    (MAX_COORDINATES, MAX_POWER + 1), each coordinate's powers (filled here, once per call)."""
+    columns, powers, coefficient = layout.columns, layout.powers, layout.coefficient
+    used = 0  # the path's coordinates: the first columns
+    while used < MAX_COORDINATES and columns[m, used] >= 0:
+        x, table[used, 0] = q[columns[m, used]], 1.0
+        for p in range(1, table.shape[1]):
+            table[used, p] = table[used, p - 1] * x
+        used += 1
     total = 0.0
     for j in range(arm.shape[0]):
         arm[j] = 0.0
+    if used <= 2:  # the common case, unrolled (a second coordinate's powers 0 when there is none)
+        if used == 1:
+            table[1, 0] = 1.0
+        slope_0 = slope_1 = 0.0
+        for t in range(layout.rows[m, 0], layout.rows[m, 1]):
+            p0, p1, c = powers[t, 0], powers[t, 1], coefficient[t]
+            f0, f1 = table[0, p0], table[1, p1]
+            total += c * f0 * f1
+            if p0 > 0:
+                slope_0 += c * p0 * table[0, p0 - 1] * f1
+            if p1 > 0:
+                slope_1 += c * p1 * f0 * table[1, p1 - 1]
+        arm[columns[m, 0]] -= slope_0
+        if used == 2:
+            arm[columns[m, 1]] -= slope_1
+        return total
     for t in range(layout.rows[m, 0], layout.rows[m, 1]):
-        value = layout.coefficient[t]
-        for k in range(MAX_COORDINATES):
-            if layout.columns[m, k] >= 0:
-                value *= q[layout.columns[m, k]] ** layout.powers[t, k]
+        value = coefficient[t]
+        for k in range(used):
+            value *= table[k, powers[t, k]]
         total += value
-        for k in range(MAX_COORDINATES):
-            power = layout.powers[t, k]
-            if layout.columns[m, k] < 0 or power == 0:
+        for k in range(used):
+            power = powers[t, k]
+            if power == 0:
                 continue
-            slope = layout.coefficient[t] * power
-            for other in range(MAX_COORDINATES):
-                if layout.columns[m, other] >= 0:
-                    slope *= q[layout.columns[m, other]] ** (layout.powers[t, other] - (1 if other == k else 0))
-            arm[layout.columns[m, k]] -= slope
+            slope = coefficient[t] * power * table[k, power - 1]
+            for other in range(used):
+                if other != k:
+                    slope *= table[other, powers[t, other]]
+            arm[columns[m, k]] -= slope
     return total

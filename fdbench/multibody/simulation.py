@@ -18,8 +18,9 @@ from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrat
                          solve_adaptive, steps)
 from .engine import Engine
 from .layout import COMPUTED, GAINS, PD, VIOLATION
-from .muscle import (ALPHA_OPT, F0, L_OPT, L_SLACK, PASSIVE_STRAIN, TENDON_STRAIN, WIDTH, active_force_length,
-                     fiber_length, passive_force_length, rigid_tendon_force, tendon_force_length_inverse)
+from .muscle import (ALPHA_OPT, F0, L_OPT, L_SLACK, MIN_ACTIVATION, PASSIVE_STRAIN, TENDON_STRAIN, WIDTH,
+                     active_force_length, fiber_length, passive_force_length, rigid_tendon_force,
+                     tendon_force_length_inverse)
 from .muscle_paths import muscle_geometry
 
 STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # the kernels' codes
@@ -236,14 +237,15 @@ def _excitations(excitation, t: np.ndarray, engine: Engine) -> np.ndarray:
 def muscle_start(engine: Engine, y0: np.ndarray, excitation: np.ndarray) -> np.ndarray:
     """The muscle states at the mechanical state y0 (n_state,) as an OpenSim user sets them: each
     activation at its excitation (M,), a compliant tendon's normalised force where the fibre is in
-    static equilibrium (fibre velocity zero: f_T = cos(alpha) (a f_L + f_PE), by bisection)."""
+    static equilibrium (fibre velocity zero: f_T = cos(alpha) (a f_L + f_PE), by bisection, a at
+    least ``muscle.MIN_ACTIVATION`` as in the tendon's dynamics)."""
     z, _ = engine.joints_from_state(y0)
     lengths, _ = muscle_geometry(engine.model, z)
     start = np.zeros(engine.n_muscle_states)
     start[:engine.n_muscles] = excitation
     for m, row in enumerate(engine.tendon_row):
         if row >= 0:
-            start[row] = _static_tendon_force(excitation[m], lengths[m], engine.muscle_params[m])
+            start[row] = _static_tendon_force(max(excitation[m], MIN_ACTIVATION), lengths[m], engine.muscle_params[m])
     return start
 
 
@@ -464,9 +466,9 @@ class _Still:
 
 
 def warm_up(adaptive: bool = False, engines=()) -> list:
-    """Load (or compile) the engine's kernels on the forearm and each kind of ``engines`` (and with
-    ``adaptive`` the adaptive right-hand side and scipy), so that timings exclude it; the engines
-    warmed, one per kind."""
+    """Load (or compile) the engine's kernels on the forearm and each kind of ``engines``, the
+    muscles' kernel for those with muscles (and with ``adaptive`` the adaptive right-hand side and
+    scipy), so that timings exclude it; the engines warmed, one per kind."""
     from ..compile_guard import compiling
 
     with compiling():  # Ctrl-C while a kernel compiles ends the command at once
@@ -482,7 +484,12 @@ def _warm_up(adaptive: bool, others) -> list:
     from ..models import find_model
 
     warmed = {}
+    muscled = set()
     for engine in (Engine(find_model("forearm")), *others):  # the banded kernels, then the others
+        if engine.n_muscles and kind(engine) not in muscled:  # the muscles' kernel (``rk4_muscles``)
+            muscled.add(kind(engine))
+            simulate(None, engine, _Still(engine.joints), dt=0.05,
+                     excitation=lambda t, m=engine.n_muscles: np.full((len(t), m), 0.1))
         if kind(engine) in warmed:
             continue
         warmed[kind(engine)] = engine
