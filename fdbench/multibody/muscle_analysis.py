@@ -28,7 +28,7 @@ from .muscle import (ALPHA_OPT, DAMPING, F0, L_OPT, L_SLACK, PASSIVE_STRAIN, TEN
                      passive_force_length, passive_force_length_derivative,
                      tendon_force_length_derivative, tendon_force_length_inverse)
 from .muscle_paths import muscle_geometry
-from .simulation import _static_tendon_force
+from .simulation import static_tendon_force
 
 QUANTITIES = ("length", "fiber_length", "pennation_angle", "fiber_velocity", "active_fiber_force",
               "passive_fiber_force")  # the (n, M) fields of MuscleAnalysis, in this order
@@ -76,7 +76,7 @@ def _compliant_fiber(length: float, lengthening: float, p: np.ndarray) -> tuple:
     dx/dt = dl_MT/dt T'(u) / (T'(u) + l_s G'(x))."""
     if not math.isfinite(length):
         return (math.nan,) * 5
-    u = tendon_force_length_inverse(_static_tendon_force(1.0, length, p), p[TENDON_STRAIN])
+    u = tendon_force_length_inverse(static_tendon_force(1.0, length, p), p[TENDON_STRAIN])
     along = length - p[L_SLACK] * u
     l_m, cos_alpha = fiber_length(along, p[L_OPT], p[ALPHA_OPT])
     norm = l_m / p[L_OPT]

@@ -245,11 +245,11 @@ def muscle_start(engine: Engine, y0: np.ndarray, excitation: np.ndarray) -> np.n
     start[:engine.n_muscles] = excitation
     for m, row in enumerate(engine.tendon_row):
         if row >= 0:
-            start[row] = _static_tendon_force(max(excitation[m], MIN_ACTIVATION), lengths[m], engine.muscle_params[m])
+            start[row] = static_tendon_force(max(excitation[m], MIN_ACTIVATION), lengths[m], engine.muscle_params[m])
     return start
 
 
-def _static_tendon_force(activation: float, length: float, p: np.ndarray) -> float:
+def static_tendon_force(activation: float, length: float, p: np.ndarray) -> float:
     """The normalised tendon force f_T in [0, 5] where f_T = cos(alpha) (a f_L + f_PE) of the
     fibre that the tendon's stretch leaves of ``length`` (m)."""
     def excess(force):
