@@ -380,7 +380,7 @@ def test_the_readme_muscle_is_the_polynomial_it_states(tmp_path):
     from fdbench.models import library
 
     readme = (ROOT / "README.md").read_text()
-    section = readme[readme.index("\n### Muscles\n"):]
+    section = readme[readme.index("\n## Muscles\n"):]
     (example,) = re.findall(r"```\n(\[\[muscles\]\].*?)```", section, flags=re.DOTALL)
     path = tmp_path / "arm.toml"
     path.write_text(library()["arm2"].read_text() + "\n" + example)
