@@ -819,15 +819,17 @@ class Engine:
         return (self.n_state,), (self.n_state,), (self.n_joints,)
 
     def _half_step_arrays(self, rows: int, copy: bool = True, **arrays) -> list[np.ndarray]:
-        """Each array as a contiguous float array of shape (rows, J) (a copy, or with copy False the
-        array itself where it is one already: for a kernel that only reads it now); ValueError
-        naming another shape."""
+        """Each array as a contiguous float array of shape (rows, J) (a copy, or with copy False a
+        read-only view of the array itself where it is one already: for a kernel that only reads it
+        now; read-only whatever the caller's flags, so that the kernel compiles once, not once per
+        combination of writeable and read-only arguments); ValueError naming another shape."""
         shape = (rows, self.n_joints)
         for name, array in arrays.items():
             if np.shape(array) != shape:
                 raise ValueError(f"{name} must have shape {shape} (the half-step grid), got {np.shape(array)}")
-        convert = np.array if copy else np.ascontiguousarray
-        return [convert(array, dtype=float) for array in arrays.values()]
+        if copy:
+            return [np.array(array, dtype=float) for array in arrays.values()]
+        return [_read_only(np.ascontiguousarray(array, dtype=float)) for array in arrays.values()]
 
     def _law(self, kp, kd, mode, gains, rows: int):
         """kp, kd (J,), the mode and the gain matrices as the kernels take them."""
@@ -844,3 +846,9 @@ class Engine:
             gains = np.zeros((1, *shape[1:]))
         return kp, kd, int(mode), gains
 
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """A read-only view of array (no copy)."""
+    view = array.view()
+    view.flags.writeable = False
+    return view
