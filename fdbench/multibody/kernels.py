@@ -54,8 +54,8 @@ from ..jit import njit
 from .inverse import N_KIN, _inverse, _no_loads, _spline_at
 from .inverse import inverse_torques  # noqa: F401 - eq. 3, one of the kernels
 from .muscle import SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, compliant_tendon, rigid_tendon_force
-from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_length
-from .muscles import MAX_COORDINATES, MAX_POWER
+from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_length, _powers
+from .muscles import MAX_POWER
 from .tangents import (FORM, LAMBDA, MAX_ENTRIES, N_AUX, N_STAGE, PIVOT, VELOCITY_TERM, _load_in_ground,
                        _stage_sensitivity, _stage_tangents)
 from .layout import (ALPHA, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA, COLUMN, COMPUTED, CONSTRAINT, D, FREE,
@@ -139,7 +139,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     muscle_frames, muscle_slopes = np.zeros((framed, N_FRAME)), np.zeros((framed, N_FRAME, J))
     muscle_points = np.zeros((2 if n_muscles else 0, 3, max(2, J)))
     muscle_length, muscle_arms = np.zeros(n_muscles), np.zeros((n_muscles, J))
-    muscle_powers = np.zeros((MAX_COORDINATES if n_muscles else 0, MAX_POWER + 1))  # a polynomial path's
+    muscle_powers = np.zeros((J if n_muscles else 0, 2, MAX_POWER + 1))  # the coordinates' powers
     rhs = np.zeros(n_q)  # the right-hand side, then the solution (the banded solve: its first n_p)
     K, aux, q_phi = np.zeros((n_p, n_p)), np.zeros((n_b, N_AUX)), np.zeros(n_b)  # the banded solve's
     trig, shape, ends = np.zeros((n_b, 2)), np.zeros((n_b, 4)), np.empty((n_b, 2), dtype=np.int64)
@@ -522,13 +522,14 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
         coordinates()
         geometry = muscles.paths
         _frames(z, geometry, muscle_frames, muscle_slopes)
+        _powers(z, geometry, muscle_powers)
         after = 2 * n_q
         for m in range(n_muscles):
             arm = muscle_arms[m]
             if geometry.kind[m] == POINTS:
                 length = _points_length(geometry, m, muscle_frames, muscle_slopes, muscle_points, arm, n_b)
             else:
-                length = _polynomial_length(z, geometry, m, arm, muscle_powers)
+                length = _polynomial_length(geometry, m, arm, muscle_powers)
             lengthening = 0.0
             for j in range(J):
                 lengthening -= arm[j] * zd[j]
