@@ -109,13 +109,15 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     body_int, body_float, dense_first = model.body_int, model.body_float, model.dense_first
     n_b, n_p = body_int.shape[0], mass.shape[0]
     n_q = n_p + n_b
-    n_muscles, n = 0, 2 * n_q
+    n_muscles, n, framed = 0, 2 * n_q, 0
     if muscles is not None:  # the muscle states after [q, q']: activations, compliant tendons' forces
         n_muscles = muscles.params.shape[0]
         n += n_muscles
         for m in range(n_muscles):
             if muscles.tendon_row[m] >= 0:
                 n += 1
+            if muscles.paths.kind[m] == POINTS:  # the bodies' frames needed
+                framed = body_int.shape[0] + 1
     J = tau.shape[1]
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
@@ -135,7 +137,6 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     torque, z, zd, v, err = np.empty(J), np.empty(J), np.empty(J), np.empty(J), np.empty(J)
     kin, points = np.zeros((believed.body_int.shape[0], N_KIN)), np.zeros((3, believed.mass.shape[0]))
     # the muscles' scratch (``muscle_paths.geometry``'s) and their lengths (m) and moment arms (M, J)
-    framed = 0 if n_muscles == 0 else n_b + 1
     muscle_frames, muscle_slopes = np.zeros((framed, N_FRAME)), np.zeros((framed, N_FRAME, J))
     muscle_points = np.zeros((2 if n_muscles else 0, 3, max(2, J)))
     muscle_length, muscle_arms = np.zeros(n_muscles), np.zeros((n_muscles, J))
@@ -521,7 +522,8 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
         excitations of grid row half; a compliant tendon's normalised force) into ks[stage]."""
         coordinates()
         geometry = muscles.paths
-        _frames(z, geometry, muscle_frames, muscle_slopes)
+        if framed:
+            _frames(z, geometry, muscle_frames, muscle_slopes)
         _powers(z, geometry, muscle_powers)
         after = 2 * n_q
         for m in range(n_muscles):
