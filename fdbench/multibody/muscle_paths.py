@@ -254,23 +254,28 @@ def _polynomial_length(layout, m, arm, table):
     while last + 1 < MAX_COORDINATES and columns[m, last + 1] >= 0:
         last += 1
     values, slopes = table[columns[m, last], 0], table[columns[m, last], 1]
-    total = slope_last = 0.0
+    total = slope_last = slope_first = 0.0
     for line in range(layout.rows[m, 0], layout.rows[m, 1]):
-        start = layout.lines[line, 0]
+        dense = coefficient[layout.lines[line, 0]:layout.lines[line, 1]]
         inner = inner_slope = 0.0
-        for p in range(layout.lines[line, 1] - start):
-            inner += coefficient[start + p] * values[p]
-            inner_slope += coefficient[start + p] * slopes[p]
+        for p in range(dense.shape[0]):
+            inner += dense[p] * values[p]
+            inner_slope += dense[p] * slopes[p]
         monomial = 1.0
         for k in range(last):
             monomial *= table[columns[m, k], 0, powers[line, k]]
         total += monomial * inner
         slope_last += monomial * inner_slope
+        if last == 1:  # two coordinates, the common case: the first's slope summed here, not in arm
+            slope_first += inner * table[columns[m, 0], 1, powers[line, 0]]
+            continue
         for k in range(last):  # the monomial's slopes
             slope = inner * table[columns[m, k], 1, powers[line, k]]
             for other in range(last):
                 if other != k:
                     slope *= table[columns[m, other], 0, powers[line, other]]
             arm[columns[m, k]] -= slope
+    if last == 1:
+        arm[columns[m, 0]] -= slope_first
     arm[columns[m, last]] -= slope_last
     return total
