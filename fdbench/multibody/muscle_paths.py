@@ -145,7 +145,7 @@ def geometry(q, layout, lengths, arms, frames, slopes, points, table):
     muscles of ``layout`` (a ``MusclePaths``). Scratch: frames (B + 1, N_FRAME) each body's angle
     and origin, slopes (B + 1, N_FRAME, J) their derivatives by the coordinates (row B: ground,
     zero), points (2, 3, max(2, J)) a segment's two points (x, y in row 0, their derivatives in rows 1, 2),
-    table (J + 1, MAX_POWER + 2) the coordinates' powers (``_powers``)."""
+    table (J, 2, MAX_POWER + 1) the coordinates' powers and their slopes (``_powers``)."""
     n_bodies = layout.body_int.shape[0]
     for i in range(q.shape[0]):
         _frames(q[i], layout, frames, slopes)
