@@ -16,6 +16,9 @@ Printed:
 2. Speed: one second of simulation, fdbench's kernel (dt 1 ms: 1000 RK4 steps) and its
    ``simulate`` (the CLI's call: excitations sampled, forces after) against OpenSim's integrate
    (accuracy 1e-7 and its default 1e-5; the integrate alone timed, best of ROUNDS); goal: 50x.
+   Also at matched accuracy: OpenSim's error at 1 s (its coordinates against its own run at accuracy
+   1e-10) and fdbench's (against its run at dt 1e-5 s); fdbench timed at the largest of DTS whose
+   error is at most OpenSim's.
 3. The cost of one RK4 step of arm26 with muscles against arm26 without them (torque-driven, zero
    torque) and against arm2 (the library's two-link arm), kernel alone, best of ROUNDS x CALLS.
 
@@ -48,6 +51,9 @@ TRICEPS, FLEXORS = [0.03, 0.06, 0.02, 0.06, 0.03, 0.06], [0.09, 0.13, 0.09, 0.13
 EXCITATIONS = {"TRIlong": TRICEPS, "TRIlat": TRICEPS, "TRImed": TRICEPS,  # the joints kept in their ranges
                "BIClong": FLEXORS, "BICshort": FLEXORS, "BRA": FLEXORS}
 SAMPLES = [round(0.01 * k, 10) for k in range(51)]  # s: the compared samples (0.5 s)
+DTS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3, 5e-3, 1e-2, 2e-2)  # s: fdbench's candidate steps at matched accuracy
+REFERENCE_DT, REFERENCE_ACCURACY = 1e-5, 1e-10  # the two sides' own reference runs (OpenSim at 1e-9 ends 0.01 deg
+# off its runs at 1e-5 to 1e-10, which agree within 2e-4 deg: its run at 1e-9 is the odd one)
 
 OPENSIM_ARM26 = """
 import json, sys, time
@@ -101,9 +107,9 @@ def run(muscles):
     return out
 
 
-def seconds(accuracy):
+def seconds(accuracy, rounds):
     best = float("inf")
-    for _ in range(request["rounds"]):
+    for _ in range(rounds):
         model, state, coordinates, _ = arm(True)
         manager = osim.Manager(model)
         manager.setIntegratorAccuracy(accuracy)
@@ -115,7 +121,8 @@ def seconds(accuracy):
 
 
 print(json.dumps({"muscles": run(True), "bare": run(False),
-                  "seconds": {str(a): seconds(a) for a in request["accuracies"]}}))
+                  "seconds": {str(a): seconds(a, request["rounds"]) for a in request["accuracies"]},
+                  "reference": seconds(request["reference"], 1)[1]}))
 """
 
 
@@ -158,7 +165,8 @@ def opensim(accuracies=(1e-7, 1e-5)) -> dict | None:
     if importlib.util.find_spec("opensim") is None:
         return None
     request = {"path": str(OSIM), "coordinates": COORDINATES, "z0": Z0.tolist(), "times": TIMES,
-               "excitations": EXCITATIONS, "samples": SAMPLES, "rounds": ROUNDS, "accuracies": list(accuracies)}
+               "excitations": EXCITATIONS, "samples": SAMPLES, "rounds": ROUNDS, "accuracies": list(accuracies),
+               "reference": REFERENCE_ACCURACY}
     done = subprocess.run([sys.executable, "-c", OPENSIM_ARM26], input=json.dumps(request), capture_output=True,
                           text=True, timeout=1800)
     if done.returncode != 0:
@@ -205,6 +213,15 @@ def agreement(theirs: dict) -> None:
           f"{np.abs(force).max():.0f} N")
 
 
+def end_error(engine: Engine, dt: float, reference: np.ndarray) -> float:
+    """The largest difference (deg) of the coordinates at 1 s of a run of step dt from reference (rad);
+    inf if the run fails."""
+    result = run_kernel(engine, dt, round(1.0 / dt))()
+    if result.status != 0:
+        return np.inf
+    return float(np.degrees(np.abs(engine.joints_from_state(result.states[-1, :engine.n_state])[0] - reference)).max())
+
+
 def speed(theirs: dict | None) -> None:
     from fdbench.multibody.simulation import simulate
 
@@ -230,17 +247,23 @@ def speed(theirs: dict | None) -> None:
     call = best_of(whole, ROUNDS, CALLS)
     print(f"one second of arm26 driven by its six muscles: fdbench's kernel (RK4, dt 1 ms) {kernel * 1e3:.2f} ms, "
           f"its simulate (the CLI's call) {call * 1e3:.2f} ms")
-    fine = muscled.joints_from_state(run_kernel(muscled, 1e-4, 10000)().states[-1, :muscled.n_state])[0]
-    for dt in (1e-3, 2e-3, 5e-3):
-        end = muscled.joints_from_state(run_kernel(muscled, dt, round(1.0 / dt))().states[-1, :muscled.n_state])[0]
-        print(f"  fdbench dt {dt:g} s: coordinates at 1 s off those of dt 1e-4 s by {np.degrees(np.abs(end - fine)).max():.2g}"
-              f" deg")
+    fine = run_kernel(muscled, REFERENCE_DT, round(1.0 / REFERENCE_DT))().states[-1, :muscled.n_state]
+    errors = {dt: end_error(muscled, dt, muscled.joints_from_state(fine)[0]) for dt in DTS}
+    print(f"  fdbench's error at 1 s (against dt {REFERENCE_DT:g} s), deg: "
+          + ", ".join(f"dt {dt:g} s {error:.2g}" for dt, error in errors.items()))
     if theirs is not None:
-        reference = np.array(theirs["seconds"]["1e-07"][1])
-        for accuracy, (seconds, end) in theirs["seconds"].items():
-            print(f"  OpenSim's integrate (accuracy {float(accuracy):g}) {seconds * 1e3:.1f} ms: fdbench's kernel "
-                  f"{seconds / kernel:.0f}x, its simulate {seconds / call:.0f}x faster (goal: 50x); its coordinates at"
-                  f" 1 s off those of accuracy 1e-7 by {np.degrees(np.abs(np.array(end) - reference)).max():.2g} deg")
+        reference = np.array(theirs["reference"])
+        for accuracy, (seconds, end) in sorted(theirs["seconds"].items(), key=lambda item: -float(item[0])):
+            their_error = float(np.degrees(np.abs(np.array(end) - reference)).max())
+            matched = max([dt for dt, error in errors.items() if error <= their_error], default=min(DTS))
+            run = run_kernel(muscled, matched, round(1.0 / matched))
+            run()
+            at_matched = best_of(run, ROUNDS, CALLS)
+            print(f"  OpenSim's integrate (accuracy {float(accuracy):g}) {seconds * 1e3:.1f} ms, error at 1 s "
+                  f"{their_error:.2g} deg (against accuracy {REFERENCE_ACCURACY:g}); fdbench's kernel at dt 1 ms "
+                  f"{seconds / kernel:.0f}x faster (its simulate {seconds / call:.0f}x); at matched accuracy (dt "
+                  f"{matched:g} s, error {errors[matched]:.2g} deg) {at_matched * 1e3:.2f} ms, "
+                  f"{seconds / at_matched:.0f}x faster (goal: 50x)")
     per_step = {}
     for label, engine, muscles in (("arm26 with its six muscles", muscled, True),
                                    ("arm26 without muscles (torque-driven)", arm26(False), False),

@@ -54,8 +54,8 @@ from ..jit import njit
 from .inverse import N_KIN, _inverse, _no_loads, _spline_at
 from .inverse import inverse_torques  # noqa: F401 - eq. 3, one of the kernels
 from .muscle import SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, compliant_tendon, rigid_tendon_force
-from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_length
-from .muscles import MAX_COORDINATES, MAX_POWER
+from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_length, _powers
+from .muscles import MAX_POWER
 from .tangents import (FORM, LAMBDA, MAX_ENTRIES, N_AUX, N_STAGE, PIVOT, VELOCITY_TERM, _load_in_ground,
                        _stage_sensitivity, _stage_tangents)
 from .layout import (ALPHA, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA, COLUMN, COMPUTED, CONSTRAINT, D, FREE,
@@ -109,13 +109,15 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     body_int, body_float, dense_first = model.body_int, model.body_float, model.dense_first
     n_b, n_p = body_int.shape[0], mass.shape[0]
     n_q = n_p + n_b
-    n_muscles, n = 0, 2 * n_q
+    n_muscles, n, framed = 0, 2 * n_q, 0
     if muscles is not None:  # the muscle states after [q, q']: activations, compliant tendons' forces
         n_muscles = muscles.params.shape[0]
         n += n_muscles
         for m in range(n_muscles):
             if muscles.tendon_row[m] >= 0:
                 n += 1
+            if muscles.paths.kind[m] == POINTS:  # the bodies' frames needed
+                framed = body_int.shape[0] + 1
     J = tau.shape[1]
     alpha, txo, om2, switch = params[ALPHA], params[TWO_XI_OMEGA], params[OMEGA2], params[SWITCH_COS]
     p4 = 4 * alpha
@@ -135,11 +137,10 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     torque, z, zd, v, err = np.empty(J), np.empty(J), np.empty(J), np.empty(J), np.empty(J)
     kin, points = np.zeros((believed.body_int.shape[0], N_KIN)), np.zeros((3, believed.mass.shape[0]))
     # the muscles' scratch (``muscle_paths.geometry``'s) and their lengths (m) and moment arms (M, J)
-    framed = 0 if n_muscles == 0 else n_b + 1
     muscle_frames, muscle_slopes = np.zeros((framed, N_FRAME)), np.zeros((framed, N_FRAME, J))
     muscle_points = np.zeros((2 if n_muscles else 0, 3, max(2, J)))
     muscle_length, muscle_arms = np.zeros(n_muscles), np.zeros((n_muscles, J))
-    muscle_powers = np.zeros((MAX_COORDINATES if n_muscles else 0, MAX_POWER + 1))  # a polynomial path's
+    muscle_powers = np.zeros((J if n_muscles else 0, 2, MAX_POWER + 1))  # the coordinates' powers
     rhs = np.zeros(n_q)  # the right-hand side, then the solution (the banded solve: its first n_p)
     K, aux, q_phi = np.zeros((n_p, n_p)), np.zeros((n_b, N_AUX)), np.zeros(n_b)  # the banded solve's
     trig, shape, ends = np.zeros((n_b, 2)), np.zeros((n_b, 4)), np.empty((n_b, 2), dtype=np.int64)
@@ -521,14 +522,16 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
         excitations of grid row half; a compliant tendon's normalised force) into ks[stage]."""
         coordinates()
         geometry = muscles.paths
-        _frames(z, geometry, muscle_frames, muscle_slopes)
+        if framed:
+            _frames(z, geometry, muscle_frames, muscle_slopes)
+        _powers(z, geometry, muscle_powers)
         after = 2 * n_q
         for m in range(n_muscles):
             arm = muscle_arms[m]
             if geometry.kind[m] == POINTS:
                 length = _points_length(geometry, m, muscle_frames, muscle_slopes, muscle_points, arm, n_b)
             else:
-                length = _polynomial_length(z, geometry, m, arm, muscle_powers)
+                length = _polynomial_length(geometry, m, arm, muscle_powers)
             lengthening = 0.0
             for j in range(J):
                 lengthening -= arm[j] * zd[j]

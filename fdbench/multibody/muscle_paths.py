@@ -36,8 +36,11 @@ class MusclePaths(NamedTuple):
     body_float (B, N_BODY_FLOAT) with OFFSET (rad), AT_PARENT_X/Y and AT_CHILD_X/Y (m); knots
     (n_knots, 5) and start (2 n_paths + 1,) the joint paths' splines (``layout.Paths``'s). Muscles:
     kind (M,) POINTS or POLYNOMIAL, rows (M, 2) muscle m's rows rows[m, 0] to rows[m, 1] (exclusive)
-    of point_body (FIXED: ground) and point_local (m, in the body's frame), or of coefficient (m) and
-    powers (terms, MAX_COORDINATES); columns (M, MAX_COORDINATES) a polynomial's coordinates (-1: none)."""
+    of point_body (FIXED: ground) and point_local (m, in the body's frame), or of a polynomial's lines:
+    line i the monomial of the path's coordinates but the last of powers (lines, MAX_COORDINATES) times
+    the polynomial of the last with coefficient[lines[i, 0]:lines[i, 1]] (m; of its powers 0, 1, ...);
+    columns (M, MAX_COORDINATES) a polynomial's coordinates (-1: none); top (J,) each coordinate's
+    highest power in the polynomials."""
     body_int: np.ndarray
     body_float: np.ndarray
     knots: np.ndarray
@@ -46,9 +49,11 @@ class MusclePaths(NamedTuple):
     rows: np.ndarray
     point_body: np.ndarray
     point_local: np.ndarray
-    coefficient: np.ndarray
+    lines: np.ndarray
     powers: np.ndarray
+    coefficient: np.ndarray
     columns: np.ndarray
+    top: np.ndarray
 
 
 def muscle_geometry(model: Model, q, layout: MusclePaths | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -66,7 +71,8 @@ def muscle_geometry(model: Model, q, layout: MusclePaths | None = None) -> tuple
     n, n_bodies = q.shape[0], layout.body_int.shape[0]
     lengths, arms = np.zeros((n, len(model.muscles))), np.zeros((n, len(model.muscles), n_coordinates))
     geometry(q, layout, lengths, arms, np.zeros((n_bodies + 1, N_FRAME)),
-             np.zeros((n_bodies + 1, N_FRAME, n_coordinates)), np.zeros((2, 3, max(2, n_coordinates))))
+             np.zeros((n_bodies + 1, N_FRAME, n_coordinates)), np.zeros((2, 3, max(2, n_coordinates))),
+             np.zeros((n_coordinates, 2, MAX_POWER + 1)))
     return (lengths[0], arms[0]) if single else (lengths, arms)
 
 
@@ -89,8 +95,9 @@ def muscle_layout(model: Model) -> MusclePaths:
             for spline in joint.path.splines():
                 pieces.append(np.column_stack([spline.x, spline.y, spline.b, spline.c, spline.d]))
                 start.append(start[-1] + len(spline.x))
-    kind, rows, point_body, point_local, coefficient, powers = [], [], [], [], [], []
+    kind, rows, point_body, point_local, lines, powers, coefficient = [], [], [], [], [], [], []
     columns = np.full((len(model.muscles), MAX_COORDINATES), -1, dtype=np.int64)
+    top = np.zeros(len(model.coordinates), dtype=np.int64)
     for m, muscle in enumerate(model.muscles):
         if isinstance(muscle.path, PointPath):
             kind.append(POINTS)
@@ -104,34 +111,50 @@ def muscle_layout(model: Model) -> MusclePaths:
             rows.append((row0, len(point_body)))
         else:
             kind.append(POLYNOMIAL)
-            path, row0 = muscle.path, len(coefficient)
-            columns[m, :len(path.coordinates)] = [model.coordinates.index(name) for name in path.coordinates]
-            for term in path.terms:
-                coefficient.append(term.coefficient)
-                powers.append(list(term.powers) + [0] * (MAX_COORDINATES - len(term.powers)))
-            rows.append((row0, len(coefficient)))
+            used = [model.coordinates.index(name) for name in muscle.path.coordinates]
+            columns[m, :len(used)] = used
+            grouped = _lines(muscle.path)
+            rows.append((len(lines), len(lines) + len(grouped)))
+            for prefix, dense in grouped.items():
+                lines.append((len(coefficient), len(coefficient) + len(dense)))
+                powers.append(list(prefix) + [0] * (MAX_COORDINATES - len(prefix)))
+                coefficient.extend(dense)
+                top[used] = np.maximum(top[used], list(prefix) + [len(dense) - 1])
     return MusclePaths(body_int, body_float, np.concatenate(pieces), np.array(start, dtype=np.int64),
                        np.array(kind, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, 2),
                        np.array(point_body, dtype=np.int64), np.array(point_local, dtype=float).reshape(-1, 2),
-                       np.array(coefficient, dtype=float), np.array(powers, dtype=np.int64).reshape(-1, MAX_COORDINATES),
-                       columns)
+                       np.array(lines, dtype=np.int64).reshape(-1, 2),
+                       np.array(powers, dtype=np.int64).reshape(-1, MAX_COORDINATES), np.array(coefficient, dtype=float),
+                       columns, top)
+
+
+def _lines(path) -> dict[tuple[int, ...], list[float]]:
+    """A polynomial path's terms grouped by their powers of its coordinates but the last: per group the
+    coefficients (m) of the last coordinate's powers 0, 1, ... to the group's highest (0 where none)."""
+    grouped: dict[tuple[int, ...], list[float]] = {}
+    for term in path.terms:
+        dense = grouped.setdefault(tuple(term.powers[:-1]), [])
+        dense.extend([0.0] * (term.powers[-1] + 1 - len(dense)))
+        dense[term.powers[-1]] = term.coefficient
+    return grouped
 
 
 @njit(error_model="numpy")
-def geometry(q, layout, lengths, arms, frames, slopes, points):
+def geometry(q, layout, lengths, arms, frames, slopes, points, table):
     """Into lengths (n, M) (m) and arms (n, M, J) (-dl/dq) at the coordinates q (n, J), for the
     muscles of ``layout`` (a ``MusclePaths``). Scratch: frames (B + 1, N_FRAME) each body's angle
     and origin, slopes (B + 1, N_FRAME, J) their derivatives by the coordinates (row B: ground,
-    zero), points (2, 3, max(2, J)) a segment's two points (x, y in row 0, their derivatives in rows 1, 2)."""
+    zero), points (2, 3, max(2, J)) a segment's two points (x, y in row 0, their derivatives in rows 1, 2),
+    table (J, 2, MAX_POWER + 1) the coordinates' powers and their slopes (``_powers``)."""
     n_bodies = layout.body_int.shape[0]
-    table = np.empty((MAX_COORDINATES, MAX_POWER + 1))
     for i in range(q.shape[0]):
         _frames(q[i], layout, frames, slopes)
+        _powers(q[i], layout, table)
         for m in range(layout.kind.shape[0]):
             if layout.kind[m] == POINTS:
                 lengths[i, m] = _points_length(layout, m, frames, slopes, points, arms[i, m], n_bodies)
             else:
-                lengths[i, m] = _polynomial_length(q[i], layout, m, arms[i, m], table)
+                lengths[i, m] = _polynomial_length(layout, m, arms[i, m], table)
 
 
 @njit(error_model="numpy", inline="always")
@@ -209,47 +232,50 @@ def _points_length(layout, m, frames, slopes, points, arm, n_bodies):
 
 
 @njit(error_model="numpy", inline="always")
-def _polynomial_length(q, layout, m, arm, table):
-    """Muscle m's length sum_t c_t prod_k x_k^p_tk (m); -dl/dq into arm (J,). Scratch: table
-    (MAX_COORDINATES, MAX_POWER + 1), each coordinate's powers (filled here, once per call)."""
+def _powers(q, layout, table):
+    """Into table (J, 2, MAX_POWER + 1) the powers the polynomial paths use of the coordinates q (J,):
+    table[j, 0, p] = q_j^p and table[j, 1, p] = p q_j^(p - 1), p = 0 to top[j]."""
+    for j in range(q.shape[0]):
+        table[j, 0, 0], table[j, 1, 0] = 1.0, 0.0
+        for p in range(1, layout.top[j] + 1):
+            table[j, 0, p] = table[j, 0, p - 1] * q[j]
+            table[j, 1, p] = p * table[j, 0, p - 1]
+
+
+@njit(error_model="numpy", inline="always")
+def _polynomial_length(layout, m, arm, table):
+    """Muscle m's length sum_t c_t prod_k x_k^p_tk (m) line by line (``MusclePaths``): a line's
+    polynomial of the last coordinate a dot product of its coefficients with that coordinate's powers
+    (and their slopes), times its monomial of the others; -dl/dq into arm (J,). table: ``_powers``'."""
     columns, powers, coefficient = layout.columns, layout.powers, layout.coefficient
-    used = 0  # the path's coordinates: the first columns
-    while used < MAX_COORDINATES and columns[m, used] >= 0:
-        x, table[used, 0] = q[columns[m, used]], 1.0
-        for p in range(1, table.shape[1]):
-            table[used, p] = table[used, p - 1] * x
-        used += 1
-    total = 0.0
     for j in range(arm.shape[0]):
         arm[j] = 0.0
-    if used <= 2:  # the common case, unrolled (a second coordinate's powers 0 when there is none)
-        if used == 1:
-            table[1, 0] = 1.0
-        slope_0 = slope_1 = 0.0
-        for t in range(layout.rows[m, 0], layout.rows[m, 1]):
-            p0, p1, c = powers[t, 0], powers[t, 1], coefficient[t]
-            f0, f1 = table[0, p0], table[1, p1]
-            total += c * f0 * f1
-            if p0 > 0:
-                slope_0 += c * p0 * table[0, p0 - 1] * f1
-            if p1 > 0:
-                slope_1 += c * p1 * f0 * table[1, p1 - 1]
-        arm[columns[m, 0]] -= slope_0
-        if used == 2:
-            arm[columns[m, 1]] -= slope_1
-        return total
-    for t in range(layout.rows[m, 0], layout.rows[m, 1]):
-        value = coefficient[t]
-        for k in range(used):
-            value *= table[k, powers[t, k]]
-        total += value
-        for k in range(used):
-            power = powers[t, k]
-            if power == 0:
-                continue
-            slope = coefficient[t] * power * table[k, power - 1]
-            for other in range(used):
+    last = 0  # the path's last coordinate
+    while last + 1 < MAX_COORDINATES and columns[m, last + 1] >= 0:
+        last += 1
+    values, slopes = table[columns[m, last], 0], table[columns[m, last], 1]
+    total = slope_last = slope_first = 0.0
+    for line in range(layout.rows[m, 0], layout.rows[m, 1]):
+        dense = coefficient[layout.lines[line, 0]:layout.lines[line, 1]]
+        inner = inner_slope = 0.0
+        for p in range(dense.shape[0]):
+            inner += dense[p] * values[p]
+            inner_slope += dense[p] * slopes[p]
+        monomial = 1.0
+        for k in range(last):
+            monomial *= table[columns[m, k], 0, powers[line, k]]
+        total += monomial * inner
+        slope_last += monomial * inner_slope
+        if last == 1:  # two coordinates, the common case: the first's slope summed here, not in arm
+            slope_first += inner * table[columns[m, 0], 1, powers[line, 0]]
+            continue
+        for k in range(last):  # the monomial's slopes
+            slope = inner * table[columns[m, k], 1, powers[line, k]]
+            for other in range(last):
                 if other != k:
-                    slope *= table[other, powers[t, other]]
+                    slope *= table[columns[m, other], 0, powers[line, other]]
             arm[columns[m, k]] -= slope
+    if last == 1:
+        arm[columns[m, 0]] -= slope_first
+    arm[columns[m, last]] -= slope_last
     return total

@@ -231,6 +231,26 @@ def test_a_polynomial_path_and_its_moment_arms_are_the_closed_form():
     assert at_zero[0][0] == 0.3 and at_zero[1][0].tolist() == [0.0, 0.0, 0.0, 0.02, 0.0]
 
 
+def test_a_polynomial_path_of_three_coordinates_is_the_closed_form():
+    """l = 0.3 + 0.05 knee + 0.01 tx knee^2 ankle - 0.02 tx^2 ankle^3 (coordinates pelvis_tx, knee,
+    ankle): l and -dl/dq by hand."""
+    terms = [{"coefficient": 0.3, "powers": [0, 0, 0]}, {"coefficient": 0.05, "powers": [0, 1, 0]},
+             {"coefficient": 0.01, "powers": [1, 2, 1]}, {"coefficient": -0.02, "powers": [2, 0, 3]}]
+    data = copy.deepcopy(LEG)
+    data["muscles"] = [MUSCLE | {"name": "poly", "path": {"length": {
+        "coordinates": ["pelvis_tx", "knee_angle", "ankle_angle"], "terms": terms}}}]
+    model = model_from_dict(data, "leg")
+    q = random_q(np.random.default_rng(11), 20)
+    tx, knee, ankle = q[:, 1], q[:, 3], q[:, 4]
+    length, arms = muscle_geometry(model, q)
+    np.testing.assert_allclose(length[:, 0], 0.3 + 0.05 * knee + 0.01 * tx * knee**2 * ankle - 0.02 * tx**2 * ankle**3,
+                               rtol=0, atol=1e-15)
+    np.testing.assert_allclose(arms[:, 0, 1], -(0.01 * knee**2 * ankle - 0.04 * tx * ankle**3), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(arms[:, 0, 3], -(0.05 + 0.02 * tx * knee * ankle), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(arms[:, 0, 4], -(0.01 * tx * knee**2 - 0.06 * tx**2 * ankle**2), rtol=0, atol=1e-15)
+    assert np.all(arms[:, 0, [0, 2]] == 0.0)
+
+
 POLYNOMIAL = {"length": {"coordinates": ["knee_angle", "ankle_angle"], "terms": [
     {"coefficient": 0.3, "powers": [0, 0]}, {"coefficient": -0.02, "powers": [1, 0]}, {"coefficient": 0.01, "powers": [1, 1]}]}}
 
