@@ -8,14 +8,12 @@ DeGrooteFregly2016Muscle on the same pin (rigid tendon at speed, compliant tendo
 from __future__ import annotations
 
 import importlib.util
-import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from helpers.opensim_child import run_opensim
 from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.model import model_from_dict, to_dict
@@ -113,10 +111,6 @@ def test_a_compliant_tendon_holds_the_fibre_in_equilibrium_and_moves_with_it(pin
 
 
 OPENSIM_PIN = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model()
 arm = osim.Body("arm", 1.0, osim.Vec3(0), osim.Inertia(1))
 model.addBody(arm)
@@ -160,10 +154,7 @@ def opensim_pin():
     request = {"d": D, "h": H, "states": states, "properties": {
         "max_isometric_force": F0, "optimal_fiber_length": L_OPT, "tendon_slack_length": L_SLACK,
         "pennation_angle_at_optimal": ALPHA, "max_contraction_velocity": V_MAX, "fiber_damping": DAMPING}}
-    done = subprocess.run([sys.executable, "-c", OPENSIM_PIN], input=json.dumps(request), capture_output=True,
-                          text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return np.array(states), np.array(json.loads(done.stdout.strip().splitlines()[-1]))
+    return np.array(states), np.array(run_opensim(OPENSIM_PIN, request, timeout=300))
 
 
 def test_the_fibres_are_opensims(pin, opensim_pin):

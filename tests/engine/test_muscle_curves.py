@@ -8,16 +8,14 @@ forms of the isometric force and of a tendon holding its length."""
 from __future__ import annotations
 
 import importlib.util
-import json
 import math
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from helpers.opensim_child import run_opensim
 from fdbench.multibody import muscle as mu
 
 RNG_SEED = 20161001
@@ -28,10 +26,6 @@ CURVES = ("active_force_length", "active_force_length_derivative", "force_veloci
 # OpenSim runs in a child process only: its bundled CasADi cannot share a process with the casadi
 # package the rest of the suite imports (see fdbench.multibody.osim.import_osim_content).
 OPENSIM_MUSCLE = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 M = osim.DeGrooteFregly2016Muscle
 curves = []
 for s in request["curves"]:
@@ -89,10 +83,7 @@ print(json.dumps({"curves": curves, "muscles": muscles}))
 
 def opensim(request: dict) -> dict:
     """OpenSim's answers to ``request`` (see OPENSIM_MUSCLE), in a child process."""
-    done = subprocess.run([sys.executable, "-c", OPENSIM_MUSCLE], input=json.dumps(request), capture_output=True,
-                          text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.strip().splitlines()[-1])
+    return run_opensim(OPENSIM_MUSCLE, request, timeout=600)
 
 
 def random_curve_points(rng, n: int = 200) -> list[dict]:

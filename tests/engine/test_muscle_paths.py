@@ -10,8 +10,6 @@ import copy
 import importlib.util
 import json
 import math
-import subprocess
-import sys
 from dataclasses import replace
 
 import numpy as np
@@ -31,6 +29,7 @@ from fdbench.multibody.muscles import Muscle, PathPoint, PointPath, PolynomialPa
 from helpers.cli_checks import assert_one_line_error
 from helpers.osim_files import body, joint, path_knee_model
 from helpers.paths import ROOT
+from helpers.opensim_child import run_opensim
 
 runner = CliRunner()
 
@@ -78,10 +77,6 @@ def leg_osim(tmp_path):
 
 
 OPENSIM_MUSCLES = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model(request["path"])
 for name, points in request["muscles"].items():
     muscle = osim.DeGrooteFregly2016Muscle()
@@ -107,12 +102,9 @@ def opensim_lengths_and_arms(path, paths: dict, coordinates, q) -> tuple[np.ndar
     """OpenSim's lengths (n, M) and moment arms (n, M, J) of DeGrooteFregly2016Muscles through the
     points of ``paths`` added to the model at ``path``, at the coordinates q (n, J), in a child
     process (OpenSim's CasADi cannot share this one)."""
-    request = json.dumps({"path": str(path), "muscles": paths, "coordinates": list(coordinates),
-                          "q": np.asarray(q).tolist()})
-    done = subprocess.run([sys.executable, "-c", OPENSIM_MUSCLES], input=request, capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stderr
-    out = np.array(json.loads(done.stdout.strip().splitlines()[-1]))
+    request = {"path": str(path), "muscles": paths, "coordinates": list(coordinates),
+               "q": np.asarray(q).tolist()}
+    out = np.array(run_opensim(OPENSIM_MUSCLES, request, timeout=300))
     return out[..., 0], out[..., 1:]
 
 

@@ -9,9 +9,6 @@ models without muscles unchanged; the command's bad inputs."""
 from __future__ import annotations
 
 import importlib.util
-import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -28,6 +25,7 @@ from fdbench.multibody.osim import to_osim
 from fdbench.multibody.simulation import muscle_start, simulate
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.opensim_child import run_opensim
 
 runner = CliRunner()
 
@@ -71,16 +69,8 @@ class Held:
 
 
 OPENSIM_MUSCLE_FORWARD = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
-
-
 def forward(tendon_forces):
     model = osim.Model(request["path"])
-    controller = osim.PrescribedController()
-    controller.setName("excitations")
     for name, (f0, l_opt, l_s, points) in request["muscles"].items():
         muscle = osim.DeGrooteFregly2016Muscle()
         muscle.setName(name)
@@ -93,12 +83,8 @@ def forward(tendon_forces):
             frame = model.getGround() if owner == "ground" else model.getBodySet().get(owner)
             muscle.addNewPathPoint(f"{name}_{k}", frame, osim.Vec3(x, y, 0.0))
         model.addForce(muscle)
-        controller.addActuator(muscle)
-        history = osim.PiecewiseLinearFunction()
-        for t, value in zip(request["times"], request["excitations"][name]):
-            history.addPoint(t, value)
-        controller.prescribeControlForActuator(name, history)
-    model.addController(controller)
+    muscles = [osim.DeGrooteFregly2016Muscle.safeDownCast(model.getForceSet().get(name)) for name in request["muscles"]]
+    prescribe(model, muscles, [request["excitations"][name] for name in request["muscles"]], request["times"])
     state = model.initSystem()
     coordinates = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
     for coordinate, angle, rate in zip(coordinates, request["z0"], request["zd0"]):
@@ -109,17 +95,9 @@ def forward(tendon_forces):
         m.setActivation(state, request["excitations"][name][0])
         if tendon_forces is not None:
             m.setNormalizedTendonForce(state, tendon_forces[k])
-    manager = osim.Manager(model)
-    manager.setIntegratorAccuracy(request["accuracy"])
-    manager.initialize(state)
-    out = []
-    for t in request["samples"]:
-        if t > 0:
-            state = manager.integrate(t)
-        model.realizeDynamics(state)
-        out.append([c.getValue(state) for c in coordinates] + [m.getActivation(state) for m in muscles]
-                   + [m.getTendonForce(state) for m in muscles])
-    return out
+    return integrate(model, state, request["accuracy"], request["samples"],
+                     lambda state: [c.getValue(state) for c in coordinates] + [m.getActivation(state) for m in muscles]
+                     + [m.getTendonForce(state) for m in muscles])
 
 
 print(json.dumps([forward(tendon_forces) for tendon_forces in request["tendon_forces"]]))
@@ -128,19 +106,16 @@ print(json.dumps([forward(tendon_forces) for tendon_forces in request["tendon_fo
 
 def opensim_forward(tmp_path, samples, tendon_forces=(None,)) -> list[np.ndarray]:
     """OpenSim's coordinates (rad), activations and tendon forces (N) at the samples (s), shape
-    (n, 2 + 2 M), from its Manager (accuracy 1e-7), in a child process (OpenSim before CasADi in one
-    process breaks CasADi): one run per entry of ``tendon_forces``, None for rigid tendons, else the
-    compliant tendons' starting normalised forces (M,) (explicit form)."""
+    (n, 2 + 2 M), from its Manager (accuracy 1e-7), in a child process: one run per entry of
+    ``tendon_forces``, None for rigid tendons, else the compliant tendons' starting normalised
+    forces (M,) (explicit form)."""
     path = tmp_path / "arm2.osim"
     path.write_text(to_osim(find_model("arm2")))
-    request = json.dumps({"path": str(path), "muscles": MUSCLES, "times": TIMES, "excitations": EXCITATIONS,
-                          "coordinates": ["shoulder", "elbow"], "z0": Z0.tolist(), "zd0": ZD0.tolist(),
-                          "samples": list(map(float, samples)), "accuracy": 1e-7,
-                          "tendon_forces": [None if f is None else list(map(float, f)) for f in tendon_forces]})
-    done = subprocess.run([sys.executable, "-c", OPENSIM_MUSCLE_FORWARD], input=request, capture_output=True,
-                          text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    return [np.array(run) for run in json.loads(done.stdout.strip().splitlines()[-1])]
+    request = {"path": str(path), "muscles": MUSCLES, "times": TIMES, "excitations": EXCITATIONS,
+               "coordinates": ["shoulder", "elbow"], "z0": Z0.tolist(), "zd0": ZD0.tolist(),
+               "samples": list(map(float, samples)), "accuracy": 1e-7,
+               "tendon_forces": [None if f is None else list(map(float, f)) for f in tendon_forces]}
+    return [np.array(run) for run in run_opensim(OPENSIM_MUSCLE_FORWARD, request)]
 
 
 # Largest differences over 0.5 s, OpenSim (Manager, accuracy 1e-7) against fdbench (RK4, alpha 1e7),
@@ -323,22 +298,12 @@ def test_a_missing_muscle_column_and_a_model_without_muscles_are_one_line(tmp_pa
 
 
 OPENSIM_ARM26 = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model(request["path"])
 osim.DeGrooteFregly2016Muscle.replaceMuscles(model)
-controller = osim.PrescribedController()
-for name, values in request["excitations"].items():
-    muscle = osim.DeGrooteFregly2016Muscle.safeDownCast(model.getMuscles().get(name))
+muscles = [osim.DeGrooteFregly2016Muscle.safeDownCast(model.getMuscles().get(name)) for name in request["excitations"]]
+for muscle in muscles:
     muscle.set_ignore_tendon_compliance(True)
-    controller.addActuator(muscle)
-    history = osim.PiecewiseLinearFunction()
-    for t, value in zip(request["times"], values):
-        history.addPoint(t, value)
-    controller.prescribeControlForActuator(name, history)
-model.addController(controller)
+prescribe(model, muscles, list(request["excitations"].values()), request["times"])
 state = model.initSystem()
 coordinates = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
 for coordinate, angle in zip(coordinates, request["z0"]):
@@ -346,11 +311,7 @@ for coordinate, angle in zip(coordinates, request["z0"]):
     coordinate.setSpeedValue(state, 0.0)
 for name, values in request["excitations"].items():
     model.getMuscles().get(name).setActivation(state, values[0])
-manager = osim.Manager(model)
-manager.setIntegratorAccuracy(1e-7)
-manager.initialize(state)
-state = manager.integrate(request["end"])
-print(json.dumps([c.getValue(state) for c in coordinates]))
+print(json.dumps(integrate(model, state, 1e-7, [request["end"]], lambda state: [c.getValue(state) for c in coordinates])[0]))
 """
 
 
@@ -380,11 +341,8 @@ def test_the_library_s_arm26_ends_near_opensim_s_arm26_under_the_same_excitation
 
     ours = simulate(None, engine, Rest(), dt=1e-3, excitation=lambda t: np.stack(
         [np.interp(t, times, excitations[m.name]) for m in engine.model.muscles], axis=-1))
-    request = json.dumps({"path": str(ROOT / "examples" / "opensim" / "arm26.osim"), "excitations": excitations,
-                          "times": times, "coordinates": list(Rest.joints), "z0": z0.tolist(), "end": 0.5})
-    done = subprocess.run([sys.executable, "-c", OPENSIM_ARM26], input=request, capture_output=True, text=True,
-                          timeout=600)
-    assert done.returncode == 0, done.stderr
-    theirs = np.array(json.loads(done.stdout.strip().splitlines()[-1]))
+    request = {"path": str(ROOT / "examples" / "opensim" / "arm26.osim"), "excitations": excitations,
+               "times": times, "coordinates": list(Rest.joints), "z0": z0.tolist(), "end": 0.5}
+    theirs = np.array(run_opensim(OPENSIM_ARM26, request))
     assert ours.success and np.degrees(np.abs(theirs - z0).max()) > 30.0
     assert np.degrees(np.abs(ours.z[-1] - theirs).max()) < 2.0

@@ -7,10 +7,7 @@ from __future__ import annotations
 
 import importlib.util
 import io
-import json
 import math
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 from dataclasses import replace
 from pathlib import Path
@@ -22,6 +19,7 @@ from typer.testing import CliRunner
 
 from helpers.osim_files import body, joint, osim_file, path_knee_model
 from helpers.paths import ROOT
+from helpers.opensim_child import run_opensim
 from fdbench.cli import app
 from fdbench.models import find_model, library
 from fdbench.multibody.model import MotionSpec
@@ -71,11 +69,7 @@ def forearm_osim(path: Path) -> Path:
 
 
 OPENSIM_ID = """
-import json, sys
 import numpy as np
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model(request["path"])
 if not request["keep_forces"]:
     model.updForceSet().clearAndDestroy()
@@ -105,12 +99,9 @@ def opensim_inverse_dynamics(path: Path, coordinates, z, zd, zdd, keep_forces: b
     """OpenSim's generalised forces (N m) of ``coordinates`` at the samples (rad, rad/s, rad/s^2),
     shape (n, J), by its InverseDynamicsSolver on the model with its forces (muscles) removed unless
     ``keep_forces``, in a child process."""
-    request = json.dumps({"path": str(path), "coordinates": list(coordinates), "keep_forces": keep_forces,
-                          **{k: np.asarray(v, dtype=float).tolist() for k, v in (("z", z), ("zd", zd), ("zdd", zdd))}})
-    done = subprocess.run([sys.executable, "-c", OPENSIM_ID], input=request, capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stderr
-    return np.array(json.loads(done.stdout.strip().splitlines()[-1]))
+    request = {"path": str(path), "coordinates": list(coordinates), "keep_forces": keep_forces,
+               **{k: np.asarray(v, dtype=float).tolist() for k, v in (("z", z), ("zd", zd), ("zdd", zdd))}}
+    return np.array(run_opensim(OPENSIM_ID, request, timeout=300))
 
 
 def minimum_jerk(model, samples: int = 51):
@@ -406,9 +397,6 @@ def test_the_gait_model_imports_with_opensim_s_inverse_dynamics(tmp_path):
 
 
 OPENSIM_SPLINE = """
-import json, sys
-import opensim as osim
-request = json.loads(sys.stdin.read())
 out = []
 for x, y in request["samples"]:
     spline = osim.SimmSpline()
@@ -435,10 +423,7 @@ def test_the_path_spline_is_opensim_s_simmspline():
         x = np.cumsum(rng.uniform(0.05, 0.8, n)) - 2.0
         samples.append((x.tolist(), rng.normal(0, 0.03, n).tolist()))
     at = np.linspace(-2.5, 6.0, 121).tolist()
-    done = subprocess.run([sys.executable, "-c", OPENSIM_SPLINE], input=json.dumps({"samples": samples, "at": at}),
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr
-    theirs = np.array(json.loads(done.stdout.strip().splitlines()[-1]))  # (splines, points, order)
+    theirs = np.array(run_opensim(OPENSIM_SPLINE, {"samples": samples, "at": at}, timeout=300))  # (splines, points, order)
     for (x, y), expected in zip(samples, theirs):
         spline = fit(x, y)
         ours = np.stack([spline.evaluate(at, order) for order in range(3)], axis=-1)
@@ -534,35 +519,18 @@ def test_export_osim_writes_the_file_or_stdout_and_never_over_an_input(tmp_path)
 
 
 OPENSIM_FORWARD = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model(request["path"])
-controller = osim.PrescribedController()
-controller.setName("torques")
-for name, values in zip(request["coordinates"], request["torque"]):
-    actuator = name + "_actuator"  # optimal force 1 N m: the control is the torque
-    controller.addActuator(model.getActuators().get(actuator))
-    history = osim.PiecewiseLinearFunction()
-    for t, value in zip(request["t"], values):
-        history.addPoint(t, value)
-    controller.prescribeControlForActuator(actuator, history)
-model.addController(controller)
+# each coordinate's <joint>_actuator, optimal force 1 N m: the control is the torque
+actuators = [model.getActuators().get(name + "_actuator") for name in request["coordinates"]]
+prescribe(model, actuators, request["torque"], request["t"], name="torques")
 state = model.initSystem()
 coordinates = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
 for coordinate, angle, rate in zip(coordinates, request["z0"], request["zd0"]):
     coordinate.setValue(state, angle, False)
     coordinate.setSpeedValue(state, rate)
 state.setTime(request["t"][0])
-manager = osim.Manager(model)
-manager.setIntegratorAccuracy(request["accuracy"])
-manager.initialize(state)
-out = [[coordinate.getValue(state) for coordinate in coordinates]]
-for t in request["t"][1:]:
-    state = manager.integrate(t)
-    out.append([coordinate.getValue(state) for coordinate in coordinates])
-print(json.dumps(out))
+print(json.dumps(integrate(model, state, request["accuracy"], request["t"],
+                           lambda state: [coordinate.getValue(state) for coordinate in coordinates])))
 """
 
 
@@ -572,13 +540,10 @@ def opensim_forward(path: Path, coordinates, t, torque, z0, zd0, accuracy: float
     the torques (N m, shape (n, J)) at times t (s, shape (n,)) linear between them; its Manager
     (Runge-Kutta-Merson at ``accuracy``) stepped to every time; the angles (rad), shape (n, J), in
     a child process."""
-    request = json.dumps({"path": str(path), "coordinates": list(coordinates), "t": np.asarray(t).tolist(),
-                          "torque": np.asarray(torque).T.tolist(), "z0": np.asarray(z0).tolist(),
-                          "zd0": np.asarray(zd0).tolist(), "accuracy": accuracy})
-    done = subprocess.run([sys.executable, "-c", OPENSIM_FORWARD], input=request, capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stderr
-    return np.array(json.loads(done.stdout.strip().splitlines()[-1]))
+    request = {"path": str(path), "coordinates": list(coordinates), "t": np.asarray(t).tolist(),
+               "torque": np.asarray(torque).T.tolist(), "z0": np.asarray(z0).tolist(),
+               "zd0": np.asarray(zd0).tolist(), "accuracy": accuracy}
+    return np.array(run_opensim(OPENSIM_FORWARD, request, timeout=300))
 
 
 FOREARM_SWING = MotionSpec("swing", "minimum-jerk", 1.0, (("theta", -0.5),), (("theta", 0.3),))

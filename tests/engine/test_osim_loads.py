@@ -10,8 +10,6 @@ import importlib.util
 import io
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +18,7 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers.paths import ROOT
+from helpers.opensim_child import run_opensim
 from fdbench.cli import app
 
 if importlib.util.find_spec("opensim") is None:
@@ -34,10 +33,6 @@ TRANSLATIONS = ("pelvis_tx", "pelvis_ty")
 runner = CliRunner()
 
 OPENSIM_ID_WITH_LOADS = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 answers = []
 for loads in request["loads"]:  # one model per case: with the ExternalLoads file, or none ('')
     model = osim.Model(request["model"])
@@ -109,10 +104,7 @@ def opensim_forces(frame: pd.DataFrame, in_frames: Path) -> list[np.ndarray]:
                "loads": [str(DATA / "subject01_walk_grf.xml"), str(in_frames), ""],
                **{key: in_si(frame, names, suffix).tolist()
                   for key, suffix in (("z", ""), ("zd", "_vel"), ("zdd", "_acc"))}}
-    done = subprocess.run([sys.executable, "-c", OPENSIM_ID_WITH_LOADS], input=json.dumps(request), capture_output=True,
-                          text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return [np.array(forces) for forces in json.loads(done.stdout.strip().splitlines()[-1])]
+    return [np.array(forces) for forces in run_opensim(OPENSIM_ID_WITH_LOADS, request, timeout=300)]
 
 
 @pytest.fixture(scope="module")

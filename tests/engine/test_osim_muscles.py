@@ -7,7 +7,6 @@ library's arm26 without OpenSim."""
 from __future__ import annotations
 
 import importlib.util
-import json
 import math
 import subprocess
 import sys
@@ -20,6 +19,7 @@ from typer.testing import CliRunner
 
 from helpers.osim_files import body, joint, osim_file
 from helpers.paths import ROOT
+from helpers.opensim_child import run_opensim
 from fdbench.cli import app
 from fdbench.models import find_model
 from fdbench.multibody.muscle_paths import muscle_geometry
@@ -34,10 +34,6 @@ SMOOTH = ("TRIlat", "TRImed", "BICshort", "BRA")  # arm26's muscles whose OpenSi
 runner = CliRunner()
 
 OPENSIM_PATHS = """
-import json, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model(request["path"])
 state = model.initSystem()
 coordinates = [model.getCoordinateSet().get(name) for name in request["coordinates"]]
@@ -55,11 +51,8 @@ print(json.dumps({"names": [m.getName() for m in muscles], "lengths": lengths, "
 
 def opensim_paths(path: Path, coordinates, q) -> tuple[list, np.ndarray, np.ndarray]:
     """(muscle names, lengths (n, M) m, moment arms (n, M, J) m) by OpenSim at the states q (n, J)."""
-    request = json.dumps({"path": str(path), "coordinates": list(coordinates), "q": np.asarray(q).tolist()})
-    done = subprocess.run([sys.executable, "-c", OPENSIM_PATHS], input=request, capture_output=True, text=True,
-                          timeout=300)
-    assert done.returncode == 0, done.stderr
-    answer = json.loads(done.stdout.strip().splitlines()[-1])
+    request = {"path": str(path), "coordinates": list(coordinates), "q": np.asarray(q).tolist()}
+    answer = run_opensim(OPENSIM_PATHS, request, timeout=300)
     return answer["names"], np.array(answer["lengths"]), np.array(answer["arms"])
 
 

@@ -6,9 +6,6 @@ De Groote muscles as fdbench's import maps them, the same reserves and a lower b
 from __future__ import annotations
 
 import importlib.util
-import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -16,6 +13,7 @@ from hypothesis import given, settings, strategies as st
 from typer.testing import CliRunner
 
 from helpers.paths import ROOT
+from helpers.opensim_child import run_opensim
 from fdbench.cli import app
 from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
@@ -102,10 +100,6 @@ def test_bad_static_optimization_input_is_one_line_and_exit_2(args, words):
 # ---------------------------------------------------------------- arm26 against OpenSim
 
 OPENSIM_SO = """
-import json, math, sys
-import opensim as osim
-osim.Logger.setLevelString("Off")
-request = json.loads(sys.stdin.read())
 model = osim.Model(request["model"])
 osim.DeGrooteFregly2016Muscle.replaceMuscles(model)
 for i in range(model.getMuscles().getSize()):
@@ -177,10 +171,7 @@ def opensim_so(tmp_path_factory):
     q, u, _ = motion(t)
     request = {"model": str(ARM26), "coordinates": list(model.coordinates), "reserve": 1.0, "end": motion.duration,
                "motion": str(folder / "motion.mot"), "out": str(folder), "q": q.tolist(), "u": u.tolist()}
-    done = subprocess.run([sys.executable, "-c", OPENSIM_SO], input=json.dumps(request), capture_output=True,
-                          text=True, timeout=300, cwd=folder)
-    assert done.returncode == 0, done.stderr
-    paths = json.loads(done.stdout.strip().splitlines()[-1])
+    paths = run_opensim(OPENSIM_SO, request, timeout=300, cwd=folder)
     names, table = _storage(folder / "so_StaticOptimization_activation.sto")
     _, forces = _storage(folder / "so_StaticOptimization_force.sto")
     np.testing.assert_allclose(table[:, 0], t, atol=1e-9)  # one row per row of the motion
