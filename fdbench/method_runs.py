@@ -22,7 +22,7 @@ from .method_options import options_text
 from .models import named_motions
 from .multibody import simulation as sim
 from .multibody.sensitivity import warm_up as warm_up_sensitivities
-from .multibody.static_optimization import static_optimization
+from .multibody.static_optimization import static_optimization, unmet_notes
 from .optimizers import make_optimizer
 from .optimizers.base import NO_ITERATION
 from .outcomes import in_file_units, outcome, residual_fields
@@ -77,12 +77,15 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
 RESERVE_NEEDED = 0.05  # a reserve is needed where its peak exceeds this share of its joint's peak torque
 
 
-def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
+def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float | None = None,
                 passive: bool = False, along_tendon: bool = True) -> tuple[dict, list[str], np.ndarray]:
     """Static optimisation of the nominal model's muscles on the desired motion's inverse dynamics
     (``fdbench.multibody.static_optimization``): (record, CSV header, rows), the columns t (s),
-    <muscle>_activation, <muscle>_force (N) and <joint>_reserve (N m; N for a translation).
-    ValueError for a model without muscles or a bad exponent or optimal force."""
+    <muscle>_activation, <muscle>_force (N) and per coordinate <joint>_reserve (N m; N for a
+    translation), or <joint>_unmet on a coordinate without a reserve (the model has actuators, none
+    on it): the torque the muscles leave unmet. The reserves: the model's actuators (each its optimal
+    force, or ``reserve_optimal_force`` for all), else one per coordinate of ``reserve_optimal_force``
+    (default 1). ValueError for a model without muscles or a bad exponent or optimal force."""
     model = nominal(spec)
     if not model.muscles:
         raise ValueError(f"--muscles: model {spec.model_name} has no muscles (no [[muscles]] tables)")
@@ -91,25 +94,40 @@ def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
     inv = sim.inverse_dynamics(None, body, desired)
     so = static_optimization(model, body.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque, exponent,
                              reserve_optimal_force, passive, along_tendon=along_tendon)
+    reserved = so.optimal_force > 0
     peak_torque = np.abs(so.torque).max(axis=0)
     peak_reserve = np.abs(so.reserve).max(axis=0)
-    needed = [j for j, r, q in zip(so.joints, peak_reserve, peak_torque) if r > RESERVE_NEEDED * q]
+    needed = [j for j, r, q, has in zip(so.joints, peak_reserve, peak_torque, reserved) if has and r > RESERVE_NEEDED * q]
+    forces = sorted(set(so.optimal_force[reserved].tolist()))
     record = {"command": "inverse --muscles", "kinematics": spec.motion, **describe(spec),
-              "activation_exponent": exponent, "reserve_optimal_force": reserve_optimal_force,
+              "activation_exponent": exponent,
+              "reserve_optimal_force": forces[0] if len(forces) == 1 else "per actuator (see reserves)",
               "passive_forces": passive, "force_along_tendon": along_tendon,
               **{f"{m}_activation_{k}": float(v) for i, m in enumerate(so.muscles)
                  for k, v in (("rms", np.sqrt(np.mean(so.activation[:, i] ** 2))),
                               ("peak", so.activation[:, i].max()))},
-              **{f"{j}_reserve_{k}_nm": float(v) for i, j in enumerate(so.joints)
-                 for k, v in (("rms", np.sqrt(np.mean(so.reserve[:, i] ** 2))), ("peak", peak_reserve[i]))},
-              "reserves_needed": ", ".join(needed) if needed else "none",
-              "runtime_s": so.runtime_s, "runtime_per_sample_ms": 1e3 * so.runtime_s / len(so.t),
-              "fdbench_version": __version__}
+              **{f"{j}_{'reserve' if reserved[i] else 'unmet'}_{k}_nm": float(v) for i, j in enumerate(so.joints)
+                 for v, k in zip(_rms_and_peak(so.reserve[:, i] if reserved[i] else so.unmet[:, i]), ("rms", "peak"))},
+              "reserves_needed": ", ".join(needed) if needed else "none"}
+    if model.actuators:
+        record["reserves"] = ", ".join(f"{j} ({f:g})" for j, f, has in zip(so.joints, so.optimal_force, reserved)
+                                       if has) or "none"
+    if not reserved.all():
+        kinds = model.coordinate_kinds
+        unmet = unmet_notes(so, tuple("N" if kind == "translation" else "N m" for kind in kinds))
+        record["unmet"] = "; ".join(unmet) if unmet else "none"
+    record.update(runtime_s=so.runtime_s, runtime_per_sample_ms=1e3 * so.runtime_s / len(so.t),
+                  fdbench_version=__version__)
     header = ["t", *(f"{m}_{k}" for m in so.muscles for k in ("activation", "force")),
-              *(f"{j}_reserve" for j in so.joints)]
+              *(f"{j}_{'reserve' if has else 'unmet'}" for j, has in zip(so.joints, reserved))]
     rows = np.column_stack([so.t, *(c for i in range(len(so.muscles))
-                                    for c in (so.activation[:, i], so.force[:, i])), so.reserve])
+                                    for c in (so.activation[:, i], so.force[:, i])),
+                            np.where(reserved, so.reserve, so.unmet)])
     return record, header, rows
+
+
+def _rms_and_peak(values: np.ndarray) -> tuple[float, float]:
+    return float(np.sqrt(np.mean(values**2))), float(np.abs(values).max())
 
 
 def _method_run(spec, on_evaluation=None, on_start=None):
@@ -169,6 +187,10 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
     elif torque is not None:
         drive, label = torque, getattr(torque, "__name__", "function")
+    elif torque_file is not None and excitation is not None and engine(spec).model.actuators:
+        drive, digest = _actuator_torques(spec, torque_file, desired.duration)
+        label = f"file:{torque_file}"
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
     elif torque_file is not None:
         preferred = (tuple(f"{joint}_torque" for joint in names),) + ((("torque",),) if len(names) == 1 else ())
         t, values = read_history_csv(torque_file, "--torque-file", desired.duration, names, preferred)
@@ -221,6 +243,51 @@ def _excitation_history(spec, path, duration: float):
                       "lies in [0, 1]")
     digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
     return (lambda s: np.stack([np.interp(s, t, values[:, m]) for m in range(len(muscles))], axis=-1)), digest
+
+
+def _actuator_torques(spec, path, duration: float):
+    """The torques (N m; N for a translation) of a ``--torque-file`` beside muscles on a model with
+    ``[[actuators]]``: ``t`` (s) and a column per actuated coordinate (``<coordinate>`` or
+    ``<coordinate>_torque``, ignoring case; the actuator's torque, not its control), a missing one
+    held at zero, the unactuated coordinates at zero; as a function of times (linear between
+    samples) -> (k, J), and the file's digest. BadFile for a column of an unactuated coordinate or
+    of no coordinate."""
+    option = "--torque-file"
+    model = engine(spec).model
+    coordinates = list(model.coordinates)
+    actuated = [a.coordinate for a in model.actuators]
+    columns = {name.lower(): c for c in actuated for name in (c, f"{c}_torque")}
+    header = next((line for line in read_input_text(path, option).splitlines() if line.strip()), "")
+    present = {}
+    for column in (cell.strip() for cell in header.split(",")):
+        name = column.lower()
+        if name == "t":
+            continue
+        if name not in columns:
+            bare = name.removesuffix("_torque")
+            lowered = {c.lower(): c for c in coordinates}
+            if bare in lowered:
+                raise BadFile(f"{option}: {path}: column {column!r}: coordinate {lowered[bare]!r} has no torque "
+                              f"actuator ([[actuators]] of the model); actuated: {', '.join(actuated)}")
+            raise BadFile(f"{option}: {path}: column {column!r}: "
+                          + unknown_name_message("actuated coordinate", column, actuated))
+        if columns[name] in present.values():
+            raise BadFile(f"{option}: {path}: two columns give {columns[name]!r}'s torque; keep one")
+        present[name] = columns[name]
+    if not present:
+        raise BadFile(f"{option}: {path} has no column of an actuated coordinate; give t and some of "
+                      f"{', '.join(actuated)} (N m)")
+    t, values = read_history_csv(path, option, duration, tuple(present))
+    where = [coordinates.index(c) for c in present.values()]
+    digest = hashlib.sha256(t.tobytes() + values.tobytes() + repr(where).encode()).hexdigest()
+
+    def torque(s):
+        s = np.asarray(s, dtype=float)
+        out = np.zeros(s.shape + (len(coordinates),))
+        for k, j in enumerate(where):
+            out[..., j] = np.interp(s, t, values[:, k])
+        return out
+    return torque, digest
 
 
 def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):
