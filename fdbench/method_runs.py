@@ -209,6 +209,11 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
     done = outcome(spec, record, result, inverse)
+    compliant = [m.name for m in body.model.muscles if m.tendon == "compliant"]
+    if excitation is not None and compliant and done.record.get("status") == "nonfinite":
+        done.record["message"] = (f"{done.record.get('message', '')}; compliant tendons near slack are stiff "
+                                  f"({', '.join(compliant[:3])}{', ...' if len(compliant) > 3 else ''}): try a "
+                                  f"smaller --dt than {spec.dt:g} s (arm26 needs about 1e-4 s)")
     if excitation is not None:  # each muscle's activation, excitation and force (N) beside the joints
         muscles = [m.name for m in engine(spec).model.muscles]
         header, rows = done.table
