@@ -93,6 +93,19 @@ def test_a_bad_actuator_is_one_line_naming_the_file_and_the_key(tmp_path, case, 
         load_model(path)
 
 
+def test_the_readme_actuator_reads_as_it_says(tmp_path):
+    import re
+
+    from helpers.paths import ROOT
+
+    readme = (ROOT / "README.md").read_text()
+    (example,) = re.findall(r"```\n(\[\[actuators\]\].*?)```", readme[readme.index("\n## Muscles\n"):],
+                            flags=re.DOTALL)
+    path = tmp_path / "arm26.toml"
+    path.write_text(library()["arm26"].read_text() + "\n" + example)
+    assert load_model(path).actuators == (Actuator("r_shoulder_elev_reserve", "r_shoulder_elev", 10.0),)
+
+
 def test_two_actuators_on_a_coordinate_or_of_one_name_are_refused():
     with pytest.raises(ModelError, match=r"actuators\[1\].coordinate: 'elbow' already has actuators\[0\]"):
         model_from_dict(with_actuators({"coordinate": "elbow"}, {"coordinate": "elbow", "name": "other"}), "two")
