@@ -169,11 +169,13 @@ def _set_up(spec):
 
 
 # ---------------------------------------------------------------------- open loop
-def run_simulation(spec, torque_file=None, params_file=None, torque=None, excitation_file=None) -> RunOutcome:
+def run_simulation(spec, torque_file=None, params_file=None, torque=None, excitation_file=None,
+                   warn=None) -> RunOutcome:
     """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history (``t``
     and a column per joint or ``<joint>_torque``, N m), saved optimisation parameters or ``torque``
     (t (s), (k,) -> N m, (k, J)); with ``excitation_file`` (``t,<muscle>...``, in [0, 1]) the muscles
-    excited and the torques those given or zero. Bad files raise ``files.BadFile``."""
+    excited and the torques those given or zero. Bad files raise ``files.BadFile``. ``warn`` (a
+    function of a text) hears, before the run, of a step too long for a compliant tendon."""
     names = joints(spec)
     desired, _ = motions(spec)
     label, drive = "id", sim.feedforward(engine(spec, nominal(spec)), desired)
@@ -200,6 +202,8 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
     warm_up(spec)
     body, desired, inverse, grid = _set_up(spec)
+    if excitation is not None and warn is not None:
+        _check_tendon_step(body, desired, excitation, spec.dt, warn)
     if grid is not None:
         drive = sim.on_half_steps(drive, grid, body.n_joints)
     began = time.perf_counter()
@@ -222,6 +226,18 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
                                                       axis=-1).reshape(len(rows), -1)]))
     done.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
     return explained(done, spec)
+
+
+def _check_tendon_step(body, desired, excitation, dt: float, warn) -> None:
+    """``warn`` where ``dt`` (s) exceeds RK4's stable step on a compliant tendon at the start."""
+    z, zd, _ = desired(np.zeros(1))
+    limits = sim.compliant_step_limits(body, z[0], zd[0], excitation(np.zeros(1))[0])
+    if limits:
+        name, limit = min(limits, key=lambda pair: pair[1])
+        if dt > limit:
+            warn(f"compliant tendons near slack are stiff: at the start {name}'s tendon needs --dt below "
+                 f"{limit:.2g} s for RK4 to be stable, and --dt is {dt:g} s; the run will likely fail: try "
+                 f"--dt {limit / 5:.1g}")
 
 
 def _excitation_history(spec, path, duration: float):

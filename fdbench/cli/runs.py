@@ -116,7 +116,8 @@ def simulate(
     from ..method_runs import run_simulation
 
     one.out.check_store()
-    outcome = run_simulation(spec, torque_file=torque_file, params_file=params, excitation_file=excitation_file)
+    outcome = run_simulation(spec, torque_file=torque_file, params_file=params, excitation_file=excitation_file,
+                             warn=lambda text: say(one.out.quiet, f"[yellow]warning:[/] {text}"))
     one.out.deliver(outcome, outcome.extra.get("spec", spec), "fdbench simulate")
 
 
