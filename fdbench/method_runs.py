@@ -22,7 +22,7 @@ from .method_options import options_text
 from .models import named_motions
 from .multibody import simulation as sim
 from .multibody.sensitivity import warm_up as warm_up_sensitivities
-from .multibody.static_optimization import static_optimization
+from .multibody.static_optimization import static_optimization, unmet_notes
 from .optimizers import make_optimizer
 from .optimizers.base import NO_ITERATION
 from .outcomes import in_file_units, outcome, residual_fields
@@ -77,12 +77,15 @@ def inverse_run(spec) -> tuple[dict, list[str], np.ndarray]:
 RESERVE_NEEDED = 0.05  # a reserve is needed where its peak exceeds this share of its joint's peak torque
 
 
-def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
+def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float | None = None,
                 passive: bool = False, along_tendon: bool = True) -> tuple[dict, list[str], np.ndarray]:
     """Static optimisation of the nominal model's muscles on the desired motion's inverse dynamics
     (``fdbench.multibody.static_optimization``): (record, CSV header, rows), the columns t (s),
-    <muscle>_activation, <muscle>_force (N) and <joint>_reserve (N m; N for a translation).
-    ValueError for a model without muscles or a bad exponent or optimal force."""
+    <muscle>_activation, <muscle>_force (N) and per coordinate <joint>_reserve (N m; N for a
+    translation), or <joint>_unmet on a coordinate without a reserve (the model has actuators, none
+    on it): the torque the muscles leave unmet. The reserves: the model's actuators (each its optimal
+    force, or ``reserve_optimal_force`` for all), else one per coordinate of ``reserve_optimal_force``
+    (default 1). ValueError for a model without muscles or a bad exponent or optimal force."""
     model = nominal(spec)
     if not model.muscles:
         raise ValueError(f"--muscles: model {spec.model_name} has no muscles (no [[muscles]] tables)")
@@ -91,25 +94,40 @@ def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float = 1.0,
     inv = sim.inverse_dynamics(None, body, desired)
     so = static_optimization(model, body.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque, exponent,
                              reserve_optimal_force, passive, along_tendon=along_tendon)
+    reserved = so.optimal_force > 0
     peak_torque = np.abs(so.torque).max(axis=0)
     peak_reserve = np.abs(so.reserve).max(axis=0)
-    needed = [j for j, r, q in zip(so.joints, peak_reserve, peak_torque) if r > RESERVE_NEEDED * q]
+    needed = [j for j, r, q, has in zip(so.joints, peak_reserve, peak_torque, reserved) if has and r > RESERVE_NEEDED * q]
+    forces = sorted(set(so.optimal_force[reserved].tolist()))
     record = {"command": "inverse --muscles", "kinematics": spec.motion, **describe(spec),
-              "activation_exponent": exponent, "reserve_optimal_force": reserve_optimal_force,
+              "activation_exponent": exponent,
+              "reserve_optimal_force": forces[0] if len(forces) == 1 else "per actuator (see reserves)",
               "passive_forces": passive, "force_along_tendon": along_tendon,
               **{f"{m}_activation_{k}": float(v) for i, m in enumerate(so.muscles)
                  for k, v in (("rms", np.sqrt(np.mean(so.activation[:, i] ** 2))),
                               ("peak", so.activation[:, i].max()))},
-              **{f"{j}_reserve_{k}_nm": float(v) for i, j in enumerate(so.joints)
-                 for k, v in (("rms", np.sqrt(np.mean(so.reserve[:, i] ** 2))), ("peak", peak_reserve[i]))},
-              "reserves_needed": ", ".join(needed) if needed else "none",
-              "runtime_s": so.runtime_s, "runtime_per_sample_ms": 1e3 * so.runtime_s / len(so.t),
-              "fdbench_version": __version__}
+              **{f"{j}_{'reserve' if reserved[i] else 'unmet'}_{k}_nm": float(v) for i, j in enumerate(so.joints)
+                 for v, k in zip(_rms_and_peak(so.reserve[:, i] if reserved[i] else so.unmet[:, i]), ("rms", "peak"))},
+              "reserves_needed": ", ".join(needed) if needed else "none"}
+    if model.actuators:
+        record["reserves"] = ", ".join(f"{j} ({f:g})" for j, f, has in zip(so.joints, so.optimal_force, reserved)
+                                       if has) or "none"
+    if not reserved.all():
+        kinds = model.coordinate_kinds
+        unmet = unmet_notes(so, tuple("N" if kind == "translation" else "N m" for kind in kinds))
+        record["unmet"] = "; ".join(unmet) if unmet else "none"
+    record.update(runtime_s=so.runtime_s, runtime_per_sample_ms=1e3 * so.runtime_s / len(so.t),
+                  fdbench_version=__version__)
     header = ["t", *(f"{m}_{k}" for m in so.muscles for k in ("activation", "force")),
-              *(f"{j}_reserve" for j in so.joints)]
+              *(f"{j}_{'reserve' if has else 'unmet'}" for j, has in zip(so.joints, reserved))]
     rows = np.column_stack([so.t, *(c for i in range(len(so.muscles))
-                                    for c in (so.activation[:, i], so.force[:, i])), so.reserve])
+                                    for c in (so.activation[:, i], so.force[:, i])),
+                            np.where(reserved, so.reserve, so.unmet)])
     return record, header, rows
+
+
+def _rms_and_peak(values: np.ndarray) -> tuple[float, float]:
+    return float(np.sqrt(np.mean(values**2))), float(np.abs(values).max())
 
 
 def _method_run(spec, on_evaluation=None, on_start=None):
@@ -151,11 +169,13 @@ def _set_up(spec):
 
 
 # ---------------------------------------------------------------------- open loop
-def run_simulation(spec, torque_file=None, params_file=None, torque=None, excitation_file=None) -> RunOutcome:
+def run_simulation(spec, torque_file=None, params_file=None, torque=None, excitation_file=None,
+                   warn=None) -> RunOutcome:
     """Open-loop forward dynamics driven by the inverse-dynamics torques, a CSV torque history (``t``
     and a column per joint or ``<joint>_torque``, N m), saved optimisation parameters or ``torque``
     (t (s), (k,) -> N m, (k, J)); with ``excitation_file`` (``t,<muscle>...``, in [0, 1]) the muscles
-    excited and the torques those given or zero. Bad files raise ``files.BadFile``."""
+    excited and the torques those given or zero. Bad files raise ``files.BadFile``. ``warn`` (a
+    function of a text) hears, before the run, of a step too long for a compliant tendon."""
     names = joints(spec)
     desired, _ = motions(spec)
     label, drive = "id", sim.feedforward(engine(spec, nominal(spec)), desired)
@@ -169,6 +189,10 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--params", digest),))))
     elif torque is not None:
         drive, label = torque, getattr(torque, "__name__", "function")
+    elif torque_file is not None and excitation is not None and engine(spec).model.actuators:
+        drive, digest = _actuator_torques(spec, torque_file, desired.duration)
+        label = f"file:{torque_file}"
+        spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
     elif torque_file is not None:
         preferred = (tuple(f"{joint}_torque" for joint in names),) + ((("torque",),) if len(names) == 1 else ())
         t, values = read_history_csv(torque_file, "--torque-file", desired.duration, names, preferred)
@@ -178,6 +202,8 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
         spec = replace(spec, inputs=tuple(sorted(spec.inputs + (("--torque-file", digest),))))
     warm_up(spec)
     body, desired, inverse, grid = _set_up(spec)
+    if excitation is not None and warn is not None:
+        _check_tendon_step(body, desired, excitation, spec.dt, warn)
     if grid is not None:
         drive = sim.on_half_steps(drive, grid, body.n_joints)
     began = time.perf_counter()
@@ -187,6 +213,11 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
     record = base_record(spec)
     record.update(torque=label, evaluations=1, runtime_s=runtime)
     done = outcome(spec, record, result, inverse)
+    compliant = [m.name for m in body.model.muscles if m.tendon == "compliant"]
+    if excitation is not None and compliant and done.record.get("status") == "nonfinite":
+        done.record["message"] = (f"{done.record.get('message', '')}; compliant tendons near slack are stiff "
+                                  f"({', '.join(compliant[:3])}{', ...' if len(compliant) > 3 else ''}): try a "
+                                  f"smaller --dt than {spec.dt:g} s (arm26 needs about 1e-4 s)")
     if excitation is not None:  # each muscle's activation, excitation and force (N) beside the joints
         muscles = [m.name for m in engine(spec).model.muscles]
         header, rows = done.table
@@ -195,6 +226,18 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
                                                       axis=-1).reshape(len(rows), -1)]))
     done.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
     return explained(done, spec)
+
+
+def _check_tendon_step(body, desired, excitation, dt: float, warn) -> None:
+    """``warn`` where ``dt`` (s) exceeds RK4's stable step on a compliant tendon at the start."""
+    z, zd, _ = desired(np.zeros(1))
+    limits = sim.compliant_step_limits(body, z[0], zd[0], excitation(np.zeros(1))[0])
+    if limits:
+        name, limit = min(limits, key=lambda pair: pair[1])
+        if dt > limit:
+            warn(f"compliant tendons near slack are stiff: at the start {name}'s tendon needs --dt below "
+                 f"{limit:.2g} s for RK4 to be stable, and --dt is {dt:g} s; the run will likely fail: try "
+                 f"--dt {limit / 5:.1g}")
 
 
 def _excitation_history(spec, path, duration: float):
@@ -221,6 +264,51 @@ def _excitation_history(spec, path, duration: float):
                       "lies in [0, 1]")
     digest = hashlib.sha256(t.tobytes() + values.tobytes()).hexdigest()
     return (lambda s: np.stack([np.interp(s, t, values[:, m]) for m in range(len(muscles))], axis=-1)), digest
+
+
+def _actuator_torques(spec, path, duration: float):
+    """The torques (N m; N for a translation) of a ``--torque-file`` beside muscles on a model with
+    ``[[actuators]]``: ``t`` (s) and a column per actuated coordinate (``<coordinate>`` or
+    ``<coordinate>_torque``, ignoring case; the actuator's torque, not its control), a missing one
+    held at zero, the unactuated coordinates at zero; as a function of times (linear between
+    samples) -> (k, J), and the file's digest. BadFile for a column of an unactuated coordinate or
+    of no coordinate."""
+    option = "--torque-file"
+    model = engine(spec).model
+    coordinates = list(model.coordinates)
+    actuated = [a.coordinate for a in model.actuators]
+    columns = {name.lower(): c for c in actuated for name in (c, f"{c}_torque")}
+    header = next((line for line in read_input_text(path, option).splitlines() if line.strip()), "")
+    present = {}
+    for column in (cell.strip() for cell in header.split(",")):
+        name = column.lower()
+        if name == "t":
+            continue
+        if name not in columns:
+            bare = name.removesuffix("_torque")
+            lowered = {c.lower(): c for c in coordinates}
+            if bare in lowered:
+                raise BadFile(f"{option}: {path}: column {column!r}: coordinate {lowered[bare]!r} has no torque "
+                              f"actuator ([[actuators]] of the model); actuated: {', '.join(actuated)}")
+            raise BadFile(f"{option}: {path}: column {column!r}: "
+                          + unknown_name_message("actuated coordinate", column, actuated))
+        if columns[name] in present.values():
+            raise BadFile(f"{option}: {path}: two columns give {columns[name]!r}'s torque; keep one")
+        present[name] = columns[name]
+    if not present:
+        raise BadFile(f"{option}: {path} has no column of an actuated coordinate; give t and some of "
+                      f"{', '.join(actuated)} (N m)")
+    t, values = read_history_csv(path, option, duration, tuple(present))
+    where = [coordinates.index(c) for c in present.values()]
+    digest = hashlib.sha256(t.tobytes() + values.tobytes() + repr(where).encode()).hexdigest()
+
+    def torque(s):
+        s = np.asarray(s, dtype=float)
+        out = np.zeros(s.shape + (len(coordinates),))
+        for k, j in enumerate(where):
+            out[..., j] = np.interp(s, t, values[:, k])
+        return out
+    return torque, digest
 
 
 def _problem(spec, torque: str, feedforward: bool, penalty_weight: float = 1.0, **options):

@@ -130,7 +130,8 @@ def _show_text(model, source: str) -> str:
     return (render(header, "table", f"model {model.name}")
             + _table("bodies (kg, m, kg m^2 about the centre of mass; end: second point of natural coordinates)", bodies)
             + _table("joints in order (m, rad)", joints)
-            + _table("loads (m in the body's frame, N in world axes)", loads) + _muscles_text(model) + _motions_text(model)
+            + _table("loads (m in the body's frame, N in world axes)", loads) + _muscles_text(model) + _actuators_text(model)
+            + _motions_text(model)
             + _table("short keys (--model KEY=VALUE)", keys) + _table("paths (--model PATH=VALUE)", paths, ["path", "value"]))
 
 
@@ -143,6 +144,16 @@ def _muscles_text(model) -> str:
                                           f"polynomial in {', '.join(m.path.coordinates)} ({len(m.path.terms)} terms)")}
             for m in model.muscles]
     return _table("muscles (max isometric force, optimal fibre length, tendon slack length)", rows)
+
+
+def _actuators_text(model) -> str:
+    """The torque actuators ([[actuators]]): name, coordinate and optimal force."""
+    kinds = dict(zip(model.coordinates, model.coordinate_kinds))
+    rows = [{"name": a.name, "coordinate": a.coordinate,
+             "optimal force": f"{a.optimal_force:.6g} {'N' if kinds[a.coordinate] == 'translation' else 'N m'}"}
+            for a in model.actuators]
+    return _table("torque actuators (optimal force per unit control; the other coordinates have none beside the "
+                  "muscles)", rows)
 
 
 def _joint_type(joint) -> str:

@@ -46,9 +46,9 @@ def inverse(
     fmt: Format = "table",
     output: Output = None,
     quiet: Quiet = False,
-    muscles: Annotated[bool, typer.Option("--muscles", help="Static optimisation of the model's muscles, as OpenSim's StaticOptimization: at each sample the activations in [0, 1] minimising the sum of activation^p (reserves' controls included) such that muscles plus one reserve per coordinate meet the inverse-dynamics torques; each muscle's force is its active force at the motion's length and speed with a rigid tendon. --format csv: t, <muscle>_activation, <muscle>_force (N), <joint>_reserve (N m).")] = False,
+    muscles: Annotated[bool, typer.Option("--muscles", help="Static optimisation of the model's muscles, as OpenSim's StaticOptimization: at each sample the activations in [0, 1] minimising the sum of activation^p (reserves' controls included) such that muscles plus one reserve per coordinate meet the inverse-dynamics torques; each muscle's force is its active force at the motion's length and speed with a rigid tendon. A model with [[actuators]]: they are the reserves, and a coordinate without one has none: the torque its muscles cannot meet is reported (<joint>_unmet, a warning naming the muscles at full activation). --format csv: t, <muscle>_activation, <muscle>_force (N), <joint>_reserve (N m), or <joint>_unmet.")] = False,
     activation_exponent: Annotated[Optional[float], typer.Option("--activation-exponent", help="With --muscles: the exponent p of the objective, > 0 (default 2: a quadratic programme solved exactly).", show_default=False)] = None,
-    reserve_optimal_force: Annotated[Optional[float], typer.Option("--reserve-optimal-force", help="With --muscles: each reserve's torque per unit control (N m; N for a translation), > 0 (default 1, as OpenSim's arm26 examples).", show_default=False)] = None,
+    reserve_optimal_force: Annotated[Optional[float], typer.Option("--reserve-optimal-force", help="With --muscles: each reserve's torque per unit control (N m; N for a translation), > 0 (default 1, as OpenSim's arm26 examples). On a model with [[actuators]] it overrides every actuator's optimal_force (default: each actuator's own); coordinates without an actuator stay without a reserve.", show_default=False)] = None,
     passive_forces: Annotated[bool, typer.Option("--passive-forces", help="With --muscles: count the muscles' passive forces, which OpenSim's StaticOptimization leaves out.")] = False,
     fiber_force: Annotated[bool, typer.Option("--fiber-force", help="With --muscles: a muscle's active force as the fibre's, not times cos(pennation), as OpenSim 4.6's DeGrooteFregly2016Muscle gives it to StaticOptimization (to compare with OpenSim).")] = False,
     conditions: dict = None,
@@ -69,6 +69,8 @@ def inverse(
 
         with bad_input(ValueError):
             record, header, rows = muscles_run(spec, **so_options)
+        if record.get("unmet", "none") != "none":
+            say(quiet, f"[yellow]warning:[/] torque the muscles cannot meet (no reserve): {record['unmet']}")
         title = "fdbench inverse --muscles"
     else:
         record, header, rows = inverse_run(spec)
@@ -86,10 +88,10 @@ def _static_optimization_options(muscles: bool, exponent, reserve, passive: bool
              if value is not None]
     if given and not muscles:
         raise BadInput(f"{given[0]} needs --muscles")
-    exponent, reserve = 2.0 if exponent is None else exponent, 1.0 if reserve is None else reserve
-    check_finite(activation_exponent=exponent, reserve_optimal_force=reserve)
+    exponent = 2.0 if exponent is None else exponent  # the reserves' force: None, the model's own (or 1)
+    check_finite(activation_exponent=exponent, **({} if reserve is None else {"reserve_optimal_force": reserve}))
     for name, value in (("--activation-exponent", exponent), ("--reserve-optimal-force", reserve)):
-        if not value > 0:
+        if value is not None and not value > 0:
             raise BadInput(f"{name} must be > 0, got {value:g}")
     return {"exponent": exponent, "reserve_optimal_force": reserve, "passive": passive, "along_tendon": not fiber}
 
@@ -98,11 +100,11 @@ def _static_optimization_options(muscles: bool, exponent, reserve, passive: bool
 @with_conditions
 @with_groups
 def simulate(
-    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and the joint's torque (N m): theta, theta_torque or torque for the forearm, one column per joint (<joint> or <joint>_torque) for another model; covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque.")] = None,
+    torque_file: Annotated[Optional[Path], typer.Option("--torque-file", help="CSV with columns t (s) and the joint's torque (N m): theta, theta_torque or torque for the forearm, one column per joint (<joint> or <joint>_torque) for another model; covering the motion's span (eq. 5: [0, 1] s), linearly interpolated. Default: the inverse-dynamics torque. With --excitation-file on a model with [[actuators]]: columns only for the actuated coordinates, each the actuator's torque in N m (N for a translation), not its control; an actuated coordinate without a column is held at zero.")] = None,
     params: Annotated[Optional[Path], typer.Option("--params", help="Parameters saved by 'fdbench optimize --save-params'.")] = None,
     one: OneRun = None,
     conditions: dict = None,
-    excitation_file: Annotated[Optional[Path], typer.Option("--excitation-file", help="CSV with columns t (s) and one per muscle of the model (its [[muscles]] names), each excitation in [0, 1], covering the motion's span, linear between samples: the muscles act on the joints, the torques are --torque-file's or zero; the run starts on the motion's first sample, each activation at its first excitation; --save-trajectory adds <muscle>_activation, _excitation and _force (N).")] = None,
+    excitation_file: Annotated[Optional[Path], typer.Option("--excitation-file", help="CSV with columns t (s) and one per muscle of the model (its [[muscles]] names), each excitation in [0, 1], covering the motion's span, linear between samples: the muscles act on the joints, the torques are --torque-file's or zero (a model with [[actuators]]: torques on the actuated coordinates only); the run starts on the motion's first sample, each activation at its first excitation; --save-trajectory adds <muscle>_activation, _excitation and _force (N).")] = None,
 ):
     """Open-loop forward dynamics (eq. 12) driven by a torque history: by default the inverse-dynamics torque, whose drift from the desired motion motivates the paper."""
     from ..spec import RunSpec
@@ -114,7 +116,8 @@ def simulate(
     from ..method_runs import run_simulation
 
     one.out.check_store()
-    outcome = run_simulation(spec, torque_file=torque_file, params_file=params, excitation_file=excitation_file)
+    outcome = run_simulation(spec, torque_file=torque_file, params_file=params, excitation_file=excitation_file,
+                             warn=lambda text: say(one.out.quiet, f"[yellow]warning:[/] {text}"))
     one.out.deliver(outcome, outcome.extra.get("spec", spec), "fdbench simulate")
 
 

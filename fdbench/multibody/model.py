@@ -47,6 +47,8 @@ Choices made here (documented in the README's "Your own model"):
 * ``[[muscles]]`` (optional): Hill-type muscles, their constants and paths (points fixed to bodies
   or a polynomial length), read, checked and written by ``fdbench.multibody.muscles``; their
   lengths and moment arms are ``fdbench.multibody.muscle_paths``.
+* ``[[actuators]]`` (optional): torque actuators, one per coordinate at most, with their optimal
+  force, read, checked and written by ``fdbench.multibody.actuators`` (what they change is said there).
 * ``[keys]`` (optional) maps short names (``--model KEY=VALUE``) to targets ``[-]path[@joint]``:
   a path of ``with_changes``, '-' for its negative (``F_ext = "-loads[0].force.y"``), and after
   ``<body>.inertia`` an ``@<joint>`` of the body for the inertia about the joint's point (inertia +
@@ -63,6 +65,7 @@ from pathlib import Path
 
 from ..files import quoted
 from ..registry import unknown_name_message
+from .actuators import Actuator, actuator_dict, read_actuators
 from .muscles import Muscle, muscle_dict, read_muscles
 from .spline import fit
 
@@ -187,7 +190,8 @@ class MotionSpec:
 class Model:
     """A planar tree of bodies hanging from ground through pin joints (in topological order),
     gravity (m/s^2, world axes), constant loads, named motions (the first the default), short
-    keys ((name, target) pairs: see ``with_short_keys``), frames and muscles (``fdbench.multibody.muscles``)."""
+    keys ((name, target) pairs: see ``with_short_keys``), frames, muscles (``fdbench.multibody.muscles``)
+    and torque actuators (``fdbench.multibody.actuators``)."""
 
     name: str
     gravity: tuple[float, float]
@@ -199,6 +203,7 @@ class Model:
     keys: tuple[tuple[str, str], ...] = ()
     frames: tuple[Frame, ...] = ()
     muscles: tuple[Muscle, ...] = ()
+    actuators: tuple[Actuator, ...] = ()
 
     def frame(self, name: str) -> tuple[str, tuple[float, float], float]:
         """(body, origin (m), angle (rad)) of a body's own frame or of a named frame fixed to a body;
@@ -317,7 +322,8 @@ def distance(a, b) -> float:
 # ---------------------------------------------------------------- checking values
 
 TOP_KEYS = {"name": False, "description": False, "gravity": False, "bodies": True, "joints": True, "loads": False,
-            "motions": False, "keys": False, "frames": False, "muscles": False}
+            "motions": False, "keys": False, "frames": False, "muscles": False,
+            "actuators": False}
 BODY_KEYS = {"name": True, "mass": True, "com": True, "inertia": True, "end": False}
 JOINT_KEYS = {"name": True, "type": False, "parent": True, "child": True, "at_parent": True, "at_child": False,
               "offset": False, "limits": False, "path": False, "coordinates": False}
@@ -348,7 +354,7 @@ ALLOWED = {
     "coordinates": "three names [angle, x, y] of a free joint's coordinates",
     "angles": "a list of angles (rad), strictly increasing", "x": "a list of x values (m)",
     "y": "a list of y values (m)", "y_angles": "a list of angles (rad), strictly increasing: y's own",
-    "muscles": "a list of tables ([[muscles]] in TOML)",
+    "muscles": "a list of tables ([[muscles]] in TOML)", "actuators": "a list of tables ([[actuators]] in TOML)",
 }
 
 
@@ -467,7 +473,8 @@ def model_from_dict(data, source: str, default_name: str | None = None) -> Model
     frames = tuple(_frame(check, entry, f"frames[{i}]", model, named)
                    for i, entry in enumerate(check.entries(data, "frames")))
     model = replace(model, motions=motions, keys=_short_keys(check, data.get("keys", {}), model), frames=frames)
-    return replace(model, muscles=read_muscles(check, check.entries(data, "muscles"), model))
+    model = replace(model, muscles=read_muscles(check, check.entries(data, "muscles"), model))
+    return replace(model, actuators=read_actuators(check, check.entries(data, "actuators"), model))
 
 
 def _body(check: _Checker, entry, key: str) -> Body:
@@ -798,6 +805,8 @@ def to_dict(model: Model, explicit_ends: bool = False) -> dict:
         data["frames"] = [{"name": f.name, "body": f.body, "at": list(f.at), "angle": f.angle} for f in model.frames]
     if model.muscles:
         data["muscles"] = [muscle_dict(m) for m in model.muscles]
+    if model.actuators:
+        data["actuators"] = [actuator_dict(a) for a in model.actuators]
     return data
 
 

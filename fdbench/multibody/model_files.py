@@ -62,7 +62,7 @@ def to_toml(model: Model, explicit_ends: bool = False) -> str:
     """The model as a TOML file that load_model reads back to an equal Model."""
     data = to_dict(model, explicit_ends)
     lines = [f"{key} = {_toml_value(data[key])}" for key in ("name", "description", "gravity") if key in data]
-    for section in ("bodies", "joints", "loads", "motions", "frames", "muscles"):
+    for section in ("bodies", "joints", "loads", "motions", "frames", "muscles", "actuators"):
         for entry in data.get(section, []):
             lines += ["", f"[[{section}]]"] + [f"{key} = {_toml_value(value)}" for key, value in entry.items()]
     if "keys" in data:

@@ -201,8 +201,12 @@ def _describe(osim, model, state, source: str, element, max_tilt_deg: float, max
     data["muscles"], muscle_notes = imported_muscles(osim, model, state, description, hosts, source, max_path_error)
     if data["muscles"]:
         description = model_from_dict(data, source, default_name=Path(source).stem)
-    kept_forces = set(loads) | {muscle["name"] for muscle in data["muscles"]}
-    notes = [note for note in (_dropped_note(osim, model, kept_forces), _welded_note(welded),
+    actuators, actuator_names, actuator_note = _coordinate_actuators(osim, model, description)
+    if actuators:
+        data["actuators"] = actuators
+        description = model_from_dict(data, source, default_name=Path(source).stem)
+    kept_forces = set(loads) | {muscle["name"] for muscle in data["muscles"]} | actuator_names
+    notes = [note for note in (_dropped_note(osim, model, kept_forces), actuator_note, _welded_note(welded),
                                _tilt_note(tilts + gravity_tilt), *muscle_notes) if note]
     return description, tuple(notes)
 
@@ -625,6 +629,44 @@ def _constant_loads(osim, model, hosts: dict, kept: set) -> dict:
     return loads
 
 
+def _coordinate_actuators(osim, model, description) -> tuple[list[dict], set, str]:
+    """([[actuators]] tables, the names of every CoordinateActuator and ActivationCoordinateActuator
+    of the OpenSim model, a note naming those left out and why): one actuator per kept coordinate
+    (the first), its optimal force kept (its control bounds and activation dynamics are not);
+    named as in OpenSim where that name is free, else ``<coordinate>_reserve``."""
+    from .actuators import default_name
+    from .model import NAME_PATTERN
+
+    taken = {name.lower() for name in [b.name for b in description.bodies] + [j.name for j in description.joints]
+             + list(description.coordinates) + [f.name for f in description.frames]
+             + [m.name for m in description.muscles]}
+    entries, seen, dropped, driven = [], set(), [], set()
+    for force in model.getForceSet():
+        actuator = osim.CoordinateActuator.safeDownCast(force)
+        if actuator is None:
+            continue
+        name = force.getName()
+        seen.add(name)
+        coordinate, optimal = actuator.get_coordinate(), actuator.getOptimalForce()
+        reason = ("it applies no force" if not force.get_appliesForce() else
+                  f"its coordinate {quoted(coordinate)} is not one of the model's" if coordinate not in
+                  description.coordinates else
+                  f"its optimal force {optimal:g} is not > 0" if not (math.isfinite(optimal) and optimal > 0) else
+                  f"{quoted(coordinate)} already has one" if coordinate in driven else "")
+        if reason:
+            dropped.append(f"{quoted(name)} ({reason})")
+            continue
+        own = name if NAME_PATTERN.fullmatch(name) and name.lower() not in taken else default_name(coordinate)
+        if own.lower() in taken:
+            dropped.append(f"{quoted(name)} (its name and {quoted(own)} are taken)")
+            continue
+        taken.add(own.lower())
+        driven.add(coordinate)
+        entries.append({"name": own, "coordinate": coordinate, "optimal_force": optimal})
+    note = f"dropped coordinate actuators: {shown('; '.join(dropped), 300)}" if dropped else ""
+    return entries, seen, note
+
+
 def _constants(osim, functions, empty=None):
     """The three values of a FunctionSet of Constant functions, ``empty`` for an empty set, or None."""
     if functions.getSize() == 0:
@@ -787,7 +829,8 @@ def check_exportable(model) -> None:
 
 def to_osim(model) -> str:
     """The description ``model`` (pin joints only) as an OpenSim model file (XML text): a ``Body``
-    per body, a ``PinJoint`` about z and a ``CoordinateActuator`` (1 N m) per joint, a constant
+    per body, a ``PinJoint`` about z, a ``CoordinateActuator`` per actuator of the model's
+    ``[[actuators]]`` with its optimal force (a model without: one of 1 N m per joint), a constant
     ``PrescribedForce`` per load."""
     check_exportable(model)
 
@@ -799,7 +842,8 @@ def to_osim(model) -> str:
              '<BodySet name="bodyset"><objects>', *map(_osim_body, model.bodies), "</objects></BodySet>",
              '<JointSet name="jointset"><objects>', *map(_osim_joint, model.joints), "</objects></JointSet>",
              '<ForceSet name="forceset"><objects>', *(_osim_load(k, load) for k, load in enumerate(model.loads)),
-             *(_osim_actuator(joint.name) for joint in model.joints), "</objects></ForceSet>",
+             *(_osim_actuator(a.coordinate, a.name, a.optimal_force) for a in model.actuators),
+             *(_osim_actuator(joint.name) for joint in model.joints if not model.actuators), "</objects></ForceSet>",
              "</Model>", "</OpenSimDocument>"]
     return "\n".join(parts) + "\n"
 
@@ -855,6 +899,8 @@ def _osim_load(k: int, load) -> str:
             f"{_constant_set('pointFunctions', (*load.at, 0.0))}</PrescribedForce>")
 
 
-def _osim_actuator(coordinate: str) -> str:
-    return (f'<CoordinateActuator name="{coordinate}_actuator"><coordinate>{coordinate}</coordinate>'
-            "<optimal_force>1</optimal_force></CoordinateActuator>")
+def _osim_actuator(coordinate: str, name: str | None = None, optimal_force: float | None = None) -> str:
+    name = f"{coordinate}_actuator" if name is None else name
+    force = "1" if optimal_force is None else _numbers(optimal_force)
+    return (f'<CoordinateActuator name="{name}"><coordinate>{coordinate}</coordinate>'
+            f"<optimal_force>{force}</optimal_force></CoordinateActuator>")

@@ -19,8 +19,8 @@ from ..integrate import (AdaptiveSystem, Status, StopIntegration, check_integrat
 from .engine import Engine
 from .layout import COMPUTED, GAINS, PD, VIOLATION
 from .muscle import (ALPHA_OPT, F0, L_OPT, L_SLACK, MIN_ACTIVATION, PASSIVE_STRAIN, TENDON_STRAIN, WIDTH,
-                     active_force_length, fiber_length, passive_force_length, rigid_tendon_force,
-                     tendon_force_length_inverse)
+                     active_force_length, compliant_tendon, fiber_length, passive_force_length,
+                     rigid_tendon_force, tendon_force_length_inverse)
 from .muscle_paths import muscle_geometry
 
 STATUS_OF_CODE = (Status.SUCCESS, Status.NONFINITE, Status.SINGULAR, Status.CONSTRAINT)  # the kernels' codes
@@ -247,6 +247,29 @@ def muscle_start(engine: Engine, y0: np.ndarray, excitation: np.ndarray) -> np.n
         if row >= 0:
             start[row] = static_tendon_force(max(excitation[m], MIN_ACTIVATION), lengths[m], engine.muscle_params[m])
     return start
+
+
+RK4_STABLE = 2.785  # RK4 is stable for dt |lambda| up to this on the negative real axis
+
+
+def compliant_step_limits(engine: Engine, z0: np.ndarray, zd0: np.ndarray, excitation: np.ndarray) -> list:
+    """(muscle, dt limit (s)) of each compliant tendon at the start (coordinates z0, rates zd0 (J,),
+    excitations (M,) as ``muscle_start`` sets the muscles): RK4_STABLE / |d(df_T/dt)/df_T|, the
+    step above which RK4 is unstable on the tendon's own dynamics there (a central difference)."""
+    lengths, arms = muscle_geometry(engine.model, z0[None])
+    lengthening = -arms[0] @ zd0
+    limits = []
+    for m, row in enumerate(engine.tendon_row):
+        if row < 0:
+            continue
+        p = engine.muscle_params[m]
+        force = static_tendon_force(max(excitation[m], MIN_ACTIVATION), lengths[0, m], p)
+        h = 1e-6 * max(force, 1e-3)
+        rate = [compliant_tendon(excitation[m], f, lengths[0, m], lengthening[m], p)[1] for f in (force + h, force - h)]
+        slope = abs(rate[0] - rate[1]) / (2 * h)
+        if math.isfinite(slope) and slope > 0:
+            limits.append((engine.model.muscles[m].name, RK4_STABLE / slope))
+    return limits
 
 
 def static_tendon_force(activation: float, length: float, p: np.ndarray) -> float:

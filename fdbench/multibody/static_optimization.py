@@ -15,6 +15,15 @@ The reserves are unbounded, so r = (tau - arm (a F_act + F_pas)) / rho and each 
 in a alone over the box [0, 1]^M: for p = 2 a strictly convex bounded least-squares problem, solved
 exactly by a primal active-set method (``box_qp``); for p > 2 projected Newton (a box QP a step);
 for p < 2 L-BFGS-B with the exact gradient; each started from the previous sample's solution.
+
+The reserves are the model's torque actuators (``[[actuators]]``, each with its optimal force) where
+it has any; a coordinate without one has no reserve: its torque is a requirement the muscles may
+fail to meet. It is solved as a reserve whose optimal force is ``NO_RESERVE`` (1e-3) of the
+strongest muscle's torque on the coordinate at full activation at that sample (at least 1e-3 N m),
+its torque reported as the torque left unmet: the problem stays the same box QP for p = 2 (solved
+to 1e-10 of its activations); leaving unmet what the strongest muscle gives at activation 1e-3
+costs as much as a muscle at full activation, so the muscles saturate before torque is left unmet,
+and a torque they can meet is met within 1e-6 of itself (one muscle: a = tau / k / (1 + 1e-6)).
 """
 
 from __future__ import annotations
@@ -24,15 +33,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .actuators import optimal_forces
 from .muscle import ALPHA_OPT, L_OPT, L_SLACK, fiber_length, rigid_tendon_force
 from .muscle_paths import muscle_geometry
+
+NO_RESERVE = 1e-3  # of the strongest muscle's torque: a coordinate without a reserve, its torque counted unmet
+UNMET, UNMET_SHARE = 1e-3, 1e-4  # N m (N) and of the torque: unmet torque beyond both is reported
 
 
 @dataclass(frozen=True)
 class StaticOptimization:
     """Per sample t (s, (n,)): activations (n, M), muscle forces along the paths (N, (n, M)),
-    reserve torques (N m, (n, J); N for a translation) and the joint torques they meet (n, J);
-    ``runtime_s`` the optimisation's time (s, the paths and curves excluded)."""
+    reserve torques (N m, (n, J); N for a translation; 0 where a coordinate has no reserve) and the
+    joint torques (n, J); ``runtime_s`` the optimisation's time (s, the paths and curves excluded);
+    ``unmet`` (n, J) the torque the muscles leave unmet on the coordinates without a reserve (0 on
+    the others), ``optimal_force`` (J,) each reserve's (0: none), ``moment_arms`` (n, M, J) m."""
 
     t: np.ndarray
     activation: np.ndarray
@@ -42,6 +57,9 @@ class StaticOptimization:
     muscles: tuple
     joints: tuple
     runtime_s: float
+    unmet: np.ndarray | None = None
+    optimal_force: np.ndarray | None = None
+    moment_arms: np.ndarray | None = None
 
 
 def muscle_capacity(params: np.ndarray, lengths: np.ndarray, lengthening: np.ndarray,
@@ -144,17 +162,25 @@ def box_qp(hessian: np.ndarray, linear: np.ndarray, start: np.ndarray | None = N
 
 
 def static_optimization(model, params: np.ndarray, t: np.ndarray, z: np.ndarray, zd: np.ndarray, torque: np.ndarray,
-                        exponent: float = 2.0, reserve_optimal_force: float = 1.0,
+                        exponent: float = 2.0, reserve_optimal_force: float | None = None,
                         passive: bool = False, geometry: tuple | None = None,
-                        along_tendon: bool = True) -> StaticOptimization:
+                        along_tendon: bool = True, reserve_forces=None) -> StaticOptimization:
     """Static optimisation of ``model``'s muscles (``params`` (M, len(muscle.PARAMETERS)), the
     engine's ``muscle_params``) on the samples t (s, (n,)) with coordinates z, rates zd and the
-    inverse-dynamics torques ``torque`` (N m), each (n, J); one reserve per coordinate of optimal
-    force ``reserve_optimal_force`` (N m). ValueError for an exponent or optimal force <= 0."""
+    inverse-dynamics torques ``torque`` (N m), each (n, J). The reserves: the model's actuators,
+    each with its optimal force (N m per unit control), or ``reserve_optimal_force`` for every one
+    of them; a model without actuators: one per coordinate of ``reserve_optimal_force`` (default 1);
+    ``reserve_forces`` (J,): each coordinate's instead (0: none). ValueError for an exponent or
+    optimal force <= 0."""
     if not np.isfinite(exponent) or exponent <= 0:
         raise ValueError(f"the activation exponent must be a finite number > 0, not {exponent:g}")
-    if not np.isfinite(reserve_optimal_force) or reserve_optimal_force <= 0:
+    if reserve_optimal_force is not None and (not np.isfinite(reserve_optimal_force) or reserve_optimal_force <= 0):
         raise ValueError(f"the reserves' optimal force must be a finite number > 0, not {reserve_optimal_force:g}")
+    if reserve_forces is None:
+        reserve_forces = optimal_forces(model, reserve_optimal_force)
+    optimal_force = np.array(reserve_forces, dtype=float).reshape(z.shape[1])
+    if not np.all(np.isfinite(optimal_force) & (optimal_force >= 0)):
+        raise ValueError("the reserves' optimal forces must be finite numbers >= 0 (0: no reserve)")
     if geometry is None:
         lengths, arms = muscle_geometry(model, z)
         lengthening = -np.einsum("nmj,nj->nm", arms, zd)
@@ -162,16 +188,59 @@ def static_optimization(model, params: np.ndarray, t: np.ndarray, z: np.ndarray,
         lengths, arms, lengthening = (np.asarray(g, dtype=float) for g in geometry)
     active, passive_force = muscle_capacity(params, lengths, lengthening, along_tendon)
     passive_force = passive_force if passive else np.zeros_like(active)
-    reserve_force = np.full(z.shape[1], float(reserve_optimal_force))
+    reserved = optimal_force > 0
+    reserve_force = optimal_force
     activation = np.empty(active.shape)
     began = time.perf_counter()
     start = None
     for k in range(len(t)):
         gain = arms[k].T * active[k]  # (J, M)
         need = torque[k] - arms[k].T @ passive_force[k]
+        if not reserved.all():
+            strongest = np.abs(gain).max(axis=1, initial=0.0)
+            reserve_force = np.where(reserved, optimal_force, NO_RESERVE * np.maximum(strongest, 1.0))
         start = activation[k] = solve_sample(gain, need, reserve_force, exponent, start)
     runtime = time.perf_counter() - began
     force = activation * active + passive_force
-    reserve = torque - np.einsum("nmj,nm->nj", arms, force)
+    left = torque - np.einsum("nmj,nm->nj", arms, force)
+    reserve, unmet = np.where(reserved, left, 0.0), np.where(reserved, 0.0, left)
     return StaticOptimization(np.asarray(t, dtype=float), activation, force, reserve, np.asarray(torque, dtype=float),
-                              tuple(m.name for m in model.muscles), tuple(model.coordinates), runtime)
+                              tuple(m.name for m in model.muscles), tuple(model.coordinates), runtime, unmet,
+                              optimal_force, arms)
+
+
+def unmet_notes(so: StaticOptimization, units: tuple | None = None) -> list[str]:
+    """One text per coordinate whose torque the muscles leave unmet (beyond ``UNMET`` N m and
+    ``UNMET_SHARE`` of its torque) at some
+    sample: its peak unmet torque, the spans of time where it is unmet and the muscles at full
+    activation there that would help it ('elbow: 12.3 N m unmet at t 0.31-0.42 s, BIClong, BRA at
+    full activation'); ``units`` per coordinate ('N m' default, 'N' for a translation)."""
+    notes = []
+    for j, joint in enumerate(so.joints):
+        where = np.abs(so.unmet[:, j]) > UNMET + UNMET_SHARE * np.abs(so.torque[:, j])
+        if not where.any():
+            continue
+        spans = _spans(so.t, where)
+        unit = "N m" if units is None else units[j]
+        arms = so.moment_arms[where][:, :, j] * np.sign(so.unmet[where, j])[:, None]  # > 0: the muscle helps
+        full = (so.activation[where] >= 1.0 - 1e-9) & (arms > 0)
+        helping = (arms > 0).any(axis=0)
+        saturated = [m for i, m in enumerate(so.muscles) if full[:, i].any()]
+        if saturated:
+            tail = f"{', '.join(saturated)} at full activation"
+        elif helping.any():
+            tail = "the muscles that would help held back by the other coordinates"
+        else:
+            tail = "no muscle acts on it that way"
+        peak = np.abs(so.unmet[:, j]).max()
+        notes.append(f"{joint}: {peak:.3g} {unit} unmet at t {spans}, {tail}")
+    return notes
+
+
+def _spans(t: np.ndarray, where: np.ndarray, most: int = 3) -> str:
+    """'0.31-0.42 s' or '0.1-0.2, 0.5 and 0.8-0.9 s': the runs of samples where ``where`` holds."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], where.astype(int), [0]])))
+    runs = [(t[a], t[b - 1]) for a, b in zip(edges[::2], edges[1::2])]
+    texts = [f"{a:.3g}" if a == b else f"{a:.3g}-{b:.3g}" for a, b in runs[:most]]
+    texts += [f"{len(runs) - most} more spans"] if len(runs) > most else []
+    return (", ".join(texts[:-1]) + " and " + texts[-1] if len(texts) > 1 else texts[0]) + " s"

@@ -487,12 +487,14 @@ def test_the_readme_file_is_the_library_forearm(tmp_path):
 
 def test_the_readme_table_names_every_key():
     from fdbench.multibody.model import BODY_KEYS, FRAME_KEYS, JOINT_KEYS, LOAD_KEYS, MOTION_KEYS, TOP_KEYS
+    from fdbench.multibody.actuators import ACTUATOR_KEYS
     from fdbench.multibody.muscles import MUSCLE_KEYS
 
     documented = set(re.findall(r"^\| `([a-z_.]+)` \|", readme_section(), flags=re.MULTILINE))
     keys = set(TOP_KEYS) | {f"{section}.{key}" for section, keys in
                             (("bodies", BODY_KEYS), ("joints", JOINT_KEYS), ("loads", LOAD_KEYS),
-                             ("motions", MOTION_KEYS), ("frames", FRAME_KEYS), ("muscles", MUSCLE_KEYS))
+                             ("motions", MOTION_KEYS), ("frames", FRAME_KEYS), ("muscles", MUSCLE_KEYS),
+                             ("actuators", ACTUATOR_KEYS))
                             for key in keys}
     assert documented == keys
 

@@ -27,6 +27,7 @@ from fdbench.multibody.model_files import load_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import MinimumJerk
 
+from fdbench.multibody.actuators import Actuator
 from fdbench.multibody.osim import import_osim, to_osim
 from fdbench.multibody.simulation import simulate
 
@@ -493,9 +494,25 @@ def test_an_exported_model_has_opensim_s_inverse_dynamics_and_imports_back(tmp_p
     # a body's end point of natural coordinates is not OpenSim's: the import puts one only where needed
     assert [replace(b, end=None) for b in back.bodies] == [replace(b, end=None) for b in model.bodies]
     assert [replace(j, limits=None) for j in back.joints] == [replace(j, limits=None) for j in model.joints]
-    assert notes == (f"dropped {len(model.joints)} other force{'s' if len(model.joints) > 1 else ''} "
-                     "(CoordinateActuator): the imported model is driven by joint torques",)
+    # a model without [[actuators]] is written with one of 1 N m per joint, read back as its actuators
+    assert back.actuators == tuple(Actuator(f"{j}_actuator", j, 1.0) for j in model.coordinates) and notes == ()
     np.testing.assert_allclose(Engine(back).inverse_dynamics(z, zd, zdd), ours, rtol=0, atol=1e-9)
+
+
+def test_a_model_s_actuators_are_written_and_read_back_with_their_optimal_force(tmp_path):
+    """arm2 with an actuator on the elbow: export-osim writes it alone with its optimal force; a
+    second one on the elbow is left out with a note, an ActivationCoordinateActuator kept."""
+    model = replace(find_model("arm2"), actuators=(Actuator("elbow_motor", "elbow", 12.5),))
+    text = to_osim(model)
+    assert text.count("<CoordinateActuator ") == 1
+    extra = ('<CoordinateActuator name="again"><coordinate>elbow</coordinate><optimal_force>3</optimal_force>'
+             '</CoordinateActuator><ActivationCoordinateActuator name="hip"><coordinate>shoulder</coordinate>'
+             "<optimal_force>7</optimal_force></ActivationCoordinateActuator></objects></ForceSet>")
+    path = tmp_path / "arm2.osim"
+    path.write_text(text.replace("</objects></ForceSet>", extra))
+    back, notes = import_osim(path)
+    assert back.actuators == (Actuator("elbow_motor", "elbow", 12.5), Actuator("hip", "shoulder", 7.0))
+    assert notes == ("dropped coordinate actuators: 'again' ('elbow' already has one)",)
 
 
 def test_export_osim_writes_the_file_or_stdout_and_never_over_an_input(tmp_path):
