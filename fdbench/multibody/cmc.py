@@ -43,7 +43,7 @@ import numpy as np
 
 from .cmc_muscles import excitations_for, muscle_gains
 from .engine import Engine
-from .muscle import MIN_ACTIVATION
+from .muscle import L_OPT, L_SLACK, MIN_ACTIVATION
 from .muscle_paths import muscle_geometry
 from .simulation import STATUS_OF_CODE, HalfSteps, Simulation, _on_samples, half_steps, muscle_forces, muscle_start
 from .static_optimization import muscle_capacity, solve_sample
@@ -186,3 +186,15 @@ def _on_motion_samples(plant: Engine, motion, grid: HalfSteps, states, rates, ap
     result.activation = y[:, plant.n_state:plant.n_state + plant.n_muscles]
     result.muscle_force = muscle_forces(plant, z, zd, y[:, plant.n_state:])
     return result
+
+
+def warm_up(engine: Engine) -> None:
+    """Load (or compile) CMC's compiled parts for ``engine``'s muscles, so that a run's time excludes it."""
+    if not engine.n_muscles:
+        return
+    p, rows = engine.muscle_params, engine.tendon_row
+    states = np.full(engine.n_muscle_states, 0.1)
+    lengths = p[:, L_OPT] + p[:, L_SLACK]  # m
+    gain, passive = muscle_gains(states, lengths, np.zeros(engine.n_muscles), p, rows)
+    excitations_for(gain * 0.1 + passive, np.full(engine.n_muscles, 0.1), states, lengths, np.zeros(engine.n_muscles),
+                    1e-4, 2, p, rows)
