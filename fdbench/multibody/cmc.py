@@ -3,11 +3,11 @@
 
 At the start t of each control window of length T (the state there: coordinates q, rates q', the
 muscles' activations and compliant tendons' forces; q'' the accelerations the last window ended
-with), the muscles' forces are aimed at the window's middle, t_a = t + T/2 (``AIM``): held
-excitations make a force that changes steadily over the window equal its mean there. (OpenSim's
-CMC aims at t + T; with T = 0.01 s that made the motion lag where it speeds up and lead where it
-slows: 0.19 deg RMS against 0.11 on tests/methods/test_cmc.py's pin, 0.46 against 0.16 deg at
-arm26's elbow with rigid tendons.) With h = t_a - t:
+with), the muscles' forces are aimed at the window's end, t_a = t + T, as OpenSim's CMC aims them
+(``AIM``; aiming at the window's middle, where a force that changes steadily over the window
+equals its mean, tracked better with rigid tendons, 0.11 deg RMS against 0.19 on
+tests/methods/test_cmc.py's pin, and far worse with arm26's compliant ones, 7.3 deg against 0.41:
+their lag carries the force past its target). With h = t_a - t:
 
 1. the state predicted at t_a, q_a = q + h q' + h^2 q'' / 2, q'_a = q' + h q'';
 2. desired accelerations there, the motion's targets at t_a (OpenSim's CMC_Joint takes them at the
@@ -53,7 +53,7 @@ from .static_optimization import muscle_capacity, solve_sample
 
 # OpenSim's CMC examples' task gains (CMC_Joint kp, kv: critically damped, natural frequency 10 rad/s)
 # and default time window
-AIM = 0.5  # the share of a window after which its forces are aimed (RK4 steps rounded, at least one)
+AIM = 1.0  # the share of a window after which its forces are aimed (RK4 steps rounded, at least one)
 DEFAULT_KP, DEFAULT_KD, DEFAULT_WINDOW = 100.0, 20.0, 0.01  # 1/s^2, 1/s, s
 
 
