@@ -142,6 +142,8 @@ def _method_run(spec, on_evaluation=None, on_start=None):
     law, known = controller(spec), plan(spec)
     law.warm_up(known)
     body, desired, inverse, grid = _set_up(spec)
+    if hasattr(law, "run"):  # a controller that simulates the plant itself (cmc, window by window)
+        return _self_simulated(spec, law, known, body, desired, inverse, grid)
     if grid is not None:  # the plan's feedforward (eq. 3) on the half-step grid, kept by it
         known.feedforward()(grid.t)
     began = time.perf_counter()
@@ -155,7 +157,29 @@ def _method_run(spec, on_evaluation=None, on_start=None):
     record.update(torque=design.label, evaluations=1, runtime_s=runtime, controller=name, **design.fields)
     if name != "pd":
         record["controller_options"] = options_text(spec.method_options)
-    return outcome(spec, record, result, inverse)
+    done = outcome(spec, record, result, inverse)
+    if body.n_muscles:
+        done.record["message"] += (f"; torque-driven: the model's {body.n_muscles} muscles left out "
+                                   "(--controller cmc drives them)")
+    return done
+
+
+def _self_simulated(spec, law, known, body, desired, inverse, grid):
+    """A control run by a controller that simulates the plant itself (``law.run``: computed muscle
+    control), its fields and trajectory columns (each muscle's activation, excitation, force) added."""
+    if spec.integrator != "rk4":
+        raise ValueError(f"--controller {spec.controller}: muscles run on the compiled RK4 only, not "
+                         f"--integrator {spec.integrator}")
+    began = time.perf_counter()
+    result, fields, (columns, values) = law.run(known, body, desired, grid, spec.dt)
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    record.update(torque="reserves+muscles", evaluations=1, runtime_s=runtime, controller=spec.controller,
+                  controller_options=options_text(spec.method_options), **fields)
+    done = outcome(spec, record, result, inverse)
+    header, rows = done.table
+    done.table = (header + columns, np.column_stack([rows, values]))
+    return done
 
 
 def _set_up(spec):

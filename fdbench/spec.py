@@ -113,6 +113,7 @@ class RunSpec:
                 check_method_options(CONTROLLERS, self.controller, dict(self.method_options), "controller")
             law = run_inputs.controller(self)  # a ValueError names a bad option or gain
             law.check_model(run_inputs.nominal(self))  # one it cannot design for in reasonable time
+            law.check_run(run_inputs.nominal(self), run_inputs.motions(self)[0].duration, self.dt)
         if self.command == "peer":
             check_peer_spec(self)
         if self.command == "collocate":

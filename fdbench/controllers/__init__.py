@@ -1,6 +1,6 @@
 """Registry of controllers: ``CONTROLLERS[name]`` -> class; ``make_controller(name, **options)``."""
 
-from . import pd, computed_torque, lqr  # noqa: F401, I001  (registration; pd, the paper's, first)
+from . import pd, computed_torque, lqr, cmc  # noqa: F401, I001  (registration; pd, the paper's, first)
 from .base import CONTROLLERS, Controller, make_controller
 from ..registry import load_plugins
 

@@ -88,6 +88,10 @@ class Controller(ABC):
         """ValueError (one line) for a model (``multibody.model.Model``) whose design would
         take more time or memory than a run is allowed; checked before any work."""
 
+    def check_run(self, model, duration: float, dt: float) -> None:
+        """ValueError (one line) for settings that do not fit a run of ``model`` over ``duration`` s
+        with RK4 steps of about ``dt`` s; checked before any work."""
+
     def warm_up(self, plan: Plan) -> None:
         """Import or build what ``design`` needs, so that a run's timing excludes it."""
 

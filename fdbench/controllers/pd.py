@@ -34,9 +34,11 @@ class PD(Controller):
 
     command_line = {
         "kp": MethodOption("proportional gain, N m/rad, on every joint (default: the paper's 80 on the forearm; on another "
-                           "model 80 per 0.04 kg m^2 of each joint's inertia).", show_default=False),
+                           "model 80 per 0.04 kg m^2 of each joint's inertia); cmc: the tasks' kp, 1/s^2 (default "
+                           "100, OpenSim's CMC examples').", show_default=False),
         "kd": MethodOption("derivative gain, N m s/rad, on every joint (default: the paper's 0.3 on the forearm; on another "
-                           "model 0.3 per 0.04 kg m^2 of each joint's inertia).", show_default=False),
+                           "model 0.3 per 0.04 kg m^2 of each joint's inertia); cmc: the tasks' kv, 1/s (default 20).",
+                           show_default=False),
     }
 
     def __init__(self, kp: float | None = None, kd: float | None = None):

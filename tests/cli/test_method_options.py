@@ -166,7 +166,8 @@ def test_the_method_flags_are_those_the_registered_methods_declare():
             assert default == method_option.default, (name, option, default)
         return set(declared)
 
-    assert flags("control", CONTROLLERS) == {"kp", "kd", "bandwidth", "damping", "q_angle", "q_rate", "r_torque"}
+    assert flags("control", CONTROLLERS) == {"kp", "kd", "bandwidth", "damping", "q_angle", "q_rate", "r_torque",
+                                            "window", "reserve_optimal_force"}
     assert flags("optimize", TORQUES, OPTIMIZERS) >= {"hidden", "knots", "terms", "sigma0", "popsize"}
     for command in ("report", "study"):
         assert flags(command, TORQUES, OPTIMIZERS) >= {"hidden", "knots", "terms", "sigma0", "popsize"}

@@ -1,0 +1,89 @@
+"""Computed muscle control (``--controller cmc``) of a model with muscles: the muscles' excitations
+and one reserve torque per coordinate, found window by window (``fdbench.multibody.cmc``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..method_options import MethodOption
+from ..multibody import cmc
+from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive, per_joint
+
+# A compliant tendon's explicit form is stiff where its muscle is barely active (fdbench's arm26: RK4
+# at 1e-4 s fails within 0.9 s of its default motion under CMC, at 5e-5 s it runs): with compliant
+# tendons CMC steps at most this (s) whatever --dt, and says so in its record (``cmc_step_s``).
+COMPLIANT_MAX_STEP = 5e-5
+
+
+@CONTROLLERS.register("cmc")
+class CMC(Controller):
+    """Computed muscle control as OpenSim's CMC (Thelen and Anderson 2006): per control window of
+    ``window`` s, desired accelerations from the motion at the window's end with task gains ``kp``
+    (1/s^2) and ``kd`` (1/s) (OpenSim's CMC examples' 100 and 20: critically damped at 10 rad/s),
+    static optimisation of the muscles' activations and reserve torques (``reserve_optimal_force``
+    N m per unit control, one per coordinate) for the inverse-dynamics forces, then the excitations
+    that give those muscle forces at the window's end; see ``fdbench.multibody.cmc``."""
+
+    name = "cmc"
+    summary = ("computed muscle control of a model with muscles (Thelen and Anderson; OpenSim's CMCTool): per "
+               "window, static optimisation of the muscles and reserves for PD-corrected accelerations, then "
+               "the excitations that reach those forces")
+
+    command_line = {
+        "window": MethodOption("control window (look-ahead) T, s; OpenSim's CMC default 0.01.", default=None,
+                               show_default=False),
+        "reserve_optimal_force": MethodOption("optimal force of the reserve actuator of each coordinate, N m per "
+                                              "unit control (default 1).", show_default=False),
+    }
+
+    def __init__(self, kp: float = cmc.DEFAULT_KP, kd: float = cmc.DEFAULT_KD, window: float = cmc.DEFAULT_WINDOW,
+                 reserve_optimal_force: float = 1.0):
+        self.kp = check_non_negative("--kp", kp)  # 1/s^2
+        self.kd = check_non_negative("--kd", kd)  # 1/s
+        self.window = check_positive("--window", window)  # s
+        self.reserve_optimal_force = check_positive("--reserve-optimal-force", reserve_optimal_force)  # N m
+
+    def check_model(self, model) -> None:
+        if not model.muscles:
+            raise ValueError(f"--controller cmc: model {model.name!r} has no muscles ([[muscles]] in its file); "
+                             "use pd, computed-torque or lqr")
+
+    def check_run(self, model, duration: float, dt: float) -> None:
+        cmc.check_window(self.window, duration, self.step(model, dt))
+
+    @staticmethod
+    def step(model, dt: float) -> float:
+        """The RK4 step (s) CMC takes on ``model`` for a requested ``dt`` (s)."""
+        compliant = any(m.tendon == "compliant" for m in model.muscles)
+        return min(dt, COMPLIANT_MAX_STEP) if compliant else dt
+
+    def warm_up(self, plan: Plan) -> None:
+        cmc.warm_up(plan.engine)
+
+    def design(self, plan: Plan) -> Design:
+        raise NotImplementedError("cmc simulates window by window: use CMC.run")
+
+    def run(self, plan: Plan, plant, motion, grid, dt: float):
+        """The CMC run of ``plant`` (an Engine) along ``motion``: (Simulation, record fields, extra
+        trajectory columns (header, (n, k) values)). ``grid``: the motion's half steps for dt, used
+        unless compliant tendons take a shorter step."""
+        step = self.step(plan.model, dt)
+        done = cmc.computed_muscle_control(plant, motion, self.kp, self.kd, self.window, self.reserve_optimal_force,
+                                           step, nominal=plan.engine, grid=grid if step == dt else None)
+        result = done.simulation
+        reached = result.reached
+        per_reserve = done.reserve_rms()
+        muscles, joints = [m.name for m in plant.model.muscles], plan.joints
+        fields = {"reserve_rms_nm": float(np.sqrt(np.mean(per_reserve**2))),
+                  **per_joint("reserve_rms_nm", joints, per_reserve),
+                  "effort": float(np.mean(np.sum(result.activation[reached] ** 2, axis=1))) if reached.any() else np.nan,
+                  **{f"{m}_activation_mean": float(np.mean(result.activation[reached, i])) if reached.any() else np.nan
+                     for i, m in enumerate(muscles)},
+                  "cmc_window_s": done.window, "cmc_kp": self.kp, "cmc_kd": self.kd,
+                  "reserve_optimal_force": self.reserve_optimal_force, "cmc_step_s": step,
+                  "cmc_windows": done.windows_done}
+        header = [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")]
+        header += [f"{j}_reserve" for j in joints]
+        values = np.column_stack([np.stack([result.activation, result.excitation, result.muscle_force],
+                                           axis=-1).reshape(len(result.t), -1), done.reserve_on_samples])
+        return result, fields, (header, values)

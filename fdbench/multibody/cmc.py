@@ -1,0 +1,206 @@
+"""Computed muscle control (Thelen, Anderson and Delp 2003; Thelen and Anderson 2006; OpenSim's
+``CMCTool``) of a model with muscles along a desired motion, window by window.
+
+At the start t of each control window of length T (the state there: coordinates q, rates q', the
+muscles' activations and compliant tendons' forces; q'' the accelerations the last window ended
+with), the muscles' forces are aimed at the window's end, t_a = t + T, as OpenSim's CMC aims them
+(``AIM``; aiming at the window's middle, where a force that changes steadily over the window
+equals its mean, tracked better with rigid tendons, 0.11 deg RMS against 0.19 on
+tests/methods/test_cmc.py's pin, and far worse with arm26's compliant ones, 7.3 deg against 0.41:
+their lag carries the force past its target). With h = t_a - t:
+
+1. the state predicted at t_a, q_a = q + h q' + h^2 q'' / 2, q'_a = q' + h q'';
+2. desired accelerations there, the motion's targets at t_a (as OpenSim's CMC_Joint takes them),
+   the errors against the predicted state (Thelen and Anderson 2006, eq. 1, take them against the
+   state at t: on arm26 with rigid tendons that tracked within 0.59 deg RMS, against 0.35 here):
+   q''* = q''_d(t_a) + kd (q'_d(t_a) - q'_a) + kp (q_d(t_a) - q_a)   (kp 1/s^2, kd 1/s);
+3. the generalised forces tau (N m) that give q''* at the predicted state: the nominal model's
+   inverse dynamics;
+4. static optimisation (``static_optimization.solve_sample``, p = 2: the exact active-set QP) for
+   the muscles' controls c in [0, 1] and one reserve per coordinate (control r / rho, rho its optimal
+   force, ``reserve_strengths``): min sum c^2 + sum (r / rho)^2 subject to
+   sum_m arm_mj (c_m G_m + P_m) + r_j = tau_j, the moment arms and G_m, P_m (muscle m's force along
+   its path per unit activation and at zero activation, ``cmc_muscles.muscle_gains``) at the
+   predicted state; c is the activation, or for a compliant tendon (a - 0.01) / 0.99: its explicit
+   form acts as if the activation were at least ``muscle.MIN_ACTIVATION``;
+5. each muscle's constant excitation u in [0, 1] whose force at t_a is the one wanted, c G + P: the
+   muscle's own activation and tendon dynamics integrated by the simulation's RK4 steps, its path
+   moving at its current speed (``cmc_muscles.excitations_for``, as OpenSim's CMC solves for the
+   controls that give the optimal forces); 0 or 1 where the force is out of reach;
+6. the plant simulated over the window by the compiled RK4 (``Engine.simulate``) with those
+   excitations and the reserve torques held, the muscles' forces its own; the next window starts
+   from its end state.
+
+The run starts on the desired motion at t = 0, the activations those of static optimisation there
+(q''* = q''_d(0), rigid tendons) and compliant tendons at the fibres' static equilibrium
+(``simulation.muscle_start``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cmc_muscles import excitations_for, muscle_gains
+from .engine import Engine
+from .muscle import L_OPT, L_SLACK, MIN_ACTIVATION
+from .muscle_paths import muscle_geometry
+from .simulation import STATUS_OF_CODE, HalfSteps, Simulation, _on_samples, half_steps, muscle_forces, muscle_start
+from .static_optimization import muscle_capacity, solve_sample
+
+# OpenSim's CMC examples' task gains (CMC_Joint kp, kv: critically damped, natural frequency 10 rad/s)
+# and default time window
+AIM = 1.0  # the share of a window after which its forces are aimed (RK4 steps rounded, at least one)
+DEFAULT_KP, DEFAULT_KD, DEFAULT_WINDOW = 100.0, 20.0, 0.01  # 1/s^2, 1/s, s
+
+
+@dataclass
+class ComputedMuscleControl:
+    """A CMC run: ``simulation`` (on the motion's samples, with each muscle's activation, excitation
+    and force, the applied torques the reserves plus the muscles' generalised forces), per window its
+    start time ``window_t`` (s, (w,)), length ``window_s`` (s, (w,)), reserve torques ``reserve``
+    (N m, (w, J)) and excitations (w, M); the reserves and excitations held on the motion's samples
+    (``reserve_on_samples`` (n, J)); the windows run (``windows_done``)."""
+
+    simulation: Simulation
+    window_t: np.ndarray
+    window_s: np.ndarray
+    reserve: np.ndarray
+    excitation: np.ndarray
+    reserve_on_samples: np.ndarray
+    windows_done: int
+    window: float
+
+    def reserve_rms(self) -> np.ndarray:
+        """Each reserve's RMS torque over the windows run, weighted by their lengths (N m, (J,))."""
+        w = self.windows_done
+        if not w:
+            return np.full(self.reserve.shape[1], np.nan)
+        weights = self.window_s[:w] / self.window_s[:w].sum()
+        return np.sqrt(weights @ self.reserve[:w] ** 2)
+
+
+def reserve_strengths(model, optimal_force: float) -> np.ndarray:
+    """The reserves' optimal forces rho (N m per unit control; N for a translation), one per
+    coordinate of ``model``, shape (J,). ValueError for a value that is not finite and > 0."""
+    if not (math.isfinite(optimal_force) and optimal_force > 0):
+        raise ValueError(f"the reserves' optimal force must be a finite number > 0, not {optimal_force:g}")
+    return np.full(model.n_joints, float(optimal_force))
+
+
+def check_window(window: float, duration: float, step: float) -> None:
+    """ValueError (one line) for a control window (s) that is not positive, is longer than the motion
+    (``duration`` s) or shorter than one RK4 step (``step`` s)."""
+    if not (math.isfinite(window) and window > 0):
+        raise ValueError(f"--window must be a positive number of seconds, not {window:g}")
+    if window > duration + 1e-12:
+        raise ValueError(f"--window {window:g} s is longer than the motion ({duration:g} s)")
+    if window < step * (1 - 1e-9):
+        raise ValueError(f"--window {window:g} s is shorter than one RK4 step (--dt {step:g} s)")
+
+
+def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: float = DEFAULT_KD,
+                            window: float = DEFAULT_WINDOW, reserve_optimal_force: float = 1.0, dt: float = 1e-3,
+                            nominal: Engine | None = None, grid: HalfSteps | None = None) -> ComputedMuscleControl:
+    """CMC of ``plant`` (an Engine of a model with muscles) along ``motion`` (``simulation``'s motion)
+    with the task gains kp (1/s^2) and kd (1/s), control windows of ``window`` s (a whole number of
+    RK4 steps of about ``dt`` s: the nearest, at least one; the last window ends with the motion),
+    reserves of ``reserve_optimal_force`` N m per unit control. ``nominal``: the believed model
+    (inverse dynamics, muscle paths and capacities; None: the plant). ``grid``: the motion's
+    ``HalfSteps`` for dt (made here if None). ValueError for bad settings."""
+    nominal = plant if nominal is None else nominal
+    if not plant.n_muscles or nominal.n_muscles != plant.n_muscles:
+        raise ValueError(f"computed muscle control needs a model with muscles; {plant.model.name!r} has none")
+    for name, gain in (("kp", kp), ("kd", kd)):
+        if not (math.isfinite(gain) and gain >= 0):
+            raise ValueError(f"{name} must be a non-negative finite number, got {gain}")
+    grid = half_steps(motion, dt) if grid is None else grid
+    check_window(window, motion.duration, grid.step)
+    rho = reserve_strengths(nominal.model, reserve_optimal_force)
+    began = time.perf_counter()
+    per_window = max(1, int(round(window / grid.step)))
+    bounds = list(range(0, grid.n, per_window)) + [grid.n]
+    n_windows, J, M, S = len(bounds) - 1, plant.n_joints, plant.n_muscles, plant.n_state
+    states, rates = (np.full((grid.n + 1, S + plant.n_muscle_states), np.nan) for _ in range(2))
+    applied = np.full((grid.n + 1, J), np.nan)
+    reserve, excitation = np.full((n_windows, J), np.nan), np.full((n_windows, M), np.nan)
+    floor = np.where(nominal.tendon_row >= 0, MIN_ACTIVATION, 0.0)  # the activation a muscle acts at, at least
+    activation = _start_activations(nominal, grid, rho)
+    control, u = np.clip((activation - floor) / (1.0 - floor), 0.0, 1.0), activation
+    start = plant.state_from_joints(grid.ref[0], grid.refd[0])
+    y, zdd = np.concatenate([start, muscle_start(plant, start, activation)]), grid.refdd[0]
+    code, done, worst, windows_done, zeros = 0, 0, 0.0, 0, {}
+    for w in range(n_windows):
+        i0, i1 = bounds[w], bounds[w + 1]
+        n = i1 - i0
+        k = i0 + max(1, int(round(AIM * n)))  # the step the forces are aimed at
+        h = grid.t_steps[k] - grid.t_steps[i0]
+        z, zd = plant.joints_from_state(y[:S])
+        z_aim, zd_aim = z + h * zd + 0.5 * h * h * zdd, zd + h * zdd  # the state predicted at t_a
+        wanted = grid.refdd[2 * k] + kd * (grid.refd[2 * k] - zd_aim) + kp * (grid.ref[2 * k] - z_aim)
+        tau = nominal.inverse_torques(z_aim, zd_aim, wanted, grid.t_steps[k])
+        lengths, arms = muscle_geometry(nominal.model, z_aim, nominal.muscle_paths)
+        gain, passive = muscle_gains(y[S:], lengths, -arms @ zd_aim, nominal.muscle_params, nominal.tendon_row)
+        passive, gain = passive + floor * gain, gain * (1.0 - floor)
+        moment_gain = arms.T * gain  # (J, M): N m per unit control
+        need = tau - arms.T @ passive
+        control = solve_sample(moment_gain, need, rho, 2.0, control)
+        reserve[w] = need - moment_gain @ control
+        lengths, arms = muscle_geometry(nominal.model, z, nominal.muscle_paths)
+        u = excitation[w] = excitations_for(gain * control + passive, u, y[S:], lengths, -arms @ zd, grid.step, k - i0,
+                                            plant.muscle_params, plant.tendon_row)
+        if n not in zeros:
+            zeros[n] = np.zeros((2 * n + 1, J))
+        result = plant.simulate(y, grid.step, n, np.broadcast_to(reserve[w], (2 * n + 1, J)), zeros[n], zeros[n],
+                                zeros[n], 0.0, 0.0, excitation_half=np.broadcast_to(u, (2 * n + 1, M)))
+        reached = slice(i0, i0 + result.steps_done + 1)
+        for whole, part in ((states, result.states), (rates, result.rates), (applied, result.applied)):
+            whole[reached] = part[:result.steps_done + 1]
+        worst, done, code, windows_done = max(worst, result.max_violation), i0 + result.steps_done, result.status, w + 1
+        if code != 0:
+            break
+        y, zdd = result.states[-1], plant.joints_from_state(result.rates[-1][:S])[1]
+    simulation = _on_motion_samples(plant, motion, grid, states, rates, applied, done, code, worst)
+    window_t = grid.t_steps[bounds[:-1]]
+    held = np.clip(np.searchsorted(window_t, motion.samples, side="right") - 1, 0, n_windows - 1)
+    simulation.excitation, reserve_on_samples = excitation[held], reserve[held]
+    simulation.excitation[~simulation.reached], reserve_on_samples[~simulation.reached] = np.nan, np.nan
+    simulation.runtime_s = time.perf_counter() - began
+    return ComputedMuscleControl(simulation, window_t, np.diff(grid.t_steps[bounds]), reserve, excitation,
+                                 reserve_on_samples, windows_done, per_window * grid.step)
+
+
+def _start_activations(nominal: Engine, grid: HalfSteps, rho: np.ndarray) -> np.ndarray:
+    """The activations (M,) of static optimisation on the desired motion at t = 0 (rigid tendons)."""
+    z, zd, zdd = grid.ref[0], grid.refd[0], grid.refdd[0]
+    tau = nominal.inverse_torques(z, zd, zdd, 0.0)
+    lengths, arms = muscle_geometry(nominal.model, z, nominal.muscle_paths)
+    active, passive = muscle_capacity(nominal.muscle_params, lengths[None], (-arms @ zd)[None])
+    return solve_sample(arms.T * active[0], tau - arms.T @ passive[0], rho, 2.0)
+
+
+def _on_motion_samples(plant: Engine, motion, grid: HalfSteps, states, rates, applied, done: int, code: int,
+                       worst: float) -> Simulation:
+    """The run's Simulation on the motion's samples, the muscles' activations and forces included."""
+    y, torque = _on_samples(grid.t_steps, grid.every, states, rates, applied, done, motion.samples)
+    z, zd = plant.joints_from_state(y[:, :plant.n_state])
+    result = Simulation(motion.samples, z, zd, y[:, :plant.n_state], torque, done * motion.duration / grid.n,
+                        STATUS_OF_CODE[code], worst)
+    result.activation = y[:, plant.n_state:plant.n_state + plant.n_muscles]
+    result.muscle_force = muscle_forces(plant, z, zd, y[:, plant.n_state:])
+    return result
+
+
+def warm_up(engine: Engine) -> None:
+    """Load (or compile) CMC's compiled parts for ``engine``'s muscles, so that a run's time excludes it."""
+    if not engine.n_muscles:
+        return
+    p, rows = engine.muscle_params, engine.tendon_row
+    states = np.full(engine.n_muscle_states, 0.1)
+    lengths = p[:, L_OPT] + p[:, L_SLACK]  # m
+    gain, passive = muscle_gains(states, lengths, np.zeros(engine.n_muscles), p, rows)
+    excitations_for(gain * 0.1 + passive, np.full(engine.n_muscles, 0.1), states, lengths, np.zeros(engine.n_muscles),
+                    1e-4, 2, p, rows)
