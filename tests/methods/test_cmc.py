@@ -103,9 +103,9 @@ def test_cmc_tracks_a_swing_the_muscles_can_make_with_negligible_reserves(run, s
     assert result.success and run.windows_done == 50
     error = np.degrees(result.z[:, 0] - swing(swing.samples)[0][:, 0])
     # the task's error dynamics e'' + 20 e' + 100 e = 0 (a double pole at 10 rad/s) driven by the
-    # muscles' forces, which reach their targets only at each window's end: 0.19 deg RMS and 0.34 deg
-    # at most (measured; lagging as the swing speeds up, leading as it slows) on 28.6 deg in 0.5 s
-    assert np.sqrt(np.mean(error**2)) < 0.25 and np.abs(error).max() < 0.45
+    # muscles' forces, which reach their targets only at each window's end: the product's goal for
+    # CMC, within 0.5 deg RMS (measured 0.19 deg RMS, 0.34 deg at most, on 28.6 deg in 0.5 s)
+    assert np.sqrt(np.mean(error**2)) < 0.5 and np.abs(error).max() < 1.0
     assert np.all((result.activation >= 0.0) & (result.activation <= 1.0))
     assert np.all((run.excitation >= 0.0) & (run.excitation <= 1.0))
     assert run.reserve_rms()[0] < 1e-3  # N m, beside gravity's 1.5 to 3 N m
@@ -137,7 +137,7 @@ def test_fdbench_control_cmc_records_the_reserves_effort_and_each_muscle(pin_fil
     assert done.exit_code == 0, done.output
     record = json.loads(done.stdout)
     assert record["controller"] == "cmc" and record["status"] == "success"
-    assert record["rmse_rot_deg"] < 0.25 and record["reserve_rms_nm"] < 1e-3
+    assert record["rmse_rot_deg"] < 0.5 and record["reserve_rms_nm"] < 1e-3
     rows = np.loadtxt(trajectory, delimiter=",", skiprows=1)
     header = trajectory.read_text().splitlines()[0].split(",")
     assert header[-7:] == [f"{m}_{s}" for m in ("flexor", "extensor") for s in ("activation", "excitation", "force")] \
