@@ -53,19 +53,20 @@ def start(engine: Engine, excitation0: np.ndarray) -> np.ndarray:
 
 
 def test_polynomial_path_hessians_are_the_slopes_of_the_moment_arms(engines):
-    """d2l/dq2 of arm26's six polynomial paths equals minus the central differences (step 1e-6 rad)
-    of muscle_geometry's moment arms, and is symmetric."""
+    """d2l/dq2 of arm26's six polynomial paths equals minus the central differences (step 1e-4 rad:
+    measured 1e-9 off, the step's truncation; the fitted polynomials of degree up to 20 cancel, so
+    that smaller steps drown in rounding) of muscle_geometry's moment arms, and is symmetric."""
     model = engines["rigid"].model
     layout, rng = muscle_layout(model), np.random.default_rng(26)
     for _ in range(4):
         q = rng.uniform([-0.3, 0.1], [1.2, 2.0])
         out = np.zeros((6, 2, 2))
         hessians(q, layout, out, np.zeros((2, 2, MAX_POWER + 1)))
-        h = 1e-6
+        h = 1e-4
         slopes = np.stack([-(muscle_geometry(model, q + h * e)[1] - muscle_geometry(model, q - h * e)[1]) / (2 * h)
                            for e in np.eye(2)], axis=-1)
         assert np.abs(out).max() > 1e-2
-        np.testing.assert_allclose(out, slopes, atol=1e-7 * np.abs(out).max())
+        np.testing.assert_allclose(out, slopes, rtol=0, atol=1e-6 * np.abs(out).max())
         np.testing.assert_array_equal(out, np.swapaxes(out, 1, 2))
 
 
@@ -141,7 +142,8 @@ def test_coordinates_derivatives_by_excitations_equal_central_differences(engine
     h = 1e-4
     expected = np.stack([(z_of(h * unit) - z_of(-h * unit)) / (2 * h) for unit in np.eye(4)], axis=-1)
     assert np.all(np.abs(expected).max(axis=(0, 1)) > 1e-3)  # every parameter moves the arm
-    np.testing.assert_allclose(dz, expected, rtol=0, atol=1e-5 * np.abs(expected).max(axis=(0, 1)))
+    relative = np.abs(dz - expected).max(axis=(0, 1)) / np.abs(expected).max(axis=(0, 1))
+    assert relative.max() < 1e-5, relative
 
 
 def test_muscles_with_paths_of_points_are_refused_for_sensitivities():
