@@ -1,9 +1,9 @@
 """The cost of one RK4 step of the exact sensitivities with muscle states on the library's arm26
 (six muscles, polynomial paths, compliant tendons as in the library, and all rigid), against the
 same kernel without muscles (arm26's mechanics under torques: the torque-driven gradient), with
-the same number of parameters P, and against the plain RK4 (no sensitivities) with and without
-muscles. Kernel calls alone (compiled before the clock), best of ROUNDS x CALLS; the ratios are
-within one run on the same machine.
+the same number of parameters P, and against the plain RK4 (no sensitivities, ``Engine.simulate``)
+with and without muscles. Compiled before the clock, best of ROUNDS x CALLS; the ratios are within
+one run on the same machine.
 
 Run: python benchmarks/bench_muscle_sensitivity.py [--steps N] [--params P]
 """
@@ -17,7 +17,6 @@ import numpy as np
 from fdbench.models import find_model
 from fdbench.multibody import kernels
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.layout import PD, Law
 from fdbench.multibody.model import model_from_dict, to_dict
 from fdbench.multibody.simulation import muscle_start
 from timing import best_of
@@ -42,7 +41,6 @@ def costs(engine: Engine, n: int, P: int, dt: float = 1e-3) -> dict:
     y_mech = engine.state_from_joints(Z0, ZD0)
     y_full = np.concatenate([y_mech, muscle_start(engine, y_mech, excitation[0])])
     muscles = engine.muscles_at(excitation)
-    width = y_full.shape[0]
     out = {}
     for name, y0, cols, excited in (("without", y_mech, np.arange(P) % J, None),
                                     ("with", y_full, J + np.arange(P) % M, muscles)):
@@ -55,16 +53,11 @@ def costs(engine: Engine, n: int, P: int, dt: float = 1e-3) -> dict:
                                     excited)
         run()
         out[f"sensitivity {name} muscles"] = best_of(run, ROUNDS, CALLS) / n
-    law = Law(zero, zero, zero, zero, np.zeros(J), np.zeros(J), PD, np.zeros((1, J, 2 * J)))
-    plain = (np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state)), np.empty((n + 1, J)))
-    full = (np.empty((n + 1, width)), np.empty((n + 1, width)), np.empty((n + 1, J)))
-    args = (engine.layout, None, None, None, engine.layout, None, None)
-
-    def rk4():
-        kernels.rk4(y_mech, dt, n, 0, law, *args, *plain)
+    def rk4():  # Engine.simulate: the compiled RK4 as every command calls it
+        engine.simulate(y_mech, dt, n, zero, zero, zero, zero, 0.0, 0.0)
 
     def rk4_muscles():
-        kernels.rk4_muscles(y_full, dt, n, 0, law, *args, muscles, *full)
+        engine.simulate(y_full, dt, n, zero, zero, zero, zero, 0.0, 0.0, excitation_half=excitation)
     for name, fn in (("rk4 without muscles", rk4), ("rk4 with muscles", rk4_muscles)):
         fn()
         out[name] = best_of(fn, ROUNDS, CALLS) / n
