@@ -284,7 +284,7 @@ class TrackingProblem(ShootingProblem):
         p = np.asarray(p, dtype=float)
         G, joint = self.torque_jacobian(p)
         engine = self.engine
-        y0, dt, n, tau, ref, refd, every, angles_ref, weight, *layout = engine.population_args(
+        y0, dt, n, tau, ref, refd, every, angles_ref, weight, *layout, _ = engine.population_args(
             *self._kernel_start, self.torques_on_grid(p)[None], *self._kernel_rest)
         residual, residual_gradient = self._residual_costs(tau)[0], self._residual_gradient(tau[0], G, joint)
         states, rates = np.empty((n + 1, engine.n_state)), np.empty((n + 1, engine.n_state))
@@ -294,27 +294,37 @@ class TrackingProblem(ShootingProblem):
 
         _, done = rk4_sensitivity(y0, dt, n, tau[0], ref, refd, G, joint, every, *layout, states, rates, applied, dz)
         value = tracking_objective(states, done, every, angles_ref, n, weight, engine.layout)
-        m = done // every + 1
-        error = engine.joints_from_state(states[: done + 1 : every])[0] - angles_ref[:m]
-        gradient = np.zeros(len(p))
-        translation = np.array([kind == "translation" for kind in engine.model.coordinate_kinds])
-        for columns, unit in ((~translation, np.degrees(1.0)), (translation, sim.CM_PER_M)):
-            if not columns.any():
-                continue
-            scaled = unit * error[:, columns]
-            rmse = float(np.sqrt(np.mean(scaled**2)))
-            if not (math.isfinite(rmse) and rmse > 0):
-                continue
-            with np.errstate(all="ignore"):
-                part = unit * np.einsum("kj,kjq->q", scaled, dz[:m][:, columns]) / (scaled.size * rmse)
-            if np.all(np.isfinite(part)):
-                gradient += part
-        return float(value + residual), gradient + residual_gradient
+        return float(value + residual), tracking_gradient(engine, states, done, every, angles_ref, dz) + residual_gradient
 
     def value_and_gradient_scaled(self, x) -> tuple[float, np.ndarray]:
         """``value_and_gradient`` on the scaled parameters x = p / scale."""
         f, g = self.value_and_gradient(np.asarray(x, dtype=float) * self.scale)
         return f, g * self.scale
+
+
+def tracking_gradient(engine, states, done: int, every: int, angles_ref, dz) -> np.ndarray:
+    """d/dp of eq. 18's tracking term, shape (P,), from a simulation's states (n + 1, width) reached
+    up to step ``done`` and the coordinates' derivatives dz (samples, J, P) at its samples (every
+    ``every``-th step; desired coordinates angles_ref (samples, J)): over the m samples reached, for
+    the angles (deg) and, on a model with translations, the translations (cm), each with e its errors
+    (m x J_kind, in its unit u per rad or m), d RMSE / d p = sum e u dz / dp / (m J_kind RMSE)
+    (zero where an RMSE is zero or not finite)."""
+    m = done // every + 1
+    error = engine.joints_from_state(states[: done + 1 : every, :engine.n_state])[0] - angles_ref[:m]
+    gradient = np.zeros(dz.shape[2])
+    translation = np.array([kind == "translation" for kind in engine.model.coordinate_kinds])
+    for columns, unit in ((~translation, np.degrees(1.0)), (translation, sim.CM_PER_M)):
+        if not columns.any():
+            continue
+        scaled = unit * error[:, columns]
+        rmse = float(np.sqrt(np.mean(scaled**2)))
+        if not (math.isfinite(rmse) and rmse > 0):
+            continue
+        with np.errstate(all="ignore"):
+            part = unit * np.einsum("kj,kjq->q", scaled, dz[:m][:, columns]) / (scaled.size * rmse)
+        if np.all(np.isfinite(part)):
+            gradient += part
+    return gradient
 
 
 def _interp(grid, values, t):

@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from .jit import njit
-from .multibody.kernels import rk4
-from .multibody.layout import AT_PARENT_X, COLUMN, FREE, KI, OFFSET, OK, PARENT, PD, Law
+from .multibody.kernels import rk4, rk4_muscles
+from .multibody.layout import AT_PARENT_X, COLUMN, FREE, KI, OFFSET, OK, PARENT, PD, Law, Muscles
 from .population import DEGREES_PER_RADIAN, Population
 
 from .multibody.simulation import CM_PER_M
@@ -53,15 +53,18 @@ def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight,
 
 @njit(nogil=True)
 def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, model, paths, free, loads,
-                   states, rates, applied, objective, candidate, stride, step, budget):
+                   muscles, states, rates, applied, objective, candidate, stride, step, budget):
     """Open-loop RK4 (``rk4`` in PD mode with zero gains) and eq. 18 (``tracking_objective``) for
     candidates candidate, candidate + stride, ... of tau (N m, shape (lam, 2 n_steps + 1, J)), at
     most ``budget`` steps in all: the first candidate resumes at step ``step`` (its states up to
     there in the work buffers, from the call before), each chunk from the last state of the one
     before at the same grid row, so the numbers are those of one call. ref, refd: the half-step
     references (unused by an open loop but for the layout of its call); model, paths, free, loads:
-    the engine's (``Engine.population_args``); states (n+1, n_state), rates (n+1, n_state), applied
-    (n+1, J): this thread's work buffers, reused candidate after candidate; objective (lam,):
+    the engine's (``Engine.population_args``); muscles: None, or a ``layout.Muscles`` whose
+    excitations are the candidates' (lam, 2 n_steps + 1, M), each candidate then run by
+    ``rk4_muscles`` on its own (y0 and the states with the muscle states after [q, q']); states
+    (n+1, n_state), rates (n+1, n_state), applied (n+1, J): this thread's work buffers, reused
+    candidate after candidate; objective (lam,):
     filled for the candidates finished. Returns the (candidate, step) to resume at (a candidate past
     the last: all done). Runs without the GIL."""
     J = tau.shape[2]
@@ -70,8 +73,14 @@ def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_w
         n = min(budget, n_steps - step)
         y = y0 if step == 0 else states[step].copy()
         law = Law(tau[candidate], ref, refd, ref, zero, zero, PD, no_gains)
-        code, done, _ = rk4(y, dt, n, 2 * step, law, model, paths, free, loads, model, paths, loads,
-                            states[step:step + n + 1], rates[step:step + n + 1], applied[step:step + n + 1])
+        if muscles is None:
+            code, done, _ = rk4(y, dt, n, 2 * step, law, model, paths, free, loads, model, paths, loads,
+                                states[step:step + n + 1], rates[step:step + n + 1], applied[step:step + n + 1])
+        else:
+            own = Muscles(muscles.paths, muscles.params, muscles.tendon_row, muscles.excitation[candidate])
+            code, done, _ = rk4_muscles(y, dt, n, 2 * step, law, model, paths, free, loads, model, paths, loads, own,
+                                        states[step:step + n + 1], rates[step:step + n + 1],
+                                        applied[step:step + n + 1])
         step, budget = step + done, budget - max(done, 1)  # steps run: a failing candidate costs few
         if code != OK or step == n_steps:
             objective[candidate] = tracking_objective(states, step, every, angles_ref, n_steps, penalty_weight,

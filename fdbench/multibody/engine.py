@@ -790,14 +790,17 @@ class Engine:
                             self.free, loads, *believed, out, applied)
         return out, applied
 
-    def population_args(self, y0, dt, n_steps, tau, ref_half, refd_half, every, angles_ref, penalty_weight) -> tuple:
+    def population_args(self, y0, dt, n_steps, tau, ref_half, refd_half, every, angles_ref, penalty_weight,
+                        excitation=None) -> tuple:
         """The arguments of ``fdbench.tracking.rk4_candidates`` before its work buffers, for
         ``fdbench.population.Population(rk4_candidates, n_steps, engine.population_widths)(lam, args)``:
         the start y0 (n_state,), the step dt (s), the candidates' torques tau (N m, shape (lam,
         2 n_steps + 1, J)), the half-step references ref_half (rad), refd_half (rad/s) (2 n_steps + 1,
         J), eq. 18's samples every ``every``-th step with the desired coordinates angles_ref (rad,
-        shape (n_steps // every + 1, J)) and its penalty weight (deg), then the kernels' layout and
-        the loads on the grid."""
+        shape (n_steps // every + 1, J)) and its penalty weight (deg), then the kernels' layout, the
+        loads on the grid and the muscles: None, or with ``excitation`` (the candidates' excitations
+        in [0, 1], shape (lam, 2 n_steps + 1, M)) their ``layout.Muscles`` (y0 then has n_state +
+        n_muscle_states entries and the work buffers ``population_widths_with(True)``)."""
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(every, (int, np.integer)) and 1 <= every <= n_steps):
@@ -809,14 +812,29 @@ class Engine:
         samples = (n_steps // every + 1, self.n_joints)
         if np.shape(angles_ref) != samples:
             raise ValueError(f"angles_ref must have shape {samples}, got {np.shape(angles_ref)}")
-        return (self._vector(y0, self.n_state, "the initial state"), float(dt), int(n_steps),
+        muscles = None
+        if excitation is not None:
+            shape = (np.shape(tau)[0], rows, self.n_muscles)
+            if not self.n_muscles or np.shape(excitation) != shape:
+                raise ValueError(f"excitations must have shape {shape} (candidates, the half-step grid, muscles), "
+                                 f"got {np.shape(excitation)}")
+            muscles = Muscles(self.muscle_paths, self.muscle_params, self.tendon_row,
+                              np.ascontiguousarray(excitation, dtype=float))
+        width = self.n_state + (0 if muscles is None else self.n_muscle_states)
+        return (self._vector(y0, width, "the initial state"), float(dt), int(n_steps),
                 np.ascontiguousarray(tau, dtype=float), ref, refd, int(every), np.array(angles_ref, dtype=float),
-                float(penalty_weight), *self.kernel_args(), self.loads_at(np.arange(rows) * (0.5 * float(dt))))
+                float(penalty_weight), *self.kernel_args(), self.loads_at(np.arange(rows) * (0.5 * float(dt))),
+                muscles)
 
     @property
     def population_widths(self) -> tuple:
         """The trailing shapes of ``rk4_candidates``' work buffers: states, rates, applied."""
-        return (self.n_state,), (self.n_state,), (self.n_joints,)
+        return self.population_widths_with(False)
+
+    def population_widths_with(self, muscles: bool) -> tuple:
+        """``population_widths`` of candidates without or with (``muscles``) the muscle states."""
+        width = self.n_state + (self.n_muscle_states if muscles else 0)
+        return (width,), (width,), (self.n_joints,)
 
     def _half_step_arrays(self, rows: int, copy: bool = True, **arrays) -> list[np.ndarray]:
         """Each array as a contiguous float array of shape (rows, J) (a copy, or with copy False a

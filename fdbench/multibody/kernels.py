@@ -53,8 +53,9 @@ import numpy as np
 from ..jit import njit
 from .inverse import N_KIN, _inverse, _no_loads, _spline_at
 from .inverse import inverse_torques  # noqa: F401 - eq. 3, one of the kernels
-from .muscle import SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, compliant_tendon, rigid_tendon_force
-from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_length, _powers
+from .muscle import (F0, SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, activation_partials, compliant_tendon,
+                     compliant_tendon_partials, rigid_tendon_force, rigid_tendon_partials)
+from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_hessian, _polynomial_length, _powers
 from .muscles import MAX_POWER
 from .tangents import (FORM, LAMBDA, MAX_ENTRIES, N_AUX, N_STAGE, PIVOT, VELOCITY_TERM, _load_in_ground,
                        _stage_sensitivity, _stage_tangents)
@@ -63,6 +64,10 @@ from .layout import (ALPHA, AT_PARENT_X, AT_PARENT_Y, BASE_1, BASE_2, BETA, COLU
                      PARENT, PD, SINGULAR, SWITCH_COS, TWO_XI_OMEGA, VIOLATION, Law)
 
 CHECK, ASSEMBLE = 0, 1  # what the driver's ``constraints`` does with each row
+# a muscle's partial derivatives at a stage (the sensitivities' ``muscle_part`` columns): its force
+# (N) and dF/da, dF/dl (N/m), dF/dv (N s/m), dF/df_T; its activation rate's d/de, d/da; a compliant
+# tendon's rate of f_T: d/da, d/df_T, d/dl, d/dv
+(M_FORCE, M_FA, M_FL, M_FV, M_FT, M_AE, M_AA, M_RA, M_RT, M_RL, M_RV, N_MUSCLE_PART) = range(12)
 
 
 @njit
@@ -92,9 +97,12 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     parameter q moving coordinate param_col[q]'s generalised force; dz (n_steps // every + 1, J, P)
     the derivatives of the coordinates at every ``every``-th step reached.
 
-    With muscles not None (``layout.Muscles``; dz None), the state is [q, q'] followed by the
-    muscles' activations and their compliant tendons' normalised forces (``rk4_muscles``), and each
-    stage adds the muscles' generalised forces (moment arms times force) to the law's torque.
+    With muscles not None (``layout.Muscles``), the state is [q, q'] followed by the muscles'
+    activations and their compliant tendons' normalised forces (``rk4_muscles``), and each stage
+    adds the muscles' generalised forces (moment arms times force) to the law's torque. With dz
+    too, the sensitivities carry the muscle states (their polynomial paths' Hessians, the curves'
+    and the activation dynamics' derivatives), and a parameter q with param_col[q] = J + m moves
+    muscle m's excitation by G[:, q] instead of a generalised force.
 
     Speed: the stage code is written once, as closures over this function's arrays (numba inlines
     them without the reference counting that array arguments of inlined functions cost at every
@@ -161,8 +169,17 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     P = 0 if G is None else G.shape[1]
     ns = 0 if dz is None else n
     S, U, acc, dk = np.zeros((ns, P)), np.zeros((ns, P)), np.zeros((ns, P)), np.zeros((ns, P))
-    jac, moved = np.zeros((ns // 2, n)), np.zeros((ns // 2, P))
-    force_rows, solved_rows = np.zeros((ns // 2, J)), np.zeros((ns // 2, J))
+    n_qs = 0 if dz is None else n_q
+    jac, moved = np.zeros((n_qs, n)), np.zeros((n_qs, P))
+    force_rows, solved_rows = np.zeros((n_qs, J)), np.zeros((n_qs, J))
+    # the muscles' sensitivities: per muscle its partials, path Hessian (J, J) and Hessian times q';
+    # the directions' coordinates and rates dzq, dzdq (J, P), the muscles' generalised forces' change
+    # dtm (J, P) and on the body angles muscle_dtau (the banded solve's)
+    n_mt = 0 if dz is None else n_muscles
+    muscle_part, muscle_hess = np.zeros((n_mt, N_MUSCLE_PART)), np.zeros((n_mt, J, J))
+    muscle_hzd = np.zeros((n_mt, J))
+    dzq, dzdq, dtm = np.zeros((J if n_mt else 0, P)), np.zeros((J if n_mt else 0, P)), np.zeros((J if n_mt else 0, P))
+    muscle_dtau = np.zeros((n_b if n_mt else 0, P))
     n_kept = 0 if dz is None else phi_rows.shape[0]  # per constraint row: its entries, Hessian, term
     row_count, row_term = np.zeros(n_kept, dtype=np.int64), np.zeros(n_kept)
     row_idx, row_val = np.zeros((n_kept, MAX_ENTRIES), dtype=np.int64), np.zeros((n_kept, MAX_ENTRIES))
@@ -173,7 +190,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     torque_sign = np.zeros((nb_s, P))  # the banded tangents: coordinate -> generalised forces of the body angles
     tangent_work = (np.empty((nb_s, N_STAGE)), np.empty(n_p if dz is not None else 0), np.empty((nb_s, P)),
                     np.empty((n_p if dz is not None else 0, P)), np.empty((nb_s, P)), np.empty((nb_s, P)),
-                    np.empty((nb_s, P)), np.empty((ns, P)))
+                    np.empty((nb_s, P)), dk)
     factor = (K, rhs, aux)
     banded_layout = (pt_index, pt_fixed, body_pts, body_geom, joint_parent, lin_idx, lin_coef, lin_const, first, base,
                      q_ext, params)
@@ -188,9 +205,10 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 force_rows[body_int[k, KI] + 1, col + 2] += 1.0
         if paths is None and free is None and loads is None:  # the banded solve: a coordinate per body
             for q in range(P):
-                torque_sign[param_col[q], q] = 1.0
-                if joint_parent[param_col[q]] >= 0:
-                    torque_sign[joint_parent[param_col[q]], q] = -1.0
+                if param_col[q] < J:  # not an excitation
+                    torque_sign[param_col[q], q] = 1.0
+                    if joint_parent[param_col[q]] >= 0:
+                        torque_sign[joint_parent[param_col[q]], q] = -1.0
 
     def point(b):
         """x, y, x', y' of body b's point i in the stage's state (fixed: its position, zero velocity)."""
@@ -546,6 +564,65 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                                                         p[TAU_DEACT], p[SMOOTHING])
             for j in range(J):
                 torque[j] += arm[j] * force
+            if dz is not None:  # the partials the sensitivities need (``muscle_tangents``)
+                part = muscle_part[m]
+                if geometry.kind[m] != POINTS:  # a path of points: refused by ``rk4_sensitivity``
+                    _polynomial_hessian(geometry, m, muscle_hess[m], muscle_powers)
+                for i in range(J):
+                    total = 0.0
+                    for k in range(J):
+                        total += muscle_hess[m, k, i] * zd[k]
+                    muscle_hzd[m, i] = total
+                part[M_FORCE] = force
+                if tendon < 0:
+                    part[M_FA], part[M_FL], part[M_FV] = rigid_tendon_partials(activation, length, lengthening, p)
+                    part[M_FT] = 0.0
+                else:
+                    part[M_FA], part[M_FL], part[M_FV], part[M_FT] = 0.0, 0.0, 0.0, p[F0]
+                    part[M_RA], part[M_RT], part[M_RL], part[M_RV] = compliant_tendon_partials(
+                        activation, state[after + tendon], length, lengthening, p)
+                part[M_AE], part[M_AA] = activation_partials(muscles.excitation[half, m], activation, p[TAU_ACT],
+                                                             p[TAU_DEACT], p[SMOOTHING])
+
+    def muscle_tangents(half):
+        """The muscles' part of the stage's tangents in the directions U: the change of their
+        generalised forces into dtm (J, P) (d(arm F) = -H dz F + arm dF, with dl = -arm . dz and
+        dv = (H q') . dz - arm . dz'), and their states' rows of dk (an excitation parameter moving its
+        muscle's activation rate), from the partials ``muscle_forces`` kept."""
+        for k in range(n_b):  # the directions' coordinates and rates
+            p, col = body_int[k, PARENT], body_int[k, COLUMN]
+            for q in range(P):
+                dzq[col, q] = U[n_p + k, q] - (U[n_p + p, q] if p >= 0 else 0.0)
+                dzdq[col, q] = U[n_q + n_p + k, q] - (U[n_q + n_p + p, q] if p >= 0 else 0.0)
+                if body_int[k, FREE] == 1:
+                    ki = body_int[k, KI]
+                    dzq[col + 1, q], dzq[col + 2, q] = U[ki, q], U[ki + 1, q]
+                    dzdq[col + 1, q], dzdq[col + 2, q] = U[n_q + ki, q], U[n_q + ki + 1, q]
+        dtm[:, :] = 0.0
+        after = 2 * n_q
+        for m in range(n_muscles):
+            part, arm, hess, tendon = muscle_part[m], muscle_arms[m], muscle_hess[m], muscles.tendon_row[m]
+            force = part[M_FORCE]
+            for q in range(P):
+                dl, dv = 0.0, 0.0
+                for j in range(J):
+                    dl -= arm[j] * dzq[j, q]
+                    dv += muscle_hzd[m, j] * dzq[j, q] - arm[j] * dzdq[j, q]
+                da = U[after + m, q]
+                df = part[M_FL] * dl + part[M_FV] * dv + part[M_FA] * da
+                if tendon >= 0:
+                    dt_ = U[after + tendon, q]
+                    df += part[M_FT] * dt_
+                    dk[after + tendon, q] = part[M_RA] * da + part[M_RT] * dt_ + part[M_RL] * dl + part[M_RV] * dv
+                rate = part[M_AA] * da
+                if param_col[q] == J + m:
+                    rate += part[M_AE] * G[half, q]
+                dk[after + m, q] = rate
+                for j in range(J):
+                    bend = 0.0
+                    for i in range(J):
+                        bend += hess[j, i] * dzq[i, q]
+                    dtm[j, q] += arm[j] * df - bend * force
 
     # ------------------------------------------------------------------ either solve
     def check():
@@ -687,13 +764,33 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                             U[m, q], acc[m, q] = S[m, q], 0.0
                 weight = 1.0 if stage == 0 or stage == 3 else 2.0
                 next_step = 0.5 * dt if stage < 2 else (dt if stage == 2 else 0.0)
+                if muscles is not None:
+                    muscle_tangents(half)
                 if paths is None and free is None and loads is None:
-                    _stage_sensitivity(state, ks[stage], S, U, acc, weight, next_step, half, G, torque_sign, factor,
-                                       tangent_work, banded_layout)
+                    if muscles is None:
+                        _stage_sensitivity(state, ks[stage], S, U, acc, weight, next_step, half, G, torque_sign, None,
+                                           factor, tangent_work, banded_layout)
+                    else:  # the muscles' generalised forces on the body angles: + on the child, - on the parent
+                        muscle_dtau[:, :] = 0.0
+                        for k in range(n_b):
+                            col = body_int[k, COLUMN]
+                            for q in range(P):
+                                muscle_dtau[k, q] += dtm[col, q]
+                                if joint_parent[k] >= 0:
+                                    muscle_dtau[joint_parent[k], q] -= dtm[col, q]
+                        _stage_sensitivity(state, ks[stage], S, U, acc, weight, next_step, half, G, torque_sign,
+                                           muscle_dtau, factor, tangent_work, banded_layout)
                 else:
                     _stage_tangents(state, rhs, A, dense_first, values_at(load_values, half), load_frames, body_int,
                                     body_float, path_body, params, kept_rows, path_kept, force_rows, G[half],
                                     param_col, U, jac, solved_rows, moved, dk)
+                    if muscles is not None:  # A^-1 (force_rows dtm): the muscles' generalised forces' change
+                        for r in range(n_q):
+                            for q in range(P):
+                                total = 0.0
+                                for j in range(J):
+                                    total += solved_rows[r, j] * dtm[j, q]
+                                dk[n_q + r, q] += total
                     for m in range(n):
                         for q in range(P):
                             acc[m, q] += weight * dk[m, q]
@@ -788,18 +885,35 @@ def constraint_violation(y, model, paths, free, loads, residuals):
 
 
 @njit(error_model="numpy")
+def _rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model, paths, free, loads, states, rates,
+                     applied, dz, muscles):
+    """``rk4_sensitivity``'s compiled kernel (muscles None or a ``layout.Muscles``)."""
+    J = tau.shape[1]
+    zero = np.zeros(J)
+    law = Law(tau, ref, refd, ref, zero, zero, PD, np.zeros((1, J, 2 * J)))
+    code, done, _ = _drive(y0, dt, n_steps, 0, law, model, paths, free, loads, model, paths, loads,
+                           (states, rates, applied), None, G, param_col, every, dz, muscles)
+    return code, done
+
+
 def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model, paths, free, loads, states, rates,
-                    applied, dz):
+                    applied, dz, muscles=None):
     """Open-loop RK4 (``rk4`` in PD mode with zero gains, as the population runs it) and the forward
     sensitivities of the coordinates (``fdbench.multibody.sensitivity``): tau, ref, refd (rows, J)
     on the half-step grid, G (rows, P) d tau / d p, parameter q moving coordinate param_col[q]'s
     generalised force only (N m or N per parameter unit). The initial state does not depend on p.
     Fills states, rates, applied as ``rk4`` does and dz (n_steps // every + 1, J, P), the derivative
     of the coordinates (rad; m for a free joint's x and y, per parameter unit) at every ``every``-th
-    step reached. Returns (status, steps_done)."""
-    J = tau.shape[1]
-    zero = np.zeros(J)
-    law = Law(tau, ref, refd, ref, zero, zero, PD, np.zeros((1, J, 2 * J)))
-    code, done, _ = _drive(y0, dt, n_steps, 0, law, model, paths, free, loads, model, paths, loads,
-                           (states, rates, applied), None, G, param_col, every, dz, None)
-    return code, done
+    step reached. Returns (status, steps_done).
+
+    ``muscles`` (``layout.Muscles``, its excitations (rows, M) on the grid; None: none): the state
+    (n_state + muscle states) and its sensitivities carry the muscles' activations and compliant
+    tendons' forces as ``rk4_muscles`` does, and a parameter q with param_col[q] = J + m moves
+    muscle m's excitation by G[:, q] (per parameter unit) instead of a generalised force.
+    ValueError for a muscle with a path of points (its path's Hessian is not derived: polynomial
+    paths only)."""
+    if muscles is not None and np.any(muscles.paths.kind == POINTS):
+        raise ValueError("exact sensitivities with muscles need polynomial muscle paths "
+                         "(the path Hessian of a path of points is not derived)")
+    return _rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model, paths, free, loads, states,
+                            rates, applied, dz, muscles)

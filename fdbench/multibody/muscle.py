@@ -218,3 +218,75 @@ def compliant_tendon(activation, tendon_force, length, lengthening, p):
     tendon_velocity = lengthening - fiber_velocity / cos_alpha
     return (p[F0] * tendon_force,
             tendon_velocity / p[L_SLACK] * tendon_force_length_derivative(norm_tendon, p[TENDON_STRAIN]))
+
+
+# ---------------------------------------------------------------------- partial derivatives (exact sensitivities)
+
+
+@njit(error_model="numpy")
+def activation_partials(excitation, activation, tau_act, tau_deact, smoothing):
+    """(d/de, d/da) of ``activation_derivative`` (1/s per unit excitation, per unit activation)."""
+    z = 0.5 + 1.5 * activation
+    w = excitation - activation
+    th = math.tanh(smoothing * w)
+    f = 0.5 * th
+    rate = (f + 0.5) / (tau_act * z) + (0.5 - f) * z / tau_deact
+    f_w = 0.5 * smoothing * (1.0 - th * th)
+    rate_f = 1.0 / (tau_act * z) - z / tau_deact
+    rate_z = -(f + 0.5) / (tau_act * z * z) + (0.5 - f) / tau_deact
+    return rate + w * rate_f * f_w, -rate + w * (1.5 * rate_z - rate_f * f_w)
+
+
+@njit(error_model="numpy")
+def rigid_tendon_partials(activation, length, lengthening, p):
+    """(dF/da (N), dF/dl (N/m), dF/dv (N s/m)) of ``rigid_tendon_force`` at the same arguments."""
+    along = length - p[L_SLACK]
+    l_m, cos_alpha = fiber_length(along, p[L_OPT], p[ALPHA_OPT])
+    height = p[L_OPT] * math.sin(p[ALPHA_OPT])
+    cos_l = height * height / (l_m * l_m * l_m)  # d cos(alpha) / d length
+    norm_length, speed = l_m / p[L_OPT], p[V_MAX] * p[L_OPT]
+    norm_l = cos_alpha / p[L_OPT]
+    velocity = lengthening * cos_alpha / speed
+    velocity_l = lengthening * cos_l / speed
+    f_l, f_v = active_force_length(norm_length, p[WIDTH]), force_velocity(velocity)
+    f_l1, f_v1 = active_force_length_derivative(norm_length, p[WIDTH]), force_velocity_derivative(velocity)
+    inner = activation * f_l * f_v + passive_force_length(norm_length, p[PASSIVE_STRAIN]) + p[DAMPING] * velocity
+    inner_l = (activation * f_l1 * f_v * norm_l + activation * f_l * f_v1 * velocity_l
+               + passive_force_length_derivative(norm_length, p[PASSIVE_STRAIN]) * norm_l + p[DAMPING] * velocity_l)
+    return (p[F0] * cos_alpha * f_l * f_v, p[F0] * (inner_l * cos_alpha + inner * cos_l),
+            p[F0] * cos_alpha * (activation * f_l * f_v1 + p[DAMPING]) * cos_alpha / speed)
+
+
+@njit(error_model="numpy")
+def compliant_tendon_partials(activation, tendon_force, length, lengthening, p):
+    """(d/da, d/df_T, d/dl (1/m), d/dv (s/m)) of ``compliant_tendon``'s rate of the normalised tendon
+    force (1/s) at the same arguments (its force, F0 f_T, has d/df_T = F0 alone). Below
+    MIN_ACTIVATION the rate does not depend on the activation."""
+    strain, k = p[TENDON_STRAIN], tendon_stiffness(p[TENDON_STRAIN])
+    norm_tendon = tendon_force_length_inverse(tendon_force, strain)
+    tendon_f = 1.0 / (k * (tendon_force + C3))  # d norm_tendon / d f_T
+    l_m, cos_alpha = fiber_length(length - p[L_SLACK] * norm_tendon, p[L_OPT], p[ALPHA_OPT])
+    height = p[L_OPT] * math.sin(p[ALPHA_OPT])
+    cos_x = height * height / (l_m * l_m * l_m)  # d cos(alpha) / d (the fibre's length along the path)
+    norm_length = l_m / p[L_OPT]
+    norm_x = cos_alpha / p[L_OPT]
+    active = max(activation, MIN_ACTIVATION)
+    active_a = 1.0 if activation > MIN_ACTIVATION else 0.0
+    f_l = active_force_length(norm_length, p[WIDTH])
+    numerator = tendon_force / cos_alpha - passive_force_length(norm_length, p[PASSIVE_STRAIN])
+    denominator = active * f_l
+    multiplier = numerator / denominator
+    numerator_x = (-tendon_force / (cos_alpha * cos_alpha) * cos_x
+                   - passive_force_length_derivative(norm_length, p[PASSIVE_STRAIN]) * norm_x)
+    denominator_x = active * active_force_length_derivative(norm_length, p[WIDTH]) * norm_x
+    multiplier_x = (numerator_x - multiplier * denominator_x) / denominator
+    speed = p[V_MAX] * p[L_OPT]
+    fiber_velocity = force_velocity_inverse(multiplier) * speed
+    velocity_m = math.cosh((multiplier - D4) / D1) / (D1 * D2) * speed  # d fiber_velocity / d multiplier
+    tendon_velocity = lengthening - fiber_velocity / cos_alpha
+    tv_x = -velocity_m * multiplier_x / cos_alpha + fiber_velocity * cos_x / (cos_alpha * cos_alpha)
+    tv_m = -velocity_m / cos_alpha
+    slope = tendon_force_length_derivative(norm_tendon, strain) / p[L_SLACK]
+    tv_f = tv_x * (-p[L_SLACK] * tendon_f) + tv_m / (cos_alpha * denominator)
+    return (slope * tv_m * (-multiplier * active_a * f_l / denominator),
+            slope * tv_f + tendon_velocity * slope * k * tendon_f, slope * tv_x, slope)

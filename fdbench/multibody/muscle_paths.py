@@ -279,3 +279,56 @@ def _polynomial_length(layout, m, arm, table):
         arm[columns[m, 0]] -= slope_first
     arm[columns[m, last]] -= slope_last
     return total
+
+
+@njit(error_model="numpy", inline="always")
+def _power_factor(table, j, power, order):
+    """d^order/dq_j^order of q_j^power (order 0, 1, 2) from ``_powers``' table."""
+    if order == 0:
+        return table[j, 0, power]
+    if order == 1:
+        return table[j, 1, power]
+    return power * (power - 1) * table[j, 0, power - 2] if power >= 2 else 0.0
+
+
+@njit(error_model="numpy", inline="always")
+def _polynomial_hessian(layout, m, hess, table):
+    """The Hessian d2l/dq2 (m per rad^2; hess (J, J), overwritten) of polynomial muscle m's length,
+    line by line as ``_polynomial_length`` (table: ``_powers``')."""
+    columns, powers, coefficient = layout.columns, layout.powers, layout.coefficient
+    hess[:, :] = 0.0
+    last = 0
+    while last + 1 < MAX_COORDINATES and columns[m, last + 1] >= 0:
+        last += 1
+    for line in range(layout.rows[m, 0], layout.rows[m, 1]):
+        dense = coefficient[layout.lines[line, 0]:layout.lines[line, 1]]
+        inner0 = inner1 = inner2 = 0.0  # the last coordinate's polynomial and its two derivatives
+        for p in range(dense.shape[0]):
+            inner0 += dense[p] * _power_factor(table, columns[m, last], p, 0)
+            inner1 += dense[p] * _power_factor(table, columns[m, last], p, 1)
+            inner2 += dense[p] * _power_factor(table, columns[m, last], p, 2)
+        for a in range(last + 1):
+            for b in range(a, last + 1):
+                value = 1.0
+                for k in range(last + 1):
+                    order = (1 if k == a else 0) + (1 if k == b else 0)
+                    if k == last:
+                        value *= inner0 if order == 0 else (inner1 if order == 1 else inner2)
+                    else:
+                        value *= _power_factor(table, columns[m, k], powers[line, k], order)
+                hess[columns[m, a], columns[m, b]] += value
+                if a != b:
+                    hess[columns[m, b], columns[m, a]] += value
+
+
+@njit(error_model="numpy")
+def hessians(q, layout, out, table):
+    """The Hessians d2l/dq2 (m per rad^2) of the polynomial muscle paths of ``layout`` at the
+    coordinates q (J,) into out (M, J, J) (zero for a path of points: not derived); table
+    (J, 2, MAX_POWER + 1) scratch (``_powers``)."""
+    _powers(q, layout, table)
+    for m in range(layout.kind.shape[0]):
+        if layout.kind[m] == POINTS:
+            out[m] = 0.0
+        else:
+            _polynomial_hessian(layout, m, out[m], table)

@@ -24,6 +24,14 @@ every constraint row contributes through its Hessian and third derivative on its
 and point turn and move with; D is solved with the stage's own Cholesky factor and applied to all
 P directions at once (a matrix product), about 4 n_state^2 P flops per stage. The two derivations
 agree on pin joints to 1e-9 (``tests/test_sensitivity_dense.py``).
+
+Muscles (``rk4_sensitivity``'s ``muscles``): the state and S carry the activations and compliant
+tendons' forces. Each stage forms the change of the muscles' generalised forces in every direction,
+-H dq F + arm dF (H the path's Hessian, exact for polynomial paths; dF from the curves' partials at
+the stage), adds it to the generalised forces' change of either derivation above, and the muscle
+states' own rows (activation dynamics, the tendon's rate) from their partials; an excitation
+parameter enters its muscle's activation row. Paths of points are refused (their Hessian is not
+derived). ``tests/engine/test_muscle_sensitivity.py`` checks it against central differences.
 """
 
 from __future__ import annotations

@@ -169,12 +169,14 @@ def _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, param
 
 
 @njit(error_model="numpy", inline="always")
-def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign, work, scratch, layout):
+def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign, muscle_dtau, work, scratch, layout):
     """The tangents K_s of the stage at the state y (derivative k) for every parameter, from their
     inputs U (n_state, P) (the tangents of the stage's state): acc += weight K_s, then
     U = S + next_step K_s (the next stage's input). ``work`` holds the stage's factor and
     multipliers (``_drive``'s K, rhs, aux); G[half, q] is d tau / d p_q (N m per parameter unit), which
-    moves the generalised force of body b's angle by torque_sign[b, q] G[half, q]; layout: the
+    moves the generalised force of body b's angle by torque_sign[b, q] G[half, q]; muscle_dtau
+    (n_b, P): the muscles' change of those forces, added (None without muscles; the muscle states'
+    rows of dk, beyond the mechanical ones, are the caller's); layout: the
     penalty layout (``rk4``'s order); scratch: values, inv_diag, dtau, dr, dlam, dpivot,
     dca, dk of ``_stage_values`` and ``_tangents``."""
     K, x, aux = work[0], work[1], work[2]
@@ -184,6 +186,10 @@ def _stage_sensitivity(y, k, S, U, acc, weight, next_step, half, G, torque_sign,
     for b in range(torque_sign.shape[0]):
         for q in range(torque_sign.shape[1]):
             dtau[b, q] = torque_sign[b, q] * G[half, q]
+    if muscle_dtau is not None:
+        for b in range(torque_sign.shape[0]):
+            for q in range(torque_sign.shape[1]):
+                dtau[b, q] += muscle_dtau[b, q]
     _tangents(U, dtau, pt_index, body_pts, lin_idx, lin_coef, first, base, params, K, values, inv_diag, dr, dlam,
               dpivot, dca, dk)
     for m in range(S.shape[0]):
@@ -335,8 +341,8 @@ def _stage_tangents(state, x, L, first, values, load_int, body_int, body_float, 
     solution x = the accelerations): the top rows U's rates, the bottom A^-1 (D U + b_tau g) with D
     built from the loads (values (L, N_LOAD) at the stage) and the constraint rows the assembly
     kept (``rows``, path_kept), b_tau = force_rows (n_q, J) and g (P,) = d tau / d p at the stage,
-    parameter q moving coordinate param_col[q]. jac (n_q, n_state), solved_rows (n_q, J), moved
-    (n_q, P): scratch."""
+    parameter q moving coordinate param_col[q] (none for param_col[q] >= J: an excitation, whose
+    rows are the caller's). jac (n_q, n_state), solved_rows (n_q, J), moved (n_q, P): scratch."""
     n_q = L.shape[0]
     n_p = n_q - body_int.shape[0]
     jac[:] = 0.0
@@ -350,7 +356,9 @@ def _stage_tangents(state, x, L, first, values, load_int, body_int, body_float, 
     _solve_cholesky(L, first, jac)
     _solve_cholesky(L, first, solved_rows)
     np.dot(jac, U, moved)
+    n_forces = force_rows.shape[1]
     for r in range(n_q):
         for q in range(U.shape[1]):
             dk[r, q] = U[n_q + r, q]
-            dk[n_q + r, q] = moved[r, q] + solved_rows[r, param_col[q]] * g[q]
+            c = param_col[q]
+            dk[n_q + r, q] = moved[r, q] + solved_rows[r, c] * g[q] if c < n_forces else moved[r, q]
