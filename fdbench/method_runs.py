@@ -241,7 +241,7 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
     if excitation is not None and compliant and done.record.get("status") == "nonfinite":
         done.record["message"] = (f"{done.record.get('message', '')}; compliant tendons near slack are stiff "
                                   f"({', '.join(compliant[:3])}{', ...' if len(compliant) > 3 else ''}): try a "
-                                  f"smaller --dt than {spec.dt:g} s (arm26 needs about 1e-4 s)")
+                                  f"smaller --dt than {spec.dt:g} s")
     if excitation is not None:  # each muscle's activation, excitation and force (N) beside the joints
         muscles = [m.name for m in engine(spec).model.muscles]
         header, rows = done.table
