@@ -102,9 +102,9 @@ def test_the_two_setup_lines_are_the_install_and_the_tests_ci_runs():
     lang, body = code_blocks(README.split("\n## ", 1)[0])[0]
     lines = body.strip().splitlines()
     venv = "python3 -m venv .venv && . .venv/bin/activate && "
-    assert lines == [venv + "pip install . && fdbench report", venv + "pip install '.[test]' && pytest -q"]
+    assert lines == [venv + "pip install . && fdbench report", venv + "pip install '.[test]' && pytest -q -n 2"]
     ci = (ROOT / ".ci" / "run").read_text()
-    for step in ("python3 -m venv .venv", ". .venv/bin/activate", "pip install --quiet '.[test]'", "pytest -q"):
+    for step in ("python3 -m venv .venv", ". .venv/bin/activate", "pip install --quiet '.[test]'", "pytest -q -n 2"):
         assert step in ci
 
 

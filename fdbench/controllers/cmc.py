@@ -1,5 +1,6 @@
 """Computed muscle control (``--controller cmc``) of a model with muscles: the muscles' excitations
-and one reserve torque per coordinate, found window by window (``fdbench.multibody.cmc``)."""
+and the reserve torques (the model's actuators, else one per coordinate), found window by window
+(``fdbench.multibody.cmc``)."""
 
 from __future__ import annotations
 
@@ -20,8 +21,9 @@ class CMC(Controller):
     """Computed muscle control as OpenSim's CMC (Thelen and Anderson 2006): per control window of
     ``window`` s, desired accelerations from the motion at the window's end with task gains ``kp``
     (1/s^2) and ``kd`` (1/s) (OpenSim's CMC examples' 100 and 20: critically damped at 10 rad/s),
-    static optimisation of the muscles' activations and reserve torques (``reserve_optimal_force``
-    N m per unit control, one per coordinate) for the inverse-dynamics forces, then the excitations
+    static optimisation of the muscles' activations and reserve torques (the model's actuators, each
+    of its optimal force or ``reserve_optimal_force`` N m per unit control; a model without
+    actuators: one per coordinate, default 1) for the inverse-dynamics forces, then the excitations
     that give those muscle forces at the window's end; see ``fdbench.multibody.cmc``."""
 
     name = "cmc"
@@ -32,16 +34,19 @@ class CMC(Controller):
     command_line = {
         "window": MethodOption("control window (look-ahead) T, s; OpenSim's CMC default 0.01.", default=None,
                                show_default=False),
-        "reserve_optimal_force": MethodOption("optimal force of the reserve actuator of each coordinate, N m per "
-                                              "unit control (default 1).", show_default=False),
+        "reserve_optimal_force": MethodOption("optimal force of every reserve, N m per unit control (default: "
+                                              "each of the model's [[actuators]] its own; without actuators 1 per "
+                                              "coordinate). A coordinate without an actuator has no reserve: the "
+                                              "torque its muscles miss is reported unmet.", show_default=False),
     }
 
     def __init__(self, kp: float = cmc.DEFAULT_KP, kd: float = cmc.DEFAULT_KD, window: float = cmc.DEFAULT_WINDOW,
-                 reserve_optimal_force: float = 1.0):
+                 reserve_optimal_force: float | None = None):
         self.kp = check_non_negative("--kp", kp)  # 1/s^2
         self.kd = check_non_negative("--kd", kd)  # 1/s
         self.window = check_positive("--window", window)  # s
-        self.reserve_optimal_force = check_positive("--reserve-optimal-force", reserve_optimal_force)  # N m
+        self.reserve_optimal_force = (None if reserve_optimal_force is None  # N m; None: the model's actuators
+                                      else check_positive("--reserve-optimal-force", reserve_optimal_force))
 
     def check_model(self, model) -> None:
         if not model.muscles:
@@ -72,16 +77,23 @@ class CMC(Controller):
                                            step, nominal=plan.engine, grid=grid if step == dt else None)
         result = done.simulation
         reached = result.reached
-        per_reserve = done.reserve_rms()
+        per_reserve, rho = done.reserve_rms(), cmc.reserve_strengths(plan.model, self.reserve_optimal_force)
         muscles, joints = [m.name for m in plant.model.muscles], plan.joints
-        fields = {"reserve_rms_nm": float(np.sqrt(np.mean(per_reserve**2))),
+        reserved = rho > 0
+        fields = {"reserve_rms_nm": float(np.sqrt(np.mean(per_reserve[reserved] ** 2))) if reserved.any() else 0.0,
                   **per_joint("reserve_rms_nm", joints, per_reserve),
                   "effort": float(np.mean(np.sum(result.activation[reached] ** 2, axis=1))) if reached.any() else np.nan,
                   **{f"{m}_activation_mean": float(np.mean(result.activation[reached, i])) if reached.any() else np.nan
                      for i, m in enumerate(muscles)},
                   "cmc_window_s": done.window, "cmc_kp": self.kp, "cmc_kd": self.kd,
-                  "reserve_optimal_force": self.reserve_optimal_force, "cmc_step_s": step,
+                  "reserve_optimal_force": (float(rho[0]) if reserved.all() and np.all(rho == rho[0])
+                                            else "per actuator (see reserves)"),
+                  "cmc_step_s": step,
                   "cmc_windows": done.windows_done}
+        if not reserved.all():  # the torque left unmet where a coordinate has no reserve
+            per_unmet = done.unmet_rms()
+            fields["unmet_rms_nm"] = float(np.sqrt(np.mean(per_unmet[~reserved] ** 2)))
+            fields.update(per_joint("unmet_rms_nm", joints, np.where(reserved, 0.0, per_unmet)))
         header = [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")]
         header += [f"{j}_reserve" for j in joints]
         values = np.column_stack([np.stack([result.activation, result.excitation, result.muscle_force],

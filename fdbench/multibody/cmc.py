@@ -17,8 +17,10 @@ their lag carries the force past its target). With h = t_a - t:
 3. the generalised forces tau (N m) that give q''* at the predicted state: the nominal model's
    inverse dynamics;
 4. static optimisation (``static_optimization.solve_sample``, p = 2: the exact active-set QP) for
-   the muscles' controls c in [0, 1] and one reserve per coordinate (control r / rho, rho its optimal
-   force, ``reserve_strengths``): min sum c^2 + sum (r / rho)^2 subject to
+   the muscles' controls c in [0, 1] and the reserves (control r / rho, rho its optimal force,
+   ``reserve_strengths``: the model's actuators as static optimisation takes them; a coordinate
+   without one has a reserve of ``static_optimization.NO_RESERVE`` of its strongest muscle's torque
+   whose torque is left unmet, not applied): min sum c^2 + sum (r / rho)^2 subject to
    sum_m arm_mj (c_m G_m + P_m) + r_j = tau_j, the moment arms and G_m, P_m (muscle m's force along
    its path per unit activation and at zero activation, ``cmc_muscles.muscle_gains``) at the
    predicted state; c is the activation, or for a compliant tendon (a - 0.01) / 0.99: its explicit
@@ -49,7 +51,8 @@ from .engine import Engine
 from .muscle import L_OPT, L_SLACK, MIN_ACTIVATION
 from .muscle_paths import muscle_geometry
 from .simulation import STATUS_OF_CODE, HalfSteps, Simulation, _on_samples, half_steps, muscle_forces, muscle_start
-from .static_optimization import muscle_capacity, solve_sample
+from .actuators import optimal_forces
+from .static_optimization import NO_RESERVE, muscle_capacity, solve_sample
 
 # OpenSim's CMC examples' task gains (CMC_Joint kp, kv: critically damped, natural frequency 10 rad/s)
 # and default time window
@@ -62,8 +65,9 @@ class ComputedMuscleControl:
     """A CMC run: ``simulation`` (on the motion's samples, with each muscle's activation, excitation
     and force, the applied torques the reserves plus the muscles' generalised forces), per window its
     start time ``window_t`` (s, (w,)), length ``window_s`` (s, (w,)), reserve torques ``reserve``
-    (N m, (w, J)) and excitations (w, M); the reserves and excitations held on the motion's samples
-    (``reserve_on_samples`` (n, J)); the windows run (``windows_done``)."""
+    (N m, (w, J); 0 on a coordinate without a reserve), the torque the muscles left unmet there
+    (``unmet``, N m, (w, J); 0 elsewhere) and excitations (w, M); the reserves and excitations held
+    on the motion's samples (``reserve_on_samples`` (n, J)); the windows run (``windows_done``)."""
 
     simulation: Simulation
     window_t: np.ndarray
@@ -73,22 +77,40 @@ class ComputedMuscleControl:
     reserve_on_samples: np.ndarray
     windows_done: int
     window: float
+    unmet: np.ndarray
 
     def reserve_rms(self) -> np.ndarray:
         """Each reserve's RMS torque over the windows run, weighted by their lengths (N m, (J,))."""
+        return self._rms(self.reserve)
+
+    def unmet_rms(self) -> np.ndarray:
+        """Each coordinate's RMS torque left unmet over the windows run (N m, (J,))."""
+        return self._rms(self.unmet)
+
+    def _rms(self, per_window: np.ndarray) -> np.ndarray:
         w = self.windows_done
         if not w:
-            return np.full(self.reserve.shape[1], np.nan)
+            return np.full(per_window.shape[1], np.nan)
         weights = self.window_s[:w] / self.window_s[:w].sum()
-        return np.sqrt(weights @ self.reserve[:w] ** 2)
+        return np.sqrt(weights @ per_window[:w] ** 2)
 
 
-def reserve_strengths(model, optimal_force: float) -> np.ndarray:
-    """The reserves' optimal forces rho (N m per unit control; N for a translation), one per
-    coordinate of ``model``, shape (J,). ValueError for a value that is not finite and > 0."""
-    if not (math.isfinite(optimal_force) and optimal_force > 0):
+def reserve_strengths(model, optimal_force: float | None = None) -> np.ndarray:
+    """The reserves' optimal forces rho (N m per unit control; N for a translation) per coordinate of
+    ``model``, shape (J,), 0 where a coordinate has none: its actuators' (``optimal_force`` for every
+    one of them if given), a model without actuators one per coordinate of ``optimal_force``
+    (default 1). ValueError for a value that is not finite and > 0."""
+    if optimal_force is not None and not (math.isfinite(optimal_force) and optimal_force > 0):
         raise ValueError(f"the reserves' optimal force must be a finite number > 0, not {optimal_force:g}")
-    return np.full(model.n_joints, float(optimal_force))
+    return np.array(optimal_forces(model, optimal_force), dtype=float)
+
+
+def _weights(rho: np.ndarray, moment_gain: np.ndarray) -> np.ndarray:
+    """The reserves' optimal forces for the QP (J,): rho, and on a coordinate without a reserve
+    ``NO_RESERVE`` of its strongest muscle's torque (N m per unit control, ``moment_gain`` (J, M))."""
+    if (rho > 0).all():
+        return rho
+    return np.where(rho > 0, rho, NO_RESERVE * np.maximum(np.abs(moment_gain).max(axis=1, initial=0.0), 1.0))
 
 
 def check_window(window: float, duration: float, step: float) -> None:
@@ -103,12 +125,13 @@ def check_window(window: float, duration: float, step: float) -> None:
 
 
 def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: float = DEFAULT_KD,
-                            window: float = DEFAULT_WINDOW, reserve_optimal_force: float = 1.0, dt: float = 1e-3,
+                            window: float = DEFAULT_WINDOW, reserve_optimal_force: float | None = None,
+                            dt: float = 1e-3,
                             nominal: Engine | None = None, grid: HalfSteps | None = None) -> ComputedMuscleControl:
     """CMC of ``plant`` (an Engine of a model with muscles) along ``motion`` (``simulation``'s motion)
     with the task gains kp (1/s^2) and kd (1/s), control windows of ``window`` s (a whole number of
     RK4 steps of about ``dt`` s: the nearest, at least one; the last window ends with the motion),
-    reserves of ``reserve_optimal_force`` N m per unit control. ``nominal``: the believed model
+    the reserves of ``reserve_strengths(model, reserve_optimal_force)``. ``nominal``: the believed model
     (inverse dynamics, muscle paths and capacities; None: the plant). ``grid``: the motion's
     ``HalfSteps`` for dt (made here if None). ValueError for bad settings."""
     nominal = plant if nominal is None else nominal
@@ -127,6 +150,7 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
     states, rates = (np.full((grid.n + 1, S + plant.n_muscle_states), np.nan) for _ in range(2))
     applied = np.full((grid.n + 1, J), np.nan)
     reserve, excitation = np.full((n_windows, J), np.nan), np.full((n_windows, M), np.nan)
+    unmet = np.full((n_windows, J), np.nan)
     floor = np.where(nominal.tendon_row >= 0, MIN_ACTIVATION, 0.0)  # the activation a muscle acts at, at least
     activation = _start_activations(nominal, grid, rho)
     control, u = np.clip((activation - floor) / (1.0 - floor), 0.0, 1.0), activation
@@ -147,8 +171,9 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
         passive, gain = passive + floor * gain, gain * (1.0 - floor)
         moment_gain = arms.T * gain  # (J, M): N m per unit control
         need = tau - arms.T @ passive
-        control = solve_sample(moment_gain, need, rho, 2.0, control)
-        reserve[w] = need - moment_gain @ control
+        control = solve_sample(moment_gain, need, _weights(rho, moment_gain), 2.0, control)
+        left = need - moment_gain @ control
+        reserve[w], unmet[w] = np.where(rho > 0, left, 0.0), np.where(rho > 0, 0.0, left)
         lengths, arms = muscle_geometry(nominal.model, z, nominal.muscle_paths)
         u = excitation[w] = excitations_for(gain * control + passive, u, y[S:], lengths, -arms @ zd, grid.step, k - i0,
                                             plant.muscle_params, plant.tendon_row)
@@ -170,7 +195,7 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
     simulation.excitation[~simulation.reached], reserve_on_samples[~simulation.reached] = np.nan, np.nan
     simulation.runtime_s = time.perf_counter() - began
     return ComputedMuscleControl(simulation, window_t, np.diff(grid.t_steps[bounds]), reserve, excitation,
-                                 reserve_on_samples, windows_done, per_window * grid.step)
+                                 reserve_on_samples, windows_done, per_window * grid.step, unmet)
 
 
 def _start_activations(nominal: Engine, grid: HalfSteps, rho: np.ndarray) -> np.ndarray:
@@ -179,7 +204,8 @@ def _start_activations(nominal: Engine, grid: HalfSteps, rho: np.ndarray) -> np.
     tau = nominal.inverse_torques(z, zd, zdd, 0.0)
     lengths, arms = muscle_geometry(nominal.model, z, nominal.muscle_paths)
     active, passive = muscle_capacity(nominal.muscle_params, lengths[None], (-arms @ zd)[None])
-    return solve_sample(arms.T * active[0], tau - arms.T @ passive[0], rho, 2.0)
+    gain = arms.T * active[0]
+    return solve_sample(gain, tau - arms.T @ passive[0], _weights(rho, gain), 2.0)
 
 
 def _on_motion_samples(plant: Engine, motion, grid: HalfSteps, states, rates, applied, done: int, code: int,

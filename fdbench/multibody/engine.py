@@ -723,7 +723,7 @@ class Engine:
                              f"got {muscles.excitation.shape[0]}")
         width = self.n_state + (0 if muscles is None else self.n_muscle_states)
         y0 = self._vector(y0, width, "the initial state")
-        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, copy=False, tau_half=tau_half,
+        tau, ref, refd, refdd = self._half_step_arrays(2 * n_steps + 1, tau_half=tau_half,
                                                        ref_half=ref_half, refd_half=refd_half, refdd_half=refdd_half)
         kp, kd, mode, gains = self._law(kp, kd, mode, gains, 2 * n_steps + 1)
         states, rates = np.empty((n_steps + 1, width)), np.empty((n_steps + 1, width))
@@ -836,18 +836,16 @@ class Engine:
         width = self.n_state + (self.n_muscle_states if muscles else 0)
         return (width,), (width,), (self.n_joints,)
 
-    def _half_step_arrays(self, rows: int, copy: bool = True, **arrays) -> list[np.ndarray]:
-        """Each array as a contiguous float array of shape (rows, J) (a copy, or with copy False a
-        read-only view of the array itself where it is one already: for a kernel that only reads it
-        now; read-only whatever the caller's flags, so that the kernel compiles once, not once per
-        combination of writeable and read-only arguments); ValueError naming another shape."""
+    def _half_step_arrays(self, rows: int, **arrays) -> list[np.ndarray]:
+        """Each array as a new contiguous float array of shape (rows, J): writeable whatever the
+        caller's flags, so that every entry of the RK4 driver passes the same types and numba
+        compiles the driver once per kind of model, not once more per combination of writeable and
+        read-only arguments; ValueError naming another shape."""
         shape = (rows, self.n_joints)
         for name, array in arrays.items():
             if np.shape(array) != shape:
                 raise ValueError(f"{name} must have shape {shape} (the half-step grid), got {np.shape(array)}")
-        if copy:
-            return [np.array(array, dtype=float) for array in arrays.values()]
-        return [_read_only(np.ascontiguousarray(array, dtype=float)) for array in arrays.values()]
+        return [np.array(array, dtype=float) for array in arrays.values()]
 
     def _law(self, kp, kd, mode, gains, rows: int):
         """kp, kd (J,), the mode and the gain matrices as the kernels take them."""
@@ -864,9 +862,3 @@ class Engine:
             gains = np.zeros((1, *shape[1:]))
         return kp, kd, int(mode), gains
 
-
-def _read_only(array: np.ndarray) -> np.ndarray:
-    """A read-only view of array (no copy)."""
-    view = array.view()
-    view.flags.writeable = False
-    return view

@@ -154,6 +154,10 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     trig, shape, ends = np.zeros((n_b, 2)), np.zeros((n_b, 4)), np.empty((n_b, 2), dtype=np.int64)
     A = np.empty((n_q, n_q))  # the dense solve's
     idx, val = np.empty(MAX_ENTRIES, dtype=np.int64), np.empty(MAX_ENTRIES)
+    # the constraint rows ``constraints`` keeps for ``row``: entries, count, value, velocity term
+    n_dense = phi_rows.shape[0]
+    kept_idx, kept_val = np.empty((n_dense, MAX_ENTRIES), dtype=np.int64), np.empty((n_dense, MAX_ENTRIES))
+    kept_count, kept_phi, kept_jdv = np.empty(n_dense, dtype=np.int64), np.empty(n_dense), np.empty(n_dense)
     for m in range(n):
         y[m] = y0[m]
     # per body, hoisted: the coordinate indices of its points i and j (i: FIXED on ground), and its
@@ -363,13 +367,25 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
         return status
 
     # ------------------------------------------------------------------ the dense solve (free and path joints, loads)
-    def row(r, phi, jdv, count, task):
+    def keep(r, phi, jdv, count):
         """Constraint row r of value phi and velocity term J' q' jdv, its count nonzero entries in
-        idx, val: Phi and J q' into phi_rows, jv_rows; in task ASSEMBLE, its alpha J^T J into A's
-        lower triangle and -alpha J^T (J' q' + 2 xi omega J q' + omega^2 Phi) into rhs, and with
-        the sensitivities its entries and that term into the row_* arrays (``constraints`` puts its
-        Hessian H and third derivative T(q', q', .) on those entries into row_hess, row_third).
-        Returns |phi|."""
+        idx, val, kept for ``row`` (``constraints`` sends every row to it from one call: numba inlines
+        a closure's code at each of its calls, and compile time grows with it). Returns |phi|."""
+        for e in range(count):
+            kept_idx[r, e], kept_val[r, e] = idx[e], val[e]
+        kept_count[r], kept_phi[r], kept_jdv[r] = count, phi, jdv
+        return abs(phi)
+
+    def row(r, task):
+        """Constraint row r as ``keep`` has it (value phi, velocity term J' q' jdv, its count nonzero
+        entries, copied into idx, val): Phi and J q' into phi_rows, jv_rows; in task ASSEMBLE, its
+        alpha J^T J into A's lower triangle and -alpha J^T (J' q' + 2 xi omega J q' + omega^2 Phi)
+        into rhs, and with the sensitivities its entries and that term into the row_* arrays
+        (``constraints`` puts its Hessian H and third derivative T(q', q', .) on those entries into
+        row_hess, row_third)."""
+        count, phi, jdv = kept_count[r], kept_phi[r], kept_jdv[r]
+        for e in range(count):
+            idx[e], val[e] = kept_idx[r, e], kept_val[r, e]
         jv = 0.0
         for e in range(count):
             jv += val[e] * state[n_q + idx[e]]
@@ -385,7 +401,6 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 for f in range(count):
                     if idx[e] >= idx[f]:
                         A[idx[e], idx[f]] += alpha * val[e] * val[f]
-        return abs(phi)
 
     def constraints(task):
         """Every constraint row at the stage's state (``row`` in task CHECK or ASSEMBLE): the bodies'
@@ -407,8 +422,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 if ki >= 0:
                     hess[2, 2], hess[3, 3] = 2.0, 2.0
                     hess[0, 2], hess[2, 0], hess[1, 3], hess[3, 1] = -2.0, -2.0, -2.0, -2.0
-            worst = max(worst, row(r, ex * ex + ey * ey - d * d, 2 * (evx * evx + evy * evy), 4 if ki >= 0 else 2,
-                                   task))
+            worst = max(worst, keep(r, ex * ex + ey * ey - d * d, 2 * (evx * evx + evy * evy), 4 if ki >= 0 else 2))
             psi, w = state[n_p + b] + body_float[b, BETA], state[n_q + n_p + b]
             s, c = math.sin(psi), math.cos(psi)
             if abs(c) >= switch:  # the sin form, (y_j - y_i) - d sin(psi)
@@ -421,7 +435,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
             if dz is not None and task == ASSEMBLE:  # d2 Phi / d psi2 and d3 Phi / d psi3 w^2 of the form
                 row_hess[r + 1, 1, 1] = d * s if axis == 1 else d * c
                 row_third[r + 1, 1] = d * c * w * w if axis == 1 else -d * s * w * w
-            worst = max(worst, row(r + 1, phi, jdv, 3 if ki >= 0 else 2, task))
+            worst = max(worst, keep(r + 1, phi, jdv, 3 if ki >= 0 else 2))
             r += 2
         for lr in range(lin_const.shape[0]):
             total, count = 0.0, 0
@@ -430,7 +444,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                     total += lin_coef[lr, e] * state[lin_idx[lr, e]]
                     idx[count], val[count] = lin_idx[lr, e], lin_coef[lr, e]
                     count += 1
-            worst = max(worst, row(r, total + lin_const[lr], 0.0, count, task))
+            worst = max(worst, keep(r, total + lin_const[lr], 0.0, count))
             r += 1
         for m in range(path_body.shape[0]):
             k = path_body[m]
@@ -443,13 +457,12 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 idx[0], val[0], idx[1], val[1] = ki, 1.0, n_p + k, -sx1
                 if dz is not None and task == ASSEMBLE:
                     row_hess[r, 1, 1], row_third[r, 1] = -sx2, -sx3 * rate * rate
-                worst = max(worst, row(r, state[ki] - body_float[k, AT_PARENT_X] - sx0, -sx2 * rate * rate, 2,
-                                       task))
+                worst = max(worst, keep(r, state[ki] - body_float[k, AT_PARENT_X] - sx0, -sx2 * rate * rate, 2))
                 idx[0], val[0], idx[1], val[1] = ki + 1, 1.0, n_p + k, -sy1
                 if dz is not None and task == ASSEMBLE:
                     row_hess[r + 1, 1, 1], row_third[r + 1, 1] = -sy2, -sy3 * rate * rate
-                worst = max(worst, row(r + 1, state[ki + 1] - body_float[k, AT_PARENT_Y] - sy0, -sy2 * rate * rate,
-                                       2, task))
+                worst = max(worst, keep(r + 1, state[ki + 1] - body_float[k, AT_PARENT_Y] - sy0, -sy2 * rate * rate,
+                                       2))
                 r += 2
                 continue
             pi, pj = body_int[p, KI], body_int[p, KJ]
@@ -479,7 +492,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                     idx[5], val[5] = pi, gj0 - (1.0 if axis == 0 else 0.0)
                     idx[6], val[6] = pi + 1, gj1 - (1.0 if axis == 1 else 0.0)
                     count = 7
-                worst = max(worst, row(r + axis, phi, jdv, count, task))
+                worst = max(worst, keep(r + axis, phi, jdv, count))
             if dz is not None and task == ASSEMBLE:  # for ``_path_hessian``
                 path_kept[m, 0], path_kept[m, 1], path_kept[m, 2], path_kept[m, 3] = r, ex, ey, evx
                 path_kept[m, 4], path_kept[m, 5], path_kept[m, 6], path_kept[m, 7] = evy, rate, c1a, c1b
@@ -487,6 +500,8 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 path_kept[m, 10] = f[L_11] * sx3 + f[L_12] * sy3
                 path_kept[m, 11] = f[L_21] * sx3 + f[L_22] * sy3
             r += 2
+        for k in range(r):
+            row(k, task)
         return worst
 
     def coordinates():
@@ -729,9 +744,23 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
 
     for m in range(n):
         state[m] = y[m]
-    max_viol = check()
-    code = OK
-    for i in range(n_steps + 1):
+    max_viol, code = 0.0, OK
+    for i in range(max(n_steps, 0) + 1):
+        # the state reached (the given one at i = 0) is checked at the driver's one call of
+        # ``check``: numba inlines a closure's code at each of its calls, and compile time grows with it
+        viol = check()
+        if i > 0 and viol > params[VIOLATION]:
+            return CONSTRAINT, i - 1, max(max_viol, viol)
+        max_viol = viol if i == 0 else max(max_viol, viol)
+        if n_steps < 0:
+            break
+        if i > 0:
+            if dz is not None:
+                for m in range(n):
+                    for q in range(P):
+                        S[m, q] += dt / 6.0 * acc[m, q]
+            for m in range(n):
+                y[m] = state[m]
         j = start + 2 * i
         for stage in range(4):  # k1 at y, k2 and k3 at the half step, k4 at the full step
             if stage > 0:
@@ -805,16 +834,6 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
             finite = finite and math.isfinite(state[m])
         if not finite:
             return NONFINITE, i, max_viol
-        viol = check()
-        if viol > params[VIOLATION]:
-            return CONSTRAINT, i, max(max_viol, viol)
-        max_viol = max(max_viol, viol)
-        if dz is not None:
-            for m in range(n):
-                for q in range(P):
-                    S[m, q] += dt / 6.0 * acc[m, q]
-        for m in range(n):
-            y[m] = state[m]
     return OK, n_steps, max_viol
 
 

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from fdbench.cli import app
 from fdbench.models import find_model
 from fdbench.multibody import muscle
-from fdbench.multibody.cmc import computed_muscle_control
+from fdbench.multibody.cmc import computed_muscle_control, reserve_strengths
 from fdbench.multibody.cmc_muscles import excitations_for, force_after, muscle_gains
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.model import model_from_dict, to_dict
@@ -171,3 +171,47 @@ def test_bad_cmc_settings_are_one_line_exit_2(pin_file, extra, words):
 
 def test_a_model_without_muscles_refuses_cmc():
     bad_input(["control", "--controller", "cmc"], "cmc", "no muscles")
+
+
+def rigid_arm26(actuators) -> dict:
+    """The library's arm26 with rigid tendons (RK4 at 1 ms) and the given ``[[actuators]]``."""
+    data = to_dict(find_model("arm26"))
+    for entry in data["muscles"]:
+        entry["tendon"] = "rigid"
+        entry.pop("tendon_strain", None)
+    data["actuators"] = actuators
+    return data
+
+
+def test_the_model_s_actuators_are_cmc_s_reserves_and_a_coordinate_without_one_has_none(tmp_path):
+    """With a shoulder actuator only, the elbow is driven by its muscles alone: its reserve is 0 in
+    every window, the torque applied there is the muscles' moment arms times forces, and what they
+    miss is reported unmet; --reserve-optimal-force overrides the actuator's optimal force only."""
+    shoulder_only = model_from_dict(rigid_arm26([{"coordinate": "r_shoulder_elev", "optimal_force": 2.0}]),
+                                    "arm.toml")
+    assert list(reserve_strengths(shoulder_only)) == [2.0, 0.0]
+    assert list(reserve_strengths(shoulder_only, 5.0)) == [5.0, 0.0]
+    assert list(reserve_strengths(model_from_dict(rigid_arm26([]), "arm.toml"))) == [1.0, 1.0]
+    plant = Engine(shoulder_only)
+    motion = MinimumJerk(plant.model.motions[0], plant.joints)
+    run = computed_muscle_control(plant, motion, dt=1e-3)
+    assert run.simulation.success
+    elbow = plant.joints.index("r_elbow_flex")
+    assert np.all(run.reserve[:, elbow] == 0.0) and np.all(run.unmet[:, 1 - elbow] == 0.0)
+    result = run.simulation
+    lengths, arms = muscle_geometry(plant.model, result.z, plant.muscle_paths)
+    on_boundary = np.isclose(np.mod(result.t + 1e-9, run.window), 1e-9)
+    rows = ~on_boundary
+    rows[[0, -1]] = False
+    np.testing.assert_allclose(result.torque[rows, elbow],
+                               np.einsum("nm,nm->n", arms[rows, :, elbow], result.muscle_force[rows]), rtol=1e-10,
+                               atol=1e-10)
+    path = tmp_path / "arm.toml"
+    path.write_text(to_toml(shoulder_only))
+    done = runner.invoke(app, ["control", "--model", str(path), "--controller", "cmc", "-f", "json", "--quiet"])
+    assert done.exit_code == 0, done.output
+    record = json.loads(done.stdout)
+    assert record["reserve_rms_nm_r_elbow_flex"] == 0.0
+    assert record["reserve_optimal_force"] == "per actuator (see reserves)"
+    assert record["unmet_rms_nm_r_elbow_flex"] == pytest.approx(run.unmet_rms()[elbow], rel=1e-9)
+    assert record["unmet_rms_nm_r_shoulder_elev"] == 0.0
