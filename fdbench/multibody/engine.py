@@ -819,10 +819,10 @@ class Engine:
                 raise ValueError(f"excitations must have shape {shape} (candidates, the half-step grid, muscles), "
                                  f"got {np.shape(excitation)}")
             muscles = Muscles(self.muscle_paths, self.muscle_params, self.tendon_row,
-                              np.ascontiguousarray(excitation, dtype=float))
+                              _writeable(excitation))
         width = self.n_state + (0 if muscles is None else self.n_muscle_states)
         return (self._vector(y0, width, "the initial state"), float(dt), int(n_steps),
-                np.ascontiguousarray(tau, dtype=float), ref, refd, int(every), np.array(angles_ref, dtype=float),
+                _writeable(tau), ref, refd, int(every), np.array(angles_ref, dtype=float),
                 float(penalty_weight), *self.kernel_args(), self.loads_at(np.arange(rows) * (0.5 * float(dt))),
                 muscles)
 
@@ -862,3 +862,8 @@ class Engine:
             gains = np.zeros((1, *shape[1:]))
         return kp, kd, int(mode), gains
 
+
+def _writeable(array) -> np.ndarray:
+    """array as a contiguous, writeable float array (a copy only where it is not one already): the
+    kernels compile once for writeable arguments, not once more for read-only ones."""
+    return np.require(array, dtype=float, requirements=["C", "W"])
