@@ -19,8 +19,8 @@ their lag carries the force past its target). With h = t_a - t:
 4. static optimisation (``static_optimization.solve_sample``, p = 2: the exact active-set QP) for
    the muscles' controls c in [0, 1] and the reserves (control r / rho, rho its optimal force,
    ``reserve_strengths``: the model's actuators as static optimisation takes them; a coordinate
-   without one has a reserve of ``static_optimization.NO_RESERVE`` of its strongest muscle's torque
-   whose torque is left unmet, not applied): min sum c^2 + sum (r / rho)^2 subject to
+   without one weighed as ``static_optimization.qp_reserve_forces`` weighs it, its torque left
+   unmet, not applied): min sum c^2 + sum (r / rho)^2 subject to
    sum_m arm_mj (c_m G_m + P_m) + r_j = tau_j, the moment arms and G_m, P_m (muscle m's force along
    its path per unit activation and at zero activation, ``cmc_muscles.muscle_gains``) at the
    predicted state; c is the activation, or for a compliant tendon (a - 0.01) / 0.99: its explicit
@@ -52,7 +52,7 @@ from .muscle import L_OPT, L_SLACK, MIN_ACTIVATION
 from .muscle_paths import muscle_geometry
 from .simulation import STATUS_OF_CODE, HalfSteps, Simulation, _on_samples, half_steps, muscle_forces, muscle_start
 from .actuators import optimal_forces
-from .static_optimization import NO_RESERVE, muscle_capacity, solve_sample
+from .static_optimization import muscle_capacity, qp_reserve_forces, solve_sample
 
 # OpenSim's CMC examples' task gains (CMC_Joint kp, kv: critically damped, natural frequency 10 rad/s)
 # and default time window
@@ -103,14 +103,6 @@ def reserve_strengths(model, optimal_force: float | None = None) -> np.ndarray:
     if optimal_force is not None and not (math.isfinite(optimal_force) and optimal_force > 0):
         raise ValueError(f"the reserves' optimal force must be a finite number > 0, not {optimal_force:g}")
     return np.array(optimal_forces(model, optimal_force), dtype=float)
-
-
-def _weights(rho: np.ndarray, moment_gain: np.ndarray) -> np.ndarray:
-    """The reserves' optimal forces for the QP (J,): rho, and on a coordinate without a reserve
-    ``NO_RESERVE`` of its strongest muscle's torque (N m per unit control, ``moment_gain`` (J, M))."""
-    if (rho > 0).all():
-        return rho
-    return np.where(rho > 0, rho, NO_RESERVE * np.maximum(np.abs(moment_gain).max(axis=1, initial=0.0), 1.0))
 
 
 def check_window(window: float, duration: float, step: float) -> None:
@@ -171,7 +163,7 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
         passive, gain = passive + floor * gain, gain * (1.0 - floor)
         moment_gain = arms.T * gain  # (J, M): N m per unit control
         need = tau - arms.T @ passive
-        control = solve_sample(moment_gain, need, _weights(rho, moment_gain), 2.0, control)
+        control = solve_sample(moment_gain, need, qp_reserve_forces(rho, moment_gain), 2.0, control)
         left = need - moment_gain @ control
         reserve[w], unmet[w] = np.where(rho > 0, left, 0.0), np.where(rho > 0, 0.0, left)
         lengths, arms = muscle_geometry(nominal.model, z, nominal.muscle_paths)
@@ -205,7 +197,7 @@ def _start_activations(nominal: Engine, grid: HalfSteps, rho: np.ndarray) -> np.
     lengths, arms = muscle_geometry(nominal.model, z, nominal.muscle_paths)
     active, passive = muscle_capacity(nominal.muscle_params, lengths[None], (-arms @ zd)[None])
     gain = arms.T * active[0]
-    return solve_sample(gain, tau - arms.T @ passive[0], _weights(rho, gain), 2.0)
+    return solve_sample(gain, tau - arms.T @ passive[0], qp_reserve_forces(rho, gain), 2.0)
 
 
 def _on_motion_samples(plant: Engine, motion, grid: HalfSteps, states, rates, applied, done: int, code: int,

@@ -82,6 +82,17 @@ def muscle_capacity(params: np.ndarray, lengths: np.ndarray, lengthening: np.nda
     return full - passive, passive
 
 
+def qp_reserve_forces(optimal_force: np.ndarray, gain: np.ndarray) -> np.ndarray:
+    """The reserves' optimal forces the QP weighs (J,): ``optimal_force``, and on a coordinate
+    without a reserve (0) ``NO_RESERVE`` of its strongest muscle's torque per unit control (``gain``
+    (J, M), N m), whose torque is then reported unmet."""
+    reserved = optimal_force > 0
+    if reserved.all():
+        return optimal_force
+    strongest = np.abs(gain).max(axis=1, initial=0.0)
+    return np.where(reserved, optimal_force, NO_RESERVE * np.maximum(strongest, 1.0))
+
+
 def solve_sample(gain: np.ndarray, need: np.ndarray, reserve_force: np.ndarray, exponent: float = 2.0,
                  start: np.ndarray | None = None) -> np.ndarray:
     """The activations a (M,) in [0, 1] minimising sum a^p + sum |(need - gain a) / reserve_force|^p:
@@ -189,17 +200,13 @@ def static_optimization(model, params: np.ndarray, t: np.ndarray, z: np.ndarray,
     active, passive_force = muscle_capacity(params, lengths, lengthening, along_tendon)
     passive_force = passive_force if passive else np.zeros_like(active)
     reserved = optimal_force > 0
-    reserve_force = optimal_force
     activation = np.empty(active.shape)
     began = time.perf_counter()
     start = None
     for k in range(len(t)):
         gain = arms[k].T * active[k]  # (J, M)
         need = torque[k] - arms[k].T @ passive_force[k]
-        if not reserved.all():
-            strongest = np.abs(gain).max(axis=1, initial=0.0)
-            reserve_force = np.where(reserved, optimal_force, NO_RESERVE * np.maximum(strongest, 1.0))
-        start = activation[k] = solve_sample(gain, need, reserve_force, exponent, start)
+        start = activation[k] = solve_sample(gain, need, qp_reserve_forces(optimal_force, gain), exponent, start)
     runtime = time.perf_counter() - began
     force = activation * active + passive_force
     left = torque - np.einsum("nmj,nm->nj", arms, force)
