@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 # every file the report's --figures writes, checked before the work starts
+ACTIVATIONS_FILE = "activations.png"  # on a model with muscles: each muscle's activation per method
 FIGURE_FILES = ("figure2_inverse_dynamics.png", "figure5_tracking.png", "figure6_tracking.png",
-                "convergence_table2.png", "convergence_table3.png")
+                "convergence_table2.png", "convergence_table3.png", ACTIVATIONS_FILE)
 
 # the reference lines (the desired rotation, the inverse-dynamics torque or residuals): dashed black, on top
 DESIRED = {"color": "black", "linestyle": (0, (4, 2)), "linewidth": 1.6, "zorder": 10}
@@ -777,6 +778,56 @@ def write_model_figures(spec, inverse, rows, runs: dict, directory: Path, base: 
                   directory / MODEL_FIGURE_FILES[3])
         link("Animation: the recorded walk and every method's", MODEL_FIGURE_FILES[3])
     return written
+
+
+def activation_curves(rows, runs: dict, jobs: int = 1) -> dict:
+    """{row key: (t (s), activations (n, M))} of ``rows`` (those that drove the model's muscles),
+    their stored runs carried out again (``trajectories``)."""
+    sims, _ = trajectories(rows, runs, jobs) if rows else ({}, {})
+    return {key: (sim.t, sim.activation) for key, sim in sims.items() if getattr(sim, "activation", None) is not None}
+
+
+def activations_figure(curves: dict, muscles, labels: dict, path: Path) -> None:
+    """A panel per muscle: its activation (0 to 1) against time (s), a line per method."""
+    plt = agg_pyplot()
+    columns = 2
+    n_rows = (len(muscles) + 1) // columns
+    fig, axes = plt.subplots(n_rows, columns, figsize=(11, 2.2 * n_rows), sharex=True, squeeze=False)
+    spare = iter(_SPARE_COLOURS)
+    colours = {key: COLOURS.get(key) or next(spare, None) for key in labels}
+    for m, name in enumerate(muscles):
+        ax = axes[m // columns, m % columns]
+        for key, label in labels.items():
+            if key in curves:
+                ax.plot(curves[key][0], curves[key][1][:, m], label=label, color=colours[key], **METHOD)
+        ax.set_title(name, fontsize=9)
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylabel("activation", fontsize=8)
+        ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    for ax in axes.flat[len(muscles):]:
+        ax.set_visible(False)
+    fig.suptitle("Each muscle's activation: the methods that drive the muscles", fontsize=11)
+    fig.tight_layout()
+    _legend_outside(fig, axes[0, 0])
+    save_png(fig, path)
+
+
+def write_activations_figure(rows, runs: dict, directory: Path, base: Path, jobs: int = 1) -> dict:
+    """Write ``ACTIVATIONS_FILE`` into ``directory`` for the rows whose run drove the model's muscles
+    (a record with ``effort``; none: nothing written); return {title: path relative to ``base``}."""
+    from .run_inputs import nominal
+
+    driven = [row for row in rows if row.record.get("effort") is not None]
+    curves = activation_curves(driven, runs, jobs)
+    if not curves:
+        return {}
+    directory.mkdir(exist_ok=True)
+    labels = {row.key: row.name for row in driven if row.key in curves}
+    muscles = [m.name for m in nominal(driven[0].specs[0]).muscles]
+    activations_figure(curves, muscles, labels, directory / ACTIVATIONS_FILE)
+    return {"Each muscle's activation": os.path.relpath(directory / ACTIVATIONS_FILE, base)}
 
 
 def _short_labels(labels: dict, short: dict) -> dict:

@@ -15,6 +15,10 @@ from .multibody import simulation as sim
 from .records import ALPHA_HINT, RunOutcome
 from .run_inputs import engine, joints, nominal
 
+# an activation at least this is full activation: the muscle gives all it can (its excitation at 1)
+FULL_ACTIVATION = 0.99
+MAX_SPANS = 3  # the spans of full activation named per muscle in ``saturation``
+
 RESIDUAL_FIELDS = ("residual_force_rms_n", "residual_moment_rms_nm", "residual_fx_rms_n", "residual_fy_rms_n",
                    "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm")
 
@@ -34,6 +38,25 @@ def residual_fields(model, forces: np.ndarray) -> dict:
     return {"residual_force_rms_n": float(np.sqrt(np.mean(fx**2 + fy**2))), "residual_moment_rms_nm": rms(mz),
             "residual_fx_rms_n": rms(fx), "residual_fy_rms_n": rms(fy), "residual_fx_mean_n": float(np.mean(fx)),
             "residual_fy_mean_n": float(np.mean(fy)), "residual_mz_mean_nm": float(np.mean(mz))}
+
+
+def muscle_fields(muscles, t: np.ndarray, activation: np.ndarray) -> dict:
+    """A muscle-driven run's indicators over the samples t (s, (n,)) reached, activations (n, M):
+    ``effort``, the mean of sum_m a_m^2; ``<muscle>_activation_mean``; ``saturation``, each muscle
+    at full activation (a >= ``FULL_ACTIVATION``) and when, e.g. "BIClong from 0.62 to 1 s", or None."""
+    if not len(t):
+        return {"effort": math.nan, **{f"{m}_activation_mean": math.nan for m in muscles}, "saturation": None}
+    said = []
+    for m, name in enumerate(muscles):
+        full = np.concatenate([[False], activation[:, m] >= FULL_ACTIVATION, [False]])
+        starts, ends = np.flatnonzero(full[1:] & ~full[:-1]), np.flatnonzero(~full[1:] & full[:-1]) - 1
+        if len(starts):
+            spans = [f"from {t[a]:.3g} to {t[b]:.3g} s" for a, b in zip(starts[:MAX_SPANS], ends[:MAX_SPANS])]
+            more = f" and {len(starts) - MAX_SPANS} more times" if len(starts) > MAX_SPANS else ""
+            said.append(f"{name} {', '.join(spans)}{more}")
+    return {"effort": float(np.mean(np.sum(activation**2, axis=1))),
+            **{f"{m}_activation_mean": float(np.mean(activation[:, i])) for i, m in enumerate(muscles)},
+            "saturation": "; ".join(said) or None}
 
 
 def _message(result) -> str:
@@ -75,6 +98,9 @@ def outcome(spec, record: dict, result, inverse, **more) -> RunOutcome:
     if "translation" in kinds:
         record.update(rmse_trans_cm=trans, rmse_force_n=force)
     record.update(residual_fields(nominal(spec), result.torque[result.reached]))
+    if getattr(result, "activation", None) is not None:  # the muscles drove the model
+        record.update(muscle_fields([m.name for m in nominal(spec).muscles], result.t[result.reached],
+                                    result.activation[result.reached]))
     if result.status is sim.Status.CONSTRAINT:
         record["message"] = drift_hint(record["message"], result, desired, kinds)
     header = ["t"] + [f"{j}{s}" for s in ("", "_desired", "_vel", "_vel_desired", "_acc", "_acc_desired", "_torque",

@@ -113,7 +113,7 @@ class Batch:
 @with_groups
 def report(
     ctx: typer.Context,
-    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation (on a model with a floating base: --no-beyond leaves out its slow collocation row).")] = True,
+    beyond: Annotated[bool, typer.Option("--beyond/--no-beyond", help="Include the table 'Beyond the paper': computed-torque and LQR control, direct collocation, and on a model with muscles computed muscle control with a table of the muscles (on a model with a floating base: --no-beyond leaves out its slow collocation row).")] = True,
     peers: Annotated[Optional[str], typer.Option("--peers", metavar="opensim,opensim-cmc,moco", help="Add the section 'Peers': opensim (OpenSim's forward simulation under the same PD law), opensim-cmc (OpenSim's CMCTool), moco (MocoTrack, its torque replayed by fdbench), comma-separated. Needs pip install 'fdbench\\[opensim]'.", show_default=False)] = None,
     seeds: Annotated[int, typer.Option("--seeds", help="Runs per cell, in [1, 1000]: seeds 0..N-1; medians and IQRs over them.")] = 5,
     figures: Annotated[Optional[Path], typer.Option("--figures", help="Write PNG figures into DIR (created if missing) and link them.")] = None,
@@ -344,10 +344,11 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
         return json.dumps(report, indent=2) + "\n"
     links = None
     if figures is not None:
-        from ..figures import write_report_figures
+        from ..figures import write_activations_figure, write_report_figures
 
-        links = _write_figures(figures, batch, lambda base: write_report_figures(plan, runs, rows, inverse, figures,
-                                                                                  base))
+        links = _write_figures(figures, batch, lambda base: {
+            **write_report_figures(plan, runs, rows, inverse, figures, base),
+            **write_activations_figure(extra_rows, runs, figures, base)})
     section = beyond_markdown(extra_rows, methods) if methods else None
     if peer_rows:
         section = (section or []) + peers_markdown(peer_rows, peer_methods, rows + extra_rows)

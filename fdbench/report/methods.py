@@ -21,10 +21,12 @@ EXACT_GRADIENT_SUMMARY = ("the paper's cell with the gradient computed exactly, 
                           "RK4 simulation, instead of by finite differences; a simulation with its sensitivities "
                           "counts as one evaluation of the budget; seed 0")
 
-OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS = (
-    "open-loop", "pd", "computed-torque", "lqr", "collocation", "cs-cmaes", "cs-bfgs")
-# the methods "Beyond the paper" (the paper's report of a model on a fixed base)
+OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS, CMC = (
+    "open-loop", "pd", "computed-torque", "lqr", "collocation", "cs-cmaes", "cs-bfgs", "cmc")
+# the methods "Beyond the paper" (the paper's report of a model on a fixed base), then those that
+# drive a model's muscles (on a model with muscles only)
 BEYOND = (COMPUTED_TORQUE, LQR, COLLOCATION)
+MUSCLE_DRIVEN = (CMC,)
 # every registered method, in the report's order
 EVERY = (OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS)
 # the order in which their runs are handed out, the slowest first (so that workers share the work evenly)
@@ -108,6 +110,20 @@ def _bfgs_skip(dataset: Dataset, options: Options) -> str | None:
     return None
 
 
+def _cmc_skip(dataset: Dataset, options: Options) -> str | None:
+    try:
+        control_spec(controller="cmc", **dataset.common).validate()
+    except ValueError as exc:
+        return f"computed muscle control is not in this report: {exc}"
+    return None
+
+
+def _cmc_label() -> str:
+    from ..multibody.cmc import DEFAULT_KD, DEFAULT_KP, DEFAULT_WINDOW
+
+    return f"Computed muscle control (kp {DEFAULT_KP:g}, kd {DEFAULT_KD:g}, window {DEFAULT_WINDOW:g} s)"
+
+
 def _summary(name: str) -> str:
     from ..controllers import CONTROLLERS
 
@@ -150,6 +166,8 @@ REGISTRY = {registered.key: registered for registered in (
     Registered(BFGS, lambda o: f"CS + BFGS + ff, exact gradient (budget {o.budget})",
                lambda d, o: "the same splines tuned by BFGS with gradients by forward sensitivities",
                lambda d, o: _shooting("bfgs", d, o, gradient="exact"), _bfgs_skip),
+    Registered(CMC, lambda o: _cmc_label(), lambda d, o: _summary("cmc"),
+               lambda d, o: control_spec(controller="cmc", **d.common), _cmc_skip),
 )}
 
 
@@ -176,8 +194,11 @@ def methods(keys, dataset: Dataset, options: Options | None = None) -> list[Meth
 def beyond_methods(**common) -> list[Method]:
     """The methods "Beyond the paper" with their default options, on the settings ``common``
     (kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions, model_name): computed
-    torque, LQR and direct collocation, on the forearm or on another model (the arm)."""
-    return methods(BEYOND, Dataset("", common))
+    torque, LQR and direct collocation, on the forearm or on another model (the arm), and on a model
+    with muscles computed muscle control."""
+    dataset = Dataset("", common)
+    muscle_driven, _ = select(MUSCLE_DRIVEN, [dataset], Options())
+    return methods(BEYOND + tuple(muscle_driven), dataset)
 
 
 def exact_gradient_methods(cells, budget, torque_options, optimizer_options, penalty_weight, **common) -> list[Method]:
@@ -236,10 +257,43 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
         out += ["", f"Direct collocation's own RMSE_rot at its nodes: {significant(rec.get('collocation_rmse_rot_deg'))} deg; "
                     f"IPOPT: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, "
                     f"{significant(rec.get('solve_time_s'))} s."]
+    out += muscles_markdown(rows)
     failed = failure_lines(rows)
     if failed:
         out += ["", "Did not succeed (`status`, `t_end` and `message` in the CSV and JSON):", ""] + failed
     return out + [""]
+
+
+ACTIVATION_MEAN = "_activation_mean"  # a muscle-driven run's record: <muscle>_activation_mean
+
+
+def muscles_markdown(rows: list) -> list[str]:
+    """The muscles' table of the rows whose run drove the model's muscles (a record with ``effort``):
+    effort (the mean of sum a^2 over the samples reached), the reserves' RMS torque, the torque left
+    unmet where a coordinate has no reserve, and each muscle's mean activation; [] without such rows."""
+    from ..outcomes import FULL_ACTIVATION
+    from .paper import significant
+
+    driven = [row for row in rows if row.records[0].get("effort") is not None]
+    if not driven:
+        return []
+    muscles = [key[:-len(ACTIVATION_MEAN)] for key in driven[0].records[0] if key.endswith(ACTIVATION_MEAN)]
+    unmet = any(row.records[0].get("unmet_rms_nm") is not None for row in driven)
+    header = ["method", "effort (mean sum a^2)", "reserves RMS (N m)", *(["unmet RMS (N m)"] if unmet else []),
+              *(f"{m} mean a" for m in muscles)]
+    out = ["", "The muscles (activations a in [0, 1]; the reserves are the model's actuators, else one per "
+               "coordinate; unmet: the torque of a coordinate without a reserve that its muscles did not give):",
+           "", "| " + " | ".join(header) + " |", "|---|" + "---:|" * (len(header) - 1)]
+    for row in driven:
+        rec = row.records[0]
+        cells = [rec.get("effort"), rec.get("reserve_rms_nm"), *([rec.get("unmet_rms_nm")] if unmet else []),
+                 *(rec.get(m + ACTIVATION_MEAN) for m in muscles)]
+        out.append("| " + " | ".join([row.name, *(significant(v) for v in cells)]) + " |")
+    full = [f"- {row.name}: {row.records[0]['saturation']}." for row in driven if row.records[0].get("saturation")]
+    if full:
+        out += ["", f"At full activation (a >= {FULL_ACTIVATION:g}: the muscle gives all it can, the reserves or "
+                    "the tracking take the rest):", ""] + full
+    return out
 
 
 def method_csv_rows(rows: list, named=None) -> list[list]:

@@ -810,6 +810,18 @@ def _finite(value):
     return value
 
 
+def _muscle_entry(row: Row) -> dict:
+    """A one-run row that drove the model's muscles: {"muscles": its effort, reserves, unmet
+    torque, saturation and each muscle's mean activation}; {} for any other row."""
+    rec = row.record
+    if len(row.records) != 1 or rec.get("effort") is None:
+        return {}
+    suffix = "_activation_mean"
+    return {"muscles": {"effort": _finite(rec["effort"]), "reserve_rms_nm": _finite(rec.get("reserve_rms_nm")),
+                        "unmet_rms_nm": _finite(rec.get("unmet_rms_nm")), "saturation": rec.get("saturation"),
+                        "activation_mean": {k[:-len(suffix)]: _finite(v) for k, v in rec.items() if k.endswith(suffix)}}}
+
+
 def json_report(rows: list[Row], settings: dict) -> dict:
     """The report as one JSON-ready object: settings and one entry per cell with medians, IQRs,
     success counts, the paper's figures, the judgement and the ids of its stored runs."""
@@ -827,6 +839,7 @@ def json_report(rows: list[Row], settings: dict) -> dict:
             made=[{"id": p.get("id"), "created_at": p.get("created_at"), "machine": p.get("machine"),
                    "jobs": p.get("jobs")} for p in row.provenance],
         )
+        entry.update(_muscle_entry(row))
         cells.append(entry)
     return {"command": "report", "fdbench_version": __version__, "settings": settings, "cells": cells,
             "comparison": {k: _finite(v) if not isinstance(v, dict) else v for k, v in comparison_facts(rows).items()}}

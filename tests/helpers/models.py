@@ -1,10 +1,11 @@
 """Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
-it."""
+it; the forearm with a flexor and an extensor."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from fdbench.models import find_model
 from fdbench.multibody import model as d
 from fdbench.multibody.loads import ExternalLoad, ExternalLoads
 
@@ -30,3 +31,19 @@ def hopper_loads(seed):
              ExternalLoad("c", "pelvis", "ground", "thigh"))
     return ExternalLoads(loads, np.linspace(-0.1, 1.0, n), rng.normal(0, 50, (n, 3, 2)), rng.normal(0, 0.2, (n, 3, 2)),
                          rng.normal(0, 5, (n, 3)))
+
+
+H, D = 0.3, 0.05  # m: the muscles' origins at (0, +-H) on ground, their insertion (D, 0) on the forearm
+SWING = {"name": "swing", "type": "minimum-jerk", "duration": 0.5, "start": {"theta": -0.6}, "goal": {"theta": -0.1}}
+
+
+def forearm_with_muscles_data() -> dict:
+    """The library's forearm (a model file's dict) with a flexor and an extensor (rigid tendons, a
+    straight path from ground to the forearm each) and the motion ``swing`` (0.5 s)."""
+    data = d.to_dict(find_model("forearm"))
+    data["muscles"] = [{"name": name, "max_isometric_force": 600.0, "optimal_fiber_length": 0.1,
+                        "tendon_slack_length": slack,
+                        "path": {"points": [{"body": "ground", "at": [0.0, y]}, {"body": "forearm", "at": [D, 0.0]}]}}
+                       for name, y, slack in (("flexor", H, 0.2), ("extensor", -H, 0.21))]
+    data["motions"] = [SWING]
+    return data

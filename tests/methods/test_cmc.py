@@ -24,30 +24,20 @@ from fdbench.multibody.motions.named import MinimumJerk
 from fdbench.multibody.muscle_paths import muscle_geometry
 from fdbench.multibody.static_optimization import muscle_capacity
 
+from helpers.models import forearm_with_muscles_data
+
 runner = CliRunner()
-H, D = 0.3, 0.05  # m: the origins at (0, +-H) on ground, the insertion (D, 0) on the forearm
-SWING = {"name": "swing", "type": "minimum-jerk", "duration": 0.5, "start": {"theta": -0.6}, "goal": {"theta": -0.1}}
-
-
-def pin_data() -> dict:
-    data = to_dict(find_model("forearm"))
-    data["muscles"] = [{"name": name, "max_isometric_force": 600.0, "optimal_fiber_length": 0.1,
-                        "tendon_slack_length": slack,
-                        "path": {"points": [{"body": "ground", "at": [0.0, y]}, {"body": "forearm", "at": [D, 0.0]}]}}
-                       for name, y, slack in (("flexor", H, 0.2), ("extensor", -H, 0.21))]
-    data["motions"] = [SWING]
-    return data
 
 
 @pytest.fixture(scope="module")
 def pin():
-    return Engine(model_from_dict(pin_data(), "pin.toml"))
+    return Engine(model_from_dict(forearm_with_muscles_data(), "pin.toml"))
 
 
 @pytest.fixture(scope="module")
 def pin_file(tmp_path_factory):
     path = tmp_path_factory.mktemp("cmc") / "pin.toml"
-    path.write_text(to_toml(model_from_dict(pin_data(), "pin.toml")))
+    path.write_text(to_toml(model_from_dict(forearm_with_muscles_data(), "pin.toml")))
     return path
 
 

@@ -8,6 +8,7 @@ import json
 import sqlite3
 
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
@@ -52,3 +53,31 @@ def test_no_beyond_leaves_the_section_out(tmp_path):
         assert name in with_section
     without = invoke([*SMALL, "--db", db, "--no-beyond"])
     assert "Beyond the paper" not in without and "Table 2" in without
+
+
+def test_on_a_model_with_muscles_cmc_joins_the_section_with_the_muscles_table_and_figure(tmp_path):
+    """On the forearm with a flexor and an extensor, "Beyond the paper" adds computed muscle control;
+    its row, its muscles' table and the activations figure give what ``control --controller cmc``
+    gives on its own."""
+    from fdbench.multibody.model import model_from_dict
+    from fdbench.multibody.model_files import to_toml
+
+    from helpers.models import forearm_with_muscles_data
+
+    model = tmp_path / "pin.toml"
+    model.write_text(to_toml(model_from_dict(forearm_with_muscles_data(), "pin.toml")))
+    db, figures = tmp_path / "runs.sqlite", tmp_path / "figures"
+    common = ["--model", model, "--motion", "swing"]
+    text = invoke([*SMALL, *common, "--db", db, "--figures", figures, "--output", tmp_path / "report.md"])
+    report = (tmp_path / "report.md").read_text()
+    alone = json.loads(invoke(["control", *common, "--controller", "cmc", "-f", "json", "--quiet"]))
+    cells = json.loads(invoke([*SMALL, *common, "--db", db, "--format", "json"]))["cells"]
+    cmc = [cell for cell in cells if "muscles" in cell]
+    assert len(cmc) == 1 and cmc[0]["cell"].startswith("Computed muscle control")
+    assert cmc[0]["rmse_rot_deg_median"] == alone["rmse_rot_deg"]
+    assert cmc[0]["muscles"]["effort"] == alone["effort"]
+    assert cmc[0]["muscles"]["activation_mean"] == {m: alone[f"{m}_activation_mean"] for m in ("flexor", "extensor")}
+    assert 0.0 <= alone["flexor_activation_mean"] <= 1.0 and 0.0 <= alone["extensor_activation_mean"] <= 1.0
+    assert "flexor mean a" in report and "extensor mean a" in report
+    assert (figures / "activations.png").stat().st_size > 0 and "activations.png" in report
+    assert text == ""  # the report went to --output
