@@ -8,7 +8,6 @@ effort from the trajectory); bad input one line and exit 2; the hashes of existi
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 import math
 
@@ -18,13 +17,12 @@ from typer.testing import CliRunner
 
 from fdbench.cli import app
 from fdbench.excitation_problem import DEFAULT_EFFORT_WEIGHT
-from fdbench.models import find_model
-from fdbench.multibody.model import MotionSpec, model_from_dict, to_dict
 from fdbench.multibody.model_files import to_toml
 from fdbench.multibody.muscle_paths import muscle_geometry
 from fdbench.spec import RunSpec, optimize_spec
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.models import short_arm26
 
 runner = CliRunner()
 WEIGHT = 2.0  # deg per excitation^2 s, as tests/methods/test_excitation_problem.py's
@@ -37,13 +35,7 @@ def invoke(args):
 @pytest.fixture(scope="module")
 def arm(tmp_path_factory):
     """(the model, its file): arm26 with rigid tendons and one motion, 'short', 50 ms."""
-    data = to_dict(find_model("arm26"))
-    for m in data["muscles"]:
-        m["tendon"] = "rigid"
-    model = model_from_dict(data, "arm26.toml")
-    start = tuple(zip(model.coordinates, (0.3, 0.8)))
-    goal = tuple(zip(model.coordinates, (0.32, 0.9)))
-    model = dataclasses.replace(model, motions=(MotionSpec("short", "minimum-jerk", 0.05, start, goal),))
+    model = short_arm26()
     path = tmp_path_factory.mktemp("arm") / "arm26_rigid.toml"
     path.write_text(to_toml(model))
     return model, path

@@ -2,33 +2,22 @@
 library's arm26 with rigid tendons, over a 50-ms motion (50 RK4 steps, a spline of 4 knots per muscle): the logistic map, the
 effort term's closed form, a population against its rows one by one, the value of
 ``value_and_gradient`` against ``objective``, its gradient against central differences, and a few
-BFGS iterations lowering the objective."""
+BFGS iterations lowering the objective; with feedforward, the start's excitations against static
+optimisation on the grid and the gradient against central differences."""
 
 from __future__ import annotations
-
-import dataclasses
 
 import numpy as np
 import pytest
 
 from fdbench.excitation_problem import START_RANGE, ExcitationProblem, logistic
-from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.model import MotionSpec, model_from_dict, to_dict
 from fdbench.multibody.motions import joint_motion
 from fdbench.multibody.simulation import inverse_dynamics
 from fdbench.multibody.static_optimization import static_optimization
 from fdbench.optimizers import make_optimizer
 
-
-def short_arm26():
-    data = to_dict(find_model("arm26"))
-    for m in data["muscles"]:
-        m["tendon"] = "rigid"
-    model = model_from_dict(data, "arm26.toml")
-    start = tuple(zip(model.coordinates, (0.3, 0.8)))
-    goal = tuple(zip(model.coordinates, (0.32, 0.9)))
-    return dataclasses.replace(model, motions=(MotionSpec("short", "minimum-jerk", 0.05, start, goal),))
+from helpers.models import short_arm26
 
 
 @pytest.fixture(scope="module")
