@@ -130,3 +130,11 @@ def check_positive(option: str, value: float) -> float:
 def per_joint(prefix: str, joints, values) -> dict:
     """Record fields ``<prefix>_<joint>`` of per-joint values; none for one joint (the overall value)."""
     return {f"{prefix}_{joint}": float(v) for joint, v in zip(joints, values)} if len(joints) > 1 else {}
+
+
+def muscle_columns(result, muscles) -> tuple[list[str], np.ndarray]:
+    """The trajectory columns of a simulation with muscles: (header, values (n, 3 M)),
+    ``<muscle>_activation``, ``_excitation`` and ``_force`` (N) for each of ``muscles`` in turn."""
+    header = [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")]
+    return header, np.stack([result.activation, result.excitation, result.muscle_force], axis=-1).reshape(
+        len(result.t), -1)

@@ -8,7 +8,8 @@ import numpy as np
 
 from ..method_options import MethodOption
 from ..multibody import cmc
-from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive, per_joint
+from .base import (CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive,
+                   muscle_columns, per_joint)
 
 # A compliant tendon's explicit form is stiff where its muscle is barely active (fdbench's arm26: RK4
 # at 1e-4 s fails within 0.9 s of its default motion under CMC, at 5e-5 s it runs): with compliant
@@ -90,8 +91,6 @@ class CMC(Controller):
             per_unmet = done.unmet_rms()
             fields["unmet_rms_nm"] = float(np.sqrt(np.mean(per_unmet[~reserved] ** 2)))
             fields.update(per_joint("unmet_rms_nm", joints, np.where(reserved, 0.0, per_unmet)))
-        header = [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")]
-        header += [f"{j}_reserve" for j in joints]
-        values = np.column_stack([np.stack([result.activation, result.excitation, result.muscle_force],
-                                           axis=-1).reshape(len(result.t), -1), done.reserve_on_samples])
-        return result, fields, (header, values)
+        header, values = muscle_columns(result, muscles)
+        return result, fields, (header + [f"{j}_reserve" for j in joints],
+                                np.column_stack([values, done.reserve_on_samples]))

@@ -1,7 +1,9 @@
 """Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
-it; the forearm with a flexor and an extensor."""
+it; the forearm with a flexor and an extensor; arm26 with rigid tendons on a 50-ms motion."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -47,3 +49,15 @@ def forearm_with_muscles_data() -> dict:
                        for name, y, slack in (("flexor", H, 0.2), ("extensor", -H, 0.21))]
     data["motions"] = [SWING]
     return data
+
+
+def short_arm26():
+    """The library's arm26 with every tendon rigid and one motion, 'short': 50 ms of minimum jerk
+    from (0.3, 0.8) to (0.32, 0.9) rad."""
+    data = d.to_dict(find_model("arm26"))
+    for m in data["muscles"]:
+        m["tendon"] = "rigid"
+    model = d.model_from_dict(data, "arm26.toml")
+    start = tuple(zip(model.coordinates, (0.3, 0.8)))
+    goal = tuple(zip(model.coordinates, (0.32, 0.9)))
+    return dataclasses.replace(model, motions=(d.MotionSpec("short", "minimum-jerk", 0.05, start, goal),))
