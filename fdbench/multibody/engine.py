@@ -379,7 +379,7 @@ class Engine:
         shape."""
         if not self.n_muscles:
             raise ValueError(f"the model {self.model.name!r} has no muscles to excite")
-        excitation = np.ascontiguousarray(excitation_half, dtype=float)
+        excitation = _writeable(excitation_half)
         if excitation.ndim != 2 or excitation.shape[1] != self.n_muscles:
             raise ValueError(f"excitations must have shape (rows, {self.n_muscles}), got {excitation.shape}")
         return Muscles(self.muscle_paths, self.muscle_params, self.tendon_row, excitation)
@@ -538,8 +538,9 @@ class Engine:
 
     @staticmethod
     def _vector(value, size: int, what: str) -> np.ndarray:
-        """value as a contiguous float array of shape (size,); ValueError for another shape."""
-        array = np.ascontiguousarray(value, dtype=float)
+        """value as a contiguous, writeable float array of shape (size,) (``_writeable``); ValueError
+        for another shape."""
+        array = _writeable(value)
         if array.shape != (size,):
             raise ValueError(f"{what} must have shape ({size},), got {array.shape}")
         return array

@@ -66,7 +66,8 @@ def muscle_geometry(model: Model, q, layout: MusclePaths | None = None) -> tuple
     n_coordinates = model.n_joints
     if q.ndim not in (1, 2) or q.shape[-1] != n_coordinates:
         raise ValueError(f"coordinates must have shape ({n_coordinates},) or (n, {n_coordinates}), got {q.shape}")
-    single, q = q.ndim == 1, np.ascontiguousarray(np.atleast_2d(q))
+    # contiguous and writeable whatever the caller's flags: the kernel compiles once, not once more for read-only q
+    single, q = q.ndim == 1, np.require(np.atleast_2d(q), requirements=["C", "W"])
     layout = muscle_layout(model) if layout is None else layout
     n, n_bodies = q.shape[0], layout.body_int.shape[0]
     lengths, arms = np.zeros((n, len(model.muscles))), np.zeros((n, len(model.muscles), n_coordinates))
