@@ -7,13 +7,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from fdbench.casadi_loader import casadi
 from fdbench.collocation import collocate_muscles, rigid_tendons
 from fdbench.models import find_model
 from fdbench.multibody import simulation as sim
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.motions import joint_motion
-from fdbench.multibody.muscle import rigid_tendon_force
+from fdbench.multibody.model import model_from_dict
+from fdbench.multibody.muscle import (SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, compliant_tendon,
+                                      rigid_tendon_force)
 from fdbench.multibody.muscle_paths import muscle_geometry
+from fdbench.multibody.symbolic_muscles import muscle_functions, symbolic
 
 ARM26 = find_model("arm26")
 RIGID = rigid_tendons(ARM26)
@@ -80,3 +84,65 @@ def test_a_model_without_muscles_or_a_bad_weight_is_refused_in_one_line():
         with pytest.raises(ValueError, match=words) as caught:
             collocate_muscles(model, motion, np.zeros((0, 12)), 5, effort_weight=weight)
         assert "\n" not in str(caught.value)
+
+
+# ---------------------------------------------------------------- the symbolic muscles against the compiled ones
+LEG = {  # a free base, a knee on a path spline, an offset ankle, a frame: every case of a path of points
+    "name": "leg",
+    "bodies": [{"name": "thigh", "mass": 8.0, "com": [0.0, -0.2], "inertia": 0.1},
+               {"name": "shank", "mass": 3.5, "com": [0.0, -0.2], "inertia": 0.05},
+               {"name": "foot", "mass": 1.0, "com": [0.05, 0.0], "inertia": 0.01}],
+    "joints": [{"name": "hip", "type": "free", "coordinates": ["pelvis_tilt", "pelvis_tx", "pelvis_ty"],
+                "parent": "ground", "child": "thigh", "at_parent": [0.0, 0.0]},
+               {"name": "knee_angle", "parent": "thigh", "child": "shank", "at_parent": [0.0, -0.4],
+                "path": {"angles": [-2.0, -1.0, 0.0, 1.0], "x": [-0.01, -0.005, 0.0, 0.001], "y": [0.0] * 4}},
+               {"name": "ankle_angle", "parent": "shank", "child": "foot", "at_parent": [0.01, -0.42],
+                "at_child": [-0.02, 0.01], "offset": 0.3}],
+    "frames": [{"name": "heel", "body": "foot", "at": [-0.05, 0.02], "angle": 0.7}],
+    "muscles": [{"name": name, "max_isometric_force": 1000.0, "optimal_fiber_length": 0.1, "tendon_slack_length": 0.3,
+                 "pennation_angle": 0.2, "fiber_damping": 0.01,
+                 "path": {"points": [{"body": b, "at": [x, y]} for b, x, y in points]}}
+                for name, points in (("long", [("ground", 0.05, 0.1), ("thigh", 0.04, -0.1), ("shank", 0.02, -0.05),
+                                               ("heel", 0.12, 0.03)]),
+                                     ("soleus", [("shank", -0.03, -0.1), ("foot", -0.04, 0.02)]))],
+}
+
+
+def compiled_muscles(model, params, z, zd, a):
+    """Lengths, moment arms, lengthening speeds and rigid-tendon forces by the compiled kernels."""
+    lengths, arms = muscle_geometry(model, z)
+    lengthening = -arms @ zd
+    force = np.array([rigid_tendon_force(a[m], lengths[m], lengthening[m], params[m]) for m in range(len(a))])
+    return lengths, arms, lengthening, force
+
+
+@pytest.mark.parametrize("name", ["arm26", "leg"])
+def test_the_symbolic_muscles_are_the_compiled_ones_at_random_states(name):
+    """At random coordinates, rates and activations: lengths, moment arms (-dl/dz by CasADi's jacobian
+    against the kernel's closed forms), lengthening speeds, rigid-tendon forces, the muscles'
+    generalised forces and De Groote's activation rate agree with the compiled functions to 1e-10
+    (relative to each quantity's scale): arm26's polynomial paths, and paths of points on a free base, a
+    knee on a path spline, an offset ankle and a frame."""
+    model = RIGID if name == "arm26" else model_from_dict(LEG, "leg")
+    params = Engine(model).muscle_params
+    geometry, forces, rate = muscle_functions(model, params)
+    J, M = model.n_joints, len(model.muscles)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        z = rng.uniform(0.1, 1.2, J) if name == "arm26" else rng.uniform(-0.5, 0.5, J)
+        zd, a, e = rng.normal(0.0, 2.0, J), rng.uniform(0.0, 1.0, M), rng.uniform(0.0, 1.0, M)
+        lengths, arms, lengthening, force = compiled_muscles(model, params, z, zd, a)
+        found = [np.array(v) for v in (*geometry(z, zd), *forces(z, zd, a))]
+        for mine, theirs in zip(found, (lengths, arms, lengthening, force, arms.T @ force)):
+            np.testing.assert_allclose(mine.reshape(theirs.shape), theirs, rtol=0, atol=1e-10 * np.abs(theirs).max())
+        expected = [activation_derivative(e[m], a[m], params[m, TAU_ACT], params[m, TAU_DEACT], params[m, SMOOTHING])
+                    for m in range(M)]
+        np.testing.assert_allclose(np.array(rate(e, a)).ravel(), expected, rtol=1e-12, atol=1e-12)
+
+
+def test_a_compiled_function_that_branches_on_data_raises_on_a_symbol():
+    """The compliant tendon's max(a, MIN_ACTIVATION) cannot be written on a symbol: it raises, never a silent branch."""
+    ca = casadi()
+    a = ca.SX.sym("a")
+    with pytest.raises(Exception):
+        symbolic(compliant_tendon)(a, 0.5, 0.3, 0.0, Engine(RIGID).muscle_params[0])
