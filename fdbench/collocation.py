@@ -469,6 +469,8 @@ def collocate_muscles(model, motion, params: np.ndarray, nodes: int = DEFAULT_NO
                          "torque-driven")
     ca = casadi()
     began = time.perf_counter()
+    compliant = tuple(muscle.name for muscle in model.muscles if muscle.tendon == "compliant")
+    model = rigid_tendons(model)
     J, M = model.n_joints, len(model.muscles)
     t = point_times(motion.duration, nodes, scheme)
     z, zd, zdd = desired_samples(model, motion, t)
@@ -509,7 +511,7 @@ def collocate_muscles(model, motion, params: np.ndarray, nodes: int = DEFAULT_NO
         muscle_force=force[nodes_], muscle_torque=muscle_torque[nodes_],
         inverse=np.array(actuation.map(m)(zs.T, ws.T, accs.T, p_loads.T)).T[nodes_], reserve_forces=reserve,
         effort_weight=float(effort_weight),
-        rigid_tendons=tuple(muscle.name for muscle in model.muscles if muscle.tendon == "compliant"))
+        rigid_tendons=compliant)
 
 
 def own_fields(model, solution: CollocationResult, truth) -> dict:
@@ -533,8 +535,9 @@ def own_fields(model, solution: CollocationResult, truth) -> dict:
 def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str) -> dict:
     """The fields a collocate run adds to its replay's record: options, ``own`` indicators, IPOPT's
     status and iterations, build and solve times (s); status 'collocation_failed' if unsolved."""
+    weight = {key: options[key] for key in ("regularization", "effort_weight") if key in options}
     fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],
-                  regularization=options["regularization"], **own, ipopt_status=solution.ipopt_status,
+                  **weight, **own, ipopt_status=solution.ipopt_status,
                   ipopt_iterations=solution.iterations, build_time_s=solution.build_time_s,
                   solve_time_s=solution.solve_time_s)
     if solution.residual_weights is not None:

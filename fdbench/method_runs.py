@@ -16,7 +16,8 @@ import numpy as np
 
 from . import __version__
 from .casadi_loader import casadi
-from .collocation import collocate, own_fields, record_fields
+from .collocation import collocate, collocate_muscles, own_fields, record_fields, rigid_tendons
+from .controllers.base import muscle_fields
 from .files import BadFile, read_history_csv, read_input_text
 from .method_options import options_text
 from .models import named_motions
@@ -32,8 +33,8 @@ from .problem import residual_weight as problem_residual_weight
 from .peers import run as run_peer
 from .records import RunOutcome, base_record, explained
 from .registry import unknown_name_message
-from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, reference,
-                         warm_up)
+from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, plant,
+                         reference, warm_up)
 from .torques import TORQUES
 from .torques.ann import select_hidden
 
@@ -416,6 +417,8 @@ def _optimize(spec, on_evaluation, on_start):
 def _collocate(spec):
     """Direct collocation of the nominal model, its torque replayed by the plant: the indicators are
     the replay's, the collocation's own beside them; ``extra['collocation']`` holds the solution."""
+    if getattr(spec, "actuation", "torques") == "muscles":
+        return _collocate_muscles(spec)
     options = dict(spec.method_options)
     warm_up(spec)
     casadi()  # its import is not part of the runtime
@@ -431,6 +434,47 @@ def _collocate(spec):
     done = outcome(spec, record, result, inverse, extra={"collocation": solution})
     own = own_fields(model, solution, truth)
     record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
+    return done
+
+
+def _collocate_muscles(spec):
+    """Muscle-driven direct collocation of the nominal model (``collocation.collocate_muscles``; its
+    compliant tendons taken as rigid), its excitations and reserves replayed by the plant with rigid
+    tendons too; the record has the replay's indicators and muscle fields (as CMC's), the
+    collocation's own beside them, and the trajectory each muscle's activation, excitation and force."""
+    options = {key: value for key, value in spec.method_options if key not in ("regularization",)}
+    model = nominal(spec)
+    if not model.muscles:
+        raise ValueError(f"--actuation muscles: model {spec.model_name!r} has no muscles ([[muscles]] in its file); "
+                         "use --actuation torques")
+    if spec.integrator != "rk4":
+        raise ValueError(f"--actuation muscles: muscles run on the compiled RK4 only, not --integrator "
+                         f"{spec.integrator}")
+    body = engine(spec, rigid_tendons(plant(spec)))
+    sim.warm_up(False, (body,))
+    casadi()  # its import is not part of the runtime
+    desired, truth = motions(spec)
+    grid, inverse, external = sim.half_steps(desired, spec.dt), reference(spec), loads(spec)
+    began = time.perf_counter()
+    solution = collocate_muscles(model, desired, engine(spec, rigid_tendons(model)).muscle_params, **options, loads=external)
+    result = sim.simulate(solution.torque_function(), body, desired, grid=grid,
+                          excitation=solution.excitation_function(), **integration(spec))
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    done = outcome(spec, record, result, inverse, extra={"collocation": solution})
+    reached = result.reached
+    reserve = solution.torque_samples(result.t[reached]).reshape(int(reached.sum()), -1)
+    per_reserve = np.sqrt(np.mean(reserve**2, axis=0)) if reached.any() else np.full(model.n_joints, np.nan)
+    record.update(runtime_s=runtime, **record_fields(solution, options, own_fields(model, solution, truth),
+                                                     record["message"]),
+                  actuation="muscles", **muscle_fields(result, per_reserve, solution.reserve_forces > 0,
+                                                       solution.muscles, joints(spec)),
+                  tendons=("rigid" if not solution.rigid_tendons else
+                           f"rigid (compliant taken as rigid: {', '.join(solution.rigid_tendons)})"))
+    header, rows = done.table
+    done.table = (header + [f"{m}_{s}" for m in solution.muscles for s in ("activation", "excitation", "force")],
+                  np.column_stack([rows, np.stack([result.activation, result.excitation, result.muscle_force],
+                                                  axis=-1).reshape(len(rows), -1)]))
     return done
 
 
