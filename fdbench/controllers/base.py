@@ -130,16 +130,3 @@ def check_positive(option: str, value: float) -> float:
 def per_joint(prefix: str, joints, values) -> dict:
     """Record fields ``<prefix>_<joint>`` of per-joint values; none for one joint (the overall value)."""
     return {f"{prefix}_{joint}": float(v) for joint, v in zip(joints, values)} if len(joints) > 1 else {}
-
-
-def muscle_fields(result, per_reserve, reserved, muscles, joints) -> dict:
-    """The record fields of a muscle-driven run's simulation ``result`` (its ``activation`` (n, M)
-    on the samples reached): ``reserve_rms_nm`` over the coordinates with a reserve (``reserved``
-    (J,) bool; ``per_reserve`` (J,) each reserve's RMS, N m) and per joint, ``effort`` (the mean of
-    sum_m a_m^2) and ``<muscle>_activation_mean``."""
-    reached = result.reached
-    return {"reserve_rms_nm": float(np.sqrt(np.mean(per_reserve[reserved] ** 2))) if reserved.any() else 0.0,
-            **per_joint("reserve_rms_nm", joints, per_reserve),
-            "effort": float(np.mean(np.sum(result.activation[reached] ** 2, axis=1))) if reached.any() else np.nan,
-            **{f"{m}_activation_mean": float(np.mean(result.activation[reached, i])) if reached.any() else np.nan
-               for i, m in enumerate(muscles)}}
