@@ -88,17 +88,17 @@ DEG2 = (180.0 / math.pi) ** 2  # deg^2 per rad^2
 CM2 = 100.0**2  # cm^2 per m^2
 
 
-def check_options(nodes: int, scheme: str, regularization: float, max_iter: int = DEFAULT_MAX_ITER,
+def check_options(nodes: int, scheme: str, regularization: float = 0.0, max_iter: int = DEFAULT_MAX_ITER,
                   max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
-                  residual_moment_weight: float | None = None) -> None:
+                  residual_moment_weight: float | None = None, effort_weight: float | None = None) -> None:
     """Raise ValueError with a one-line message naming the option for anything out of range (a
-    residual weight may be None: its default)."""
+    residual or effort weight may be None: its default)."""
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not MIN_NODES <= nodes <= MAX_NODES:
         raise ValueError(f"--nodes must be an integer in [{MIN_NODES}, {MAX_NODES}], got {nodes}")
     if scheme not in SCHEMES:
         raise ValueError("--scheme: " + unknown_name_message("scheme", scheme, list(SCHEMES)))
     for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
-                          ("--residual-moment-weight", residual_moment_weight)):
+                          ("--residual-moment-weight", residual_moment_weight), ("--effort-weight", effort_weight)):
         if value is None and option != "--regularization":
             continue
         if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -460,10 +460,7 @@ def collocate_muscles(model, motion, params: np.ndarray, nodes: int = DEFAULT_NO
     ``rigid_tendons``). The guess: the motion, and static optimisation's activations and reserves
     at the points. ValueError (one line) for bad options, a model without muscles or a motion of
     other joints."""
-    check_options(nodes, scheme, 0.0, max_iter, max_time)
-    if isinstance(effort_weight, bool) or not (isinstance(effort_weight, (int, float)) and math.isfinite(effort_weight)
-                                               and effort_weight >= 0):
-        raise ValueError(f"--effort-weight must be a non-negative finite number, got {effort_weight}")
+    check_options(nodes, scheme, max_iter=max_iter, max_time=max_time, effort_weight=effort_weight)
     if not model.muscles:
         raise ValueError(f"collocate: model {model.name!r} has no muscles ([[muscles]] in its file); collocate it "
                          "torque-driven")

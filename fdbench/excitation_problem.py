@@ -13,7 +13,11 @@ flatten the parameters' space.
 
 The parameterisations are prepared (fitted) on the logit of static optimisation's activations along
 the motion (``multibody.static_optimization``, clipped to [0.02, 0.98]), a start that roughly
-meets the motion's inverse dynamics. The effort integral is the trapezoidal rule on RK4's half-step
+meets the motion's inverse dynamics. With ``feedforward`` static optimisation's excitations are
+the feedforward instead, as the inverse-dynamics torque is the torque problem's (eq. 19): muscle
+m's signal is s_m(t) = logit(a_SO,m(t)) + the parameterisation's output, static optimisation run
+on RK4's half-step grid (its activations clipped as above), each parameterisation starting from
+zero output (``prepare`` with feedforward; its scale from that logit's range). The effort integral is the trapezoidal rule on RK4's half-step
 grid (excitation^2 s; its weight w_e in deg per excitation^2 s) and is added outside the compiled
 kernels, its gradient 2 w_e sum_k w_k e_k de_k/dp by numpy. The start: the motion's first sample,
 each activation at the initial parameters' excitation at t = 0 (a compliant tendon at the fibre's
@@ -32,9 +36,9 @@ import math
 
 import numpy as np
 
+from .multibody import simulation as sim
 from .multibody.muscle_paths import POINTS
 from .problem import ShootingProblem, tracking_gradient, tracking_setup
-from .multibody.simulation import muscle_start
 
 DEFAULT_EFFORT_WEIGHT = 1.0  # deg per (excitation^2 s)
 START_RANGE = (0.02, 0.98)  # static optimisation's activations clipped to this before the logit
@@ -45,15 +49,34 @@ def logistic(s):
     return 0.5 * (1.0 + np.tanh(0.5 * np.asarray(s, dtype=float)))  # the logistic without overflow
 
 
+def start_signal(activation) -> np.ndarray:
+    """The logit of static optimisation's activations (any shape), clipped to START_RANGE first."""
+    start = np.clip(np.asarray(activation, dtype=float), *START_RANGE)
+    return np.log(start / (1.0 - start))
+
+
+def check_muscle_paths(engine) -> None:
+    """ValueError (one line) where exact gradients cannot be had on ``engine``'s muscles: a muscle
+    path of points (its Hessian is not derived)."""
+    kinds = engine.muscle_paths.kind
+    if np.any(kinds == POINTS):
+        name = engine.model.muscles[int(np.flatnonzero(kinds == POINTS)[0])].name
+        raise ValueError(f"--gradient exact with muscles needs polynomial muscle paths; muscle {name!r} "
+                         "runs through points")
+
+
 class ExcitationProblem(ShootingProblem):
     """Optimise per-muscle excitation parameters so that ``engine``'s model (with muscles) tracks
     ``motion``: ``excitation`` a registered parameterisation's name (made once per muscle with
     ``options``) or a parameterisation (copied per muscle); ``penalty_weight`` eq. 18's; ``effort_weight``
     w_e (deg per excitation^2 s, >= 0); RK4 with steps of about ``dt`` s on the motion's samples.
+    ``feedforward``: the signals add to static optimisation's logit on the grid (see the module's
+    text); without, the parameterisations alone, fitted to it.
     No joint torques: the muscles alone move the model."""
 
     def __init__(self, excitation, engine, motion, penalty_weight: float = 1.0,
-                 effort_weight: float = DEFAULT_EFFORT_WEIGHT, dt: float = 1e-3, **options):
+                 effort_weight: float = DEFAULT_EFFORT_WEIGHT, dt: float = 1e-3, feedforward: bool = False,
+                 **options):
         from .multibody.static_optimization import static_optimization
         from .torques import make_torque
 
@@ -62,10 +85,11 @@ class ExcitationProblem(ShootingProblem):
         for name, value in (("penalty weight", penalty_weight), ("effort weight", effort_weight)):
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a non-negative finite number, got {value}")
-        self.engine, self.motion, self.dt = engine, motion, dt
+        self.engine, self.motion, self.dt, self.feedforward = engine, motion, dt, bool(feedforward)
         self.penalty_weight, self.effort_weight = float(penalty_weight), float(effort_weight)
         setup = tracking_setup(engine, motion, dt)
         self.inverse, grid = setup.inverse, setup.grid
+        self._grid = grid
         if not grid.every:
             raise ValueError("the motion's samples must lie on the RK4 grid (uniform, every k steps)")
         self.duration, self._n_steps, self._every, self._half = motion.duration, grid.n, grid.every, grid.t
@@ -73,22 +97,28 @@ class ExcitationProblem(ShootingProblem):
         self.parts = ([make_torque(excitation, **options) for _ in range(M)] if isinstance(excitation, str)
                       else [copy.deepcopy(excitation) for _ in range(M)])
         inv = self.inverse
-        so = static_optimization(engine.model, engine.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque)
-        start = np.clip(so.activation, *START_RANGE)
-        signal = np.log(start / (1.0 - start))
-        p0 = [np.asarray(part.prepare(inv.t, signal[:, m], False), dtype=float) for m, part in enumerate(self.parts)]
+        rows = 2 * self._n_steps + 1
+        if self.feedforward:  # static optimisation on the grid; the motion's samples are among its rows
+            half = sim.inverse_dynamics(grid.t, engine, motion)
+            self._ff_half = start_signal(static_optimization(engine.model, engine.muscle_params, half.t, half.angles,
+                                                             half.velocities, half.torque).activation)
+            signal = self._ff_half[::2 * self._every]
+        else:
+            so = static_optimization(engine.model, engine.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque)
+            signal, self._ff_half = start_signal(so.activation), np.zeros((rows, M))
+        p0 = [np.asarray(part.prepare(inv.t, signal[:, m], self.feedforward), dtype=float)
+              for m, part in enumerate(self.parts)]
         self.blocks = np.cumsum([0] + [len(p) for p in p0])
         self.p0 = np.concatenate(p0)
         self.scale = np.concatenate([np.asarray(part.scale(), dtype=float) for part in self.parts])
         self.x0 = self.p0 / self.scale
         self._on_grid_batch = [part.on_grid_batch(self._half) for part in self.parts]
         self._jacobians = None
-        rows = 2 * self._n_steps + 1
         self._trapezoid = np.full(rows, 0.5 * grid.step)  # the half-step grid's trapezoidal weights (s)
         self._trapezoid[[0, -1]] *= 0.5
         z0, zd0, _ = motion(np.zeros(1))
         y0 = engine.state_from_joints(z0[0], zd0[0])
-        self.y0 = np.concatenate([y0, muscle_start(engine, y0, self.excitations_on_grid(self.p0)[0])])
+        self.y0 = np.concatenate([y0, sim.muscle_start(engine, y0, self.excitations_on_grid(self.p0)[0])])
         self._zero = np.zeros((rows, engine.n_joints))
         self._kernel_rest = (grid.ref, grid.refd, self._every, np.ascontiguousarray(inv.angles), self.penalty_weight)
         self._population = None
@@ -103,12 +133,13 @@ class ExcitationProblem(ShootingProblem):
 
     def excitations_on_grid_batch(self, P) -> np.ndarray:
         """The excitations in (0, 1) on the half-step grid for every row of P, shape (lam, n_params)
-        -> (lam, 2 n + 1, M): each muscle's parameterisation on its block, through the logistic."""
+        -> (lam, 2 n + 1, M): each muscle's parameterisation on its block (plus, with feedforward,
+        static optimisation's logit), through the logistic."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         with np.errstate(all="ignore"):
             signal = np.stack([f(P[:, a:b]) for f, a, b in zip(self._on_grid_batch, self.blocks[:-1], self.blocks[1:])],
                               axis=-1)
-        return logistic(signal)
+        return logistic(signal + self._ff_half if self.feedforward else signal)
 
     def excitations_on_grid(self, p) -> np.ndarray:
         """The excitations on the half-step grid for parameters p, shape (2 n + 1, M)."""
@@ -125,6 +156,18 @@ class ExcitationProblem(ShootingProblem):
         zero = self._zero
         return self.engine.simulate(self.y0, self.duration / self._n_steps, self._n_steps, zero, zero, zero, zero,
                                     0.0, 0.0, excitation_half=self.excitations_on_grid(p))
+
+    def simulation(self, p) -> sim.Simulation:
+        """The forward simulation of parameters p on the motion's samples (``simulation.simulate``
+        from the start y0, muscle states included): the angles, the applied generalised forces (the
+        muscles'), each muscle's activation, excitation and force (N)."""
+        E, half = self.excitations_on_grid(p), self._half
+
+        def excitation(t):
+            return E if t is half else np.stack([np.interp(t, half, E[:, m]) for m in range(E.shape[1])], axis=-1)
+
+        return sim.simulate(None, self.engine, self.motion, dt=self.dt, start=self.y0, grid=self._grid,
+                            excitation=excitation)
 
     def objectives(self, P) -> np.ndarray:
         """f of every row of P, shape (lam, n_params) -> (lam,): the simulations and eq. 18 in compiled
@@ -147,11 +190,7 @@ class ExcitationProblem(ShootingProblem):
     def check_exact_gradient(self) -> None:
         """ValueError (one line) where the exact gradient is not available: a muscle path of points
         or a parameterisation without d signal / d p."""
-        kinds = self.engine.muscle_paths.kind
-        if np.any(kinds == POINTS):
-            name = self.engine.model.muscles[int(np.flatnonzero(kinds == POINTS)[0])].name
-            raise ValueError(f"--gradient exact with muscles needs polynomial muscle paths; muscle {name!r} "
-                             "runs through points")
+        check_muscle_paths(self.engine)
         if self._jacobians is None:
             self._jacobians = [part.on_grid_jacobian(self._half) for part in self.parts]
         if any(jacobian is None for jacobian in self._jacobians):
@@ -193,3 +232,32 @@ class ExcitationProblem(ShootingProblem):
         """``value_and_gradient`` on the scaled parameters x = p / scale."""
         f, g = self.value_and_gradient(np.asarray(x, dtype=float) * self.scale)
         return f, g * self.scale
+
+
+def warm_up(engine, sensitivities: bool = False) -> None:
+    """Load (or compile) the kernels an ``ExcitationProblem`` on ``engine`` (a model with muscles)
+    runs, on two steps from rest at excitations 0.1, with the very argument types of its calls: the
+    population's (``tracking.rk4_candidates`` with muscles) and, with ``sensitivities``,
+    ``rk4_sensitivity`` with muscles (polynomial paths only), so that later timings exclude them."""
+    from .compile_guard import compiling
+    from .multibody.kernels import rk4_sensitivity
+    from .population import Population
+    from .tracking import rk4_candidates
+
+    J, M, n = engine.n_joints, engine.n_muscles, 2
+    rows = 2 * n + 1
+    y0 = engine.state_from_joints(np.zeros(J), np.zeros(J))
+    y0 = np.concatenate([y0, sim.muscle_start(engine, y0, np.full(M, 0.1))])
+    ref, E = np.zeros((rows, J)), np.full((1, rows, M), 0.1)
+    with compiling():  # Ctrl-C while a kernel compiles ends the command at once
+        args = engine.population_args(y0, 0.05, n, np.zeros((1, rows, J)), ref, ref, 1, np.zeros((n + 1, J)), 1.0,
+                                      excitation=E)
+        Population(rk4_candidates, n, engine.population_widths_with(True))(1, args)
+        if not sensitivities:
+            return
+        y0, dt, _, tau, ref, refd, every, _, _, *layout, muscles = args
+        width, P = y0.shape[0], M
+        muscles = muscles._replace(excitation=np.ascontiguousarray(E[0]))
+        rk4_sensitivity(y0, dt, n, tau[0], ref, refd, np.ones((rows, P)), J + np.arange(M), every, *layout,
+                        np.empty((n + 1, width)), np.empty((n + 1, width)), np.empty((n + 1, J)),
+                        np.empty((n // every + 1, J, P)), muscles)

@@ -87,8 +87,9 @@ _WARM: set = set()  # what this process is warm for (see warm_up_for)
 
 def warm_up_for(spec) -> None:
     """Before a timed run, make this process warm for it by a miniature run, neither stored nor
-    timed: every kernel and import the run uses (RK4, population and torque kernels, scipy, cma)
-    is then loaded or compiled, and what a method computes once per settings and keeps (the
+    timed: every kernel and import the run uses (RK4, population and torque kernels; with
+    ``--actuation muscles`` the muscles' population and sensitivity kernels on the run's model;
+    scipy, cma) is then loaded or compiled, and what a method computes once per settings and keeps (the
     ANN's pretraining) is there, so a worker's first run costs what its later runs cost, on
     every backend. An optimisation is warmed per settings (seed 0, ``WARM_UP_BUDGET``
     evaluations), control once per controller, model and integrator. Collocation is left to its

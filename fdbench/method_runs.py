@@ -17,7 +17,9 @@ import numpy as np
 from . import __version__
 from .casadi_loader import casadi
 from .collocation import collocate, collocate_muscles, own_fields, record_fields, rigid_tendons
-from .controllers.base import muscle_fields
+from .controllers.base import activation_fields, muscle_columns, per_joint
+from .excitation_problem import DEFAULT_EFFORT_WEIGHT, ExcitationProblem
+from .excitation_problem import warm_up as warm_up_excitations
 from .files import BadFile, read_history_csv, read_input_text
 from .method_options import options_text
 from .models import named_motions
@@ -244,13 +246,16 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
                                   f"({', '.join(compliant[:3])}{', ...' if len(compliant) > 3 else ''}): try a "
                                   f"smaller --dt than {spec.dt:g} s")
     if excitation is not None:  # each muscle's activation, excitation and force (N) beside the joints
-        muscles = [m.name for m in engine(spec).model.muscles]
-        header, rows = done.table
-        done.table = (header + [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")],
-                      np.column_stack([rows, np.stack([result.activation, result.excitation, result.muscle_force],
-                                                      axis=-1).reshape(len(rows), -1)]))
+        _with_muscle_columns(done, spec)
     done.extra["spec"] = spec  # the spec run: its inputs name the torque file or parameters by content
     return explained(done, spec)
+
+
+def _with_muscle_columns(done: RunOutcome, spec) -> None:
+    """The run's trajectory with each muscle's activation, excitation and force (N) after the joints'."""
+    header, rows = done.table
+    columns, values = muscle_columns(done.result, [m.name for m in engine(spec).model.muscles])
+    done.table = (header + columns, np.column_stack([rows, values]))
 
 
 def _check_tendon_step(body, desired, excitation, dt: float, warn) -> None:
@@ -362,8 +367,18 @@ def _saved_torque(spec, path):
     return problem.torque_function(saved["params"]), f"{name} from {saved['path'].name}", saved["digest"], spec
 
 
+def _excitation_problem(spec, **options) -> ExcitationProblem:
+    """The shooting problem on the plant's muscles' excitations of an ``--actuation muscles`` spec
+    (static optimisation of its start on the plant too)."""
+    effort = DEFAULT_EFFORT_WEIGHT if spec.effort_weight is None else spec.effort_weight
+    return ExcitationProblem(spec.torque, engine(spec), motions(spec)[0], spec.penalty_weight, effort, spec.dt,
+                             spec.feedforward, **options)
+
+
 def replay(spec, params) -> sim.Simulation:
     """The simulation of a stored optimisation run's best parameters (for figures)."""
+    if spec.actuation == "muscles":
+        return _excitation_problem(spec, **dict(spec.torque_options)).simulation(np.asarray(params, dtype=float))
     options = dict(spec.torque_options)
     if options.get("hidden") == "auto":  # 3 n + 1 parameters per joint
         options["hidden"] = (len(params) // len(joints(spec)) - 1) // 3
@@ -373,15 +388,20 @@ def replay(spec, params) -> sim.Simulation:
 
 # ---------------------------------------------------------------------- optimisation and collocation
 def _optimize(spec, on_evaluation, on_start):
-    """Shooting optimisation of per-joint torque parameters (``fdbench.problem.TrackingProblem``)."""
+    """Shooting optimisation of per-joint torque parameters (``fdbench.problem.TrackingProblem``) or,
+    with ``--actuation muscles``, of per-muscle excitation parameters (``ExcitationProblem``)."""
+    muscles = spec.actuation == "muscles"
     optimizer = make_optimizer(spec.optimizer, **dict(spec.optimizer_options))
-    warm_up(spec, population=True)  # the population kernel and its threads too
-    if spec.gradient == "exact":
+    warm_up(spec, population=not muscles)  # the population kernel and its threads too
+    if muscles:  # the muscles' population and sensitivity kernels on this model
+        warm_up_excitations(engine(spec), spec.gradient == "exact")
+    elif spec.gradient == "exact":
         warm_up_sensitivities()
     optimizer.warm_up()
     TORQUES[spec.torque].warm_up()
     # eq. 3 and the references on the half-step grid, before the clock as the C loop's
-    setup = tracking_setup(engine(spec, nominal(spec)), motions(spec)[0], spec.dt, spec.feedforward)
+    setup = None if muscles else tracking_setup(engine(spec, nominal(spec)), motions(spec)[0], spec.dt,
+                                                spec.feedforward)
     if on_start:
         on_start(spec.budget)
     began = time.perf_counter()
@@ -392,23 +412,32 @@ def _optimize(spec, on_evaluation, on_start):
         options["hidden"] = max(n for n, _ in fits)
         extra["hidden_fits"] = [(n, max(dict(tried).get(n, math.inf) for _, tried in fits))
                                 for n in range(1, options["hidden"] + 1)]
-    problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, setup=setup, **options)
+    if muscles:
+        problem = _excitation_problem(spec, **options)
+    else:
+        problem = _problem(spec, spec.torque, spec.feedforward, spec.penalty_weight, setup=setup, **options)
     batch = problem.objectives_scaled if problem.batched else None
     gradient = problem.value_and_gradient_scaled if spec.gradient == "exact" else None
     found = optimizer.minimize(problem.objective_scaled, problem.x0, spec.budget, spec.seed, on_evaluation, gradient,
                                batch)
     params = np.asarray(found.x) * problem.scale
-    result = problem.simulate(params)
+    result = problem.simulation(params) if muscles else problem.simulate(params)
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque=spec.torque, optimizer=spec.optimizer, seed=spec.seed, budget=spec.budget,
                   evaluations=found.evaluations, best_objective=found.fun, stop_reason=found.stop_reason,
                   n_params=problem.n_params, runtime_s=runtime, penalty_weight=spec.penalty_weight,
-                  **({"residual_weight": problem.residual_weight} if problem.base_column is not None else {}),
+                  **({"residual_weight": problem.residual_weight}
+                     if getattr(problem, "base_column", None) is not None else {}),
                   torque_options=options_text(sorted(options.items())),
                   optimizer_options=options_text(spec.optimizer_options), gradient=spec.gradient,
                   initial_objective=problem.objective(problem.p0))
+    if muscles:  # no reserves: the muscles alone drive the joints
+        record.update(actuation="muscles", effort_weight=problem.effort_weight, reserve_rms_nm=0.0,
+                      **activation_fields(result, [m.name for m in problem.engine.model.muscles]))
     done = outcome(spec, record, result, reference(spec), history=list(found.history), params=params, extra=extra)
+    if muscles:
+        _with_muscle_columns(done, spec)
     if found.stop_reason.startswith(NO_ITERATION):  # "success" of a run that hardly moved: say why
         done.record["message"] += f"; {spec.optimizer} completed no iteration within the budget (see stop_reason)"
     return done
@@ -417,7 +446,7 @@ def _optimize(spec, on_evaluation, on_start):
 def _collocate(spec):
     """Direct collocation of the nominal model, its torque replayed by the plant: the indicators are
     the replay's, the collocation's own beside them; ``extra['collocation']`` holds the solution."""
-    if getattr(spec, "actuation", "torques") == "muscles":
+    if spec.actuation == "muscles":
         return _collocate_muscles(spec)
     options = dict(spec.method_options)
     warm_up(spec)
@@ -441,40 +470,36 @@ def _collocate_muscles(spec):
     """Muscle-driven direct collocation of the nominal model (``collocation.collocate_muscles``; its
     compliant tendons taken as rigid), its excitations and reserves replayed by the plant with rigid
     tendons too; the record has the replay's indicators and muscle fields (as CMC's), the
-    collocation's own beside them, and the trajectory each muscle's activation, excitation and force."""
-    options = {key: value for key, value in spec.method_options if key not in ("regularization",)}
+    collocation's own beside them, and the trajectory each muscle's activation, excitation and force
+    and each coordinate's reserve (N m). The spec's checks refuse a model without muscles."""
+    options = {key: value for key, value in spec.method_options if key != "regularization"}
     model = nominal(spec)
-    if not model.muscles:
-        raise ValueError(f"--actuation muscles: model {spec.model_name!r} has no muscles ([[muscles]] in its file); "
-                         "use --actuation torques")
-    if spec.integrator != "rk4":
-        raise ValueError(f"--actuation muscles: muscles run on the compiled RK4 only, not --integrator "
-                         f"{spec.integrator}")
-    body = engine(spec, rigid_tendons(plant(spec)))
+    body, params = engine(spec, rigid_tendons(plant(spec))), engine(spec, rigid_tendons(model)).muscle_params
     sim.warm_up(False, (body,))
     casadi()  # its import is not part of the runtime
     desired, truth = motions(spec)
     grid, inverse, external = sim.half_steps(desired, spec.dt), reference(spec), loads(spec)
     began = time.perf_counter()
-    solution = collocate_muscles(model, desired, engine(spec, rigid_tendons(model)).muscle_params, **options, loads=external)
+    solution = collocate_muscles(model, desired, params, **options, loads=external)
     result = sim.simulate(solution.torque_function(), body, desired, grid=grid,
                           excitation=solution.excitation_function(), **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     done = outcome(spec, record, result, inverse, extra={"collocation": solution})
     reached = result.reached
-    reserve = solution.torque_samples(result.t[reached]).reshape(int(reached.sum()), -1)
-    per_reserve = np.sqrt(np.mean(reserve**2, axis=0)) if reached.any() else np.full(model.n_joints, np.nan)
+    reserve = solution.torque_samples(result.t).reshape(len(result.t), -1)
+    per_reserve = np.sqrt(np.mean(reserve[reached] ** 2, axis=0)) if reached.any() else np.full(model.n_joints, np.nan)
+    reserved = solution.reserve_forces > 0
+    taken = solution.rigid_tendons
     record.update(runtime_s=runtime, **record_fields(solution, options, own_fields(model, solution, truth),
                                                      record["message"]),
-                  actuation="muscles", **muscle_fields(result, per_reserve, solution.reserve_forces > 0,
-                                                       solution.muscles, joints(spec)),
-                  tendons=("rigid" if not solution.rigid_tendons else
-                           f"rigid (compliant taken as rigid: {', '.join(solution.rigid_tendons)})"))
+                  actuation="muscles", tendons=f"rigid (compliant taken as rigid: {', '.join(taken)})" if taken
+                  else "rigid", reserve_rms_nm=float(np.sqrt(np.mean(per_reserve[reserved] ** 2)))
+                  if reserved.any() else 0.0, **per_joint("reserve_rms_nm", joints(spec), per_reserve),
+                  **activation_fields(result, solution.muscles))
     header, rows = done.table
-    done.table = (header + [f"{m}_{s}" for m in solution.muscles for s in ("activation", "excitation", "force")],
-                  np.column_stack([rows, np.stack([result.activation, result.excitation, result.muscle_force],
-                                                  axis=-1).reshape(len(rows), -1)]))
+    columns, values = muscle_columns(result, solution.muscles)
+    done.table = (header + columns + [f"{j}_reserve" for j in joints(spec)], np.column_stack([rows, values, reserve]))
     return done
 
 

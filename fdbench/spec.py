@@ -11,9 +11,11 @@ import math
 from dataclasses import InitVar, asdict, dataclass, replace
 
 from . import run_inputs
-from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION, check_model, check_options
+from .collocation import (DEFAULT_EXCITATION_WEIGHT, DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION,
+                          check_model, check_options)
 from .controllers import CONTROLLERS
 from .controllers.pd import PAPER_KD, PAPER_KP
+from .excitation_problem import DEFAULT_EFFORT_WEIGHT, check_muscle_paths
 from .integrate import check_integrator
 from .memory import check_run
 from .method_options import accepted_options, check_method_options, options_for
@@ -29,8 +31,9 @@ from .torques.cs import DEFAULT_KNOTS, knots_for
 from .validation import MAX_CAPTURE_HZ, MAX_NOISE_DEG, MAX_SEED, check_conditions, check_gradient
 
 COMMANDS = ("control", "optimize", "simulate", "collocate", "peer")  # peer: fdbench.peers
+ACTUATIONS = ("torques", "muscles")  # what an optimisation's parameters drive (``--actuation``)
 MAX_BUDGET = 1_000_000  # evaluations: hours of work, and the history kept in memory stays small
-__all__ = ["COMMANDS", "MAX_BUDGET", "MAX_CAPTURE_HZ", "MAX_NOISE_DEG", "MAX_SEED", "OMITTED_AT_DEFAULT", "PAPER_KD",
+__all__ = ["ACTUATIONS", "COMMANDS", "MAX_BUDGET", "MAX_CAPTURE_HZ", "MAX_NOISE_DEG", "MAX_SEED", "OMITTED_AT_DEFAULT", "PAPER_KD",
            "PAPER_KP", "RunSpec", "collocate_spec", "control_spec", "gradient_for", "model_digest", "motion_digest",
            "optimize_spec", "peer_spec", "with_model_file", "with_motion_file", "with_motion_knots"]
 
@@ -76,6 +79,8 @@ class RunSpec:
     model_name: str = "forearm"  # the simulated body: a name of ``fdbench.models.names()`` or a model file
     loads: str | None = None  # external loads from data: an OpenSim ExternalLoads file (its content among inputs)
     residual_weight: float | None = None  # optimize on a floating base: eq. 18's residual term, deg per N (N m)
+    actuation: str = "torques"  # optimize: "torques" (joint torques) or "muscles" (the muscles' excitations)
+    effort_weight: float | None = None  # optimize --actuation muscles: w_e, deg per excitation^2 s (None: default)
     kinematics: InitVar[str | None] = None  # ``motion`` by its stored name (stored settings, the record's field)
 
     def __post_init__(self, kinematics):
@@ -139,8 +144,36 @@ class RunSpec:
             check_gradient(self.gradient, optimizer, torque, self.integrator)
         elif self.gradient != "fd":
             raise ValueError("--gradient applies to optimisations only")
+        self._check_actuation()
         self._check_memory()
         return self
+
+    def _check_actuation(self) -> None:
+        """--actuation and --effort-weight: ValueError (one line) for a value out of range, an option
+        that does not apply, or an optimisation of muscles the model or the method cannot run."""
+        if self.actuation not in ACTUATIONS:
+            raise ValueError(f"--actuation must be one of {', '.join(ACTUATIONS)}, got {self.actuation!r}")
+        if self.actuation != "torques" and self.command not in ("optimize", "collocate"):
+            raise ValueError("--actuation applies to optimize and collocate only")
+        if self.effort_weight is not None and (self.actuation != "muscles" or self.command != "optimize"):
+            raise ValueError("--effort-weight needs optimize --actuation muscles (collocate's is among its options)")
+        if self.actuation != "muscles":
+            return
+        if self.effort_weight is not None and not (math.isfinite(self.effort_weight) and self.effort_weight >= 0):
+            raise ValueError(f"--effort-weight must be a non-negative finite number, got {self.effort_weight}")
+        model = run_inputs.nominal(self)
+        if not model.muscles:
+            raise ValueError(f"--actuation muscles: model {self.model_name!r} has no muscles ([[muscles]] in its "
+                             "file); use --actuation torques")
+        if self.integrator != "rk4":
+            raise ValueError(f"--actuation muscles: muscles run on the compiled RK4 only, not --integrator "
+                             f"{self.integrator}")
+        if self.residual_weight is not None:
+            raise ValueError("--residual-weight applies to --actuation torques only")
+        if dict(self.torque_options).get("hidden") == "auto":
+            raise ValueError("--hidden auto fits the inverse-dynamics torque: give a count with --actuation muscles")
+        if self.gradient == "exact":
+            check_muscle_paths(run_inputs.engine(self))
 
     def _check_memory(self) -> None:
         """ValueError (one line naming the option to change) if the run's arrays would not fit in
@@ -180,6 +213,9 @@ class RunSpec:
             data["loads"] = "file"
         if data.get("controller") == "pd":  # the paper's PD is the default controller
             data["controller"] = None
+        if data.get("actuation") == "muscles" and data.get("effort_weight") is None and self.command == "optimize":
+            # the default, written out (collocate's is among its method options)
+            data["effort_weight"] = float(DEFAULT_EFFORT_WEIGHT)
         for name, default in OMITTED_AT_DEFAULT.items():
             if data.get(name) == default:
                 data.pop(name)
@@ -192,7 +228,7 @@ class RunSpec:
 
 
 FLOAT_FIELDS = ("dt", "rtol", "atol", "alpha", "xi", "omega", "kp", "kd", "penalty_weight", "cutoff_hz",
-                "spline_lambda", "sample_dt", "noise_deg", "capture_hz", "residual_weight")
+                "spline_lambda", "sample_dt", "noise_deg", "capture_hz", "residual_weight", "effort_weight")
 def with_model_file(spec: "RunSpec") -> "RunSpec":
     """The spec with its model file's content digest among its inputs (none for a library model)."""
     if not is_file(spec.model_name):
@@ -211,7 +247,8 @@ def with_motion_file(spec: "RunSpec") -> "RunSpec":
 OMITTED_AT_DEFAULT = {"inputs": (), "controller": None, "method_options": (), "radians": False,
                       "cutoff_hz": DEFAULT_CUTOFF_HZ, "smoothing": "butterworth", "spline_lambda": None,
                       "sample_dt": None, "noise_deg": 0.0, "capture_hz": DEFAULT_CAPTURE_HZ, "plant": (), "model": (), "gradient": "fd",
-                      "model_name": "forearm", "loads": None, "residual_weight": None}
+                      "model_name": "forearm", "loads": None, "residual_weight": None, "actuation": "torques",
+                      "effort_weight": None}
 
 
 def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **common) -> RunSpec:
@@ -227,9 +264,24 @@ def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **c
 
 
 def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max_iter=None, max_time=None,
-                   residual_force_weight=None, residual_moment_weight=None, **common) -> RunSpec:
-    """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default (a
-    residual weight's depends on the loads, so it is left out of the options)."""
+                   residual_force_weight=None, residual_moment_weight=None, actuation="torques", effort_weight=None,
+                   **common) -> RunSpec:
+    """A direct-collocation spec (see ``fdbench.collocation.collocate``, with ``actuation`` 'muscles'
+    ``collocate_muscles`` and its ``effort_weight``); None takes the default (a residual weight's
+    depends on the loads, so it is left out of the options). ValueError (one line) for a weight
+    that does not apply to the actuation."""
+    if actuation == "muscles":
+        for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
+                              ("--residual-moment-weight", residual_moment_weight)):
+            if value is not None:
+                raise ValueError(f"{option} applies to --actuation torques only (muscles: --effort-weight)")
+        options = dict(nodes=nodes, scheme=scheme, max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,
+                       max_time=DEFAULT_MAX_TIME if max_time is None else max_time,
+                       effort_weight=DEFAULT_EXCITATION_WEIGHT if effort_weight is None else effort_weight)
+        return RunSpec(command="collocate", method_options=tuple(sorted(options.items())), actuation=actuation,
+                       **common)
+    if effort_weight is not None:
+        raise ValueError("--effort-weight applies to --actuation muscles only")
     options = dict(nodes=nodes, scheme=scheme,
                    regularization=DEFAULT_REGULARIZATION if regularization is None else regularization,
                    max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,

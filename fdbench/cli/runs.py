@@ -9,7 +9,7 @@ import typer
 
 from .app import BadInput, app, bad_input
 from .common import (
-    OUTPUT_LABELS, Progress, applicable_options, bracketed, check_count, check_finite, check_gradient,
+    OUTPUT_LABELS, Progress, applicable_options, bracketed, check_choice, check_count, check_finite, check_gradient,
     check_method_ranges, check_outputs, emit, finish, history_csv, methods_text, say, shooting_methods, validated,
 )
 from .conditions import noise_seed, spec_inputs, with_conditions
@@ -170,12 +170,14 @@ def _casadi_ready(command: str) -> None:
 def collocate(
     nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over the motion's span (eq. 5: [0, 1] s), >= 2.")] = 100,
     scheme: Annotated[str, typer.Option("--scheme", help="Transcription: hermite-simpson (piecewise-quadratic torque) or trapezoidal (piecewise-linear).")] = "hermite-simpson",
-    regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
+    regularization: Annotated[Optional[float], typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; default 1e-6, which makes 1 N m weigh as much as 0.001 deg (torques only).", show_default=False)] = None,
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit, in [1, 1000000].")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
     residual_force_weight: Annotated[Optional[float], typer.Option("--residual-force-weight", help="A floating base's residual force: weight of the integral of FX^2 + FY^2 beside the squared errors (deg^2, and cm^2 of translations), deg^2/N^2; default 1e-3 with --loads, the --regularization without (the residuals then carry the body's weight).", show_default=False)] = None,
     residual_moment_weight: Annotated[Optional[float], typer.Option("--residual-moment-weight", help="A floating base's residual moment: weight of the integral of MZ^2, deg^2/(N m)^2; default 1e-3 with --loads, the --regularization without.", show_default=False)] = None,
     save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; another model: t and one column per joint, e.g. t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
+    actuation: Annotated[str, typer.Option("--actuation", metavar="torques|muscles", help="What drives the model: torques (the inverse dynamics of the states found) or muscles, the model's muscles (activations, excitations in [0, 1], De Groote's activation dynamics; tendons rigid, a compliant one taken as rigid) and one reserve torque per coordinate (the model's [[actuators]], none on a coordinate without one; 1 N m per coordinate on a model without), as Moco's MocoTrack; the excitations and reserves are replayed (rk4 only). The record adds effort (mean of the summed squared activations), reserve_rms_nm, <muscle>_activation_mean, tendons; --save-trajectory adds <muscle>_activation, _excitation, _force (N) and <joint>_reserve (N m).")] = "torques",
+    effort_weight: Annotated[Optional[float], typer.Option("--effort-weight", help="With --actuation muscles: weight of the integral of the summed squared excitations and squared reserve controls (r / optimal force) beside the squared rotation error: deg^2 per excitation^2, >= 0 (default 0.1).", show_default=False)] = None,
     one: OneRun = None,
     conditions: dict = None,
 ):
@@ -183,9 +185,16 @@ def collocate(
     from ..method_runs import run
     from ..spec import collocate_spec
 
+    from ..spec import ACTUATIONS
+
     one.check(conditions, save_torque=save_torque)
-    spec = validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
-                                    residual_moment_weight, **one.fields(conditions)))
+    check_choice("--actuation", actuation, ACTUATIONS)
+    if actuation == "muscles" and save_torque is not None:
+        raise BadInput("--save-torque writes joint torques; with --actuation muscles use --save-trajectory")
+    with bad_input():
+        made = collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
+                              residual_moment_weight, actuation, effort_weight, **one.fields(conditions))
+    spec = validated(made)
     _casadi_ready("collocate")
     one.out.check_store()
     outcome = run(spec)
@@ -229,7 +238,9 @@ def optimize(
     ctx: typer.Context,
     torque: Annotated[str, typer.Option("--torque", help="Torque parameterisation (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'cs[knots=21]'.")] = "cs",
     opt: Annotated[str, typer.Option("--opt", help="Optimiser (see 'fdbench methods'); NAME[KEY=VALUE,...] passes any option its class takes, e.g. 'cmaes[sigma0=0.1,popsize=12]'.")] = "bfgs",
-    feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2).")] = False,
+    feedforward: Annotated[bool, typer.Option("--feedforward/--no-feedforward", help="Add the inverse-dynamics torque (Table 3) or not (Table 2). With --actuation muscles: add static optimisation's excitations, each muscle's signal logit(a_SO) (a_SO clipped to [0.02, 0.98], on the RK4 grid) plus the parameterisation's, which starts at zero; without, the parameterisation alone, fitted to that logit.")] = False,
+    actuation: Annotated[str, typer.Option("--actuation", metavar="torques|muscles", help="What the parameters drive: torques, one parameterised torque per joint (the paper's), or muscles, one parameterised excitation per muscle of the model (--torque's parameterisation through a logistic into (0, 1); no joint torques and no reserves: the muscles alone move the model; rk4 only). The objective is then eq. 18 plus --effort-weight times the integral of the summed squared excitations; the record adds effort (mean of the summed squared activations), <muscle>_activation_mean, reserve_rms_nm (0), rmse_torque_nm the muscles' generalised forces against the inverse dynamics; --save-trajectory adds <muscle>_activation, _excitation, _force (N).")] = "torques",
+    effort_weight: Annotated[Optional[float], typer.Option("--effort-weight", help="With --actuation muscles: w_e, deg per excitation^2 s, >= 0 (default 1: six muscles at excitation 0.3 for 1 s cost about half a degree of tracking error, so tracking comes first and the effort picks among motions that track alike).", show_default=False)] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of every stochastic step; the same seed gives the same numbers.")] = 0,
     threads: Threads = None,
     residual_weight: Annotated[Optional[float], typer.Option("--residual-weight", help="On a floating base: eq. 18's residual term, deg per N of the base's residual force RMS (FX, FY) and per N m of its moment's (MZ), over the torque history; default 0.01 with --loads, 0 without (the residuals then carry the body's weight).", show_default=False)] = None,
@@ -243,7 +254,7 @@ def optimize(
     methods: MethodValues = None,
     conditions: dict = None,
 ):
-    """Forward dynamic optimisation (section 4): tune a parameterised torque history so the simulated rotation tracks the desired one (objective of eq. 18)."""
+    """Forward dynamic optimisation (section 4): tune a parameterised torque history (or, with --actuation muscles, the muscles' excitations) so the simulated rotation tracks the desired one (objective of eq. 18)."""
     if list_methods:
         emit(methods_text(), None)
         return
@@ -259,17 +270,18 @@ def optimize(
     optimizer_options = applicable_options(ctx, optimizer_options, OPTIMIZERS, opt, "--opt")
     check_gradient(optim.gradient)
     check_count("--threads", threads, MAX_THREADS)
+    muscle_fields = _actuation(actuation, effort_weight, save_params)
     spec = validated(optimize_spec(
         torque, opt, feedforward, seed, optim.budget, torque_options=torque_options, optimizer_options=optimizer_options,
         penalty_weight=optim.penalty_weight, gradient=optim.gradient, **_residual(residual_weight),
-        **sim.spec_fields(kinematics, conditions),
+        **muscle_fields, **sim.spec_fields(kinematics, conditions),
     ))
     out.check_store()
     if opt == "cmaes":
         from ..population import set_threads
 
         set_threads(threads)
-    with Progress(out.quiet, f"{torque} + {opt}") as progress:
+    with Progress(out.quiet, f"{torque}{' excitations' if muscle_fields else ''} + {opt}") as progress:
         outcome = run(spec, on_evaluation=progress.update, on_start=progress.start)
     if "hidden_fits" in outcome.extra:
         fits = ", ".join(f"{n}: {err:.2e}" for n, err in outcome.extra["hidden_fits"])
@@ -287,6 +299,25 @@ def optimize(
             write_atomic(save_params, params_json(spec, outcome), "--save-params")
 
     out.deliver(outcome, spec, "fdbench optimize", write_more)
+
+
+def _actuation(actuation: str, effort_weight, save_params) -> dict:
+    """The spec fields of --actuation and --effort-weight (none for torques, the default), checked:
+    an unknown actuation, --effort-weight without --actuation muscles, a weight not finite, or
+    --save-params with muscles (its file holds torque parameters) are bad input."""
+    from ..spec import ACTUATIONS
+
+    check_choice("--actuation", actuation, ACTUATIONS)
+    if effort_weight is not None and actuation != "muscles":
+        raise BadInput("--effort-weight needs --actuation muscles")
+    if actuation != "muscles":
+        return {}
+    if save_params is not None:
+        raise BadInput("--save-params writes torque parameters; it does not apply to --actuation muscles")
+    if effort_weight is None:
+        return {"actuation": actuation}
+    check_finite(effort_weight=effort_weight)
+    return {"actuation": actuation, "effort_weight": effort_weight}
 
 
 def _residual(weight) -> dict:

@@ -130,3 +130,23 @@ def check_positive(option: str, value: float) -> float:
 def per_joint(prefix: str, joints, values) -> dict:
     """Record fields ``<prefix>_<joint>`` of per-joint values; none for one joint (the overall value)."""
     return {f"{prefix}_{joint}": float(v) for joint, v in zip(joints, values)} if len(joints) > 1 else {}
+
+
+def activation_fields(result, muscles) -> dict:
+    """The record fields of a simulation with muscles (``Simulation.activation`` (n, M)) over the
+    samples reached: ``effort``, the mean of sum_m a_m^2, and ``<muscle>_activation_mean`` for each
+    of ``muscles`` (names, M); NaN with no sample reached."""
+    reached = result.reached
+    if not reached.any():
+        return {"effort": np.nan, **{f"{m}_activation_mean": np.nan for m in muscles}}
+    activation = result.activation[reached]
+    return {"effort": float(np.mean(np.sum(activation**2, axis=1))),
+            **{f"{m}_activation_mean": float(np.mean(activation[:, i])) for i, m in enumerate(muscles)}}
+
+
+def muscle_columns(result, muscles) -> tuple[list[str], np.ndarray]:
+    """The trajectory columns of a simulation with muscles: (header, values (n, 3 M)),
+    ``<muscle>_activation``, ``_excitation`` and ``_force`` (N) for each of ``muscles`` in turn."""
+    header = [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")]
+    return header, np.stack([result.activation, result.excitation, result.muscle_force], axis=-1).reshape(
+        len(result.t), -1)

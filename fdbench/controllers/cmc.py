@@ -8,7 +8,8 @@ import numpy as np
 
 from ..method_options import MethodOption
 from ..multibody import cmc
-from .base import CONTROLLERS, Controller, Design, Plan, check_non_negative, check_positive, per_joint
+from .base import (CONTROLLERS, Controller, Design, Plan, activation_fields, check_non_negative, check_positive,
+                   muscle_columns, per_joint)
 
 # A compliant tendon's explicit form is stiff where its muscle is barely active (fdbench's arm26: RK4
 # at 1e-4 s fails within 0.9 s of its default motion under CMC, at 5e-5 s it runs): with compliant
@@ -76,15 +77,12 @@ class CMC(Controller):
         done = cmc.computed_muscle_control(plant, motion, self.kp, self.kd, self.window, self.reserve_optimal_force,
                                            step, nominal=plan.engine, grid=grid if step == dt else None)
         result = done.simulation
-        reached = result.reached
         per_reserve, rho = done.reserve_rms(), cmc.reserve_strengths(plan.model, self.reserve_optimal_force)
         muscles, joints = [m.name for m in plant.model.muscles], plan.joints
         reserved = rho > 0
         fields = {"reserve_rms_nm": float(np.sqrt(np.mean(per_reserve[reserved] ** 2))) if reserved.any() else 0.0,
                   **per_joint("reserve_rms_nm", joints, per_reserve),
-                  "effort": float(np.mean(np.sum(result.activation[reached] ** 2, axis=1))) if reached.any() else np.nan,
-                  **{f"{m}_activation_mean": float(np.mean(result.activation[reached, i])) if reached.any() else np.nan
-                     for i, m in enumerate(muscles)},
+                  **activation_fields(result, muscles),
                   "cmc_window_s": done.window, "cmc_kp": self.kp, "cmc_kd": self.kd,
                   "reserve_optimal_force": (float(rho[0]) if reserved.all() and np.all(rho == rho[0])
                                             else "per actuator (see reserves)"),
@@ -94,8 +92,6 @@ class CMC(Controller):
             per_unmet = done.unmet_rms()
             fields["unmet_rms_nm"] = float(np.sqrt(np.mean(per_unmet[~reserved] ** 2)))
             fields.update(per_joint("unmet_rms_nm", joints, np.where(reserved, 0.0, per_unmet)))
-        header = [f"{m}_{s}" for m in muscles for s in ("activation", "excitation", "force")]
-        header += [f"{j}_reserve" for j in joints]
-        values = np.column_stack([np.stack([result.activation, result.excitation, result.muscle_force],
-                                           axis=-1).reshape(len(result.t), -1), done.reserve_on_samples])
-        return result, fields, (header, values)
+        header, values = muscle_columns(result, muscles)
+        return result, fields, (header + [f"{j}_reserve" for j in joints],
+                                np.column_stack([values, done.reserve_on_samples]))

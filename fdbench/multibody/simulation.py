@@ -157,7 +157,8 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     ``torque`` (a torque function, or None) plus feedback: PD (kp N m/rad, kd N m s/rad, scalars or
     (J,)), with ``computed`` computed torque through ``nominal`` (None: the plant; kp 1/s^2, kd 1/s),
     or ``gains`` K(t): (k,) -> (k, J, 2J) on [z_d - z, z'_d - z']. ``start``: the state (n_state,)
-    (default: on the motion at t = 0). ``integrator``: 'rk4' (a fixed step of about ``dt`` s) or a
+    (default: on the motion at t = 0); with ``excitation`` it may hold the muscle states after it
+    (n_state + n_muscle_states,), which then replace the start below. ``integrator``: 'rk4' (a fixed step of about ``dt`` s) or a
     scipy method (``integrate.SCIPY_METHODS``, tolerances ``rtol``, ``atol``). ``grid``: the motion's ``HalfSteps`` for this dt,
     made beforehand (default: made here; rk4 only). ``excitation``: the muscles' excitations, a function
     of times (s), shape (k,) -> (k, M) in [0, 1] (RK4 only, sampled on its half-step grid): the muscles'
@@ -176,7 +177,8 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
         y0 = engine.state_from_joints(z0[0], zd0[0])
     else:
         y0 = np.array(start, dtype=float)
-    if y0.shape != (engine.n_state,) or not np.all(np.isfinite(y0)):
+    muscled = excitation is not None and y0.shape == (engine.n_state + engine.n_muscle_states,)
+    if (y0.shape != (engine.n_state,) and not muscled) or not np.all(np.isfinite(y0)):
         raise ValueError(f"the initial state must be {engine.n_state} finite numbers [q, q'], got shape {y0.shape}")
     law = _law(engine, kp, kd, computed, nominal, gains)
     if grid is not None and (grid.motion is not motion or grid.dt != dt):
@@ -209,7 +211,7 @@ def _simulate_rk4(torque, engine: Engine, motion, law: FeedbackLaw, y0: np.ndarr
     ``excitation`` (a function of times) or without muscles."""
     n, half = grid.n, grid.t
     excited = None if excitation is None else _excitations(excitation, half, engine)
-    if excited is not None:
+    if excited is not None and y0.shape[0] == engine.n_state:
         y0 = np.concatenate([y0, muscle_start(engine, y0, excited[0])])
     result = engine.simulate(y0, grid.step, n, _torques(torque, half, engine.n_joints), grid.ref, grid.refd,
                              grid.refdd, law.kp, law.kd, law.mode, law.gain_matrices(half, engine.n_joints),

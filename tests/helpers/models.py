@@ -1,10 +1,13 @@
 """Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
-it."""
+it; arm26 with rigid tendons on a 50-ms motion."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from fdbench.models import find_model
 from fdbench.multibody import model as d
 from fdbench.multibody.loads import ExternalLoad, ExternalLoads
 
@@ -30,3 +33,15 @@ def hopper_loads(seed):
              ExternalLoad("c", "pelvis", "ground", "thigh"))
     return ExternalLoads(loads, np.linspace(-0.1, 1.0, n), rng.normal(0, 50, (n, 3, 2)), rng.normal(0, 0.2, (n, 3, 2)),
                          rng.normal(0, 5, (n, 3)))
+
+
+def short_arm26():
+    """The library's arm26 with every tendon rigid and one motion, 'short': 50 ms of minimum jerk
+    from (0.3, 0.8) to (0.32, 0.9) rad."""
+    data = d.to_dict(find_model("arm26"))
+    for m in data["muscles"]:
+        m["tendon"] = "rigid"
+    model = d.model_from_dict(data, "arm26.toml")
+    start = tuple(zip(model.coordinates, (0.3, 0.8)))
+    goal = tuple(zip(model.coordinates, (0.32, 0.9)))
+    return dataclasses.replace(model, motions=(d.MotionSpec("short", "minimum-jerk", 0.05, start, goal),))

@@ -2,33 +2,36 @@
 library's arm26 with rigid tendons, over a 50-ms motion (50 RK4 steps, a spline of 4 knots per muscle): the logistic map, the
 effort term's closed form, a population against its rows one by one, the value of
 ``value_and_gradient`` against ``objective``, its gradient against central differences, and a few
-BFGS iterations lowering the objective."""
+BFGS iterations lowering the objective; with feedforward, the start's excitations against static
+optimisation on the grid and the gradient against central differences."""
 
 from __future__ import annotations
-
-import dataclasses
 
 import numpy as np
 import pytest
 
-from fdbench.excitation_problem import ExcitationProblem, logistic
-from fdbench.models import find_model
+from fdbench.excitation_problem import START_RANGE, ExcitationProblem, logistic
 from fdbench.multibody.engine import Engine
-from fdbench.multibody.model import MotionSpec, model_from_dict, to_dict
 from fdbench.multibody.motions import joint_motion
+from fdbench.multibody.simulation import inverse_dynamics
+from fdbench.multibody.static_optimization import static_optimization
 from fdbench.optimizers import make_optimizer
+
+from helpers.models import short_arm26
 
 
 @pytest.fixture(scope="module")
 def problem() -> ExcitationProblem:
-    data = to_dict(find_model("arm26"))
-    for m in data["muscles"]:
-        m["tendon"] = "rigid"
-    model = model_from_dict(data, "arm26.toml")
-    start = tuple(zip(model.coordinates, (0.3, 0.8)))
-    goal = tuple(zip(model.coordinates, (0.32, 0.9)))
-    model = dataclasses.replace(model, motions=(MotionSpec("short", "minimum-jerk", 0.05, start, goal),))
+    model = short_arm26()
     return ExcitationProblem("cs", Engine(model), joint_motion("short", model), dt=1e-3, effort_weight=2.0, knots=4)
+
+
+@pytest.fixture(scope="module")
+def fed() -> ExcitationProblem:
+    """The problem with static optimisation's excitations as its feedforward."""
+    model = short_arm26()
+    return ExcitationProblem("cs", Engine(model), joint_motion("short", model), dt=1e-3, effort_weight=2.0,
+                             feedforward=True, knots=4)
 
 
 def test_the_logistic_maps_every_signal_into_the_unit_interval():
@@ -75,3 +78,29 @@ def test_bfgs_with_the_exact_gradient_lowers_the_objective(problem):
     found = make_optimizer("bfgs").minimize(problem.objective_scaled, problem.x0, 8, 0,
                                             gradient=problem.value_and_gradient_scaled)
     assert found.fun < 0.75 * problem.objective_scaled(problem.x0)
+
+
+def test_with_feedforward_the_start_excites_as_static_optimisation_on_the_grid(fed):
+    """Zero knots: each excitation on RK4's half steps is static optimisation's activation there
+    (clipped to START_RANGE), and the replay's excitations on the motion's samples are those rows."""
+    assert np.all(fed.p0 == 0.0)
+    grid = fed._grid
+    inv = inverse_dynamics(grid.t, fed.engine, fed.motion)
+    so = static_optimization(fed.engine.model, fed.engine.muscle_params, grid.t, inv.angles, inv.velocities,
+                             inv.torque)
+    expected = np.clip(so.activation, *START_RANGE)
+    np.testing.assert_allclose(fed.excitations_on_grid(fed.p0), expected, rtol=1e-12, atol=1e-14)
+    replay = fed.simulation(fed.p0)
+    np.testing.assert_allclose(replay.excitation, expected[::2 * grid.every], rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(replay.activation[0], expected[0], rtol=1e-12)
+
+
+def test_with_feedforward_the_exact_gradient_equals_central_differences(fed):
+    x = fed.x0 + 0.05
+    _, gradient = fed.value_and_gradient_scaled(x)
+    for q in (2, 4 * 4 + 1):
+        step = np.zeros_like(x)
+        step[q] = 1e-4
+        expected = (fed.objective_scaled(x + step) - fed.objective_scaled(x - step)) / 2e-4
+        assert abs(expected) > 1e-4
+        assert gradient[q] == pytest.approx(expected, rel=1e-5)

@@ -1,13 +1,21 @@
 """Muscle-driven direct collocation of OpenSim's arm26 (its compliant tendons taken as rigid) along its named motion:
 IPOPT's solution checked against the compiled engine, the compiled muscle paths and curves (an independent path
-from the transcription's symbolic equations), and replayed by the forward simulation with muscles."""
+from the transcription's symbolic equations), and replayed by the forward simulation with muscles; the symbolic
+muscles against the compiled ones; `fdbench collocate --actuation muscles`, its record against its trajectory."""
 
 from __future__ import annotations
 
+import csv
+import json
+
 import numpy as np
 import pytest
+from typer.testing import CliRunner
+
+from helpers.cli_checks import assert_one_line_error
 
 from fdbench.casadi_loader import casadi
+from fdbench.cli import app
 from fdbench.collocation import collocate_muscles, rigid_tendons
 from fdbench.models import find_model
 from fdbench.multibody import simulation as sim
@@ -19,6 +27,7 @@ from fdbench.multibody.muscle import (SMOOTHING, TAU_ACT, TAU_DEACT, activation_
 from fdbench.multibody.muscle_paths import muscle_geometry
 from fdbench.multibody.symbolic_muscles import muscle_functions, symbolic
 
+runner = CliRunner()
 ARM26 = find_model("arm26")
 RIGID = rigid_tendons(ARM26)
 NODES = 20
@@ -146,3 +155,43 @@ def test_a_compiled_function_that_branches_on_data_raises_on_a_symbol():
     a = ca.SX.sym("a")
     with pytest.raises(Exception):
         symbolic(compliant_tendon)(a, 0.5, 0.3, 0.0, Engine(RIGID).muscle_params[0])
+
+
+# ---------------------------------------------------------------- the command line
+def test_collocate_actuation_muscles_records_the_muscle_fields_of_its_replay(tmp_path):
+    """`fdbench collocate --model arm26 --actuation muscles` (20 intervals): the replay tracks within 0.5 deg
+    RMS; the record's effort, activation means and reserves are those of the saved trajectory; each applied
+    generalised force is the muscles' (their saved forces times the compiled moment arms) plus the reserve."""
+    trajectory = tmp_path / "run.csv"
+    result = runner.invoke(app, ["collocate", "--model", "arm26", "--actuation", "muscles", "--nodes", "20", "-f",
+                                 "json", "-q", "--save-trajectory", str(trajectory)])
+    assert result.exit_code == 0, result.stderr
+    record = json.loads(result.stdout)
+    with open(trajectory, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    column = {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+    assert record["status"] == "success" and record["actuation"] == "muscles" and record["rmse_rot_deg"] < 0.5
+    assert record["ipopt_status"] == "Solve_Succeeded" and "compliant taken as rigid" in record["tendons"]
+    names, joints = [m.name for m in ARM26.muscles], ARM26.coordinates
+    activation = np.stack([column[f"{m}_activation"] for m in names], axis=1)
+    assert record["effort"] == pytest.approx(np.mean(np.sum(activation**2, axis=1)), rel=1e-9)
+    for i, m in enumerate(names):
+        assert record[f"{m}_activation_mean"] == pytest.approx(np.mean(activation[:, i]), rel=1e-9, abs=1e-12)
+    reserve = np.stack([column[f"{j}_reserve"] for j in joints], axis=1)
+    assert record["reserve_rms_nm"] == pytest.approx(np.sqrt(np.mean(reserve**2)), rel=1e-9)
+    z = np.radians(np.stack([column[j] for j in joints], axis=1))
+    _, arms = muscle_geometry(ARM26, z)
+    force = np.stack([column[f"{m}_force"] for m in names], axis=1)
+    applied = np.stack([column[f"{j}_torque"] for j in joints], axis=1)
+    np.testing.assert_allclose(applied, np.einsum("nmj,nm->nj", arms, force) + reserve, atol=1e-6)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--actuation", "muscles"], ["model 'forearm' has no muscles"]),
+    (["--model", "arm26", "--actuation", "muscles", "--regularization", "1"], ["--regularization", "torques only"]),
+    (["--model", "arm26", "--effort-weight", "1"], ["--effort-weight", "muscles only"]),
+    (["--model", "arm26", "--actuation", "muscles", "--save-torque", "t.csv"], ["--save-torque"]),
+    (["--model", "arm26", "--actuation", "muscle"], ["--actuation", "did you mean 'muscles'"]),
+])
+def test_collocate_s_bad_actuation_input_is_one_line_and_exit_2(args, words):
+    assert_one_line_error(runner.invoke(app, ["collocate", *args]), *words)
