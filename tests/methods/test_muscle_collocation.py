@@ -13,6 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.models import LEG
 
 from fdbench.casadi_loader import casadi
 from fdbench.cli import app
@@ -96,25 +97,12 @@ def test_a_model_without_muscles_or_a_bad_weight_is_refused_in_one_line():
 
 
 # ---------------------------------------------------------------- the symbolic muscles against the compiled ones
-LEG = {  # a free base, a knee on a path spline, an offset ankle, a frame: every case of a path of points
-    "name": "leg",
-    "bodies": [{"name": "thigh", "mass": 8.0, "com": [0.0, -0.2], "inertia": 0.1},
-               {"name": "shank", "mass": 3.5, "com": [0.0, -0.2], "inertia": 0.05},
-               {"name": "foot", "mass": 1.0, "com": [0.05, 0.0], "inertia": 0.01}],
-    "joints": [{"name": "hip", "type": "free", "coordinates": ["pelvis_tilt", "pelvis_tx", "pelvis_ty"],
-                "parent": "ground", "child": "thigh", "at_parent": [0.0, 0.0]},
-               {"name": "knee_angle", "parent": "thigh", "child": "shank", "at_parent": [0.0, -0.4],
-                "path": {"angles": [-2.0, -1.0, 0.0, 1.0], "x": [-0.01, -0.005, 0.0, 0.001], "y": [0.0] * 4}},
-               {"name": "ankle_angle", "parent": "shank", "child": "foot", "at_parent": [0.01, -0.42],
-                "at_child": [-0.02, 0.01], "offset": 0.3}],
-    "frames": [{"name": "heel", "body": "foot", "at": [-0.05, 0.02], "angle": 0.7}],
-    "muscles": [{"name": name, "max_isometric_force": 1000.0, "optimal_fiber_length": 0.1, "tendon_slack_length": 0.3,
-                 "pennation_angle": 0.2, "fiber_damping": 0.01,
-                 "path": {"points": [{"body": b, "at": [x, y]} for b, x, y in points]}}
-                for name, points in (("long", [("ground", 0.05, 0.1), ("thigh", 0.04, -0.1), ("shank", 0.02, -0.05),
-                                               ("heel", 0.12, 0.03)]),
-                                     ("soleus", [("shank", -0.03, -0.1), ("foot", -0.04, 0.02)]))],
-}
+LEG_MUSCLES = [{"name": name, "max_isometric_force": 1000.0, "optimal_fiber_length": 0.1, "tendon_slack_length": 0.3,
+                "pennation_angle": 0.2, "fiber_damping": 0.01,
+                "path": {"points": [{"body": b, "at": [x, y]} for b, x, y in points]}}
+               for name, points in (("long", [("ground", 0.05, 0.1), ("thigh", 0.04, -0.1), ("shank", 0.02, -0.05),
+                                              ("heel", 0.12, 0.03)]),
+                                    ("soleus", [("shank", -0.03, -0.1), ("foot", -0.04, 0.02)]))]
 
 
 def compiled_muscles(model, params, z, zd, a):
@@ -132,7 +120,7 @@ def test_the_symbolic_muscles_are_the_compiled_ones_at_random_states(name):
     generalised forces and De Groote's activation rate agree with the compiled functions to 1e-10
     (relative to each quantity's scale): arm26's polynomial paths, and paths of points on a free base, a
     knee on a path spline, an offset ankle and a frame."""
-    model = RIGID if name == "arm26" else model_from_dict(LEG, "leg")
+    model = RIGID if name == "arm26" else model_from_dict(LEG | {"muscles": LEG_MUSCLES}, "leg")
     params = Engine(model).muscle_params
     geometry, forces, rate = muscle_functions(model, params)
     J, M = model.n_joints, len(model.muscles)
