@@ -24,6 +24,18 @@ points of an MX graph. External loads enter symbolically in z, as the engine app
 (``symbolic.MinimalDynamics.actuation``). The initial state is fixed to the desired motion's at
 t = 0, the final state is free, the guess is the desired motion. A motion is anything with
 ``duration`` (s) and ``motion(t) -> (z, z', z'')``, each of shape t.shape + (J,).
+
+Muscle-driven (``collocate_muscles``, as Moco's MocoTrack with De Groote muscles): per point also the
+activations a and excitations e (M each, bounds [0, 1]) and a reserve torque r_j per coordinate (static
+optimisation's reserves: the model's actuators with their optimal forces, 0 (none) on a coordinate without
+one, one of 1 N m per coordinate on a model without actuators). The states are [z, z', a] with rates
+[z', z'', a'(e, a)] (De Groote's activation dynamics) in the same defects, e linear over an interval
+with Hermite-Simpson as z''; at every point ID - Q_loads = sum_m arm_m F_m(a_m, l_m, v_m) + r, each muscle's
+force along its path with a rigid tendon (a compliant tendon is taken as rigid, as Moco's
+ModOpIgnoreTendonCompliance; ``MuscleCollocationResult.rigid_tendons`` names them); a(0) = e(0) (free
+otherwise), as the forward simulation starts a muscle. The objective adds ``effort_weight`` times the
+quadrature of sum e^2 + sum (r / F_opt)^2 (MocoControlGoal's controls). The muscles' equations are
+``fdbench.multibody.symbolic_muscles``; the guess is static optimisation's activations and reserves.
 """
 
 from __future__ import annotations
@@ -34,8 +46,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from .casadi_loader import casadi
+from .multibody.actuators import optimal_forces
 from .multibody.model_changes import path_pairs
+from .multibody.static_optimization import static_optimization
 from .multibody.symbolic import MinimalDynamics, load_parameters
+from .multibody.symbolic_muscles import muscle_functions
 from .registry import unknown_name_message
 
 
@@ -54,6 +69,10 @@ DEFAULT_REGULARIZATION = 1e-6  # (deg^2) / (N^2 m^2): 1 N m of torque costs as m
 # body's weight and get the regularization.
 DEFAULT_RESIDUAL_FORCE_WEIGHT = 1e-3  # deg^2 / N^2 on FX and FY
 DEFAULT_RESIDUAL_MOMENT_WEIGHT = 1e-3  # deg^2 / (N m)^2 on MZ
+# The muscle-driven transcription's weight on the controls' squares (sum e^2 + sum (r / F_opt)^2, as Moco's
+# MocoControlGoal): deg^2 per excitation^2, the tracking term's deg^2 (excitation_problem's DEFAULT_EFFORT_WEIGHT
+# weighs an RMSE in deg, not deg^2).
+DEFAULT_EXCITATION_WEIGHT = 0.1
 DEFAULT_MAX_ITER = 1000
 MAX_ITER = 1_000_000  # IPOPT's (and Moco's) iteration limit is a C int; beyond 1e6 --max-time ends a solve first
 DEFAULT_MAX_TIME = 60.0  # s of IPOPT CPU time
@@ -69,17 +88,17 @@ DEG2 = (180.0 / math.pi) ** 2  # deg^2 per rad^2
 CM2 = 100.0**2  # cm^2 per m^2
 
 
-def check_options(nodes: int, scheme: str, regularization: float, max_iter: int = DEFAULT_MAX_ITER,
+def check_options(nodes: int, scheme: str, regularization: float = 0.0, max_iter: int = DEFAULT_MAX_ITER,
                   max_time: float = DEFAULT_MAX_TIME, residual_force_weight: float | None = None,
-                  residual_moment_weight: float | None = None) -> None:
+                  residual_moment_weight: float | None = None, effort_weight: float | None = None) -> None:
     """Raise ValueError with a one-line message naming the option for anything out of range (a
-    residual weight may be None: its default)."""
+    residual or effort weight may be None: its default)."""
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or not MIN_NODES <= nodes <= MAX_NODES:
         raise ValueError(f"--nodes must be an integer in [{MIN_NODES}, {MAX_NODES}], got {nodes}")
     if scheme not in SCHEMES:
         raise ValueError("--scheme: " + unknown_name_message("scheme", scheme, list(SCHEMES)))
     for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
-                          ("--residual-moment-weight", residual_moment_weight)):
+                          ("--residual-moment-weight", residual_moment_weight), ("--effort-weight", effort_weight)):
         if value is None and option != "--regularization":
             continue
         if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
@@ -228,50 +247,76 @@ def _point_cost(ca, actuation, tracking: np.ndarray, effort: np.ndarray):
     return ca.Function("point_cost", [y, p, desired], [value])
 
 
-def _defects(ca, z, w, a, h: float, scheme: str):
-    """The scheme's defect constraints, linear in the points' z, z', z'' (MX (J, m) each, points in
-    time order): Hermite-Simpson in separated form (the midpoint states are unknowns tied to the
-    Hermite interpolant of their interval's nodes), or the trapezoid's."""
-    m = z.shape[1]
+def _defects(ca, x, f, linear, h: float, scheme: str):
+    """The scheme's defect constraints of the states x with rates f (MX (n, m) each, points in time
+    order; the torque-driven transcription's x = [z, z'], f = [z', z'']): Hermite-Simpson in
+    separated form (the midpoint states are unknowns tied to the Hermite interpolant of their
+    interval's nodes, and ``linear`` (MX (k, m): z'', the excitations) is linear over each interval),
+    or the trapezoid's (``linear`` unused)."""
+    m = x.shape[1]
     if scheme == "hermite-simpson":
         k0, mid, k1 = ca.Slice(0, m - 1, 2), ca.Slice(1, m, 2), ca.Slice(2, m, 2)
-        return ca.vertcat(ca.vec(z[:, k1] - z[:, k0] - h / 6 * (w[:, k0] + 4 * w[:, mid] + w[:, k1])),
-                          ca.vec(w[:, k1] - w[:, k0] - h / 6 * (a[:, k0] + 4 * a[:, mid] + a[:, k1])),
-                          ca.vec(z[:, mid] - (z[:, k0] + z[:, k1]) / 2 - h / 8 * (w[:, k0] - w[:, k1])),
-                          ca.vec(w[:, mid] - (w[:, k0] + w[:, k1]) / 2 - h / 8 * (a[:, k0] - a[:, k1])),
-                          ca.vec(a[:, mid] - (a[:, k0] + a[:, k1]) / 2))
+        return ca.vertcat(ca.vec(x[:, k1] - x[:, k0] - h / 6 * (f[:, k0] + 4 * f[:, mid] + f[:, k1])),
+                          ca.vec(x[:, mid] - (x[:, k0] + x[:, k1]) / 2 - h / 8 * (f[:, k0] - f[:, k1])),
+                          ca.vec(linear[:, mid] - (linear[:, k0] + linear[:, k1]) / 2))
     k0, k1 = ca.Slice(0, m - 1), ca.Slice(1, m)
-    return ca.vertcat(ca.vec(z[:, k1] - z[:, k0] - h / 2 * (w[:, k0] + w[:, k1])),
-                      ca.vec(w[:, k1] - w[:, k0] - h / 2 * (a[:, k0] + a[:, k1])))
+    return ca.vec(x[:, k1] - x[:, k0] - h / 2 * (f[:, k0] + f[:, k1]))
 
 
 SOLVERS_KEPT = 4  # built transcriptions kept in the process (the gait model's takes minutes to build)
 _SOLVERS: dict = {}
 
 
-def _solver(ca, actuation, m: int, J: int, P: int, h: float, scheme: str, tracking: np.ndarray, effort: np.ndarray,
-            max_iter: int, max_time: float):
-    """IPOPT's solver of the transcription, built once per structure and kept (``SOLVERS_KEPT``);
-    the desired z and load parameters are the NLP's parameters p = [loads, z_d] point by point."""
-    key = (id(actuation), m, J, P, h, scheme, tracking.tobytes(), effort.tobytes(), max_iter, max_time)
+def _kept(key: tuple, owners: tuple, build):
+    """The solver kept under ``key`` for ``owners`` (the Functions it was built of, their ids in the
+    key), else ``build()``'s, kept (``SOLVERS_KEPT``) with its owners alive, so that their ids are
+    not others'."""
     found = _SOLVERS.get(key)
-    if found is not None and found[0] is actuation:
+    if found is not None and all(a is b for a, b in zip(found[0], owners)):
         return found[1]
-    y, p = ca.MX.sym("y", 3 * J, m), ca.MX.sym("p", (P + J) * m)
-    given = ca.reshape(p, P + J, m)  # column k: point k's load parameters, then its desired z
-    cost = _point_cost(ca, actuation, tracking, effort)
-    objective = ca.mtimes(cost.map(m)(y, given[:P, :], given[P:, :]), ca.DM(quadrature_weights(m, h, scheme)))
-    defects = _defects(ca, y[:J, :], y[J:2 * J, :], y[2 * J:, :], h, scheme)
+    solver = build()
+    while len(_SOLVERS) >= SOLVERS_KEPT:
+        _SOLVERS.pop(next(iter(_SOLVERS)))
+    _SOLVERS[key] = (owners, solver)
+    return solver
+
+
+def _ipopt(ca, y, p, objective, constraints, max_iter: int, max_time: float):
+    """IPOPT through CasADi on the unknowns y (MX, flattened point by point) with parameters p."""
     options = {
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "verbose": False,
         "ipopt.max_iter": max_iter, "ipopt.max_cpu_time": max_time, "ipopt.tol": 1e-10,
         "error_on_fail": False,
     }
-    solver = ca.nlpsol("collocation", "ipopt", {"x": ca.vec(y), "p": p, "f": objective, "g": defects}, options)
-    while len(_SOLVERS) >= SOLVERS_KEPT:
-        _SOLVERS.pop(next(iter(_SOLVERS)))
-    _SOLVERS[key] = (actuation, solver)  # the actuation kept alive, so that its id is not another's
-    return solver
+    return ca.nlpsol("collocation", "ipopt", {"x": ca.vec(y), "p": p, "f": objective, "g": constraints}, options)
+
+
+def _solver(ca, actuation, m: int, J: int, P: int, h: float, scheme: str, tracking: np.ndarray, effort: np.ndarray,
+            max_iter: int, max_time: float):
+    """IPOPT's solver of the transcription, built once per structure and kept (``SOLVERS_KEPT``);
+    the desired z and load parameters are the NLP's parameters p = [loads, z_d] point by point."""
+    def build():
+        y, p = ca.MX.sym("y", 3 * J, m), ca.MX.sym("p", (P + J) * m)
+        given = ca.reshape(p, P + J, m)  # column k: point k's load parameters, then its desired z
+        cost = _point_cost(ca, actuation, tracking, effort)
+        objective = ca.mtimes(cost.map(m)(y, given[:P, :], given[P:, :]), ca.DM(quadrature_weights(m, h, scheme)))
+        defects = _defects(ca, y[:2 * J, :], y[J:, :], y[2 * J:, :], h, scheme)
+        return _ipopt(ca, y, p, objective, defects, max_iter, max_time)
+
+    key = (id(actuation), m, J, P, h, scheme, tracking.tobytes(), effort.tobytes(), max_iter, max_time)
+    return _kept(key, (actuation,), build)
+
+
+def _run(solver, x0: np.ndarray, lbx: np.ndarray, ubx: np.ndarray, parameters: np.ndarray):
+    """(unknowns found, objective, IPOPT's status, iterations) of a solve with every constraint an
+    equality; never raises: a CasADi error is a status, its unknowns NaN."""
+    try:
+        solution = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0, p=parameters)
+        stats = solver.stats()
+        return (np.asarray(solution["x"], dtype=float).ravel(), float(solution["f"]),
+                str(stats.get("return_status", "unknown")), int(stats.get("iter_count", 0)))
+    except RuntimeError as exc:  # CasADi reports an error in a callback or in IPOPT itself
+        return np.full(x0.size, np.nan), math.nan, "CasADi error: " + " ".join(str(exc).split())[:200], 0
 
 
 def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray, scheme: str, max_iter: int,
@@ -295,14 +340,7 @@ def transcribe(actuation, track: Track, tracking: np.ndarray, effort: np.ndarray
     lbx[:2 * J] = ubx[:2 * J] = x0[:2 * J]  # the initial state is the desired motion's
     parameters = np.concatenate([track.loads, track.z], axis=1).ravel()  # point by point: [loads, z_d]
     built = time.perf_counter()
-    try:
-        solution = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=0.0, ubg=0.0, p=parameters)
-        stats = solver.stats()
-        values, f = np.asarray(solution["x"], dtype=float).ravel(), float(solution["f"])
-        status, iterations = str(stats.get("return_status", "unknown")), int(stats.get("iter_count", 0))
-    except RuntimeError as exc:  # CasADi reports an error in a callback or in IPOPT itself
-        values, f = np.full(x0.size, np.nan), math.nan
-        status, iterations = "CasADi error: " + " ".join(str(exc).split())[:200], 0
+    values, f, status, iterations = _run(solver, x0, lbx, ubx, parameters)
     solved = time.perf_counter()
 
     points = values.reshape(m, 3 * J)
@@ -345,6 +383,134 @@ def collocate(model, motion, nodes: int = DEFAULT_NODES, scheme: str = "hermite-
     return solution
 
 
+# ---------------------------------------------------------------------- muscle-driven
+@dataclass
+class MuscleCollocationResult(CollocationResult):
+    """The muscle-driven transcription's solution (``collocate_muscles``): ``torque`` and
+    ``torque_mid`` are the reserve torques (N m; N on a translation; 0 on a coordinate without a
+    reserve), which the replay applies beside the muscles. Node arrays: activations and excitations
+    (N + 1, M) in [0, 1], the muscles' forces along their paths (N), their generalised forces
+    arms^T F (N + 1, J) (N m) and the inverse dynamics ID - Q_loads (N + 1, J) (N m)."""
+
+    muscles: tuple = ()
+    activation: np.ndarray | None = None
+    excitation: np.ndarray | None = None
+    muscle_force: np.ndarray | None = None
+    muscle_torque: np.ndarray | None = None
+    inverse: np.ndarray | None = None
+    reserve_forces: np.ndarray | None = None  # (J,) each reserve's optimal force (N m per unit control), 0: none
+    effort_weight: float = math.nan  # deg^2 per excitation^2
+    rigid_tendons: tuple = ()  # the muscles whose compliant tendon the transcription took as rigid
+
+    def excitation_function(self):
+        """The excitations t (s), (k,) -> (k, M): linear between the nodes (as the scheme has them),
+        clipped into [0, 1] (IPOPT may leave a bound by its tolerance)."""
+        t_nodes, e = self.t, np.clip(self.excitation, 0.0, 1.0)
+        return lambda t: np.stack([np.interp(t, t_nodes, e[:, m]) for m in range(e.shape[1])], axis=-1)
+
+
+def rigid_tendons(model):
+    """``model`` with every compliant tendon rigid (Moco's ModOpIgnoreTendonCompliance)."""
+    from dataclasses import replace
+
+    return replace(model, muscles=tuple(replace(m, tendon="rigid") for m in model.muscles))
+
+
+def _muscle_solver(ca, actuation, functions, m: int, J: int, M: int, P: int, h: float, scheme: str,
+                   tracking: np.ndarray, controls: np.ndarray, max_iter: int, max_time: float):
+    """IPOPT's solver of the muscle-driven transcription (kept as ``_solver``'s): per point the
+    unknowns y = [z, z', z'', a, e, r] (4J + 2M), the parameters [loads, z_d]; constraints: the
+    defects of x = [z, z', a] with rates [z', z'', a'(e, a)] (z'' and e linear over an interval with
+    Hermite-Simpson), ID - Q_loads - arms^T F(a, l, v) - r = 0 at every point, a = e at t = 0."""
+    _, forces, rate = functions
+    n = 4 * J + 2 * M
+    cuts = [0, J, 2 * J, 3 * J, 3 * J + M, 3 * J + 2 * M, n]
+
+    def build():
+        y, p = ca.MX.sym("y", n, m), ca.MX.sym("p", (P + J) * m)
+        given = ca.reshape(p, P + J, m)
+        one, loads, desired = ca.SX.sym("y", n), ca.SX.sym("p", P), ca.SX.sym("z_d", J)
+        z, w, acc, a, e, r = ca.vertsplit(one, cuts)
+        cost = ca.Function("point_cost", [one, desired], [ca.dot(ca.DM(tracking), (z - desired) ** 2)
+                                                          + ca.dot(ca.DM(controls), ca.vertcat(e, r) ** 2)])
+        residual = actuation(z, w, acc, loads) - forces(z, w, a)[1] - r
+        point = ca.Function("point", [one, loads], [ca.vertcat(residual, rate(e, a))])
+        objective = ca.mtimes(cost.map(m)(y, given[P:, :]), ca.DM(quadrature_weights(m, h, scheme)))
+        out = point.map(m)(y, given[:P, :])
+        rows = [y[cuts[i]:cuts[i + 1], :] for i in range(6)]  # z, z', z'', a, e, r
+        defects = _defects(ca, ca.vertcat(rows[0], rows[1], rows[3]), ca.vertcat(rows[1], rows[2], out[J:, :]),
+                           ca.vertcat(rows[2], rows[4]), h, scheme)
+        start = rows[3][:, 0] - rows[4][:, 0]
+        return _ipopt(ca, y, p, objective, ca.vertcat(defects, ca.vec(out[:J, :]), start), max_iter, max_time)
+
+    key = ("muscles", id(actuation), id(forces), m, J, M, P, h, scheme, tracking.tobytes(), controls.tobytes(),
+           max_iter, max_time)
+    return _kept(key, (actuation, forces, rate), build)
+
+
+def collocate_muscles(model, motion, params: np.ndarray, nodes: int = DEFAULT_NODES, scheme: str = "hermite-simpson",
+                      effort_weight: float = DEFAULT_EXCITATION_WEIGHT, max_iter: int = DEFAULT_MAX_ITER,
+                      max_time: float = DEFAULT_MAX_TIME, loads=None) -> MuscleCollocationResult:
+    """Transcribe and solve the muscle-driven tracking of ``motion`` by ``model`` (its muscles of
+    ``params`` (M, len(muscle.PARAMETERS)), the engine's ``muscle_params``; ``loads``:
+    ``ExternalLoads`` or None) on ``nodes`` intervals: the objective is the quadrature of
+    sum_j tracking_j (z_j - z_dj)^2 + ``effort_weight`` (sum_m e_m^2 + sum_j (r_j / F_j)^2), the
+    reserves r_j those of static optimisation (the model's actuators of optimal force F_j; without
+    actuators one of 1 N m per coordinate). Tendons rigid (a compliant one taken as rigid, said by
+    ``rigid_tendons``). The guess: the motion, and static optimisation's activations and reserves
+    at the points. ValueError (one line) for bad options, a model without muscles or a motion of
+    other joints."""
+    check_options(nodes, scheme, max_iter=max_iter, max_time=max_time, effort_weight=effort_weight)
+    if not model.muscles:
+        raise ValueError(f"collocate: model {model.name!r} has no muscles ([[muscles]] in its file); collocate it "
+                         "torque-driven")
+    ca = casadi()
+    began = time.perf_counter()
+    compliant = tuple(muscle.name for muscle in model.muscles if muscle.tendon == "compliant")
+    model = rigid_tendons(model)
+    J, M = model.n_joints, len(model.muscles)
+    t = point_times(motion.duration, nodes, scheme)
+    z, zd, zdd = desired_samples(model, motion, t)
+    p_loads = load_parameters(loads, t)
+    actuation = MinimalDynamics(model).actuation(() if loads is None else loads.loads)
+    functions = muscle_functions(model, params)
+    reserve = np.array(optimal_forces(model), dtype=float)
+    tracking, _ = objective_weights(model, 0.0, 0.0, 0.0)
+    controls = float(effort_weight) * np.concatenate([np.ones(M), np.divide(1.0, reserve ** 2, out=np.zeros(J),
+                                                                            where=reserve > 0)])
+    m = len(t)
+    h = float(motion.duration) / int(nodes)
+    solver = _muscle_solver(ca, actuation, functions, m, J, M, p_loads.shape[1], h, scheme, tracking, controls,
+                            int(max_iter), float(max_time))
+    inverse = np.array(actuation.map(m)(z.T, zd.T, zdd.T, p_loads.T)).T
+    so = static_optimization(model, params, t, z, zd, inverse, reserve_forces=reserve)
+    guess = np.clip(so.activation, 0.0, 1.0)
+    x0 = np.concatenate([z, zd, zdd, guess, guess, so.reserve], axis=1).ravel()  # point by point
+    lower, upper = np.full((m, 4 * J + 2 * M), -np.inf), np.full((m, 4 * J + 2 * M), np.inf)
+    lower[:, 3 * J:3 * J + 2 * M], upper[:, 3 * J:3 * J + 2 * M] = 0.0, 1.0  # a, e in [0, 1]
+    lower[:, 3 * J + 2 * M:][:, reserve == 0] = upper[:, 3 * J + 2 * M:][:, reserve == 0] = 0.0
+    lower[0, :2 * J] = upper[0, :2 * J] = np.concatenate([z[0], zd[0]])  # the initial state is the motion's
+    built = time.perf_counter()
+    values, f, status, iterations = _run(solver, x0, lower.ravel(), upper.ravel(),
+                                         np.concatenate([p_loads, z], axis=1).ravel())
+    solved = time.perf_counter()
+
+    y = values.reshape(m, -1)
+    zs, ws, accs, a, e, r = np.split(y, [J, 2 * J, 3 * J, 3 * J + M, 3 * J + 2 * M], axis=1)
+    force, muscle_torque = (np.array(v).T for v in functions[1].map(m)(zs.T, ws.T, a.T))
+    hs = scheme == "hermite-simpson"
+    nodes_ = slice(0, m, 2 if hs else 1)
+    return MuscleCollocationResult(
+        scheme=scheme, t=t[nodes_], angles=zs[nodes_], velocities=ws[nodes_], torque=r[nodes_],
+        torque_mid=r[1::2] if hs else None, objective=f, ipopt_status=status, iterations=iterations,
+        solve_time_s=solved - built, build_time_s=built - began, accelerations=accs[nodes_],
+        muscles=tuple(muscle.name for muscle in model.muscles), activation=a[nodes_], excitation=e[nodes_],
+        muscle_force=force[nodes_], muscle_torque=muscle_torque[nodes_],
+        inverse=np.array(actuation.map(m)(zs.T, ws.T, accs.T, p_loads.T)).T[nodes_], reserve_forces=reserve,
+        effort_weight=float(effort_weight),
+        rigid_tendons=compliant)
+
+
 def own_fields(model, solution: CollocationResult, truth) -> dict:
     """The collocation's own indicators at its nodes against ``truth`` (``truth(t)`` -> (z, ...)): RMS
     error of angles (deg) and translations (cm), a floating base's residual force (N) and moment (N m)."""
@@ -366,8 +532,9 @@ def own_fields(model, solution: CollocationResult, truth) -> dict:
 def record_fields(solution: CollocationResult, options: dict, own: dict, replay_message: str) -> dict:
     """The fields a collocate run adds to its replay's record: options, ``own`` indicators, IPOPT's
     status and iterations, build and solve times (s); status 'collocation_failed' if unsolved."""
+    weight = {key: options[key] for key in ("regularization", "effort_weight") if key in options}
     fields = dict(torque="collocation", evaluations=1, nodes=options["nodes"], scheme=options["scheme"],
-                  regularization=options["regularization"], **own, ipopt_status=solution.ipopt_status,
+                  **weight, **own, ipopt_status=solution.ipopt_status,
                   ipopt_iterations=solution.iterations, build_time_s=solution.build_time_s,
                   solve_time_s=solution.solve_time_s)
     if solution.residual_weights is not None:

@@ -16,8 +16,8 @@ import numpy as np
 
 from . import __version__
 from .casadi_loader import casadi
-from .collocation import collocate, own_fields, record_fields
-from .controllers.base import muscle_columns
+from .collocation import collocate, collocate_muscles, own_fields, record_fields, rigid_tendons
+from .controllers.base import muscle_columns, per_joint
 from .excitation_problem import DEFAULT_EFFORT_WEIGHT, ExcitationProblem
 from .excitation_problem import warm_up as warm_up_excitations
 from .files import BadFile, read_history_csv, read_input_text
@@ -35,8 +35,8 @@ from .problem import residual_weight as problem_residual_weight
 from .peers import run as run_peer
 from .records import RunOutcome, base_record, explained
 from .registry import unknown_name_message
-from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, reference,
-                         warm_up)
+from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, plant,
+                         reference, warm_up)
 from .torques import TORQUES
 from .torques.ann import select_hidden
 
@@ -445,6 +445,8 @@ def _optimize(spec, on_evaluation, on_start):
 def _collocate(spec):
     """Direct collocation of the nominal model, its torque replayed by the plant: the indicators are
     the replay's, the collocation's own beside them; ``extra['collocation']`` holds the solution."""
+    if spec.actuation == "muscles":
+        return _collocate_muscles(spec)
     options = dict(spec.method_options)
     warm_up(spec)
     casadi()  # its import is not part of the runtime
@@ -460,6 +462,42 @@ def _collocate(spec):
     done = outcome(spec, record, result, inverse, extra={"collocation": solution})
     own = own_fields(model, solution, truth)
     record.update(runtime_s=runtime, **record_fields(solution, options, own, record["message"]))
+    return done
+
+
+def _collocate_muscles(spec):
+    """Muscle-driven direct collocation of the nominal model (``collocation.collocate_muscles``; its
+    compliant tendons taken as rigid), its excitations and reserves replayed by the plant with rigid
+    tendons too; the record has the replay's indicators and muscle fields (as CMC's), the
+    collocation's own beside them, and the trajectory each muscle's activation, excitation and force
+    and each coordinate's reserve (N m). The spec's checks refuse a model without muscles."""
+    options = {key: value for key, value in spec.method_options if key != "regularization"}
+    model = nominal(spec)
+    body, params = engine(spec, rigid_tendons(plant(spec))), engine(spec, rigid_tendons(model)).muscle_params
+    sim.warm_up(False, (body,))
+    casadi()  # its import is not part of the runtime
+    desired, truth = motions(spec)
+    grid, inverse, external = sim.half_steps(desired, spec.dt), reference(spec), loads(spec)
+    began = time.perf_counter()
+    solution = collocate_muscles(model, desired, params, **options, loads=external)
+    result = sim.simulate(solution.torque_function(), body, desired, grid=grid,
+                          excitation=solution.excitation_function(), **integration(spec))
+    runtime = time.perf_counter() - began
+    record = base_record(spec)
+    done = outcome(spec, record, result, inverse, extra={"collocation": solution})
+    reached = result.reached
+    reserve = solution.torque_samples(result.t).reshape(len(result.t), -1)
+    per_reserve = np.sqrt(np.mean(reserve[reached] ** 2, axis=0)) if reached.any() else np.full(model.n_joints, np.nan)
+    reserved = solution.reserve_forces > 0
+    taken = solution.rigid_tendons
+    record.update(runtime_s=runtime, **record_fields(solution, options, own_fields(model, solution, truth),
+                                                     record["message"]),
+                  actuation="muscles", tendons=f"rigid (compliant taken as rigid: {', '.join(taken)})" if taken
+                  else "rigid", reserve_rms_nm=float(np.sqrt(np.mean(per_reserve[reserved] ** 2)))
+                  if reserved.any() else 0.0, **per_joint("reserve_rms_nm", joints(spec), per_reserve))
+    header, rows = done.table
+    columns, values = muscle_columns(result, solution.muscles)
+    done.table = (header + columns + [f"{j}_reserve" for j in joints(spec)], np.column_stack([rows, values, reserve]))
     return done
 
 

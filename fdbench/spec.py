@@ -11,7 +11,8 @@ import math
 from dataclasses import InitVar, asdict, dataclass, replace
 
 from . import run_inputs
-from .collocation import DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION, check_model, check_options
+from .collocation import (DEFAULT_EXCITATION_WEIGHT, DEFAULT_MAX_ITER, DEFAULT_MAX_TIME, DEFAULT_REGULARIZATION,
+                          check_model, check_options)
 from .controllers import CONTROLLERS
 from .controllers.pd import PAPER_KD, PAPER_KP
 from .excitation_problem import DEFAULT_EFFORT_WEIGHT, check_muscle_paths
@@ -152,10 +153,10 @@ class RunSpec:
         that does not apply, or an optimisation of muscles the model or the method cannot run."""
         if self.actuation not in ACTUATIONS:
             raise ValueError(f"--actuation must be one of {', '.join(ACTUATIONS)}, got {self.actuation!r}")
-        if self.actuation != "torques" and self.command != "optimize":
-            raise ValueError("--actuation applies to optimisations only")
-        if self.effort_weight is not None and self.actuation != "muscles":
-            raise ValueError("--effort-weight needs --actuation muscles")
+        if self.actuation != "torques" and self.command not in ("optimize", "collocate"):
+            raise ValueError("--actuation applies to optimize and collocate only")
+        if self.effort_weight is not None and (self.actuation != "muscles" or self.command != "optimize"):
+            raise ValueError("--effort-weight needs optimize --actuation muscles (collocate's is among its options)")
         if self.actuation != "muscles":
             return
         if self.effort_weight is not None and not (math.isfinite(self.effort_weight) and self.effort_weight >= 0):
@@ -212,7 +213,8 @@ class RunSpec:
             data["loads"] = "file"
         if data.get("controller") == "pd":  # the paper's PD is the default controller
             data["controller"] = None
-        if data.get("actuation") == "muscles" and data.get("effort_weight") is None:  # the default, written out
+        if data.get("actuation") == "muscles" and data.get("effort_weight") is None and self.command == "optimize":
+            # the default, written out (collocate's is among its method options)
             data["effort_weight"] = float(DEFAULT_EFFORT_WEIGHT)
         for name, default in OMITTED_AT_DEFAULT.items():
             if data.get(name) == default:
@@ -262,9 +264,24 @@ def control_spec(kp=None, kd=None, controller="pd", controller_options=None, **c
 
 
 def collocate_spec(nodes=100, scheme="hermite-simpson", regularization=None, max_iter=None, max_time=None,
-                   residual_force_weight=None, residual_moment_weight=None, **common) -> RunSpec:
-    """A direct-collocation spec (see ``fdbench.collocation.collocate``); None takes the default (a
-    residual weight's depends on the loads, so it is left out of the options)."""
+                   residual_force_weight=None, residual_moment_weight=None, actuation="torques", effort_weight=None,
+                   **common) -> RunSpec:
+    """A direct-collocation spec (see ``fdbench.collocation.collocate``, with ``actuation`` 'muscles'
+    ``collocate_muscles`` and its ``effort_weight``); None takes the default (a residual weight's
+    depends on the loads, so it is left out of the options). ValueError (one line) for a weight
+    that does not apply to the actuation."""
+    if actuation == "muscles":
+        for option, value in (("--regularization", regularization), ("--residual-force-weight", residual_force_weight),
+                              ("--residual-moment-weight", residual_moment_weight)):
+            if value is not None:
+                raise ValueError(f"{option} applies to --actuation torques only (muscles: --effort-weight)")
+        options = dict(nodes=nodes, scheme=scheme, max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,
+                       max_time=DEFAULT_MAX_TIME if max_time is None else max_time,
+                       effort_weight=DEFAULT_EXCITATION_WEIGHT if effort_weight is None else effort_weight)
+        return RunSpec(command="collocate", method_options=tuple(sorted(options.items())), actuation=actuation,
+                       **common)
+    if effort_weight is not None:
+        raise ValueError("--effort-weight applies to --actuation muscles only")
     options = dict(nodes=nodes, scheme=scheme,
                    regularization=DEFAULT_REGULARIZATION if regularization is None else regularization,
                    max_iter=DEFAULT_MAX_ITER if max_iter is None else max_iter,

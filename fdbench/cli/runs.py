@@ -170,12 +170,14 @@ def _casadi_ready(command: str) -> None:
 def collocate(
     nodes: Annotated[int, typer.Option("--nodes", help="Collocation intervals N over the motion's span (eq. 5: [0, 1] s), >= 2.")] = 100,
     scheme: Annotated[str, typer.Option("--scheme", help="Transcription: hermite-simpson (piecewise-quadratic torque) or trapezoidal (piecewise-linear).")] = "hermite-simpson",
-    regularization: Annotated[float, typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; 1e-6 makes 1 N m weigh as much as 0.001 deg.")] = 1e-6,
+    regularization: Annotated[Optional[float], typer.Option("--regularization", help="Weight of the integral of torque^2 beside the integral of the squared rotation error in deg^2: deg^2/(N m)^2; default 1e-6, which makes 1 N m weigh as much as 0.001 deg (torques only).", show_default=False)] = None,
     max_iter: Annotated[int, typer.Option("--max-iter", help="IPOPT iteration limit, in [1, 1000000].")] = 1000,
     max_time: Annotated[float, typer.Option("--max-time", help="IPOPT CPU-time limit, s.")] = 60.0,
     residual_force_weight: Annotated[Optional[float], typer.Option("--residual-force-weight", help="A floating base's residual force: weight of the integral of FX^2 + FY^2 beside the squared errors (deg^2, and cm^2 of translations), deg^2/N^2; default 1e-3 with --loads, the --regularization without (the residuals then carry the body's weight).", show_default=False)] = None,
     residual_moment_weight: Annotated[Optional[float], typer.Option("--residual-moment-weight", help="A floating base's residual moment: weight of the integral of MZ^2, deg^2/(N m)^2; default 1e-3 with --loads, the --regularization without.", show_default=False)] = None,
     save_torque: Annotated[Optional[Path], typer.Option("--save-torque", help="Write the torque found as CSV (t, torque; another model: t and one column per joint, e.g. t, shoulder, elbow) to FILE, readable by 'fdbench simulate --torque-file'.")] = None,
+    actuation: Annotated[str, typer.Option("--actuation", metavar="torques|muscles", help="What drives the model: torques (the inverse dynamics of the states found) or muscles, the model's muscles (activations, excitations in [0, 1], De Groote's activation dynamics; tendons rigid, a compliant one taken as rigid) and one reserve torque per coordinate (the model's [[actuators]], none on a coordinate without one; 1 N m per coordinate on a model without), as Moco's MocoTrack; the excitations and reserves are replayed (rk4 only). The record adds effort (mean of the summed squared activations), reserve_rms_nm, <muscle>_activation_mean, tendons; --save-trajectory adds <muscle>_activation, _excitation, _force (N) and <joint>_reserve (N m).")] = "torques",
+    effort_weight: Annotated[Optional[float], typer.Option("--effort-weight", help="With --actuation muscles: weight of the integral of the summed squared excitations and squared reserve controls (r / optimal force) beside the squared rotation error: deg^2 per excitation^2, >= 0 (default 0.1).", show_default=False)] = None,
     one: OneRun = None,
     conditions: dict = None,
 ):
@@ -183,9 +185,16 @@ def collocate(
     from ..method_runs import run
     from ..spec import collocate_spec
 
+    from ..spec import ACTUATIONS
+
     one.check(conditions, save_torque=save_torque)
-    spec = validated(collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
-                                    residual_moment_weight, **one.fields(conditions)))
+    check_choice("--actuation", actuation, ACTUATIONS)
+    if actuation == "muscles" and save_torque is not None:
+        raise BadInput("--save-torque writes joint torques; with --actuation muscles use --save-trajectory")
+    with bad_input():
+        made = collocate_spec(nodes, scheme, regularization, max_iter, max_time, residual_force_weight,
+                              residual_moment_weight, actuation, effort_weight, **one.fields(conditions))
+    spec = validated(made)
     _casadi_ready("collocate")
     one.out.check_store()
     outcome = run(spec)

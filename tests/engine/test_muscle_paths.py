@@ -27,6 +27,7 @@ from fdbench.multibody.muscle_paths import muscle_geometry
 from fdbench.multibody.muscles import Muscle, PathPoint, PointPath, PolynomialPath, Term
 
 from helpers.cli_checks import assert_one_line_error
+from helpers.models import LEG
 from helpers.osim_files import body, joint, path_knee_model
 from helpers.paths import ROOT
 from helpers.opensim_child import run_opensim
@@ -35,19 +36,6 @@ runner = CliRunner()
 
 # ---------------------------------------------------------------- a leg with a free base, a path and an offset
 
-LEG = {
-    "name": "leg",
-    "bodies": [{"name": "thigh", "mass": 8.0, "com": [0.0, -0.2], "inertia": 0.1},
-               {"name": "shank", "mass": 3.5, "com": [0.0, -0.2], "inertia": 0.05},
-               {"name": "foot", "mass": 1.0, "com": [0.05, 0.0], "inertia": 0.01}],
-    "joints": [{"name": "hip", "type": "free", "coordinates": ["pelvis_tilt", "pelvis_tx", "pelvis_ty"],
-                "parent": "ground", "child": "thigh", "at_parent": [0.0, 0.0]},
-               {"name": "knee_angle", "parent": "thigh", "child": "shank", "at_parent": [0.0, -0.4],
-                "path": {"angles": [-2.0, -1.0, 0.0, 1.0], "x": [-0.01, -0.005, 0.0, 0.001], "y": [0.0] * 4}},
-               {"name": "ankle_angle", "parent": "shank", "child": "foot", "at_parent": [0.01, -0.42],
-                "at_child": [-0.02, 0.01], "offset": 0.3}],
-    "frames": [{"name": "heel", "body": "foot", "at": [-0.05, 0.02], "angle": 0.7}],
-}
 MUSCLE = {"max_isometric_force": 1000.0, "optimal_fiber_length": 0.1, "tendon_slack_length": 0.2}
 PATHS = {  # name: points (body, x, y), m in the body's frame
     "long": [("ground", 0.05, 0.1), ("thigh", 0.04, -0.1), ("thigh", 0.03, -0.38), ("shank", 0.02, -0.05),

@@ -1,5 +1,6 @@
 """Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
-it; the forearm with a flexor and an extensor; arm26 with rigid tendons on a 50-ms motion."""
+it; the forearm with a flexor and an extensor; arm26 with rigid tendons on a 50-ms motion; the leg's
+description (a free base, a knee on a path, an offset ankle and a frame), without muscles."""
 
 from __future__ import annotations
 
@@ -61,3 +62,18 @@ def short_arm26():
     start = tuple(zip(model.coordinates, (0.3, 0.8)))
     goal = tuple(zip(model.coordinates, (0.32, 0.9)))
     return dataclasses.replace(model, motions=(d.MotionSpec("short", "minimum-jerk", 0.05, start, goal),))
+
+
+LEG = {  # the leg: a free base, a knee on a path, an offset ankle and a frame
+    "name": "leg",
+    "bodies": [{"name": "thigh", "mass": 8.0, "com": [0.0, -0.2], "inertia": 0.1},
+               {"name": "shank", "mass": 3.5, "com": [0.0, -0.2], "inertia": 0.05},
+               {"name": "foot", "mass": 1.0, "com": [0.05, 0.0], "inertia": 0.01}],
+    "joints": [{"name": "hip", "type": "free", "coordinates": ["pelvis_tilt", "pelvis_tx", "pelvis_ty"],
+                "parent": "ground", "child": "thigh", "at_parent": [0.0, 0.0]},
+               {"name": "knee_angle", "parent": "thigh", "child": "shank", "at_parent": [0.0, -0.4],
+                "path": {"angles": [-2.0, -1.0, 0.0, 1.0], "x": [-0.01, -0.005, 0.0, 0.001], "y": [0.0] * 4}},
+               {"name": "ankle_angle", "parent": "shank", "child": "foot", "at_parent": [0.01, -0.42],
+                "at_child": [-0.02, 0.01], "offset": 0.3}],
+    "frames": [{"name": "heel", "body": "foot", "at": [-0.05, 0.02], "angle": 0.7}],
+}
