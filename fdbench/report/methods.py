@@ -17,16 +17,20 @@ from ..spec import RunSpec, collocate_spec, control_spec, optimize_spec
 COLLOCATION_SUMMARY = ("states and torque are the unknowns of one sparse problem whose defects discretise the "
                        "equation of motion, solved by IPOPT (as OpenSim Moco, bioptim and Drake do); fdbench replays "
                        "the torque found through its own forward simulation, and the indicators are the replay's")
+MUSCLE_COLLOCATION_SUMMARY = ("the same transcription with the muscles: activations are states, excitations "
+                              "and reserve torques unknowns, the inverse dynamics equal to the muscles' generalised "
+                              "forces plus the reserves at every point, tendons taken as rigid (as Moco's MocoTrack "
+                              "with De Groote muscles); fdbench replays the excitations and reserves")
 EXACT_GRADIENT_SUMMARY = ("the paper's cell with the gradient computed exactly, by forward sensitivities of the "
                           "RK4 simulation, instead of by finite differences; a simulation with its sensitivities "
                           "counts as one evaluation of the budget; seed 0")
 
-OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS, CMC = (
-    "open-loop", "pd", "computed-torque", "lqr", "collocation", "cs-cmaes", "cs-bfgs", "cmc")
+OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS, CMC, MUSCLE_COLLOCATION = (
+    "open-loop", "pd", "computed-torque", "lqr", "collocation", "cs-cmaes", "cs-bfgs", "cmc", "muscle-collocation")
 # the methods "Beyond the paper" (the paper's report of a model on a fixed base), then those that
 # drive a model's muscles (on a model with muscles only)
 BEYOND = (COMPUTED_TORQUE, LQR, COLLOCATION)
-MUSCLE_DRIVEN = (CMC,)
+MUSCLE_DRIVEN = (CMC, MUSCLE_COLLOCATION)
 # every registered method, in the report's order
 EVERY = (OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS)
 # the order in which their runs are handed out, the slowest first (so that workers share the work evenly)
@@ -110,12 +114,24 @@ def _bfgs_skip(dataset: Dataset, options: Options) -> str | None:
     return None
 
 
-def _cmc_skip(dataset: Dataset, options: Options) -> str | None:
-    try:
-        control_spec(controller="cmc", **dataset.common).validate()
-    except ValueError as exc:
-        return f"computed muscle control is not in this report: {exc}"
-    return None
+def _muscles_skip(spec: Callable, name: str) -> Callable:
+    """A ``skip`` for a method that drives the muscles: the reason its spec (``spec(dataset, options)``)
+    is refused on a dataset (a model without muscles), or None."""
+    def skip(dataset: Dataset, options: Options) -> str | None:
+        try:
+            spec(dataset, options).validate()
+        except ValueError as exc:
+            return f"{name} is not in this report: {exc}"
+        return None
+    return skip
+
+
+def _cmc_spec(dataset: Dataset, options: Options) -> RunSpec:
+    return control_spec(controller="cmc", **dataset.common)
+
+
+def _muscle_collocation_spec(dataset: Dataset, options: Options) -> RunSpec:
+    return collocate_spec(_nodes(), "hermite-simpson", actuation="muscles", **dataset.common)
 
 
 def _cmc_label() -> str:
@@ -166,8 +182,11 @@ REGISTRY = {registered.key: registered for registered in (
     Registered(BFGS, lambda o: f"CS + BFGS + ff, exact gradient (budget {o.budget})",
                lambda d, o: "the same splines tuned by BFGS with gradients by forward sensitivities",
                lambda d, o: _shooting("bfgs", d, o, gradient="exact"), _bfgs_skip),
-    Registered(CMC, lambda o: _cmc_label(), lambda d, o: _summary("cmc"),
-               lambda d, o: control_spec(controller="cmc", **d.common), _cmc_skip),
+    Registered(CMC, lambda o: _cmc_label(), lambda d, o: _summary("cmc"), _cmc_spec,
+               _muscles_skip(_cmc_spec, "computed muscle control")),
+    Registered(MUSCLE_COLLOCATION, lambda o: f"Direct collocation of the muscles ({_nodes()} intervals) + forward replay",
+               lambda d, o: MUSCLE_COLLOCATION_SUMMARY, _muscle_collocation_spec,
+               _muscles_skip(_muscle_collocation_spec, "muscle-driven collocation")),
 )}
 
 
@@ -251,11 +270,10 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
         described.setdefault(m.description, []).append(m.name)
     out += [f"- {'; '.join(names)}: {description}." for description, names in described.items()]
     out += [""] + results_table(rows, with_success=False)
-    collocation = [r for r in rows if r.records[0].get("command") == "collocate"]
-    if collocation:
-        rec = collocation[0].records[0]
-        out += ["", f"Direct collocation's own RMSE_rot at its nodes: {significant(rec.get('collocation_rmse_rot_deg'))} deg; "
-                    f"IPOPT: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, "
+    for row in (r for r in rows if r.records[0].get("command") == "collocate"):
+        rec = row.records[0]
+        out += ["", f"{row.name}: its own RMSE_rot at its nodes {significant(rec.get('collocation_rmse_rot_deg'))} "
+                    f"deg; IPOPT: {rec.get('ipopt_status')}, {rec.get('ipopt_iterations')} iterations, "
                     f"{significant(rec.get('solve_time_s'))} s."]
     out += muscles_markdown(rows)
     failed = failure_lines(rows)

@@ -56,9 +56,9 @@ def test_no_beyond_leaves_the_section_out(tmp_path):
 
 
 def test_on_a_model_with_muscles_cmc_joins_the_section_with_the_muscles_table_and_figure(tmp_path):
-    """On the forearm with a flexor and an extensor, "Beyond the paper" adds computed muscle control;
-    its row, its muscles' table and the activations figure give what ``control --controller cmc``
-    gives on its own."""
+    """On the forearm with a flexor and an extensor, "Beyond the paper" adds computed muscle control
+    and muscle-driven collocation; CMC's row, its muscles' table and the activations figure give what
+    ``control --controller cmc`` gives on its own."""
     from fdbench.multibody.model import model_from_dict
     from fdbench.multibody.model_files import to_toml
 
@@ -72,8 +72,10 @@ def test_on_a_model_with_muscles_cmc_joins_the_section_with_the_muscles_table_an
     report = (tmp_path / "report.md").read_text()
     alone = json.loads(invoke(["control", *common, "--controller", "cmc", "-f", "json", "--quiet"]))
     cells = json.loads(invoke([*SMALL, *common, "--db", db, "--format", "json"]))["cells"]
-    cmc = [cell for cell in cells if "muscles" in cell]
-    assert len(cmc) == 1 and cmc[0]["cell"].startswith("Computed muscle control")
+    driven = [cell for cell in cells if "muscles" in cell]
+    assert [cell["cell"].split(" (")[0] for cell in driven] == ["Computed muscle control",
+                                                                 "Direct collocation of the muscles"]
+    cmc = driven[:1]
     assert cmc[0]["rmse_rot_deg_median"] == alone["rmse_rot_deg"]
     assert cmc[0]["muscles"]["effort"] == alone["effort"]
     assert cmc[0]["muscles"]["activation_mean"] == {m: alone[f"{m}_activation_mean"] for m in ("flexor", "extensor")}
