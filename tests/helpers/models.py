@@ -1,5 +1,5 @@
 """Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
-it."""
+it; arm26's muscles through OpenSim's path points."""
 
 from __future__ import annotations
 
@@ -30,3 +30,25 @@ def hopper_loads(seed):
              ExternalLoad("c", "pelvis", "ground", "thigh"))
     return ExternalLoads(loads, np.linspace(-0.1, 1.0, n), rng.normal(0, 50, (n, 3, 2)), rng.normal(0, 0.2, (n, 3, 2)),
                          rng.normal(0, 5, (n, 3)))
+
+
+# three of arm26's muscles through the path points of OpenSim's arm26.osim (its wrapping left out; x, y in m,
+# the base's points in ground: the base sits at (0, 0.8))
+ARM26_POINTS = {
+    "TRIlong": [("ground", -0.05365, 0.78627), ("r_humerus", -0.02714, -0.11441), ("r_humerus", -0.03184, -0.22637),
+                ("r_humerus", -0.01743, -0.26757), ("r_ulna_radius_hand", -0.0219, 0.01046)],
+    "BIClong": [("ground", -0.039235, 0.80347), ("ground", -0.028945, 0.81391), ("r_humerus", 0.02131, 0.01793),
+                ("r_humerus", 0.02378, -0.00511), ("r_humerus", 0.01345, -0.02827), ("r_humerus", 0.01068, -0.07736),
+                ("r_humerus", 0.01703, -0.12125), ("r_humerus", 0.0228, -0.1754),
+                ("r_ulna_radius_hand", 0.00751, -0.04839)],
+    "BRA": [("r_humerus", 0.0068, -0.1739), ("r_ulna_radius_hand", -0.0032, -0.0239)],
+}
+
+
+def with_arm26_points(data: dict) -> dict:
+    """arm26's model dictionary (``to_dict``) with the muscles of ARM26_POINTS through their points
+    (changed in place, returned); the others keep their polynomial paths."""
+    for muscle in data["muscles"]:
+        if muscle["name"] in ARM26_POINTS:
+            muscle["path"] = {"points": [{"body": b, "at": [x, y]} for b, x, y in ARM26_POINTS[muscle["name"]]]}
+    return data
