@@ -25,8 +25,8 @@ static equilibrium), fixed: it does not move with the parameters.
 
 A population is evaluated in one compiled call per thread (``tracking.rk4_candidates`` with the
 candidates' excitations), the exact gradient by one RK4 with forward sensitivities through the
-activation and tendon states (``multibody.kernels.rk4_sensitivity`` with muscles; polynomial
-muscle paths only).
+activation and tendon states (``multibody.kernels.rk4_sensitivity`` with muscles; paths of points
+or polynomials, both with their exact Hessians).
 """
 
 from __future__ import annotations
@@ -37,7 +37,6 @@ import math
 import numpy as np
 
 from .multibody import simulation as sim
-from .multibody.muscle_paths import POINTS
 from .problem import ShootingProblem, tracking_gradient, tracking_setup
 
 DEFAULT_EFFORT_WEIGHT = 1.0  # deg per (excitation^2 s)
@@ -53,16 +52,6 @@ def start_signal(activation) -> np.ndarray:
     """The logit of static optimisation's activations (any shape), clipped to START_RANGE first."""
     start = np.clip(np.asarray(activation, dtype=float), *START_RANGE)
     return np.log(start / (1.0 - start))
-
-
-def check_muscle_paths(engine) -> None:
-    """ValueError (one line) where exact gradients cannot be had on ``engine``'s muscles: a muscle
-    path of points (its Hessian is not derived)."""
-    kinds = engine.muscle_paths.kind
-    if np.any(kinds == POINTS):
-        name = engine.model.muscles[int(np.flatnonzero(kinds == POINTS)[0])].name
-        raise ValueError(f"--gradient exact with muscles needs polynomial muscle paths; muscle {name!r} "
-                         "runs through points")
 
 
 class ExcitationProblem(ShootingProblem):
@@ -188,9 +177,8 @@ class ExcitationProblem(ShootingProblem):
         return float(self.objectives(np.asarray(p, dtype=float)[None])[0])
 
     def check_exact_gradient(self) -> None:
-        """ValueError (one line) where the exact gradient is not available: a muscle path of points
-        or a parameterisation without d signal / d p."""
-        check_muscle_paths(self.engine)
+        """ValueError (one line) where the exact gradient is not available: a parameterisation without
+        d signal / d p (either muscle path form has its exact Hessian)."""
         if self._jacobians is None:
             self._jacobians = [part.on_grid_jacobian(self._half) for part in self.parts]
         if any(jacobian is None for jacobian in self._jacobians):

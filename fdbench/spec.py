@@ -15,7 +15,7 @@ from .collocation import (DEFAULT_EXCITATION_WEIGHT, DEFAULT_MAX_ITER, DEFAULT_M
                           check_model, check_options)
 from .controllers import CONTROLLERS
 from .controllers.pd import PAPER_KD, PAPER_KP
-from .excitation_problem import DEFAULT_EFFORT_WEIGHT, check_muscle_paths
+from .excitation_problem import DEFAULT_EFFORT_WEIGHT
 from .integrate import check_integrator
 from .memory import check_run
 from .method_options import accepted_options, check_method_options, options_for
@@ -172,8 +172,6 @@ class RunSpec:
             raise ValueError("--residual-weight applies to --actuation torques only")
         if dict(self.torque_options).get("hidden") == "auto":
             raise ValueError("--hidden auto fits the inverse-dynamics torque: give a count with --actuation muscles")
-        if self.gradient == "exact":
-            check_muscle_paths(run_inputs.engine(self))
 
     def _check_memory(self) -> None:
         """ValueError (one line naming the option to change) if the run's arrays would not fit in

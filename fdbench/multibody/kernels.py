@@ -55,7 +55,8 @@ from .inverse import N_KIN, _inverse, _no_loads, _spline_at
 from .inverse import inverse_torques  # noqa: F401 - eq. 3, one of the kernels
 from .muscle import (F0, SMOOTHING, TAU_ACT, TAU_DEACT, activation_derivative, activation_partials, compliant_tendon,
                      compliant_tendon_partials, rigid_tendon_force, rigid_tendon_partials)
-from .muscle_paths import N_FRAME, POINTS, _frames, _points_length, _polynomial_hessian, _polynomial_length, _powers
+from .muscle_paths import (N_FRAME, POINTS, _frames, _points_length, _polynomial_hessian, _polynomial_length, _powers,
+                           points_hessians)
 from .muscles import MAX_POWER
 from .tangents import (FORM, LAMBDA, MAX_ENTRIES, N_AUX, N_STAGE, PIVOT, VELOCITY_TERM, _load_in_ground,
                        _stage_sensitivity, _stage_tangents)
@@ -100,7 +101,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     With muscles not None (``layout.Muscles``), the state is [q, q'] followed by the muscles'
     activations and their compliant tendons' normalised forces (``rk4_muscles``), and each stage
     adds the muscles' generalised forces (moment arms times force) to the law's torque. With dz
-    too, the sensitivities carry the muscle states (their polynomial paths' Hessians, the curves'
+    too, the sensitivities carry the muscle states (their paths' Hessians, the curves'
     and the activation dynamics' derivatives), and a parameter q with param_col[q] = J + m moves
     muscle m's excitation by G[:, q] instead of a generalised force.
 
@@ -182,6 +183,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
     n_mt = 0 if dz is None else n_muscles
     muscle_part, muscle_hess = np.zeros((n_mt, N_MUSCLE_PART)), np.zeros((n_mt, J, J))
     muscle_hzd = np.zeros((n_mt, J))
+    muscle_curves = np.zeros((framed if dz is not None else 0, 2, J, J))  # the origins' second derivatives
     dzq, dzdq, dtm = np.zeros((J if n_mt else 0, P)), np.zeros((J if n_mt else 0, P)), np.zeros((J if n_mt else 0, P))
     muscle_dtau = np.zeros((n_b if n_mt else 0, P))
     n_kept = 0 if dz is None else phi_rows.shape[0]  # per constraint row: its entries, Hessian, term
@@ -557,6 +559,8 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
         geometry = muscles.paths
         if framed:
             _frames(z, geometry, muscle_frames, muscle_slopes)
+            if dz is not None:  # a plain kernel's one call: compiled once, not inlined into each variant
+                points_hessians(z, geometry, muscle_frames, muscle_slopes, muscle_curves, muscle_hess)
         _powers(z, geometry, muscle_powers)
         after = 2 * n_q
         for m in range(n_muscles):
@@ -581,7 +585,7 @@ def _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, bel
                 torque[j] += arm[j] * force
             if dz is not None:  # the partials the sensitivities need (``muscle_tangents``)
                 part = muscle_part[m]
-                if geometry.kind[m] != POINTS:  # a path of points: refused by ``rk4_sensitivity``
+                if geometry.kind[m] != POINTS:  # a path of points' from ``points_hessians`` above
                     _polynomial_hessian(geometry, m, muscle_hess[m], muscle_powers)
                 for i in range(J):
                     total = 0.0
@@ -928,11 +932,7 @@ def rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model,
     ``muscles`` (``layout.Muscles``, its excitations (rows, M) on the grid; None: none): the state
     (n_state + muscle states) and its sensitivities carry the muscles' activations and compliant
     tendons' forces as ``rk4_muscles`` does, and a parameter q with param_col[q] = J + m moves
-    muscle m's excitation by G[:, q] (per parameter unit) instead of a generalised force.
-    ValueError for a muscle with a path of points (its path's Hessian is not derived: polynomial
-    paths only)."""
-    if muscles is not None and np.any(muscles.paths.kind == POINTS):
-        raise ValueError("exact sensitivities with muscles need polynomial muscle paths "
-                         "(the path Hessian of a path of points is not derived)")
+    muscle m's excitation by G[:, q] (per parameter unit) instead of a generalised force. Either path
+    form is exact (``muscle_paths.hessians``)."""
     return _rk4_sensitivity(y0, dt, n_steps, tau, ref, refd, G, param_col, every, model, paths, free, loads, states,
                             rates, applied, dz, muscles)

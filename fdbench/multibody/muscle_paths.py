@@ -9,7 +9,10 @@ along its path from ground; its joint point sits at the parent's ``at_parent`` (
 (x, y)(angle) in the parent's frame, plus (x, y) for a free joint) and at its own ``at_child``.
 
 One compiled kernel (``geometry``, numba, cached) over one named layout (``MusclePaths``, built once
-per model by ``muscle_layout``) computes both path forms, for later use inside the compiled dynamics.
+per model by ``muscle_layout``) computes both path forms, for later use inside the compiled dynamics;
+``hessians`` (``path_hessians`` from Python) their exact Hessians d2l/dq2, which the sensitivities
+need: a path of points' through the bodies' origins' second derivatives (``_frame_curves``), in a
+plain kernel (``points_hessians``) that the RK4 driver calls rather than inlines.
 """
 
 from __future__ import annotations
@@ -322,14 +325,129 @@ def _polynomial_hessian(layout, m, hess, table):
                     hess[columns[m, b], columns[m, a]] += value
 
 
+@njit(error_model="numpy", inline="always")
+def _frame_curves(q, layout, frames, slopes, curves):
+    """Into curves (B + 1, 2, J, J) the second derivatives d2/dq_i dq_j of each body's origin (x, y;
+    m per rad^2) from ``_frames``' frames and slopes at q, from ground out (row B, ground: zero). A body's
+    angle is linear in q, so a vector a fixed in a frame of angle phi has d2a = -a dphi_i dphi_j; a
+    path's point R(phi_p) s(theta) adds R90 R s' (dphi_p_i d_j + d_i dphi_p_j) + R s'' d_i d_j
+    (d: the joint's angle column)."""
+    body_int, body_float, n_bodies = layout.body_int, layout.body_float, layout.body_int.shape[0]
+    n_q = q.shape[0]
+    curves[n_bodies] = 0.0
+    for k in range(n_bodies):
+        p, col = body_int[k, PARENT], body_int[k, COLUMN]
+        if p < 0:
+            p = n_bodies
+        pc, ps = math.cos(frames[p, PHI]), math.sin(frames[p, PHI])
+        ax = body_float[k, AT_PARENT_X] * pc - body_float[k, AT_PARENT_Y] * ps  # fixed in the parent
+        ay = body_float[k, AT_PARENT_X] * ps + body_float[k, AT_PARENT_Y] * pc
+        c, s = math.cos(frames[k, PHI]), math.sin(frames[k, PHI])
+        cx = body_float[k, AT_CHILD_X] * c - body_float[k, AT_CHILD_Y] * s  # fixed in the child
+        cy = body_float[k, AT_CHILD_X] * s + body_float[k, AT_CHILD_Y] * c
+        path = body_int[k, PATH]
+        t1x = t1y = t2x = t2y = 0.0
+        if path >= 0:  # the path's point turns with the parent too; R s' and R s''
+            sx0, sx1, sx2, _ = _spline_at(layout.knots, layout.start[2 * path], layout.start[2 * path + 1], q[col])
+            sy0, sy1, sy2, _ = _spline_at(layout.knots, layout.start[2 * path + 1], layout.start[2 * path + 2],
+                                          q[col])
+            ax, ay = ax + sx0 * pc - sy0 * ps, ay + sx0 * ps + sy0 * pc
+            t1x, t1y = sx1 * pc - sy1 * ps, sx1 * ps + sy1 * pc
+            t2x, t2y = sx2 * pc - sy2 * ps, sx2 * ps + sy2 * pc
+        for i in range(n_q):
+            for j in range(n_q):
+                turn_parent = slopes[p, PHI, i] * slopes[p, PHI, j]
+                turn_child = slopes[k, PHI, i] * slopes[k, PHI, j]
+                curves[k, 0, i, j] = curves[p, 0, i, j] - ax * turn_parent + cx * turn_child
+                curves[k, 1, i, j] = curves[p, 1, i, j] - ay * turn_parent + cy * turn_child
+        if path >= 0:
+            for i in range(n_q):
+                w = slopes[p, PHI, i]  # zero for i = col: the parent does not turn with its child's joint
+                curves[k, 0, i, col] -= t1y * w
+                curves[k, 0, col, i] -= t1y * w
+                curves[k, 1, i, col] += t1x * w
+                curves[k, 1, col, i] += t1x * w
+            curves[k, 0, col, col] += t2x
+            curves[k, 1, col, col] += t2y
+
+
+@njit(error_model="numpy", inline="always")
+def _points_hessian(layout, m, frames, slopes, curves, hess, n_bodies):
+    """The Hessian d2l/dq2 (m per rad^2; hess (J, J), overwritten) of muscle m's path of points: per
+    segment d = P_b - P_a of length s and direction u, (dd_i . dd_j - (u . dd_i)(u . dd_j)) / s
+    + u . d2d_ij, a point P = O + a (a fixed in its body) having dP = dO + R90 a dphi and
+    d2P = d2O - a dphi_i dphi_j (``_frame_curves``). Two points that meet: NaN."""
+    n_q = hess.shape[0]
+    hess[:, :] = 0.0
+    for row in range(layout.rows[m, 0] + 1, layout.rows[m, 1]):
+        a, b = layout.point_body[row - 1], layout.point_body[row]
+        if a < 0:
+            a = n_bodies
+        if b < 0:
+            b = n_bodies
+        ca, sa = math.cos(frames[a, PHI]), math.sin(frames[a, PHI])
+        cb, sb = math.cos(frames[b, PHI]), math.sin(frames[b, PHI])
+        aax = layout.point_local[row - 1, 0] * ca - layout.point_local[row - 1, 1] * sa
+        aay = layout.point_local[row - 1, 0] * sa + layout.point_local[row - 1, 1] * ca
+        abx = layout.point_local[row, 0] * cb - layout.point_local[row, 1] * sb
+        aby = layout.point_local[row, 0] * sb + layout.point_local[row, 1] * cb
+        dx = frames[b, ORIGIN_X] + abx - frames[a, ORIGIN_X] - aax
+        dy = frames[b, ORIGIN_Y] + aby - frames[a, ORIGIN_Y] - aay
+        segment = math.sqrt(dx * dx + dy * dy)
+        ux, uy = dx / segment, dy / segment
+        for i in range(n_q):
+            dxi = slopes[b, ORIGIN_X, i] - aby * slopes[b, PHI, i] - slopes[a, ORIGIN_X, i] + aay * slopes[a, PHI, i]
+            dyi = slopes[b, ORIGIN_Y, i] + abx * slopes[b, PHI, i] - slopes[a, ORIGIN_Y, i] - aax * slopes[a, PHI, i]
+            ui = ux * dxi + uy * dyi
+            for j in range(n_q):
+                dxj = (slopes[b, ORIGIN_X, j] - aby * slopes[b, PHI, j] - slopes[a, ORIGIN_X, j]
+                       + aay * slopes[a, PHI, j])
+                dyj = (slopes[b, ORIGIN_Y, j] + abx * slopes[b, PHI, j] - slopes[a, ORIGIN_Y, j]
+                       - aax * slopes[a, PHI, j])
+                turn_a, turn_b = slopes[a, PHI, i] * slopes[a, PHI, j], slopes[b, PHI, i] * slopes[b, PHI, j]
+                ddx = curves[b, 0, i, j] - abx * turn_b - curves[a, 0, i, j] + aax * turn_a
+                ddy = curves[b, 1, i, j] - aby * turn_b - curves[a, 1, i, j] + aay * turn_a
+                hess[i, j] += ((dxi * dxj + dyi * dyj) - ui * (ux * dxj + uy * dyj)) / segment + ux * ddx + uy * ddy
+
+
 @njit(error_model="numpy")
-def hessians(q, layout, out, table):
-    """The Hessians d2l/dq2 (m per rad^2) of the polynomial muscle paths of ``layout`` at the
-    coordinates q (J,) into out (M, J, J) (zero for a path of points: not derived); table
-    (J, 2, MAX_POWER + 1) scratch (``_powers``)."""
-    _powers(q, layout, table)
+def points_hessians(q, layout, frames, slopes, curves, out):
+    """The Hessians d2l/dq2 (m per rad^2) of the muscles of ``layout`` whose paths run through points,
+    at the coordinates q (J,), into out[m] (J, J) (the other muscles' rows untouched): frames, slopes
+    ``_frames``' at q; curves (B + 1, 2, J, J) scratch (``_frame_curves``). A plain kernel, not
+    inlined: the RK4 driver calls it once a stage, and it compiles once for every driver variant."""
+    _frame_curves(q, layout, frames, slopes, curves)
+    n_bodies = layout.body_int.shape[0]
     for m in range(layout.kind.shape[0]):
         if layout.kind[m] == POINTS:
-            out[m] = 0.0
-        else:
+            _points_hessian(layout, m, frames, slopes, curves, out[m], n_bodies)
+
+
+@njit(error_model="numpy")
+def hessians(q, layout, out, table, frames, slopes, curves):
+    """The Hessians d2l/dq2 (m per rad^2) of the muscle paths of ``layout`` at the coordinates q (J,)
+    into out (M, J, J), both forms exact. Scratch: table (J, 2, MAX_POWER + 1) (``_powers``), frames
+    (B + 1, N_FRAME), slopes (B + 1, N_FRAME, J) (``_frames``, zero on entry: row B is ground) and
+    curves (B + 1, 2, J, J) (``_frame_curves``)."""
+    _powers(q, layout, table)
+    _frames(q, layout, frames, slopes)
+    points_hessians(q, layout, frames, slopes, curves, out)
+    for m in range(layout.kind.shape[0]):
+        if layout.kind[m] != POINTS:
             _polynomial_hessian(layout, m, out[m], table)
+
+
+def path_hessians(model: Model, q, layout: MusclePaths | None = None) -> np.ndarray:
+    """The Hessians d2l/dq2 (M, J, J) (m per rad^2; m per m^2 for translations) of ``model.muscles``'
+    lengths at the coordinates q (J,) (``hessians``); ``layout``: ``muscle_layout(model)``, made here if
+    not given. ValueError for q of another shape."""
+    q = np.ascontiguousarray(q, dtype=float)
+    n_coordinates = model.n_joints
+    if q.shape != (n_coordinates,):
+        raise ValueError(f"coordinates must have shape ({n_coordinates},), got {q.shape}")
+    layout = muscle_layout(model) if layout is None else layout
+    n_bodies = layout.body_int.shape[0]
+    out = np.zeros((len(model.muscles), n_coordinates, n_coordinates))
+    hessians(q, layout, out, np.zeros((n_coordinates, 2, MAX_POWER + 1)), np.zeros((n_bodies + 1, N_FRAME)),
+             np.zeros((n_bodies + 1, N_FRAME, n_coordinates)), np.zeros((n_bodies + 1, 2, n_coordinates, n_coordinates)))
+    return out

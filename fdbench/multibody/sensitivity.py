@@ -27,11 +27,12 @@ agree on pin joints to 1e-9 (``tests/test_sensitivity_dense.py``).
 
 Muscles (``rk4_sensitivity``'s ``muscles``): the state and S carry the activations and compliant
 tendons' forces. Each stage forms the change of the muscles' generalised forces in every direction,
--H dq F + arm dF (H the path's Hessian, exact for polynomial paths; dF from the curves' partials at
-the stage), adds it to the generalised forces' change of either derivation above, and the muscle
-states' own rows (activation dynamics, the tendon's rate) from their partials; an excitation
-parameter enters its muscle's activation row. Paths of points are refused (their Hessian is not
-derived). ``tests/engine/test_muscle_sensitivity.py`` checks it against central differences.
+-H dq F + arm dF (H the path's Hessian, exact for both forms, ``muscle_paths.hessians``: a path of
+points' from the bodies' origins' second derivatives; dF from the curves' partials at the stage),
+adds it to the generalised forces' change of either derivation above, and the muscle states' own
+rows (activation dynamics, the tendon's rate) from their partials; an excitation parameter enters its
+muscle's activation row. ``tests/engine/test_muscle_sensitivity.py`` checks it against central
+differences.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """Muscles in model files: their lengths and moment arms against OpenSim's (``getLength``,
 ``computeMomentArm``) on a planar model with a free base, a knee on a spline path and an ankle turned
 by an offset; moment arms against finite differences of the lengths and a polynomial path's against
-its derivative by hand; paths through the engine's own body points; the checker's one-line errors;
-and muscles written back and read again equal."""
+its derivative by hand; a path of points' Hessian against finite differences of the moment arms and
+a closed form; paths through the engine's own body points; the checker's one-line errors; and
+muscles written back and read again equal."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from fdbench.models import find_model
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.model import ModelError, model_from_dict, to_dict
 from fdbench.multibody.model_files import load_model, to_toml
-from fdbench.multibody.muscle_paths import muscle_geometry
+from fdbench.multibody.muscle_paths import muscle_geometry, path_hessians
 from fdbench.multibody.muscles import Muscle, PathPoint, PointPath, PolynomialPath, Term
 
 from helpers.cli_checks import assert_one_line_error
@@ -150,6 +151,9 @@ def test_a_muscle_over_one_pin_is_the_closed_form():
     expected = np.sqrt(d * d + h * h - 2 * d * h * np.sin(theta))
     np.testing.assert_allclose(lengths[:, 0], expected, rtol=0, atol=1e-15)
     np.testing.assert_allclose(arms[:, 0, 0], d * h * np.cos(theta) / expected, rtol=0, atol=1e-15)
+    curvature = [path_hessians(model, [angle])[0, 0, 0] for angle in theta]  # d2l/dtheta2
+    np.testing.assert_allclose(curvature, d * h * np.sin(theta) / expected - (d * h * np.cos(theta))**2 / expected**3,
+                               rtol=0, atol=1e-14)
     none = muscle_geometry(find_model("arm2"), np.zeros((3, 2)))
     assert none[0].shape == (3, 0) and none[1].shape == (3, 0, 2)
     with pytest.raises(ValueError, match=r"shape \(1,\) or \(n, 1\)"):
@@ -166,20 +170,27 @@ def leg_paths(draw):
     return points, np.array(q)
 
 
+def leg_with_path(points, q):
+    """LEG with one muscle through ``points`` (body, x, y); hypothesis passes over paths with a point
+    twice in a row or a segment shorter than 1 cm at q ((near) zero length: no slope, or a finite
+    difference far off)."""
+    try:
+        model = model_from_dict(leg_with_muscles({"m": points}), "leg")
+    except ModelError:  # two equal points in a row
+        assume(False)
+    segments = [muscle_geometry(replace(model, muscles=(replace(model.muscles[0], path=PointPath(
+        model.muscles[0].path.points[k:k + 2])),)), q)[0][0] for k in range(len(points) - 1)]
+    assume(min(segments) >= 1e-2)
+    return model
+
+
 @settings(max_examples=60)
 @given(leg_paths())
 def test_a_moment_arm_is_minus_the_length_s_slope(case):
     """-dl/dq by central differences (step 1e-6) equals the moment arm to 1e-7, for any points on any
     bodies, frames or ground whose segments are 1 cm or longer."""
     points, q = case
-    data = leg_with_muscles({"m": points})
-    try:
-        model = model_from_dict(data, "leg")
-    except ModelError:  # two equal points in a row
-        assume(False)
-    segments = [muscle_geometry(replace(model, muscles=(replace(model.muscles[0], path=PointPath(
-        model.muscles[0].path.points[k:k + 2])),)), q)[0][0] for k in range(len(points) - 1)]
-    assume(min(segments) >= 1e-2)  # (near) zero length: no slope, or a finite difference far off
+    model = leg_with_path(points, q)
     length, arms = muscle_geometry(model, q)
     step = 1e-6
     for j in range(5):
@@ -188,6 +199,44 @@ def test_a_moment_arm_is_minus_the_length_s_slope(case):
         down[j] -= step
         slope = (muscle_geometry(model, up)[0] - muscle_geometry(model, down)[0]) / (2 * step)
         assert abs(-slope[0] - arms[0, j]) < 1e-7, (j, -slope, arms[0, j])
+
+
+def minus_arm_slopes(model, q, step):
+    """-d(moment arms)/dq (M, J, J) by central differences of muscle_geometry (step in rad and m)."""
+    return np.stack([-(muscle_geometry(model, q + step * e)[1] - muscle_geometry(model, q - step * e)[1]) / (2 * step)
+                     for e in np.eye(len(q))], axis=-1)
+
+
+@settings(max_examples=30)
+@given(leg_paths())
+def test_a_path_of_points_hessian_is_the_slope_of_its_moment_arms(case):
+    """d2l/dq2 (``path_hessians``) of any points on any bodies, frames or ground (the free base's angle
+    and translations, the knee's spline path, the ankle's offset) equals minus the central differences
+    (step 1e-5: truncation and rounding below 1e-9 here) of muscle_geometry's moment arms within 1e-6
+    of its largest entry plus 1e-8 (a path on one body has none), and is symmetric to the bit."""
+    points, q = case
+    model = leg_with_path(points, q)
+    hessian = path_hessians(model, q)
+    np.testing.assert_allclose(hessian, minus_arm_slopes(model, q, 1e-5), rtol=0,
+                               atol=1e-8 + 1e-6 * np.abs(hessian).max())
+    np.testing.assert_array_equal(hessian, np.swapaxes(hessian, 1, 2))
+
+
+def test_the_hessians_of_points_and_polynomials_side_by_side_are_the_slopes_of_the_moment_arms():
+    """LEG's three paths of points, one from ground straight to the heel and a polynomial at 8
+    random states (the knee beyond its path's knots too, where the spline runs on straight): every
+    pair of coordinates bends some path, and each Hessian is minus the central differences of its
+    moment arms within 1e-6 of its largest entry."""
+    data = leg_with_muscles(PATHS | {"reach": [("ground", 0.1, -0.2), ("heel", 0.0, 0.0)]})
+    data["muscles"].append(MUSCLE | {"name": "poly", "path": POLYNOMIAL})
+    model = model_from_dict(data, "leg")
+    for q in random_q(np.random.default_rng(8), 8):
+        hessian = path_hessians(model, q)
+        assert np.all(np.abs(hessian).max(axis=0) > 1e-4)  # every pair of coordinates
+        for ours, expected in zip(hessian, minus_arm_slopes(model, q, 1e-5)):
+            np.testing.assert_allclose(ours, expected, rtol=0, atol=1e-6 * np.abs(ours).max())
+    with pytest.raises(ValueError, match=r"shape \(5,\)"):
+        path_hessians(model, np.zeros((2, 5)))
 
 
 def test_a_polynomial_path_and_its_moment_arms_are_the_closed_form():

@@ -3,8 +3,9 @@
 with excitations): the polynomial paths' Hessians against central differences of the moment arms,
 the muscle model's partial derivatives against central differences of its functions, the
 coordinates' derivatives with respect to excitations (and a torque) against central differences of
-whole simulations on the library's arm26 (compliant tendons as in the library, and rigid), and each
-candidate of a population against its own ``Engine.simulate``."""
+whole simulations on the library's arm26 (compliant tendons as in the library, rigid, and rigid with
+three muscles through points), and each candidate of a population against its own
+``Engine.simulate``. (The Hessians of paths of points: tests/engine/test_muscle_paths.py.)"""
 
 from __future__ import annotations
 
@@ -16,29 +17,30 @@ from fdbench.multibody import muscle as mu
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.kernels import rk4_sensitivity
 from fdbench.multibody.model import model_from_dict, to_dict
-from fdbench.multibody.muscle_paths import hessians, muscle_geometry, muscle_layout
-from fdbench.multibody.muscles import MAX_POWER
+from fdbench.multibody.muscle_paths import muscle_geometry, path_hessians
 from fdbench.multibody.simulation import muscle_start, static_tendon_force
 from fdbench.population import Population, set_threads
 from fdbench.tracking import rk4_candidates
+from helpers.models import with_arm26_points
 from helpers.population_checks import restore_threads  # noqa: F401 - a fixture
 
 N_STEPS, DT = 40, 2e-3  # s: a short motion
 Z0, ZD0 = np.array([0.3, 0.8]), np.array([0.2, -0.5])  # rad, rad/s
 
 
-def arm26(tendon: str | None = None) -> Engine:
-    """The library's arm26 (compliant tendons), or with every tendon ``tendon``."""
+def arm26(tendon: str | None = None, points: bool = False) -> Engine:
+    """The library's arm26 (compliant tendons), or with every tendon ``tendon``; ``points``: TRIlong,
+    BIClong and BRA (muscles 0, 3, 5) through their path points (``helpers.models.ARM26_POINTS``)."""
     data = to_dict(find_model("arm26"))
     if tendon is not None:
         for m in data["muscles"]:
             m["tendon"] = tendon
-    return Engine(model_from_dict(data, "arm26.toml"))
+    return Engine(model_from_dict(with_arm26_points(data) if points else data, "arm26.toml"))
 
 
 @pytest.fixture(scope="module")
 def engines() -> dict:
-    return {"compliant": arm26(), "rigid": arm26("rigid")}
+    return {"compliant": arm26(), "rigid": arm26("rigid"), "points": arm26("rigid", points=True)}
 
 
 def grid_excitations(engine: Engine, n_steps: int = N_STEPS, dt: float = DT) -> np.ndarray:
@@ -57,11 +59,10 @@ def test_polynomial_path_hessians_are_the_slopes_of_the_moment_arms(engines):
     measured 1e-9 off, the step's truncation; the fitted polynomials of degree up to 20 cancel, so
     that smaller steps drown in rounding) of muscle_geometry's moment arms, and is symmetric."""
     model = engines["rigid"].model
-    layout, rng = muscle_layout(model), np.random.default_rng(26)
+    rng = np.random.default_rng(26)
     for _ in range(4):
         q = rng.uniform([-0.3, 0.1], [1.2, 2.0])
-        out = np.zeros((6, 2, 2))
-        hessians(q, layout, out, np.zeros((2, 2, MAX_POWER + 1)))
+        out = path_hessians(model, q)
         h = 1e-4
         slopes = np.stack([-(muscle_geometry(model, q + h * e)[1] - muscle_geometry(model, q - h * e)[1]) / (2 * h)
                            for e in np.eye(2)], axis=-1)
@@ -102,13 +103,14 @@ def test_the_muscle_partials_are_the_derivatives_of_its_functions():
                                    atol=1e-7 * np.abs(expected).max())
 
 
-@pytest.mark.parametrize("tendon", ["compliant", "rigid"])
+@pytest.mark.parametrize("tendon", ["compliant", "rigid", "points"])
 def test_coordinates_derivatives_by_excitations_equal_central_differences(engines, tendon):
     """On arm26, 40 RK4 steps of 2 ms from a moving start: dz/dp of four parameters (three move one
     muscle's excitation each by a shape on the grid, param_col J + m; one moves the elbow's torque)
     equals central differences of whole simulations (``Engine.simulate`` with excitation_half; step
     1e-4, whose truncation and rounding are each below 1e-7 here) within 1e-5 relative, and the
-    kernel's states are those of ``Engine.simulate`` to the last bit."""
+    kernel's states are those of ``Engine.simulate`` to the last bit. ``points``: the three muscles
+    moved run through points (their paths' Hessians ``muscle_paths.points_hessians``')."""
     engine = engines[tendon]
     J, n, rows = engine.n_joints, N_STEPS, 2 * N_STEPS + 1
     t = np.arange(rows) * (0.5 * DT)
@@ -144,21 +146,6 @@ def test_coordinates_derivatives_by_excitations_equal_central_differences(engine
     assert np.all(np.abs(expected).max(axis=(0, 1)) > 1e-3)  # every parameter moves the arm
     relative = np.abs(dz - expected).max(axis=(0, 1)) / np.abs(expected).max(axis=(0, 1))
     assert relative.max() < 1e-5, relative
-
-
-def test_muscles_with_paths_of_points_are_refused_for_sensitivities():
-    """A muscle whose path runs through points has no path Hessian: rk4_sensitivity says so in one
-    line before running."""
-    data = to_dict(find_model("arm2"))
-    data["muscles"] = [{"name": "biceps", "max_isometric_force": 400.0, "optimal_fiber_length": 0.12,
-                        "tendon_slack_length": 0.22, "path": {"points": [{"body": "ground", "at": [0.0, 0.03]},
-                                                                         {"body": "forearm", "at": [0.05, 0.02]}]}}]
-    engine = Engine(model_from_dict(data, "arm.toml"))
-    rows, J = 5, engine.n_joints
-    with pytest.raises(ValueError, match="polynomial muscle paths"):
-        rk4_sensitivity(np.zeros(engine.n_state + 1), DT, 2, np.zeros((rows, J)), np.zeros((rows, J)),
-                        np.zeros((rows, J)), np.zeros((rows, 1)), np.array([J]), 1, *engine.kernel_args(), None,
-                        None, None, None, None, engine.muscles_at(np.zeros((rows, 1))))
 
 
 def test_each_candidate_of_a_muscle_population_is_eq_18_of_its_own_simulation(engines, restore_threads):

@@ -1,6 +1,7 @@
 """Small models the tests share: the hopper (a free pelvis, a hip, a knee on a path) and loads on
 it; the forearm with a flexor and an extensor; arm26 with rigid tendons on a 50-ms motion; the leg's
-description (a free base, a knee on a path, an offset ankle and a frame), without muscles."""
+description (a free base, a knee on a path, an offset ankle and a frame), without muscles; arm26's
+muscles through OpenSim's path points."""
 
 from __future__ import annotations
 
@@ -52,13 +53,13 @@ def forearm_with_muscles_data() -> dict:
     return data
 
 
-def short_arm26():
+def short_arm26(points: bool = False):
     """The library's arm26 with every tendon rigid and one motion, 'short': 50 ms of minimum jerk
-    from (0.3, 0.8) to (0.32, 0.9) rad."""
+    from (0.3, 0.8) to (0.32, 0.9) rad; ``points``: the muscles of ARM26_POINTS through their points."""
     data = d.to_dict(find_model("arm26"))
     for m in data["muscles"]:
         m["tendon"] = "rigid"
-    model = d.model_from_dict(data, "arm26.toml")
+    model = d.model_from_dict(with_arm26_points(data) if points else data, "arm26.toml")
     start = tuple(zip(model.coordinates, (0.3, 0.8)))
     goal = tuple(zip(model.coordinates, (0.32, 0.9)))
     return dataclasses.replace(model, motions=(d.MotionSpec("short", "minimum-jerk", 0.05, start, goal),))
@@ -77,3 +78,25 @@ LEG = {  # the leg: a free base, a knee on a path, an offset ankle and a frame
                 "at_child": [-0.02, 0.01], "offset": 0.3}],
     "frames": [{"name": "heel", "body": "foot", "at": [-0.05, 0.02], "angle": 0.7}],
 }
+
+
+# three of arm26's muscles through the path points of OpenSim's arm26.osim (its wrapping left out; x, y in m,
+# the base's points in ground: the base sits at (0, 0.8))
+ARM26_POINTS = {
+    "TRIlong": [("ground", -0.05365, 0.78627), ("r_humerus", -0.02714, -0.11441), ("r_humerus", -0.03184, -0.22637),
+                ("r_humerus", -0.01743, -0.26757), ("r_ulna_radius_hand", -0.0219, 0.01046)],
+    "BIClong": [("ground", -0.039235, 0.80347), ("ground", -0.028945, 0.81391), ("r_humerus", 0.02131, 0.01793),
+                ("r_humerus", 0.02378, -0.00511), ("r_humerus", 0.01345, -0.02827), ("r_humerus", 0.01068, -0.07736),
+                ("r_humerus", 0.01703, -0.12125), ("r_humerus", 0.0228, -0.1754),
+                ("r_ulna_radius_hand", 0.00751, -0.04839)],
+    "BRA": [("r_humerus", 0.0068, -0.1739), ("r_ulna_radius_hand", -0.0032, -0.0239)],
+}
+
+
+def with_arm26_points(data: dict) -> dict:
+    """arm26's model dictionary (``to_dict``) with the muscles of ARM26_POINTS through their points
+    (changed in place, returned); the others keep their polynomial paths."""
+    for muscle in data["muscles"]:
+        if muscle["name"] in ARM26_POINTS:
+            muscle["path"] = {"points": [{"body": b, "at": [x, y]} for b, x, y in ARM26_POINTS[muscle["name"]]]}
+    return data

@@ -1,9 +1,10 @@
 """The shooting problem with muscle excitations as inputs (``fdbench.excitation_problem``) on the
 library's arm26 with rigid tendons, over a 50-ms motion (50 RK4 steps, a spline of 4 knots per muscle): the logistic map, the
 effort term's closed form, a population against its rows one by one, the value of
-``value_and_gradient`` against ``objective``, its gradient against central differences, and a few
-BFGS iterations lowering the objective; with feedforward, the start's excitations against static
-optimisation on the grid and the gradient against central differences."""
+``value_and_gradient`` against ``objective``, its gradient against central differences (also with
+three muscles through points), and a few BFGS iterations lowering the objective; with feedforward, the
+start's excitations against static optimisation on the grid and the gradient against central
+differences."""
 
 from __future__ import annotations
 
@@ -20,18 +21,23 @@ from fdbench.optimizers import make_optimizer
 from helpers.models import short_arm26
 
 
+def arm26_problem(points: bool = False, **options) -> ExcitationProblem:
+    """The problem on arm26 with rigid tendons over 50 ms; ``points``: TRIlong, BIClong and BRA through
+    points."""
+    model = short_arm26(points)
+    return ExcitationProblem("cs", Engine(model), joint_motion("short", model), dt=1e-3, effort_weight=2.0, knots=4,
+                             **options)
+
+
 @pytest.fixture(scope="module")
 def problem() -> ExcitationProblem:
-    model = short_arm26()
-    return ExcitationProblem("cs", Engine(model), joint_motion("short", model), dt=1e-3, effort_weight=2.0, knots=4)
+    return arm26_problem()
 
 
 @pytest.fixture(scope="module")
 def fed() -> ExcitationProblem:
     """The problem with static optimisation's excitations as its feedforward."""
-    model = short_arm26()
-    return ExcitationProblem("cs", Engine(model), joint_motion("short", model), dt=1e-3, effort_weight=2.0,
-                             feedforward=True, knots=4)
+    return arm26_problem(feedforward=True)
 
 
 def test_the_logistic_maps_every_signal_into_the_unit_interval():
@@ -59,9 +65,12 @@ def test_a_population_is_its_rows_one_by_one_and_the_gradient_s_value_is_the_obj
     assert problem.objective(problem.p0) < 50.0  # the start (static optimisation's activations) moves the arm
 
 
-def test_the_exact_gradient_equals_central_differences(problem):
-    """d f / d x of three parameters (in the blocks of muscles 0, 3 and 5)
-    against central differences (step 1e-4 in the scaled parameters), within 1e-5 relative."""
+@pytest.mark.parametrize("points", [False, True], ids=["polynomials", "points"])
+def test_the_exact_gradient_equals_central_differences(problem, points):
+    """d f / d x of three parameters (in the blocks of muscles 0, 3 and 5, with ``points`` those
+    muscles through points) against central differences (step 1e-4 in the scaled parameters),
+    within 1e-5 relative."""
+    problem = arm26_problem(points=True) if points else problem
     x = problem.x0 + 0.1
     _, gradient = problem.value_and_gradient_scaled(x)
     for q in (1, 3 * 4 + 2, 5 * 4):
