@@ -562,17 +562,34 @@ def animation_frames(engine, tracked_z: np.ndarray, sims: dict, t: np.ndarray) -
 # ---- drawing -------------------------------------------------------------------------------------
 
 
+def _panels(names, title: str, path: Path, draw) -> None:
+    """A panel per name in two columns against time (s), ``draw(ax, j)`` drawing panel j's lines;
+    the legend outside, saved to ``path``."""
+    plt = agg_pyplot()
+    columns = 2
+    rows = (len(names) + 1) // columns
+    fig, axes = plt.subplots(rows, columns, figsize=(11, 2.2 * rows), sharex=True, squeeze=False)
+    for j, name in enumerate(names):
+        ax = axes[j // columns, j % columns]
+        draw(ax, j)
+        ax.set_title(name, fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time (s)")
+    for ax in axes.flat[len(names):]:
+        ax.set_visible(False)
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    _legend_outside(fig, axes[0, 0])
+    save_png(fig, path)
+
+
 def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> None:
     """A panel per coordinate against time (s): the recorded samples, the filtered motion every
     method tracks (dashed), each method's simulation and collocation's own solution (dotted, at its
     nodes)."""
 
-    plt = agg_pyplot()
-    columns = 2
-    rows = (len(names) + 1) // columns
-    fig, axes = plt.subplots(rows, columns, figsize=(11, 2.2 * rows), sharex=True, squeeze=False)
-    for j, (name, kind) in enumerate(zip(names, kinds)):
-        ax = axes[j // columns, j % columns]
+    def draw(ax, j):
         if "recorded" in curves:
             ax.plot(curves["recorded"][0], curves["recorded"][1][:, j], label="recorded", **RECORDED)
         ax.plot(curves["desired"][0], curves["desired"][1][:, j], label="recording, filtered (tracked)", **TRACKED)
@@ -581,17 +598,9 @@ def coordinates_figure(curves: dict, names, kinds, labels: dict, path: Path) -> 
                 ax.plot(curves[key][0], curves[key][1][:, j], label=label, color=COLOURS.get(key), **METHOD)
         if OWN_SOLUTION in curves:
             ax.plot(curves[OWN_SOLUTION][0], curves[OWN_SOLUTION][1][:, j], label=OWN_SOLUTION, **OWN_STYLE)
-        ax.set_title(name, fontsize=9)
-        ax.set_ylabel("m" if kind == "translation" else "deg", fontsize=8)
-        ax.grid(alpha=0.3)
-    for ax in axes[-1]:
-        ax.set_xlabel("time (s)")
-    for ax in axes.flat[len(names):]:
-        ax.set_visible(False)
-    fig.suptitle("Every coordinate: the recording and each method's simulation", fontsize=11)
-    fig.tight_layout()
-    _legend_outside(fig, axes[0, 0])
-    save_png(fig, path)
+        ax.set_ylabel("m" if kinds[j] == "translation" else "deg", fontsize=8)
+
+    _panels(names, "Every coordinate: the recording and each method's simulation", path, draw)
 
 
 def residuals_figure(curves: dict, labels: dict, path: Path) -> None:
@@ -789,29 +798,17 @@ def activation_curves(rows, runs: dict, jobs: int = 1) -> dict:
 
 def activations_figure(curves: dict, muscles, labels: dict, path: Path) -> None:
     """A panel per muscle: its activation (0 to 1) against time (s), a line per method."""
-    plt = agg_pyplot()
-    columns = 2
-    n_rows = (len(muscles) + 1) // columns
-    fig, axes = plt.subplots(n_rows, columns, figsize=(11, 2.2 * n_rows), sharex=True, squeeze=False)
     spare = iter(_SPARE_COLOURS)
     colours = {key: COLOURS.get(key) or next(spare, None) for key in labels}
-    for m, name in enumerate(muscles):
-        ax = axes[m // columns, m % columns]
+
+    def draw(ax, m):
         for key, label in labels.items():
             if key in curves:
                 ax.plot(curves[key][0], curves[key][1][:, m], label=label, color=colours[key], **METHOD)
-        ax.set_title(name, fontsize=9)
         ax.set_ylim(-0.02, 1.02)
         ax.set_ylabel("activation", fontsize=8)
-        ax.grid(alpha=0.3)
-    for ax in axes[-1]:
-        ax.set_xlabel("time (s)")
-    for ax in axes.flat[len(muscles):]:
-        ax.set_visible(False)
-    fig.suptitle("Each muscle's activation: the methods that drive the muscles", fontsize=11)
-    fig.tight_layout()
-    _legend_outside(fig, axes[0, 0])
-    save_png(fig, path)
+
+    _panels(muscles, "Each muscle's activation: the methods that drive the muscles", path, draw)
 
 
 def write_activations_figure(rows, runs: dict, directory: Path, base: Path, jobs: int = 1) -> dict:
