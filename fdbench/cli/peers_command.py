@@ -20,7 +20,7 @@ PEER_OPTIONS = ("nodes", "regularization", "tolerance", "max_iter")  # moco's; k
 @with_groups
 def peer(
     ctx: typer.Context,
-    name: Annotated[str, typer.Argument(metavar="opensim|opensim-cmc|moco", help="opensim: OpenSim's forward simulation under fdbench's PD law with computed feedforward, one integrate (beside 'fdbench control'); opensim-cmc: OpenSim's CMCTool tracking the motion with the model made torque-driven (beside 'fdbench control'); moco: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation (beside 'fdbench collocate').", show_default=False)],
+    name: Annotated[str, typer.Argument(metavar="opensim|opensim-cmc|moco", help="opensim: OpenSim's forward simulation under fdbench's PD law with computed feedforward, one integrate (beside 'fdbench control'); opensim-cmc: OpenSim's CMCTool tracking the motion with the model made torque-driven, or muscle-driven with reserves on a model with muscles (beside 'fdbench control'); moco: OpenSim Moco's MocoTrack, its torque replayed by fdbench's forward simulation (beside 'fdbench collocate').", show_default=False)],
     kp: Annotated[Optional[float], typer.Option("--kp", help="opensim: proportional gain, N m/rad, on every joint (default: fdbench's PD's, 80 on the forearm).", show_default=False)] = None,
     kd: Annotated[Optional[float], typer.Option("--kd", help="opensim: derivative gain, N m s/rad, on every joint (default: fdbench's PD's, 0.3 on the forearm).", show_default=False)] = None,
     nodes: Annotated[int, typer.Option("--nodes", help="moco: mesh intervals over the motion's span, >= 2 (collocate's default).")] = 100,

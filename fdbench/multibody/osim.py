@@ -34,6 +34,9 @@ from ..isolation import python_command
 from .model import GROUND, MIN_SEGMENT, ModelError, model_from_dict, to_dict
 from .model_files import to_toml
 from .osim_muscles import MAX_PATH_ERROR, imported_muscles
+from .osim_muscles_out import check_muscles, osim_muscle
+from .osim_muscles_out import frame_path as _frame_path
+from .osim_muscles_out import numbers as _numbers
 from .spline import fit
 
 INSTALL_HINT = "pip install 'fdbench[opensim]'"
@@ -820,18 +823,20 @@ DEFAULT_RANGE = (-math.pi, math.pi)  # rad: a coordinate's range in the file whe
 
 
 def check_exportable(model) -> None:
-    """ModelError (one line) for a model ``to_osim`` cannot write yet: one with free or path joints."""
+    """ModelError (one line) for a model ``to_osim`` cannot write yet: one with free or path joints,
+    or a polynomial muscle path too large for OpenSim's form (``osim_muscles_out.check_muscles``)."""
     odd = [j.name for j in model.joints if j.type == "free" or j.path is not None]
     if odd:
         raise ModelError(model.name, "", f"joints {', '.join(odd)} are free or on a path: export-osim writes pin "
                                          "joints only in this version")
+    check_muscles(model)
 
 
 def to_osim(model) -> str:
     """The description ``model`` (pin joints only) as an OpenSim model file (XML text): a ``Body``
     per body, a ``PinJoint`` about z, a ``CoordinateActuator`` per actuator of the model's
     ``[[actuators]]`` with its optimal force (a model without: one of 1 N m per joint), a constant
-    ``PrescribedForce`` per load."""
+    ``PrescribedForce`` per load, a ``DeGrooteFregly2016Muscle`` per muscle (``osim_muscles_out``)."""
     check_exportable(model)
 
     credits = _text(f"written by fdbench {__version__} export-osim from the model {model.name}"
@@ -843,7 +848,8 @@ def to_osim(model) -> str:
              '<JointSet name="jointset"><objects>', *map(_osim_joint, model.joints), "</objects></JointSet>",
              '<ForceSet name="forceset"><objects>', *(_osim_load(k, load) for k, load in enumerate(model.loads)),
              *(_osim_actuator(a.coordinate, a.name, a.optimal_force) for a in model.actuators),
-             *(_osim_actuator(joint.name) for joint in model.joints if not model.actuators), "</objects></ForceSet>",
+             *(_osim_actuator(joint.name) for joint in model.joints if not model.actuators),
+             *(osim_muscle(muscle, model) for muscle in model.muscles), "</objects></ForceSet>",
              "</Model>", "</OpenSimDocument>"]
     return "\n".join(parts) + "\n"
 
@@ -852,15 +858,6 @@ def _xml(text: str) -> str:
     from xml.sax.saxutils import escape
 
     return escape(str(text), {'"': "&quot;"})
-
-
-def _numbers(*values) -> str:
-    """Floats as OpenSim reads them back exactly (shortest round-trip digits)."""
-    return " ".join(repr(float(value)) for value in values)
-
-
-def _frame_path(body: str) -> str:
-    return "/ground" if body == GROUND else f"/bodyset/{body}"
 
 
 def _osim_body(body) -> str:

@@ -79,10 +79,11 @@ def main() -> None:
     print(json.dumps(answer))
 
 
-def model_from(osim, content: str):
+def model_from(osim, content: str, muscles: bool = False):
     """An OpenSim model of the file text ``content`` (read from a private copy), its forces but the
     PrescribedForces (the loads fdbench keeps) removed: muscles and other forces are not part of a
-    torque-driven model."""
+    torque-driven model. With ``muscles`` its muscles and CoordinateActuators that apply force are
+    kept too (a muscle-driven model and its reserves)."""
     import tempfile
 
     with tempfile.TemporaryDirectory(prefix="fdbench-peer-") as folder:
@@ -92,7 +93,10 @@ def model_from(osim, content: str):
         model = osim.Model(path)
     forces = model.updForceSet()
     for i in reversed(range(forces.getSize())):
-        if osim.PrescribedForce.safeDownCast(forces.get(i)) is None:
+        force = forces.get(i)
+        kept = osim.PrescribedForce.safeDownCast(force) is not None or (muscles and force.get_appliesForce() and (
+            osim.Muscle.safeDownCast(force) is not None or osim.CoordinateActuator.safeDownCast(force) is not None))
+        if not kept:
             forces.remove(i)
     return model
 

@@ -80,16 +80,18 @@ def replay(spec, torque) -> RunOutcome:
     return outcome(spec, base_record(spec), run_inputs.simulate(spec, torque), run_inputs.reference(spec))
 
 
-def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_end: float) -> tuple[dict, tuple]:
+def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_end: float,
+               t_start: float = 0.0) -> tuple[dict, tuple]:
     """(fields, (CSV header, rows)) of a trajectory simulated elsewhere on the grid ``t`` (s, (m,)):
-    ``angles`` (rad, m) and ``torque`` (N m, N), (m, J), up to ``t_end``, measured as fdbench's."""
+    ``angles`` (rad, m) and ``torque`` (N m, N), (m, J), from ``t_start`` up to ``t_end``, measured
+    as fdbench's over the samples between."""
     from types import SimpleNamespace
 
     inverse = spec.reference()  # the nominal model's inverse dynamics on the true motion
     truth, torque_ref, samples = inverse.angles, inverse.torque, inverse.t
     names, kinds = joints(spec.model_name), run_inputs.nominal(spec).coordinate_kinds
     z, tau = _on_samples(samples, t, angles), _on_samples(samples, t, torque)
-    reached = samples <= t_end + 1e-12
+    reached = (samples >= t_start - 1e-12) & (samples <= t_end + 1e-12)
     result = SimpleNamespace(angles=z, z=z, torque=tau, reached=reached)
     rot, trans, per_coordinate = sim.rmse_coordinates(result, truth, kinds)
     trq, force, per_force = sim.rmse_generalized_forces(result, torque_ref, kinds)

@@ -28,6 +28,7 @@ def run(spec):
     Moco's own RMSE_rot, status, iterations and times beside the replay's indicators."""
     from ..collocation import CollocationResult  # lazy: OpenSim's child imports this module, not the engine
     from ..models import joints
+    from ..run_inputs import nominal as description
     from .common import desired, loads_request, osim_texts, replay, warm_up
 
     options = dict(spec.method_options)
@@ -66,6 +67,9 @@ def run(spec):
     else:
         record["message"] = (f"MocoTrack (OpenSim {answer['version']}): {answer['status']} in {answer['iterations']} "
                              f"iterations; replay: {record.get('message')}")
+    muscles = len(description(spec).muscles)
+    if muscles:  # MocoTrack muscle-driven is not done yet: say that this one is not
+        record["message"] += f"; torque-driven: the model's {muscles} muscles left out"
     outcome.extra["collocation"] = solution
     return outcome
 
