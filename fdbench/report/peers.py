@@ -1,7 +1,7 @@
 """The report's "Peers" section: OpenSim's PD simulation, its CMCTool and Moco's MocoTrack on the
 report's model, motion and settings, with the columns of the PD row, then each peer beside the
-fdbench method it stands for (PD control beside OpenSim's simulation, computed-torque control beside CMC, direct
-collocation beside MocoTrack): accuracy and time, their ratio,
+fdbench method it stands for (PD control beside OpenSim's simulation, fdbench's computed muscle control beside
+CMC on a model with muscles, else computed-torque control, direct collocation beside MocoTrack): accuracy and time, their ratio,
 and whether fdbench meets its goal against that peer (``GOAL``: at least 10 times faster at equal
 or better RMSE_rot)."""
 
@@ -14,7 +14,7 @@ from .paper import significant
 
 # peer: the fdbench methods it stands beside, the first found among the report's rows: (command, controller, table)
 PAIRS = {"opensim": (("control", "pd", "control"),),
-         "opensim-cmc": (("control", "computed-torque", None), ("control", "pd", "control")),
+         "opensim-cmc": (("control", "cmc", None), ("control", "computed-torque", None), ("control", "pd", "control")),
          "moco": (("collocate", None, None),)}
 GOAL = 10.0  # fdbench's goal: at least this many times faster than each peer...
 SAME_ACCURACY = 0.01  # ...at equal or better RMSE_rot: fdbench's at most 1 % above the peer's
