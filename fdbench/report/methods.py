@@ -1,10 +1,11 @@
 """The report's registered one-run methods: open loop, PD, computed torque, LQR, direct collocation
-and splines tuned by CMA-ES or by BFGS with exact gradients; each one run per dataset (each is
+and splines tuned by CMA-ES or by BFGS with exact gradients, and on a model with muscles computed
+muscle control and muscle-driven collocation; each one run per dataset (each is
 deterministic; the shooting optimisation takes seed 0), stored and reused by spec hash like every
 run of the report. A dataset is a model, a motion and its loads (``Dataset``); a method says
 whether it applies to a dataset and, if not, why (``Method.skip``: one line in the report, like
 benchopt's ``Solver.skip``). On the forearm the paper's report gives computed torque, LQR and
-collocation the section "Beyond the paper"; on a model with a floating base the report runs them
+collocation (and a model with muscles its muscle-driven methods) the section "Beyond the paper"; on a model with a floating base the report runs them
 all, and the same on the forearm to test the paper's claim (``comparison``)."""
 
 from __future__ import annotations
@@ -214,7 +215,7 @@ def beyond_methods(**common) -> list[Method]:
     """The methods "Beyond the paper" with their default options, on the settings ``common``
     (kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions, model_name): computed
     torque, LQR and direct collocation, on the forearm or on another model (the arm), and on a model
-    with muscles computed muscle control."""
+    with muscles computed muscle control and muscle-driven collocation."""
     dataset = Dataset("", common)
     muscle_driven, _ = select(MUSCLE_DRIVEN, [dataset], Options())
     return methods(BEYOND + tuple(muscle_driven), dataset)
