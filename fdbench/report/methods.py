@@ -5,8 +5,9 @@ deterministic; the shooting optimisation takes seed 0), stored and reused by spe
 run of the report. A dataset is a model, a motion and its loads (``Dataset``); a method says
 whether it applies to a dataset and, if not, why (``Method.skip``: one line in the report, like
 benchopt's ``Solver.skip``). On the forearm the paper's report gives computed torque, LQR and
-collocation (and a model with muscles its muscle-driven methods) the section "Beyond the paper"; on a model with a floating base the report runs them
-all, and the same on the forearm to test the paper's claim (``comparison``)."""
+collocation (and a model with muscles its muscle-driven methods) the section "Beyond the paper"; on
+a model with a floating base the report runs them all, and the same on the forearm to test the
+paper's claim (``comparison``)."""
 
 from __future__ import annotations
 
