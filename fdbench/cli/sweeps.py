@@ -361,7 +361,7 @@ def _check_figures_dir(directory: Path, batch: Batch, inputs: dict, names=None) 
     to a missing folder, the report's own output, the database's journal, a missing parent, an
     unwritable folder, or a figure file in it that would be refused (read-only, a directory, the
     database, an input of the command, by any name)."""
-    from ..figures import FIGURE_FILES
+    from ..figures import REPORT_FIGURE_FILES
     from ..files import check_distinct, check_writable, same_file
 
     output, db = batch.output, batch.run.db_path
@@ -381,7 +381,7 @@ def _check_figures_dir(directory: Path, batch: Batch, inputs: dict, names=None) 
         return
     if not os.access(directory, os.W_OK):
         raise BadInput(f"--figures: directory {directory} is not writable")
-    paths = {f"--figures ({name})": directory / name for name in (names or FIGURE_FILES)}
+    paths = {f"--figures ({name})": directory / name for name in (names or REPORT_FIGURE_FILES)}
     for option, path in paths.items():
         check_writable(path, option)
     check_distinct({"--output": output, **paths}, inputs, db)
