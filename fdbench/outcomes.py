@@ -18,6 +18,7 @@ from .run_inputs import engine, joints, nominal
 # an activation at least this is full activation: the muscle gives all it can (its excitation at 1)
 FULL_ACTIVATION = 0.99
 MAX_SPANS = 3  # the spans of full activation named per muscle in ``saturation``
+ACTIVATION_MEAN = "_activation_mean"  # a muscle-driven run's record: <muscle>_activation_mean
 
 RESIDUAL_FIELDS = ("residual_force_rms_n", "residual_moment_rms_nm", "residual_fx_rms_n", "residual_fy_rms_n",
                    "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm")
@@ -45,7 +46,7 @@ def muscle_fields(muscles, t: np.ndarray, activation: np.ndarray) -> dict:
     ``effort``, the mean of sum_m a_m^2; ``<muscle>_activation_mean``; ``saturation``, each muscle
     at full activation (a >= ``FULL_ACTIVATION``) and when, e.g. "BIClong from 0.62 to 1 s", or None."""
     if not len(t):
-        return {"effort": math.nan, **{f"{m}_activation_mean": math.nan for m in muscles}, "saturation": None}
+        return {"effort": math.nan, **{m + ACTIVATION_MEAN: math.nan for m in muscles}, "saturation": None}
     said = []
     for m, name in enumerate(muscles):
         full = np.concatenate([[False], activation[:, m] >= FULL_ACTIVATION, [False]])
@@ -55,7 +56,7 @@ def muscle_fields(muscles, t: np.ndarray, activation: np.ndarray) -> dict:
             more = f" and {len(starts) - MAX_SPANS} more times" if len(starts) > MAX_SPANS else ""
             said.append(f"{name} {', '.join(spans)}{more}")
     return {"effort": float(np.mean(np.sum(activation**2, axis=1))),
-            **{f"{m}_activation_mean": float(np.mean(activation[:, i])) for i, m in enumerate(muscles)},
+            **{m + ACTIVATION_MEAN: float(np.mean(activation[:, i])) for i, m in enumerate(muscles)},
             "saturation": "; ".join(said) or None}
 
 

@@ -284,14 +284,11 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     return out + [""]
 
 
-ACTIVATION_MEAN = "_activation_mean"  # a muscle-driven run's record: <muscle>_activation_mean
-
-
 def muscles_markdown(rows: list) -> list[str]:
     """The muscles' table of the rows whose run drove the model's muscles (a record with ``effort``):
     effort (the mean of sum a^2 over the samples reached), the reserves' RMS torque, the torque left
     unmet where a coordinate has no reserve, and each muscle's mean activation; [] without such rows."""
-    from ..outcomes import FULL_ACTIVATION
+    from ..outcomes import ACTIVATION_MEAN, FULL_ACTIVATION
     from .paper import significant
 
     driven = [row for row in rows if row.records[0].get("effort") is not None]

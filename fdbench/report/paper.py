@@ -813,10 +813,11 @@ def _finite(value):
 def _muscle_entry(row: Row) -> dict:
     """A one-run row that drove the model's muscles: {"muscles": its effort, reserves, unmet
     torque, saturation and each muscle's mean activation}; {} for any other row."""
+    from ..outcomes import ACTIVATION_MEAN as suffix
+
     rec = row.record
     if len(row.records) != 1 or rec.get("effort") is None:
         return {}
-    suffix = "_activation_mean"
     return {"muscles": {"effort": _finite(rec["effort"]), "reserve_rms_nm": _finite(rec.get("reserve_rms_nm")),
                         "unmet_rms_nm": _finite(rec.get("unmet_rms_nm")), "saturation": rec.get("saturation"),
                         "activation_mean": {k[:-len(suffix)]: _finite(v) for k, v in rec.items() if k.endswith(suffix)}}}
