@@ -17,7 +17,7 @@ import numpy as np
 from . import __version__
 from .casadi_loader import casadi
 from .collocation import collocate, collocate_muscles, own_fields, record_fields, rigid_tendons
-from .controllers.base import muscle_columns, per_joint
+from .controllers.base import muscle_columns
 from .excitation_problem import DEFAULT_EFFORT_WEIGHT, ExcitationProblem
 from .excitation_problem import warm_up as warm_up_excitations
 from .files import BadFile, read_history_csv, read_input_text
@@ -33,9 +33,10 @@ from .params_file import make_saved_torque, read_params
 from .problem import TrackingProblem, tracking_setup
 from .problem import residual_weight as problem_residual_weight
 from .peers import run as run_peer
+from .peers.common import muscle_replay, rigid_plant, simulate_muscles
 from .records import RunOutcome, base_record, explained
 from .registry import unknown_name_message
-from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan, plant,
+from .run_inputs import (controller, describe, engine, integration, joints, loads, motions, nominal, plan,
                          reference, warm_up)
 from .torques import TORQUES
 from .torques.ann import select_hidden
@@ -468,36 +469,22 @@ def _collocate(spec):
 def _collocate_muscles(spec):
     """Muscle-driven direct collocation of the nominal model (``collocation.collocate_muscles``; its
     compliant tendons taken as rigid), its excitations and reserves replayed by the plant with rigid
-    tendons too; the record has the replay's indicators and muscle fields (as CMC's), the
-    collocation's own beside them, and the trajectory each muscle's activation, excitation and force
-    and each coordinate's reserve (N m). The spec's checks refuse a model without muscles."""
+    tendons too (``peers.common.muscle_replay``); the record has the replay's indicators and muscle
+    fields (as CMC's), the collocation's own beside them. The spec's checks refuse a model without
+    muscles."""
     options = {key: value for key, value in spec.method_options if key != "regularization"}
     model = nominal(spec)
-    body, params = engine(spec, rigid_tendons(plant(spec))), engine(spec, rigid_tendons(model)).muscle_params
-    sim.warm_up(False, (body,))
+    body, params = rigid_plant(spec), engine(spec, rigid_tendons(model)).muscle_params
     casadi()  # its import is not part of the runtime
     desired, truth = motions(spec)
-    grid, inverse, external = sim.half_steps(desired, spec.dt), reference(spec), loads(spec)
     began = time.perf_counter()
-    solution = collocate_muscles(model, desired, params, **options, loads=external)
-    result = sim.simulate(solution.torque_function(), body, desired, grid=grid,
-                          excitation=solution.excitation_function(), **integration(spec))
+    solution = collocate_muscles(model, desired, params, **options, loads=loads(spec))
+    result = simulate_muscles(spec, body, solution)
     runtime = time.perf_counter() - began
-    record = base_record(spec)
-    done = outcome(spec, record, result, inverse, extra={"collocation": solution})
-    reached = result.reached
-    reserve = solution.torque_samples(result.t).reshape(len(result.t), -1)
-    per_reserve = np.sqrt(np.mean(reserve[reached] ** 2, axis=0)) if reached.any() else np.full(model.n_joints, np.nan)
-    reserved = solution.reserve_forces > 0
-    taken = solution.rigid_tendons
+    done = muscle_replay(spec, result, solution)
+    record = done.record
     record.update(runtime_s=runtime, **record_fields(solution, options, own_fields(model, solution, truth),
-                                                     record["message"]),
-                  actuation="muscles", tendons=f"rigid (compliant taken as rigid: {', '.join(taken)})" if taken
-                  else "rigid", reserve_rms_nm=float(np.sqrt(np.mean(per_reserve[reserved] ** 2)))
-                  if reserved.any() else 0.0, **per_joint("reserve_rms_nm", joints(spec), per_reserve))
-    header, rows = done.table
-    columns, values = muscle_columns(result, solution.muscles)
-    done.table = (header + columns + [f"{j}_reserve" for j in joints(spec)], np.column_stack([rows, values, reserve]))
+                                                     record["message"]))
     return done
 
 

@@ -161,3 +161,33 @@ def radians_table(osim, labels, t, values):
             row[j] = float(value)
         table.appendRow(float(t[k]), row)
     return table
+
+
+def muscle_reserves(osim, model, coordinates, optimal_force: float, bound: float) -> tuple[list, bool]:
+    """A muscle-driven model's reserves: ([(name, coordinate)] of its CoordinateActuators, their
+    unbounded controls bounded by +-``bound``, False) or, where it has none, (those added: one per
+    coordinate of ``optimal_force`` N m per unit control, controls within +-``bound``, True)."""
+    import math
+
+    found = []
+    for force in model.getForceSet():
+        actuator = osim.CoordinateActuator.safeDownCast(force)
+        if actuator is not None:
+            found.append((actuator.getName(), actuator.get_coordinate()))
+            if actuator.getMinControl() == -math.inf:
+                actuator.setMinControl(-bound)
+            if actuator.getMaxControl() == math.inf:
+                actuator.setMaxControl(bound)
+    if found:
+        return found, False
+    for actuator in torque_driven(osim, model, coordinates, "_reserve"):
+        actuator.setOptimalForce(optimal_force)
+        actuator.setMinControl(-bound)
+        actuator.setMaxControl(bound)
+    return [(name + "_reserve", name) for name in coordinates], True
+
+
+def optimal_forces(osim, model, reserves) -> list[float]:
+    """The optimal forces (N m per unit control) of the CoordinateActuators ``reserves`` ([(name, _)])."""
+    forces = model.getForceSet()
+    return [osim.CoordinateActuator.safeDownCast(forces.get(name)).getOptimalForce() for name, _ in reserves]

@@ -18,7 +18,8 @@ import time
 
 import numpy as np
 
-from .child import call, coordinate_paths, loads_file, model_from, radians_table, torque_driven
+from .child import (call, coordinate_paths, loads_file, model_from, muscle_reserves, optimal_forces,
+                    radians_table, torque_driven)
 from .opensim_pd import hermite
 
 OPTIMAL_FORCE = 100.0  # N m per unit control
@@ -126,7 +127,7 @@ def solve(osim, request: dict) -> dict:
     muscles = request.get("muscles") or []
     model = model_from(osim, request["plant"], muscles=bool(muscles))
     if muscles:
-        reserves, added = _reserves(osim, model, names)
+        reserves, added = muscle_reserves(osim, model, names, RESERVE_OPTIMAL_FORCE, CONTROL_BOUND)
     else:
         reserves, added = [(name + "_torque", name) for name in names], False
         for actuator in torque_driven(osim, model, names, "_torque"):
@@ -202,35 +203,8 @@ def solve(osim, request: dict) -> dict:
                                                   for name in kept]).tolist(),
                       reserve=reserve.tolist(), reserve_names=[name for name, _ in reserves],
                       reserve_coordinates=[coordinate for _, coordinate in reserves],
-                      reserve_forces=_optimal_forces(osim, model, reserves), reserves_added=added)
+                      reserve_forces=optimal_forces(osim, model, reserves), reserves_added=added)
     return answer
-
-
-def _reserves(osim, model, names) -> tuple[list, bool]:
-    """([(name, coordinate)] of the model's CoordinateActuators (their unbounded controls bounded by
-    +-CONTROL_BOUND), False) or, where it has none, (those added: one per coordinate of
-    RESERVE_OPTIMAL_FORCE N m, True)."""
-    found = []
-    for force in model.getForceSet():
-        actuator = osim.CoordinateActuator.safeDownCast(force)
-        if actuator is not None:
-            found.append((actuator.getName(), actuator.get_coordinate()))
-            if actuator.getMinControl() == -np.inf:
-                actuator.setMinControl(-CONTROL_BOUND)
-            if actuator.getMaxControl() == np.inf:
-                actuator.setMaxControl(CONTROL_BOUND)
-    if found:
-        return found, False
-    for actuator in torque_driven(osim, model, names, "_reserve"):
-        actuator.setOptimalForce(RESERVE_OPTIMAL_FORCE)
-        actuator.setMinControl(-CONTROL_BOUND)
-        actuator.setMaxControl(CONTROL_BOUND)
-    return [(name + "_reserve", name) for name in names], True
-
-
-def _optimal_forces(osim, model, reserves) -> list[float]:
-    forces = model.getForceSet()
-    return [osim.CoordinateActuator.safeDownCast(forces.get(name)).getOptimalForce() for name, _ in reserves]
 
 
 def _moment_arms(osim, content: str, names, muscles, angles) -> np.ndarray:

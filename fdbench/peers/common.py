@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import run_inputs
+from ..collocation import rigid_tendons
+from ..controllers.base import muscle_columns, per_joint
 from ..files import read_input_bytes
 from ..integrate import steps
 from ..models import description, is_file, joints
@@ -78,6 +80,43 @@ def replay(spec, torque) -> RunOutcome:
     N m, shape (k, J), open loop, as ``collocate`` replays its own solution: the run's outcome with
     the three indicators (the record of ``base_record`` with the replay's fields)."""
     return outcome(spec, base_record(spec), run_inputs.simulate(spec, torque), run_inputs.reference(spec))
+
+
+def rigid_plant(spec):
+    """The plant's engine with its tendons rigid (as muscle-driven collocation takes them), its
+    kernels loaded or compiled so that a replay's time excludes them."""
+    body = run_inputs.engine(spec, rigid_tendons(run_inputs.plant(spec)))
+    sim.warm_up(False, (body,))
+    return body
+
+
+def simulate_muscles(spec, body, solution):
+    """fdbench's forward simulation of ``body`` (``rigid_plant``) under a muscle-driven solution's
+    excitations and reserve torques (``collocation.MuscleCollocationResult``), open loop."""
+    desired = motions(spec)[0]
+    return sim.simulate(solution.torque_function(), body, desired, grid=sim.half_steps(desired, spec.dt),
+                        excitation=solution.excitation_function(), **run_inputs.integration(spec))
+
+
+def muscle_replay(spec, result, solution) -> RunOutcome:
+    """The outcome of a muscle-driven solution's replay ``result`` (``simulate_muscles``): the
+    replay's indicators and muscle fields, ``actuation``, ``tendons``, the reserves' RMS torque
+    (N m, over the coordinates with one, and per coordinate) on the samples reached, and the
+    trajectory with each muscle's activation, excitation and force and each reserve (N m)."""
+    names = joints(spec.model_name)
+    done = outcome(spec, base_record(spec), result, run_inputs.reference(spec), extra={"collocation": solution})
+    reserve = solution.torque_samples(result.t).reshape(len(result.t), -1)
+    reached = result.reached
+    per_reserve = np.sqrt(np.mean(reserve[reached] ** 2, axis=0)) if reached.any() else np.full(len(names), np.nan)
+    reserved = solution.reserve_forces > 0
+    taken = solution.rigid_tendons
+    done.record.update(actuation="muscles", tendons=f"rigid (compliant taken as rigid: {', '.join(taken)})" if taken
+                       else "rigid", reserve_rms_nm=float(np.sqrt(np.mean(per_reserve[reserved] ** 2)))
+                       if reserved.any() else 0.0, **per_joint("reserve_rms_nm", names, per_reserve))
+    header, rows = done.table
+    columns, values = muscle_columns(result, solution.muscles)
+    done.table = (header + columns + [f"{j}_reserve" for j in names], np.column_stack([rows, values, reserve]))
+    return done
 
 
 def indicators(spec, t: np.ndarray, angles: np.ndarray, torque: np.ndarray, t_end: float,

@@ -82,7 +82,9 @@ def side_by_side(rows: list, ours: list) -> list[dict]:
     pairs = []
     for row in rows:
         rec = row.records[0]
-        match = _match(PAIRS.get(rec.get("peer"), ()), ours)
+        same = ours if rec.get("peer") != "moco" else [  # muscle-driven Moco beside muscle-driven collocation
+            other for other in ours if (other.records[0] if other.records else {}).get("actuation") == rec.get("actuation")]
+        match = _match(PAIRS.get(rec.get("peer"), ()), same)
         if match is None:
             continue
         mine = match.records[0]

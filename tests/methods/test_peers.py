@@ -91,6 +91,22 @@ def test_cmc_tracks_arm2_with_the_inverse_dynamics_torques_and_leaves_nothing_be
     assert list(tmp_path.iterdir()) == []
 
 
+def _arm26_short(folder) -> str:
+    """The path of the library's arm26 as a model file in ``folder``, with one motion of its own
+    (0.2 s of minimum jerk, shoulder 20 to 35 deg, elbow 30 to 60 deg)."""
+    from fdbench.models import find_model
+    from fdbench.multibody.model import model_from_dict, to_dict
+    from fdbench.multibody.model_files import to_toml
+
+    data = to_dict(find_model("arm26"))
+    data["motions"] = [{"name": "short", "type": "minimum-jerk", "duration": 0.2,
+                        "start": {"r_shoulder_elev": 0.35, "r_elbow_flex": 0.52},
+                        "goal": {"r_shoulder_elev": 0.61, "r_elbow_flex": 1.05}}]
+    path = folder / "arm26_short.toml"
+    path.write_text(to_toml(model_from_dict(data, "arm26_short")))
+    return str(path)
+
+
 def test_cmc_drives_arm26_s_muscles_with_reserves_and_its_torque_is_the_inverse_dynamics(tmp_path):
     """OpenSim's CMCTool on the library's arm26 (its six De Groote muscles written by to_osim, one
     reserve of 1 N m per coordinate as the model has no actuators) along a short motion of its own
@@ -100,16 +116,8 @@ def test_cmc_drives_arm26_s_muscles_with_reserves_and_its_torque_is_the_inverse_
     muscles' forces, composed by the peer) is fdbench's inverse dynamics within 2 % of the peak
     (measured: 0.13 deg, 0.12 N m of 31 N m, CMC's run 7 s)."""
     from fdbench.models import find_model
-    from fdbench.multibody.model import model_from_dict, to_dict
-    from fdbench.multibody.model_files import to_toml
 
-    data = to_dict(find_model("arm26"))
-    data["motions"] = [{"name": "short", "type": "minimum-jerk", "duration": 0.2,
-                        "start": {"r_shoulder_elev": 0.35, "r_elbow_flex": 0.52},
-                        "goal": {"r_shoulder_elev": 0.61, "r_elbow_flex": 1.05}}]
-    path = tmp_path / "arm26_short.toml"
-    path.write_text(to_toml(model_from_dict(data, "arm26_short")))
-    outcome = run(peer_spec("opensim-cmc", model_name=str(path)))
+    outcome = run(peer_spec("opensim-cmc", model_name=_arm26_short(tmp_path)))
     record = outcome.record
     assert record["status"] == "success" and record["t_end"] == pytest.approx(0.19), record["message"]
     assert record["message"].startswith("muscle-driven: 6 muscles (DeGrooteFregly2016Muscle), reserves "
@@ -175,6 +183,35 @@ def test_moco_s_torque_replayed_follows_its_states_and_nears_the_inverse_dynamic
     assert rot_tight < 0.1 and rot_tight < rot_loose / 2 and rot_loose < 1.0, found
     assert torque_tight < 0.1 * peak and torque_tight < torque_loose and error_tight < error_loose, found
     assert list(tmp_path.iterdir()) == []
+
+
+def test_moco_drives_arm26_s_muscles_and_fdbench_s_replay_of_its_excitations_follows_its_states(tmp_path,
+                                                                                                 monkeypatch):
+    """MocoTrack muscle-driven on arm26's short motion (20 mesh intervals; its six De Groote muscles,
+    tendons rigid, reserves of 1 N m): fdbench's own muscles and simulation, given Moco's
+    excitations and reserve torques, follow Moco's states (its angles within 0.1 deg, its
+    activations within 0.02, at the mesh points); each activation starts at its excitation; the
+    record's effort and reserves are those of the replay's trajectory."""
+    monkeypatch.chdir(tmp_path)
+    model = _arm26_short(tmp_path)
+    outcome = run(peer_spec("moco", dict(nodes=20), model_name=model))
+    record, solution = outcome.record, outcome.extra["collocation"]
+    assert record["status"] == "success" and record["ipopt_status"] == "Solve_Succeeded", record["message"]
+    assert record["actuation"] == "muscles" and "muscle-driven: 6 muscles" in record["message"]
+    assert record["tendons"].startswith("rigid") and record["effort_weight"] > 0
+    header, rows = outcome.trajectory()
+    at_nodes = lambda column: np.interp(solution.t, rows[:, 0], rows[:, header.index(column)])  # noqa: E731
+    for j, name in enumerate(("r_shoulder_elev", "r_elbow_flex")):
+        assert np.abs(at_nodes(name) - np.degrees(solution.angles[:, j])).max() < 0.1, name
+    for m, name in enumerate(solution.muscles):
+        assert np.abs(at_nodes(f"{name}_activation") - solution.activation[:, m]).max() < 0.02, name
+    assert np.abs(solution.activation[0] - solution.excitation[0]).max() < 1e-4
+    activation = rows[:, [header.index(f"{name}_activation") for name in solution.muscles]]
+    assert record["effort"] == pytest.approx(np.mean(np.sum(activation ** 2, axis=1)), rel=1e-9)
+    reserves = rows[:, [header.index(f"{j}_reserve") for j in ("r_shoulder_elev", "r_elbow_flex")]]
+    assert record["reserve_rms_nm"] == pytest.approx(np.sqrt(np.mean(reserves ** 2)), rel=1e-9)
+    assert record["rmse_rot_deg"] < 1.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["arm26_short.toml"]
 
 
 def test_the_report_with_peers_has_their_rows_in_markdown_csv_and_json(tmp_path):
