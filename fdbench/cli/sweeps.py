@@ -147,9 +147,9 @@ def report(
     # Tables 2 and 3 keep the paper's finite differences; exact gradients go to "Beyond the paper"
     for spec in ([plan.control] if plan.control else []) + [plan.specs[c][0] for c in plan.cells]:
         validated(spec)
-    from ..report.methods import beyond_methods, exact_gradient_methods
+    from ..report.methods import Options, beyond_methods, exact_gradient_methods
 
-    methods = beyond_methods(**fields) if beyond else None
+    methods, skipped = beyond_methods(Options(budget=optim.budget), **fields) if beyond else (None, [])
     if optim.gradient == "exact":
         methods = (methods or []) + exact_gradient_methods(plan.cells, optim.budget, torque_options,
                                                            optimizer_options, optim.penalty_weight, **fields)
@@ -170,7 +170,7 @@ def report(
     extra_rows = method_rows(methods, runs, made) if methods else []
     peers_found = (peer_methods, peer_rows(peer_methods, runs, made)) if peer_methods else None
     emit(_report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds,
-                      executor.describe(), figures, batch, peers_found), batch.output)
+                      executor.describe(), figures, batch, peers_found, skipped), batch.output)
     batch.wrote(len(runs))
 
 
@@ -327,7 +327,7 @@ def _write_figures(figures: Path, batch: Batch, write) -> dict:
 
 
 def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_runtime, seeds, jobs, figures,
-                 batch: Batch, peers_found=None) -> str:
+                 batch: Batch, peers_found=None, skipped=()) -> str:
     from ..report import CSV_COLUMNS, csv_rows, json_report, markdown, settings_table
     from ..report.methods import beyond_csv_rows, beyond_markdown
     from ..report.peers import peer_csv_rows, peers_markdown, with_peer_fields
@@ -349,7 +349,7 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
         links = _write_figures(figures, batch, lambda base: {
             **write_report_figures(plan, runs, rows, inverse, figures, base),
             **write_activations_figure(extra_rows, runs, figures, base)})
-    section = beyond_markdown(extra_rows, methods) if methods else None
+    section = beyond_markdown(extra_rows, methods, skipped) if methods else None
     if peer_rows:
         section = (section or []) + peers_markdown(peer_rows, peer_methods, rows + extra_rows)
     return markdown(rows, inverse, inverse_runtime, settings_table(plan, seeds, jobs), links, beyond=section,

@@ -39,7 +39,7 @@ class Peer:
 
 PEERS = {
     "opensim": Peer("opensim", "OpenSim forward simulation, PD + feedforward", OPENSIM, {}, "fdbench.peers.opensim_pd"),
-    "opensim-cmc": Peer("opensim-cmc", "OpenSim CMCTool (Computed Muscle Control), torque-driven", CMC, {},
+    "opensim-cmc": Peer("opensim-cmc", "OpenSim CMCTool (Computed Muscle Control)", CMC, {},
                         "fdbench.peers.cmc"),
     "moco": Peer("moco", "MocoTrack (Hermite-Simpson) + forward replay", MOCO,
                  {"nodes": 100, "regularization": 1e-6, "tolerance": DEFAULT_TOLERANCE, "max_iter": 1000},

@@ -23,16 +23,20 @@ MUSCLE_COLLOCATION_SUMMARY = ("the same transcription with the muscles: activati
                               "and reserve torques unknowns, the inverse dynamics equal to the muscles' generalised "
                               "forces plus the reserves at every point, tendons taken as rigid (as Moco's MocoTrack "
                               "with De Groote muscles); fdbench replays the excitations and reserves")
+EXCITATIONS_SUMMARY = ("a cubic spline per muscle (a knot every 0.1 s) through a logistic into its excitation in "
+                       "(0, 1), added to the logit of static optimisation's as feedforward, tuned on eq. 18 plus the "
+                       "effort (1 deg per excitation^2 s), with no joint torques and no reserves (SCONE's approach)")
 EXACT_GRADIENT_SUMMARY = ("the paper's cell with the gradient computed exactly, by forward sensitivities of the "
                           "RK4 simulation, instead of by finite differences; a simulation with its sensitivities "
                           "counts as one evaluation of the budget; seed 0")
 
 OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS, CMC, MUSCLE_COLLOCATION = (
     "open-loop", "pd", "computed-torque", "lqr", "collocation", "cs-cmaes", "cs-bfgs", "cmc", "muscle-collocation")
+EXCITATIONS_CMAES, EXCITATIONS_BFGS = "excitations-cmaes", "excitations-bfgs"
 # the methods "Beyond the paper" (the paper's report of a model on a fixed base), then those that
-# drive a model's muscles (on a model with muscles only)
+# drive a model's muscles (on a model with muscles only): control, collocation, optimised excitations
 BEYOND = (COMPUTED_TORQUE, LQR, COLLOCATION)
-MUSCLE_DRIVEN = (CMC, MUSCLE_COLLOCATION)
+MUSCLE_DRIVEN = (CMC, MUSCLE_COLLOCATION, EXCITATIONS_CMAES, EXCITATIONS_BFGS)
 # every registered method, in the report's order
 EVERY = (OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS)
 # the order in which their runs are handed out, the slowest first (so that workers share the work evenly)
@@ -97,14 +101,14 @@ class Registered:
         return Method(self.label(options), self.description(dataset, options), self.spec(dataset, options), self.key)
 
 
-def _shooting(optimizer: str, dataset: Dataset, options: Options, gradient: str = "fd") -> RunSpec:
+def _shooting(optimizer: str, dataset: Dataset, options: Options, gradient: str = "fd", **more) -> RunSpec:
     optimizer_options = {"popsize": options.popsize} if optimizer == "cmaes" else {}
     if optimizer == "cmaes" and options.sigma0 is not None:
         optimizer_options["sigma0"] = options.sigma0
     torque_options = {} if options.knots is None else {"knots": options.knots}
     return optimize_spec("cs", optimizer, True, 0, options.budget, torque_options, optimizer_options,
                          gradient=gradient, shared_options=True, penalty_weight=dataset.penalty_weight,
-                         **dataset.common)
+                         **dataset.common, **more)
 
 
 def _bfgs_skip(dataset: Dataset, options: Options) -> str | None:
@@ -126,6 +130,51 @@ def _muscles_skip(spec: Callable, name: str) -> Callable:
             return f"{name} is not in this report: {exc}"
         return None
     return skip
+
+
+def _excitations_spec(optimizer: str, gradient: str = "fd") -> Callable:
+    """The spec of the cubic splines on the muscles' excitations, with static optimisation's as
+    feedforward, tuned by ``optimizer`` (seed 0, the report's budget)."""
+    return lambda dataset, options: _shooting(optimizer, dataset, options, gradient, actuation="muscles")
+
+
+def _excitations_skip(optimizer: str, gradient: str = "fd") -> Callable:
+    """A ``skip`` for an optimisation of excitations: a model without muscles, or compliant tendons
+    that RK4 cannot step at the dataset's --dt (their stable step at the motion's start with every
+    muscle at its least activation: a run would fail at once)."""
+    spec_of = _excitations_spec(optimizer, gradient)
+    refused = _muscles_skip(spec_of, "optimisation of the muscles' excitations")
+
+    def skip(dataset: Dataset, options: Options) -> str | None:
+        reason = refused(dataset, options)
+        if reason is not None:
+            return reason
+        limit = _compliant_step(spec_of(dataset, options))
+        if limit is not None and spec_of(dataset, options).dt > limit[1]:
+            dt = spec_of(dataset, options).dt
+            return (f"optimisation of the muscles' excitations is not in this report: the model's compliant tendons "
+                    f"need --dt below {limit[1]:.2g} s for RK4 to be stable ({limit[0]}'s near slack, at the least "
+                    f"activation), and --dt is {dt:g} s: run the report with --dt {limit[1] / 2:.1g}, or give the "
+                    "muscles rigid tendons")
+        return None
+    return skip
+
+
+def _compliant_step(spec: RunSpec) -> tuple[str, float] | None:
+    """(muscle, RK4's stable step (s)) of the stiffest compliant tendon at the spec's motion's start,
+    every muscle at its least activation; None without compliant tendons."""
+    import numpy as np
+
+    from ..multibody.muscle import MIN_ACTIVATION
+    from ..multibody.simulation import compliant_step_limits
+    from ..run_inputs import engine, motions
+
+    body = engine(spec)
+    if not any(muscle.tendon == "compliant" for muscle in body.model.muscles):
+        return None
+    z, zd, _ = motions(spec)[0](np.zeros(1))
+    limits = compliant_step_limits(body, z[0], zd[0], np.full(len(body.model.muscles), MIN_ACTIVATION))
+    return min(limits, key=lambda pair: pair[1]) if limits else None
 
 
 def _cmc_spec(dataset: Dataset, options: Options) -> RunSpec:
@@ -189,6 +238,13 @@ REGISTRY = {registered.key: registered for registered in (
     Registered(MUSCLE_COLLOCATION, lambda o: f"Direct collocation of the muscles ({_nodes()} intervals) + forward replay",
                lambda d, o: MUSCLE_COLLOCATION_SUMMARY, _muscle_collocation_spec,
                _muscles_skip(_muscle_collocation_spec, "muscle-driven collocation")),
+    Registered(EXCITATIONS_CMAES, lambda o: f"CS excitations + CMA-ES + ff (budget {o.budget})",
+               lambda d, o: EXCITATIONS_SUMMARY + f"; CMA-ES (population {o.popsize}, seed 0)",
+               _excitations_spec("cmaes"), _excitations_skip("cmaes")),
+    Registered(EXCITATIONS_BFGS, lambda o: f"CS excitations + BFGS + ff, exact gradient (budget {o.budget})",
+               lambda d, o: EXCITATIONS_SUMMARY + "; BFGS with gradients by forward sensitivities through the "
+                                                  "activation and tendon states",
+               _excitations_spec("bfgs", "exact"), _excitations_skip("bfgs", "exact")),
 )}
 
 
@@ -212,14 +268,18 @@ def methods(keys, dataset: Dataset, options: Options | None = None) -> list[Meth
     return [REGISTRY[key].method(dataset, options) for key in keys]
 
 
-def beyond_methods(**common) -> list[Method]:
-    """The methods "Beyond the paper" with their default options, on the settings ``common``
-    (kinematics, integrator, dt, rtol, atol, alpha, xi, omega, conditions, model_name): computed
-    torque, LQR and direct collocation, on the forearm or on another model (the arm), and on a model
-    with muscles computed muscle control and muscle-driven collocation."""
-    dataset = Dataset("", common)
-    muscle_driven, _ = select(MUSCLE_DRIVEN, [dataset], Options())
-    return methods(BEYOND + tuple(muscle_driven), dataset)
+def beyond_methods(options: Options | None = None, **common) -> tuple[list[Method], list[tuple[str, str]]]:
+    """The methods "Beyond the paper" with their default options (the optimisations of excitations
+    ``options``' budget and population), on the settings ``common`` (kinematics, integrator, dt,
+    rtol, atol, alpha, xi, omega, conditions, model_name): computed torque, LQR and direct
+    collocation, on the forearm or on another model (the arm), and on a model with muscles computed
+    muscle control, muscle-driven collocation and the optimisations of excitations; and (key,
+    reason) of each muscle-driven method left out on a model with muscles."""
+    dataset, options = Dataset("", common), options or Options()
+    muscle_driven, skipped = select(MUSCLE_DRIVEN, [dataset], options)
+    if len(skipped) == len(MUSCLE_DRIVEN):  # a model without muscles: nothing to say
+        skipped = []
+    return methods(BEYOND + tuple(muscle_driven), dataset, options), skipped
 
 
 def exact_gradient_methods(cells, budget, torque_options, optimizer_options, penalty_weight, **common) -> list[Method]:
@@ -258,8 +318,9 @@ def rows(methods: list[Method], runs: dict, provenance: dict | None = None, tabl
     return out
 
 
-def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
-    """The section's Markdown lines: one sentence per method, then the table (PD's columns)."""
+def beyond_markdown(rows: list, methods: list[Method], skipped=()) -> list[str]:
+    """The section's Markdown lines: one sentence per method, then the table (PD's columns), and a
+    line per method left out (``skipped``: (key, reason))."""
     from .paper import results_table, failure_lines, significant
 
     if not rows:
@@ -271,6 +332,7 @@ def beyond_markdown(rows: list, methods: list[Method]) -> list[str]:
     for m in methods:  # one line per description (the exact-gradient rows share theirs)
         described.setdefault(m.description, []).append(m.name)
     out += [f"- {'; '.join(names)}: {description}." for description, names in described.items()]
+    out += [f"- {reason.rstrip('.')}." for reason in dict.fromkeys(reason for _, reason in skipped)]
     out += [""] + results_table(rows, with_success=False)
     for row in (r for r in rows if r.records[0].get("command") == "collocate"):
         rec = row.records[0]

@@ -427,7 +427,7 @@ def test_bad_collocate_options_on_the_arm_are_one_line_exit_2(args, word, tmp_pa
 def test_the_arms_beyond_the_paper_table_has_direct_collocation():
     from fdbench.report.methods import beyond_methods
 
-    specs = [m.spec for m in beyond_methods(kinematics="reach", model_name="arm2")]
+    specs = [m.spec for m in beyond_methods(kinematics="reach", model_name="arm2")[0]]
     assert [s.command for s in specs] == ["control", "control", "collocate"]
     assert all(s.model_name == "arm2" for s in specs)
 

@@ -223,7 +223,7 @@ def test_the_report_with_peers_has_their_rows_in_markdown_csv_and_json(tmp_path)
     assert "| MocoTrack (Hermite-Simpson) + forward replay |" in text
     assert "| PD control + feedforward | OpenSim forward simulation, PD + feedforward |" in text  # side by side
     # without the computed-torque row (--no-beyond) CMC stands beside PD; each pair says whether the goal is met
-    assert "| PD control + feedforward | OpenSim CMCTool (Computed Muscle Control), torque-driven |" in text
+    assert "| PD control + feedforward | OpenSim CMCTool (Computed Muscle Control) |" in text
     assert text.count("; the goal is ") == 2
     frame = pd.read_csv(io.StringIO(invoke(*common, "-f", "csv").stdout))
     rows = frame[frame["table"] == "peers"]
