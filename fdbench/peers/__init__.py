@@ -9,9 +9,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from ..collocation import check_options
+from ..collocation import DEFAULT_EXCITATION_WEIGHT, check_options
 from ..controllers.pd import PD
 from ..registry import unknown_name_message
+from ..run_inputs import nominal
 from .child import opensim_version
 from .cmc import SUMMARY as CMC
 from .moco import DEFAULT_TOLERANCE
@@ -78,6 +79,10 @@ def check_spec(spec) -> None:
         PD(spec.kp, spec.kd)  # a ValueError names a bad gain
         return
     check_options(options["nodes"], "hermite-simpson", options["regularization"], options["max_iter"])
+    if options["regularization"] != found.defaults["regularization"] and nominal(spec).muscles:
+        raise ValueError("--regularization weighs the torques of a torque-driven MocoTrack; on a model with muscles "
+                         "Moco weighs the excitations and reserves by collocate's effort weight "
+                         f"({DEFAULT_EXCITATION_WEIGHT:g} deg^2 per excitation^2)")
     tolerance = options["tolerance"]
     if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float)) or not (
             math.isfinite(tolerance) and 0 < tolerance < 1):

@@ -262,6 +262,7 @@ def test_the_report_with_peers_has_their_rows_in_markdown_csv_and_json(tmp_path)
     (("peer", "moco", "--tolerance", "2"), ("--tolerance",)),
     (("peer", "moco", "--max-iter", str(2**31)), ("--max-iter", "[1, 1000000]")),  # was OpenSim's "Wrong number..."
     (("peer", "moco", "--max-iter", "0"), ("--max-iter",)),
+    (("peer", "moco", "--model", "arm26", "--regularization", "1e-3"), ("--regularization", "on a model with muscles")),
     (("peer", "opensim", "--kd", "-1"), ("--kd",)),
 ])
 def test_bad_peer_inputs_are_refused_in_one_line_and_nothing_is_written(tmp_path, args, contains):
