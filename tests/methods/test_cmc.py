@@ -15,8 +15,8 @@ from typer.testing import CliRunner
 from fdbench.cli import app
 from fdbench.models import find_model
 from fdbench.multibody import muscle
-from fdbench.multibody.cmc import computed_muscle_control, reserve_strengths
-from fdbench.multibody.cmc_muscles import excitations_for, force_after, muscle_gains
+from fdbench.multibody.cmc import _bounded_controls, computed_muscle_control, reserve_strengths
+from fdbench.multibody.cmc_muscles import excitations_for, force_after, forces_after, muscle_gains
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.model import model_from_dict, to_dict
 from fdbench.multibody.model_files import to_toml
@@ -72,20 +72,49 @@ def test_the_force_after_a_window_follows_the_activation_dynamics_as_scipy_integ
                                                           p[muscle.TAU_DEACT], p[muscle.SMOOTHING])]
         end = solve_ivp(rate, (0.0, 0.01), [start], rtol=1e-12, atol=1e-14).y[0, -1]
         expected = muscle.rigid_tendon_force(end, 0.3, 0.0, p)
-        assert force_after(excitation, start, 0.0, 0.3, 0.0, 1e-4, 100, p, False) == pytest.approx(expected, rel=1e-8)
+        assert force_after(excitation, start, 0.0, 0.3, 0.0, 0.0, 1e-4, 100, p, False) == pytest.approx(expected,
+                                                                                                     rel=1e-8)
+        # the path moving at 0.05 m/s, accelerating at 2 m/s^2: after 0.01 s it is 0.3006 m long, at 0.07 m/s
+        moving = muscle.rigid_tendon_force(end, 0.3 + 0.05 * 0.01 + 0.5 * 2.0 * 0.01**2, 0.05 + 2.0 * 0.01, p)
+        assert force_after(excitation, start, 0.0, 0.3, 0.05, 2.0, 1e-4, 100, p, False) == pytest.approx(moving,
+                                                                                                      rel=1e-8)
 
 
 def test_the_excitations_reach_the_forces_asked_for_and_stop_at_their_bounds(pin):
     p, rows, states = pin.muscle_params, pin.tendon_row, np.array([0.3, 0.2])
     lengths, speed = np.array([0.3, 0.31]), np.array([0.1, -0.1])
     wanted = np.array([0.62, 0.17])
-    target = np.array([force_after(u, a, 0.0, l, v, 1e-3, 10, q, False)
-                       for u, a, l, v, q in zip(wanted, states, lengths, speed, p)])
-    found = excitations_for(target, np.array([0.5, 0.5]), states, lengths, speed, 1e-3, 10, p, rows)
+    speeding = np.array([1.0, -2.0])
+    target = np.array([force_after(u, a, 0.0, l, v, s, 1e-3, 10, q, False)
+                       for u, a, l, v, s, q in zip(wanted, states, lengths, speed, speeding, p)])
+    found = excitations_for(target, np.array([0.5, 0.5]), states, lengths, speed, speeding, 1e-3, 10, p, rows)
     np.testing.assert_allclose(found, wanted, atol=1e-6)
-    out_of_reach = excitations_for(np.array([1e4, -1.0]), np.array([0.5, 0.5]), states, lengths, speed, 1e-3, 10, p,
-                                   rows)
+    out_of_reach = excitations_for(np.array([1e4, -1.0]), np.array([0.5, 0.5]), states, lengths, speed, speeding,
+                                   1e-3, 10, p, rows)
     assert out_of_reach.tolist() == [1.0, 0.0]
+    for bound in (0.0, 1.0):  # the forces a window can reach: those under the excitations' bounds
+        reach = forces_after(bound, states, lengths, speed, speeding, 1e-3, 10, p, rows)
+        np.testing.assert_allclose(reach, [force_after(bound, a, 0.0, l, v, s, 1e-3, 10, q, False)
+                                           for a, l, v, s, q in zip(states, lengths, speed, speeding, p)], rtol=1e-14)
+
+
+def test_static_optimisation_within_the_reachable_controls_is_scipy_s_bounded_minimum():
+    from scipy.optimize import minimize
+
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        gain = rng.normal(0.0, 20.0, (2, 4))  # N m per unit control
+        need, reserve_force = rng.normal(0.0, 10.0, 2), np.array([1.0, 2.0])
+        low = rng.uniform(0.0, 0.4, 4)
+        high = np.minimum(low + rng.uniform(0.0, 0.5, 4), 1.0)
+        high[0] = low[0]  # a muscle whose window leaves it no range
+        found = _bounded_controls(gain, need, reserve_force, low, high, np.full(4, 0.5))
+        cost = lambda c: np.sum(c**2) + np.sum(((need - gain @ c) / reserve_force) ** 2)  # noqa: E731
+        best = minimize(cost, (low + high) / 2, method="L-BFGS-B", bounds=list(zip(low, high)),
+                        options={"ftol": 1e-15, "gtol": 1e-12}).x
+        assert np.all((found >= low) & (found <= high)) and found[0] == low[0]
+        assert cost(found) <= cost(best) + 1e-9
+        np.testing.assert_allclose(found, best, atol=1e-5)
 
 
 def test_cmc_tracks_a_swing_the_muscles_can_make_with_negligible_reserves(run, swing):
