@@ -146,7 +146,7 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
     unmet = np.full((n_windows, J), np.nan)
     floor = np.where(nominal.tendon_row >= 0, MIN_ACTIVATION, 0.0)  # the activation a muscle acts at, at least
     y, control, start_reserve = _start(plant, nominal, grid, rho, floor)
-    last, aims, u, zdd = start_reserve, np.full(n_windows, np.nan), y[S:S + M].copy(), grid.refdd[0]
+    last, aims, u = start_reserve, np.full(n_windows, np.nan), y[S:S + M].copy()
     code, done, worst, windows_done, zeros, ramps = 0, 0, 0.0, 0, {}, {}
     for w in range(n_windows):
         i0, i1 = bounds[w], bounds[w + 1]
@@ -154,8 +154,10 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
         k = i0 + max(1, int(round(AIM * n)))  # the step the forces are aimed at
         h, aims[w] = grid.t_steps[k] - grid.t_steps[i0], grid.t_steps[k]
         z, zd = plant.joints_from_state(y[:S])
-        z_aim, zd_aim = z + h * zd + 0.5 * h * h * zdd, zd + h * zdd  # the state predicted at t_a
-        wanted = grid.refdd[2 * k] + kd * (grid.refd[2 * k] - zd_aim) + kp * (grid.ref[2 * k] - z_aim)
+        # the errors at t; the state at t_a as OpenSim's CMC poses its model there: the motion plus those errors
+        error, rate_error = grid.ref[2 * i0] - z, grid.refd[2 * i0] - zd
+        z_aim, zd_aim = grid.ref[2 * k] - error, grid.refd[2 * k] - rate_error
+        wanted = grid.refdd[2 * k] + kd * rate_error + kp * error
         tau = nominal.inverse_torques(z_aim, zd_aim, wanted, grid.t_steps[k])
         lengths, arms = muscle_geometry(nominal.model, z_aim, nominal.muscle_paths)
         gain, passive = muscle_gains(y[S:], lengths, -arms @ zd_aim, nominal.muscle_params, nominal.tendon_row)
@@ -186,7 +188,7 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
         worst, done, code, windows_done = max(worst, result.max_violation), i0 + result.steps_done, result.status, w + 1
         if code != 0:
             break
-        y, zdd, last = result.states[-1], plant.joints_from_state(result.rates[-1][:S])[1], reserve[w]
+        y, last = result.states[-1], reserve[w]
     simulation = _on_motion_samples(plant, motion, grid, states, rates, applied, done, code, worst)
     window_t = grid.t_steps[bounds[:-1]]
     held = np.clip(np.searchsorted(window_t, motion.samples, side="right") - 1, 0, n_windows - 1)
