@@ -1,41 +1,49 @@
 """Computed muscle control (Thelen, Anderson and Delp 2003; Thelen and Anderson 2006; OpenSim's
-``CMCTool``) of a model with muscles along a desired motion, window by window.
+``CMCTool``) of a model with muscles along a desired motion, window by window, as OpenSim's
+``CMC::computeControls`` does it.
 
 At the start t of each control window of length T (the state there: coordinates q, rates q', the
-muscles' activations and compliant tendons' forces; q'' the accelerations the last window ended
-with), the muscles' forces are aimed at the window's end, t_a = t + T, as OpenSim's CMC aims them
-(``AIM``; aiming at the window's middle, where a force that changes steadily over the window
-equals its mean, tracked better with rigid tendons, 0.11 deg RMS against 0.19 on
-tests/methods/test_cmc.py's pin, and far worse with arm26's compliant ones, 7.3 deg against 0.41:
-their lag carries the force past its target). With h = t_a - t:
+muscles' activations and compliant tendons' forces), the muscles' forces are aimed at the window's
+end, t_a = t + T, as OpenSim's CMC aims them (``AIM``). With h = t_a - t:
 
-1. the state predicted at t_a, q_a = q + h q' + h^2 q'' / 2, q'_a = q' + h q'';
-2. desired accelerations there, the motion's targets at t_a (as OpenSim's CMC_Joint takes them),
-   the errors against the predicted state (Thelen and Anderson 2006, eq. 1, take them against the
-   state at t: on arm26 with rigid tendons that tracked within 0.59 deg RMS, against 0.35 here):
-   q''* = q''_d(t_a) + kd (q'_d(t_a) - q'_a) + kp (q_d(t_a) - q_a)   (kp 1/s^2, kd 1/s);
-3. the generalised forces tau (N m) that give q''* at the predicted state: the nominal model's
-   inverse dynamics;
-4. static optimisation (``static_optimization.solve_sample``, p = 2: the exact active-set QP) for
-   the muscles' controls c in [0, 1] and the reserves (control r / rho, rho its optimal force,
+1. the task errors at t, e = q_d(t) - q, e' = q'_d(t) - q' (OpenSim's ``CMC_Joint``), and the
+   state at t_a as OpenSim poses its model there: the motion plus those errors, q_a = q_d(t_a) - e,
+   q'_a = q'_d(t_a) - e';
+2. desired accelerations q''* = q''_d(t_a) + kd e' + kp e (kp 1/s^2, kd 1/s);
+3. the generalised forces tau (N m) that give q''* at (q_a, q'_a): the nominal model's inverse
+   dynamics;
+4. static optimisation (p = 2: the exact active-set QP, ``static_optimization.box_qp``) for the
+   muscles' controls c and the reserves (control r / rho, rho its optimal force,
    ``reserve_strengths``: the model's actuators as static optimisation takes them; a coordinate
    without one weighed as ``static_optimization.qp_reserve_forces`` weighs it, its torque left
    unmet, not applied): min sum c^2 + sum (r / rho)^2 subject to
    sum_m arm_mj (c_m G_m + P_m) + r_j = tau_j, the moment arms and G_m, P_m (muscle m's force along
-   its path per unit activation and at zero activation, ``cmc_muscles.muscle_gains``) at the
-   predicted state; c is the activation, or for a compliant tendon (a - 0.01) / 0.99: its explicit
-   form acts as if the activation were at least ``muscle.MIN_ACTIVATION``;
+   its path per unit activation and at zero activation, ``cmc_muscles.muscle_gains``) at q_a; c is
+   the activation, or for a compliant tendon (a - 0.01) / 0.99: its explicit form acts as if the
+   activation were at least ``muscle.MIN_ACTIVATION``. Each c is bounded by the forces the muscle
+   can reach at t_a under the excitations 0 and 1 (``cmc_muscles.forces_after``), as OpenSim bounds
+   them, so that what activation dynamics cannot deliver within the window falls to the reserves;
 5. each muscle's constant excitation u in [0, 1] whose force at t_a is the one wanted, c G + P: the
    muscle's own activation and tendon dynamics integrated by the simulation's RK4 steps, its path
-   moving at its current speed (``cmc_muscles.excitations_for``, as OpenSim's CMC solves for the
-   controls that give the optimal forces); 0 or 1 where the force is out of reach;
+   moving from its length and speed at t with the constant acceleration that reaches its length at
+   q_a (``cmc_muscles.excitations_for``, as OpenSim's CMC solves for the controls that give the
+   optimal forces along the motion);
 6. the plant simulated over the window by the compiled RK4 (``Engine.simulate``) with those
-   excitations and the reserve torques held, the muscles' forces its own; the next window starts
-   from its end state.
+   excitations held and each reserve torque linear from its last window's value to its new one
+   (OpenSim's muscles' controls are steps, its other actuators' linear between the windows' ends),
+   the muscles' forces its own; the next window starts from its end state.
 
-The run starts on the desired motion at t = 0, the activations those of static optimisation there
-(q''* = q''_d(0), rigid tendons) and compliant tendons at the fibres' static equilibrium
-(``simulation.muscle_start``).
+The run starts on the desired motion at t = 0 with static optimisation's activations and reserves
+there, the compliant tendons settled: at the fibres' static equilibrium (``simulation.muscle_start``)
+and static optimisation repeated with the forces per unit activation at those tendons' forces until
+the activations stop moving (OpenSim's CMC settles its muscles' states before it starts).
+
+On arm26's mid_range (compliant tendons, 5e-5 s RK4 steps) these steps took the angles' RMS error
+from 0.41 deg to 0.04 deg: the reachable bounds alone to 0.23 (BIClong saturates from 0.63 s and
+the muscles' forces fell short of what static optimisation assumed), with the paths' acceleration
+to 0.17, with the ramped reserves (a reserve held at its t_a value over the whole window leads the
+muscles by half a window) to 0.056, with the settled start (its first window's torque no longer
+kicks the arm) to 0.050, with OpenSim's errors at t to 0.038.
 """
 
 from __future__ import annotations
@@ -295,5 +303,6 @@ def warm_up(engine: Engine) -> None:
     lengths = p[:, L_OPT] + p[:, L_SLACK]  # m
     gain, passive = muscle_gains(states, lengths, np.zeros(engine.n_muscles), p, rows)
     still = np.zeros(engine.n_muscles)
-    excitations_for(gain * 0.1 + passive, np.full(engine.n_muscles, 0.1), states, lengths, still, still, 1e-4, 2, p, rows)
+    excitations_for(gain * 0.1 + passive, np.full(engine.n_muscles, 0.1), states, lengths, still, still, 1e-4, 2, p,
+                    rows)
     forces_after(0.0, states, lengths, still, still, 1e-4, 2, p, rows)
