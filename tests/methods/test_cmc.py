@@ -15,13 +15,14 @@ from typer.testing import CliRunner
 from fdbench.cli import app
 from fdbench.models import find_model
 from fdbench.multibody import muscle
-from fdbench.multibody.cmc import _bounded_controls, computed_muscle_control, reserve_strengths
+from fdbench.multibody.cmc import _bounded_controls, _start, computed_muscle_control, reserve_strengths
 from fdbench.multibody.cmc_muscles import excitations_for, force_after, forces_after, muscle_gains
 from fdbench.multibody.engine import Engine
 from fdbench.multibody.model import model_from_dict, to_dict
 from fdbench.multibody.model_files import to_toml
 from fdbench.multibody.motions.named import MinimumJerk
 from fdbench.multibody.muscle_paths import muscle_geometry
+from fdbench.multibody.simulation import half_steps, muscle_forces
 from fdbench.multibody.static_optimization import muscle_capacity
 
 from helpers.models import forearm_with_muscles_data
@@ -235,3 +236,24 @@ def test_the_model_s_actuators_are_cmc_s_reserves_and_a_coordinate_without_one_h
     assert record["reserve_optimal_force"] == "per actuator (see reserves)"
     assert record["unmet_rms_nm_r_elbow_flex"] == pytest.approx(run.unmet_rms()[elbow], rel=1e-9)
     assert record["unmet_rms_nm_r_shoulder_elev"] == 0.0
+
+
+def test_with_compliant_tendons_the_run_starts_with_the_muscles_giving_static_optimisation_s_torque():
+    """arm26's compliant tendons settled at the start: the muscles' forces there (the engine's own,
+    from the start's tendon states) times their moment arms, plus the reserves, are the inverse
+    dynamics of the motion at t = 0, and the activations stay in [0.01, 1]."""
+    plant = Engine(find_model("arm26"))
+    assert (plant.tendon_row >= 0).all()
+    motion = MinimumJerk(plant.model.motions[0], plant.joints)
+    grid = half_steps(motion, 5e-5)
+    rho = reserve_strengths(plant.model)
+    floor = np.full(plant.n_muscles, muscle.MIN_ACTIVATION)
+    y, control, reserve = _start(plant, plant, grid, rho, floor)
+    S, M = plant.n_state, plant.n_muscles
+    z, zd = plant.joints_from_state(y[:S])
+    np.testing.assert_allclose(z, grid.ref[0], atol=1e-12)
+    forces = muscle_forces(plant, z[None], zd[None], y[S:][None])[0]
+    _, arms = muscle_geometry(plant.model, z, plant.muscle_paths)
+    tau = plant.inverse_torques(grid.ref[0], grid.refd[0], grid.refdd[0], 0.0)
+    np.testing.assert_allclose(arms.T @ forces + reserve, tau, atol=1e-6)
+    np.testing.assert_allclose(y[S:S + M], floor + (1 - floor) * control, atol=1e-12)
