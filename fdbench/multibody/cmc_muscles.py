@@ -1,7 +1,8 @@
 """The compiled per-muscle parts of computed muscle control (``fdbench.multibody.cmc``): each
 muscle's force per unit activation at a state, its force after a window under a constant
-excitation (the engine's own activation and tendon dynamics, by the same RK4 steps), and the
-excitation that gives a wanted force at the window's end. Units: m, m/s, N, s."""
+excitation (the engine's own activation and tendon dynamics, by the same RK4 steps, its path
+moving with a constant acceleration), the forces reachable at the window's end, and the
+excitation that gives a wanted force there. Units: m, m/s, m/s^2, N, s."""
 
 from __future__ import annotations
 
@@ -39,42 +40,60 @@ def muscle_gains(muscle_states, lengths, lengthening, params, tendon_row):
 
 
 @njit(error_model="numpy")
-def force_after(excitation, activation, tendon_force, length, lengthening, step, n_steps, p, compliant):
+def force_after(excitation, activation, tendon_force, length, lengthening, speeding, step, n_steps, p, compliant):
     """A muscle's force along its path (N) after ``n_steps`` classical RK4 steps of ``step`` s under a
     constant ``excitation``, from ``activation`` (and a compliant tendon's normalised force
-    ``tendon_force``), its muscle-tendon length moving from ``length`` (m) at ``lengthening`` (m/s):
-    De Groote's activation dynamics and the compliant tendon's explicit form as the engine's
-    kernels integrate them (``muscle.activation_derivative``, ``muscle.compliant_tendon``)."""
+    ``tendon_force``), its muscle-tendon length moving from ``length`` (m) at ``lengthening`` (m/s)
+    with the constant acceleration ``speeding`` (m/s^2): De Groote's activation dynamics and the
+    compliant tendon's explicit form as the engine's kernels integrate them
+    (``muscle.activation_derivative``, ``muscle.compliant_tendon``)."""
     a, f = activation, tendon_force
     ta, td, b = p[TAU_ACT], p[TAU_DEACT], p[SMOOTHING]
     for k in range(n_steps):
-        l0 = length + lengthening * step * k
+        s0, s1 = step * k, step * (k + 0.5)
+        l0, v0 = length + (lengthening + 0.5 * speeding * s0) * s0, lengthening + speeding * s0
+        l1, v1 = length + (lengthening + 0.5 * speeding * s1) * s1, lengthening + speeding * s1
+        l2, v2 = length + (lengthening + 0.5 * speeding * (s0 + step)) * (s0 + step), v0 + speeding * step
         ka1 = activation_derivative(excitation, a, ta, td, b)
         ka2 = activation_derivative(excitation, a + 0.5 * step * ka1, ta, td, b)
         ka3 = activation_derivative(excitation, a + 0.5 * step * ka2, ta, td, b)
         ka4 = activation_derivative(excitation, a + step * ka3, ta, td, b)
         if compliant:
-            kf1 = compliant_tendon(a, f, l0, lengthening, p)[1]
-            kf2 = compliant_tendon(a + 0.5 * step * ka1, f + 0.5 * step * kf1, l0 + 0.5 * step * lengthening,
-                                   lengthening, p)[1]
-            kf3 = compliant_tendon(a + 0.5 * step * ka2, f + 0.5 * step * kf2, l0 + 0.5 * step * lengthening,
-                                   lengthening, p)[1]
-            kf4 = compliant_tendon(a + step * ka3, f + step * kf3, l0 + step * lengthening, lengthening, p)[1]
+            kf1 = compliant_tendon(a, f, l0, v0, p)[1]
+            kf2 = compliant_tendon(a + 0.5 * step * ka1, f + 0.5 * step * kf1, l1, v1, p)[1]
+            kf3 = compliant_tendon(a + 0.5 * step * ka2, f + 0.5 * step * kf2, l1, v1, p)[1]
+            kf4 = compliant_tendon(a + step * ka3, f + step * kf3, l2, v2, p)[1]
             f = f + step / 6.0 * (kf1 + 2.0 * kf2 + 2.0 * kf3 + kf4)
         a = a + step / 6.0 * (ka1 + 2.0 * ka2 + 2.0 * ka3 + ka4)
     if compliant:
         return p[F0] * f
-    return rigid_tendon_force(a, length + lengthening * step * n_steps, lengthening, p)
+    end = step * n_steps
+    return rigid_tendon_force(a, length + (lengthening + 0.5 * speeding * end) * end, lengthening + speeding * end, p)
 
 
 @njit(error_model="numpy")
-def excitations_for(target, guess, muscle_states, lengths, lengthening, step, n_steps, params, tendon_row):
+def forces_after(excitation, muscle_states, lengths, lengthening, speeding, step, n_steps, params, tendon_row):
+    """Each muscle's force along its path (N, (M,)) after ``n_steps`` RK4 steps of ``step`` s under the
+    constant ``excitation`` (the same for all), from the muscle states (n_muscle_states,), its path
+    at ``lengths`` (m) moving at ``lengthening`` (m/s) with acceleration ``speeding`` (m/s^2), (M,)
+    each (``force_after``): at 0 and 1, the range of forces a window can reach."""
+    M = lengths.shape[0]
+    out = np.empty(M)
+    for m in range(M):
+        row = tendon_row[m]
+        out[m] = force_after(excitation, muscle_states[m], muscle_states[row] if row >= 0 else 0.0, lengths[m],
+                             lengthening[m], speeding[m], step, n_steps, params[m], row >= 0)
+    return out
+
+
+@njit(error_model="numpy")
+def excitations_for(target, guess, muscle_states, lengths, lengthening, speeding, step, n_steps, params, tendon_row):
     """The constant excitations u (M,) in [0, 1] under which each muscle's force along its path
     reaches ``target`` (N, (M,)) after ``n_steps`` RK4 steps of ``step`` s (``force_after``, from the
     muscle states (n_muscle_states,) at muscle-tendon ``lengths`` (m) moving at ``lengthening``
-    (m/s), (M,)): the force grows with u, so secant steps from ``guess`` (M,), kept inside the
-    bracket the forces found so far leave (else its middle), find it within FORCE_TOLERANCE F0;
-    0 or 1 where the target is out of reach."""
+    (m/s) with acceleration ``speeding`` (m/s^2), (M,)): the force grows with u, so secant steps
+    from ``guess`` (M,), kept inside the bracket the forces found so far leave (else its middle),
+    find it within FORCE_TOLERANCE F0; 0 or 1 where the target is out of reach."""
     M = target.shape[0]
     out = np.empty(M)
     for m in range(M):
@@ -84,7 +103,7 @@ def excitations_for(target, guess, muscle_states, lengths, lengthening, step, n_
         tolerance = FORCE_TOLERANCE * p[F0]
         low, high = 0.0, 1.0
         u = min(max(guess[m], 0.0), 1.0)
-        r = force_after(u, a0, f0, lengths[m], lengthening[m], step, n_steps, p, compliant) - target[m]
+        r = force_after(u, a0, f0, lengths[m], lengthening[m], speeding[m], step, n_steps, p, compliant) - target[m]
         v, s = -1.0, 0.0  # no previous point yet
         for _ in range(60):
             if abs(r) <= tolerance or (r < 0.0 and u >= 1.0) or (r > 0.0 and u <= 0.0):
@@ -105,6 +124,6 @@ def excitations_for(target, guess, muscle_states, lengths, lengthening, step, n_
                 nxt = 0.5 * (low + high)
             v, s = u, r
             u = nxt
-            r = force_after(u, a0, f0, lengths[m], lengthening[m], step, n_steps, p, compliant) - target[m]
+            r = force_after(u, a0, f0, lengths[m], lengthening[m], speeding[m], step, n_steps, p, compliant) - target[m]
         out[m] = u
     return out
