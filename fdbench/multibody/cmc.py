@@ -189,7 +189,8 @@ def computed_muscle_control(plant: Engine, motion, kp: float = DEFAULT_KP, kd: f
             ramps[n] = np.minimum(np.linspace(0.0, n / (k - i0), 2 * n + 1), 1.0)[:, None]
             zeros[n] = np.zeros((2 * n + 1, J))
         result = plant.simulate(y, grid.step, n, last + ramps[n] * (reserve[w] - last), zeros[n], zeros[n],
-                                zeros[n], 0.0, 0.0, excitation_half=np.broadcast_to(u, (2 * n + 1, M)))
+                                zeros[n], 0.0, 0.0, excitation_half=np.broadcast_to(u, (2 * n + 1, M)),
+                                t0=grid.t_steps[i0])
         reached = slice(i0, i0 + result.steps_done + 1)
         for whole, part in ((states, result.states), (rates, result.rates), (applied, result.applied)):
             whole[reached] = part[:result.steps_done + 1]

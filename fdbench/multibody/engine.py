@@ -702,7 +702,7 @@ class Engine:
         return self.inverse_dynamics(z, zd, zdd, None if t is None else float(t))
 
     def simulate(self, y0, dt, n_steps, tau_half, ref_half, refd_half, refdd_half, kp, kd, mode=PD, gains=None,
-                 nominal: "Engine | None" = None, excitation_half=None) -> SimResult:
+                 nominal: "Engine | None" = None, excitation_half=None, t0: float = 0.0) -> SimResult:
         """Classical RK4 of eq. 12 (compiled, ``kernels.rk4``) over n_steps steps of dt (s) from the
         state y0 (n_state,) under a feedback law: ``mode`` PD, tau + kp (ref - z) + kd (refd - z')
         (kp N m/rad, kd N m s/rad); COMPUTED, the inverse dynamics of ``nominal`` (an Engine of the
@@ -713,7 +713,8 @@ class Engine:
         kp, kd: shape (J,) or one number. ``excitation_half``: the muscles' excitations (2 n_steps + 1,
         M) on the grid (``kernels.rk4_muscles``): y0, states and rates then have n_state +
         n_muscle_states columns (activations, compliant tendons' forces) and ``applied`` adds the
-        muscles' generalised forces; None: the muscles (if any) left out."""
+        muscles' generalised forces; None: the muscles (if any) left out. ``t0``: the time (s) of y0,
+        the grid's first row, at which the external loads (if any) are taken along."""
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (math.isfinite(dt) and dt > 0):
@@ -730,7 +731,7 @@ class Engine:
         states, rates = np.empty((n_steps + 1, width)), np.empty((n_steps + 1, width))
         applied = np.empty((n_steps + 1, self.n_joints))
         law = Law(tau, ref, refd, refdd, kp, kd, mode, gains)
-        loads, *believed = self.believed_args(nominal, np.arange(2 * n_steps + 1) * (0.5 * dt))
+        loads, *believed = self.believed_args(nominal, t0 + np.arange(2 * n_steps + 1) * (0.5 * dt))
 
         def run(y, n, rows, out):
             if muscles is not None:
