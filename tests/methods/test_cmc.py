@@ -25,7 +25,7 @@ from fdbench.multibody.muscle_paths import muscle_geometry
 from fdbench.multibody.simulation import half_steps, muscle_forces
 from fdbench.multibody.static_optimization import muscle_capacity
 
-from helpers.models import forearm_with_muscles_data
+from helpers.models import forearm_with_muscles_data, hopper_loads, hopper_model
 
 runner = CliRunner()
 
@@ -257,3 +257,22 @@ def test_with_compliant_tendons_the_run_starts_with_the_muscles_giving_static_op
     tau = plant.inverse_torques(grid.ref[0], grid.refd[0], grid.refdd[0], 0.0)
     np.testing.assert_allclose(arms.T @ forces + reserve, tau, atol=1e-6)
     np.testing.assert_allclose(y[S:S + M], floor + (1 - floor) * control, atol=1e-12)
+
+
+def test_a_window_simulated_from_its_own_start_time_takes_the_loads_of_that_time():
+    """CMC simulates window by window from each window's start t0 (``Engine.simulate``'s t0): under
+    time-varying external loads, 40 steps from step 40's state at t0 = 40 dt are the last 40 steps of
+    one 80-step run from 0; from t0 = 0 (the loads of the first window again) they are not."""
+    engine = Engine(hopper_model(), loads=hopper_loads(3))
+    dt, n = 1e-3, 40
+    y0 = engine.state_from_joints(np.array([0.1, 0.0, 0.0, 0.2, 0.3]), np.zeros(5))
+
+    def run(y, steps, t0):
+        zeros = np.zeros((2 * steps + 1, engine.n_joints))
+        return engine.simulate(y, dt, steps, zeros, zeros, zeros, zeros, 0.0, 0.0, t0=t0)
+    whole = run(y0, 2 * n, 0.0)
+    tail = run(whole.states[n], n, n * dt)
+    restarted = run(whole.states[n], n, 0.0)
+    assert whole.status == tail.status == 0
+    np.testing.assert_allclose(tail.states, whole.states[n:], rtol=0, atol=1e-9)
+    assert np.abs(restarted.states[-1] - whole.states[-1]).max() > 1e-6
