@@ -86,7 +86,7 @@ def _run_muscles(spec, request: dict, muscles: list):
     shape = lambda key, n: np.array(answer[key], dtype=float).reshape(len(t), n)  # noqa: E731
     angles, speeds, reserve = shape("angles", J), shape("speeds", J), shape("reserve", J)
     activation, excitation = shape("activation", M), shape("excitation", M)
-    hs = len(t) % 2 == 1 and len(t) > 1 and np.allclose(t[1::2], (t[:-1:2] + t[2::2]) / 2)
+    hs = _hermite_simpson(t)
     nodes = slice(None, None, 2 if hs else 1)
     forces = np.zeros(J)
     for coordinate, force in zip(answer["reserve_coordinates"], answer["reserve_forces"]):
@@ -134,13 +134,19 @@ def _moco_fields(spec, record: dict, answer: dict, solution, options: dict, repl
                              f"iterations; replay: {record.get('message')}")
 
 
+def _hermite_simpson(times: np.ndarray) -> bool:
+    """Whether Moco's solution times (s) are Hermite-Simpson's: the mesh points and every interval's
+    midpoint between them (2 N + 1 times)."""
+    return len(times) % 2 == 1 and len(times) > 1 and bool(np.allclose(times[1::2], (times[:-1:2] + times[2::2]) / 2))
+
+
 def _as_collocation(result_class, times: np.ndarray, controls: np.ndarray, answer: dict):
     """Moco's solution as a ``collocation.CollocationResult`` (node arrays (N + 1, J) and midpoint
     torques (N, J)), so that its torque is interpolated as collocate's: Hermite-Simpson gives the
     mesh points and the interval midpoints (2 N + 1 times)."""
     angles = np.array(answer["angles"]).reshape(controls.shape)
     speeds = np.array(answer["speeds"]).reshape(controls.shape)
-    if len(times) % 2 == 1 and np.allclose(times[1::2], (times[:-1:2] + times[2::2]) / 2):
+    if _hermite_simpson(times):
         return result_class("hermite-simpson", times[::2], angles[::2], speeds[::2], controls[::2], controls[1::2],
                             answer["objective"], answer["status"], answer["iterations"], answer["solve_s"], 0.0)
     return result_class("trapezoidal", times, angles, speeds, controls, None, answer["objective"], answer["status"],

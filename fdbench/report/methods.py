@@ -149,9 +149,10 @@ def _excitations_skip(optimizer: str, gradient: str = "fd") -> Callable:
         reason = refused(dataset, options)
         if reason is not None:
             return reason
-        limit = _compliant_step(spec_of(dataset, options))
-        if limit is not None and spec_of(dataset, options).dt > limit[1]:
-            dt = spec_of(dataset, options).dt
+        spec = spec_of(dataset, options)
+        limit = _compliant_step(spec)
+        if limit is not None and spec.dt > limit[1]:
+            dt = spec.dt
             return (f"optimisation of the muscles' excitations is not in this report: the model's compliant tendons "
                     f"need --dt below {limit[1]:.2g} s for RK4 to be stable ({limit[0]}'s near slack, at the least "
                     f"activation), and --dt is {dt:g} s: run the report with --dt {limit[1] / 2:.1g}, or give the "

@@ -82,9 +82,7 @@ def side_by_side(rows: list, ours: list) -> list[dict]:
     pairs = []
     for row in rows:
         rec = row.records[0]
-        same = ours if rec.get("peer") != "moco" else [  # muscle-driven Moco beside muscle-driven collocation
-            other for other in ours if (other.records[0] if other.records else {}).get("actuation") == rec.get("actuation")]
-        match = _match(PAIRS.get(rec.get("peer"), ()), same)
+        match = _match(PAIRS.get(rec.get("peer"), ()), ours, rec.get("actuation"))
         if match is None:
             continue
         mine = match.records[0]
@@ -101,14 +99,15 @@ def side_by_side(rows: list, ours: list) -> list[dict]:
     return pairs
 
 
-def _match(wanted, ours):
+def _match(wanted, ours, actuation=None):
     """The first of ``ours`` (report rows) that is one of the methods ``wanted`` ((command,
-    controller or None, table or None), in order of preference); None without one."""
+    controller or None, table or None), in order of preference) and drives what the peer drives
+    (``actuation``: the peer record's, "muscles" or None); None without one."""
     for command, controller, table in wanted:
         for row in ours:
             rec = row.records[0] if row.records else {}
             if (rec.get("command") == command and (controller is None or (rec.get("controller") or "pd") == controller)
-                    and (table is None or row.table == table)):
+                    and (table is None or row.table == table) and rec.get("actuation") == actuation):
                 return row
     return None
 
