@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from .casadi_loader import casadi
 from .multibody.actuators import optimal_forces
-from .multibody.model_changes import path_pairs
+from .multibody.model_changes import path_pairs, rigid_tendons
 from .multibody.static_optimization import static_optimization
 from .multibody.symbolic import MinimalDynamics, load_parameters
 from .multibody.symbolic_muscles import muscle_functions
@@ -407,13 +407,6 @@ class MuscleCollocationResult(CollocationResult):
         clipped into [0, 1] (IPOPT may leave a bound by its tolerance)."""
         t_nodes, e = self.t, np.clip(self.excitation, 0.0, 1.0)
         return lambda t: np.stack([np.interp(t, t_nodes, e[:, m]) for m in range(e.shape[1])], axis=-1)
-
-
-def rigid_tendons(model):
-    """``model`` with every compliant tendon rigid (Moco's ModOpIgnoreTendonCompliance)."""
-    from dataclasses import replace
-
-    return replace(model, muscles=tuple(replace(m, tendon="rigid") for m in model.muscles))
 
 
 def _muscle_solver(ca, actuation, functions, m: int, J: int, M: int, P: int, h: float, scheme: str,

@@ -16,7 +16,8 @@ import numpy as np
 
 from . import __version__
 from .casadi_loader import casadi
-from .collocation import collocate, collocate_muscles, own_fields, record_fields, rigid_tendons
+from .collocation import collocate, collocate_muscles, own_fields, record_fields
+from .multibody.model_changes import rigid_tendons
 from .controllers.base import muscle_columns
 from .excitation_problem import DEFAULT_EFFORT_WEIGHT, ExcitationProblem
 from .excitation_problem import warm_up as warm_up_excitations

@@ -15,6 +15,7 @@ from .base import (CONTROLLERS, Controller, Design, Plan, check_non_negative, ch
 # at 1e-4 s fails within 0.9 s of its default motion under CMC, at 5e-5 s it runs): with compliant
 # tendons CMC steps at most this (s) whatever --dt, and says so in its record (``cmc_step_s``).
 COMPLIANT_MAX_STEP = 5e-5
+TENDONS = ("model", "rigid")  # the muscles' tendons: the model's, or every compliant one taken as rigid
 
 
 @CONTROLLERS.register("cmc")
@@ -39,15 +40,22 @@ class CMC(Controller):
                                               "each of the model's [[actuators]] its own; without actuators 1 per "
                                               "coordinate). A coordinate without an actuator has no reserve: the "
                                               "torque its muscles miss is reported unmet.", show_default=False),
+        "tendons": MethodOption("the muscles' tendons: model (as the model has them) or rigid (every compliant "
+                                "tendon taken as rigid, as collocate --actuation muscles and Moco's "
+                                "ModOpIgnoreTendonCompliance take them: CMC then steps at --dt).", type=str,
+                                default=None, show_default=False, metavar="model|rigid"),
     }
 
     def __init__(self, kp: float = cmc.DEFAULT_KP, kd: float = cmc.DEFAULT_KD, window: float = cmc.DEFAULT_WINDOW,
-                 reserve_optimal_force: float | None = None):
+                 reserve_optimal_force: float | None = None, tendons: str = "model"):
         self.kp = check_non_negative("--kp", kp)  # 1/s^2
         self.kd = check_non_negative("--kd", kd)  # 1/s
         self.window = check_positive("--window", window)  # s
         self.reserve_optimal_force = (None if reserve_optimal_force is None  # N m; None: the model's actuators
                                       else check_positive("--reserve-optimal-force", reserve_optimal_force))
+        if tendons not in TENDONS:
+            raise ValueError(f"--tendons must be one of {', '.join(TENDONS)}, got {tendons!r}")
+        self.tendons = tendons
 
     def check_model(self, model) -> None:
         if not model.muscles:
@@ -57,14 +65,13 @@ class CMC(Controller):
     def check_run(self, model, duration: float, dt: float) -> None:
         cmc.check_window(self.window, duration, self.step(model, dt))
 
-    @staticmethod
-    def step(model, dt: float) -> float:
+    def step(self, model, dt: float) -> float:
         """The RK4 step (s) CMC takes on ``model`` for a requested ``dt`` (s)."""
-        compliant = any(m.tendon == "compliant" for m in model.muscles)
+        compliant = self.tendons == "model" and any(m.tendon == "compliant" for m in model.muscles)
         return min(dt, COMPLIANT_MAX_STEP) if compliant else dt
 
     def warm_up(self, plan: Plan) -> None:
-        cmc.warm_up(plan.engine)
+        cmc.warm_up(plan.engine.with_rigid_tendons() if self.tendons == "rigid" else plan.engine)
 
     def design(self, plan: Plan) -> Design:
         raise NotImplementedError("cmc simulates window by window: use CMC.run")
@@ -73,9 +80,12 @@ class CMC(Controller):
         """The CMC run of ``plant`` (an Engine) along ``motion``: (Simulation, record fields, extra
         trajectory columns (header, (n, k) values)). ``grid``: the motion's half steps for dt, used
         unless compliant tendons take a shorter step."""
-        step = self.step(plan.model, dt)
+        step, nominal = self.step(plan.model, dt), plan.engine
+        taken = [m.name for m in plan.model.muscles if m.tendon == "compliant"] if self.tendons == "rigid" else []
+        if taken:
+            plant, nominal = plant.with_rigid_tendons(), nominal.with_rigid_tendons()
         done = cmc.computed_muscle_control(plant, motion, self.kp, self.kd, self.window, self.reserve_optimal_force,
-                                           step, nominal=plan.engine, grid=grid if step == dt else None)
+                                           step, nominal=nominal, grid=grid if step == dt else None)
         result = done.simulation
         per_reserve, rho = done.reserve_rms(), cmc.reserve_strengths(plan.model, self.reserve_optimal_force)
         muscles, joints = [m.name for m in plant.model.muscles], plan.joints
@@ -86,6 +96,7 @@ class CMC(Controller):
                   "reserve_optimal_force": (float(rho[0]) if reserved.all() and np.all(rho == rho[0])
                                             else "per actuator (see reserves)"),
                   "cmc_step_s": step,
+                  "tendons": f"rigid (compliant taken as rigid: {', '.join(taken)})" if taken else "model",
                   "cmc_windows": done.windows_done}
         if not reserved.all():  # the torque left unmet where a coordinate has no reserve
             per_unmet = done.unmet_rms()

@@ -72,6 +72,7 @@ import numpy as np
 
 
 from .model import Model, resolved_end
+from .model_changes import rigid_tendons
 from . import kernels
 from .muscle import PARAMETERS as MUSCLE_PARAMETERS, parameters as muscle_parameters
 from .muscle_paths import muscle_layout
@@ -147,6 +148,7 @@ class Engine:
             if not (math.isfinite(value) and low <= value <= high):
                 raise ValueError(f"{name} must be in [{low:g}, {high:g}], got {value}")
         self.model = model
+        self.penalty = (alpha, xi, omega)
         self.joints = tuple(model.coordinates)  # the coordinates (a free joint has three)
         self.n_joints = len(self.joints)
         self.n_bodies = len(model.joints)
@@ -167,6 +169,13 @@ class Engine:
         self._build_layout()
         self._build_muscles()
         self._last_start = None  # (z and zd as bytes, the state) of the last ``state_from_joints``
+
+    def with_rigid_tendons(self) -> "Engine":
+        """This engine with every compliant tendon rigid (``model_changes.rigid_tendons``, Moco's
+        ModOpIgnoreTendonCompliance), its penalty and loads kept; itself without compliant tendons."""
+        if not (self.tendon_row >= 0).any():
+            return self
+        return Engine(rigid_tendons(self.model), *self.penalty, self.loads)
 
     # ------------------------------------------------------------------ layout
     def _build_points(self):

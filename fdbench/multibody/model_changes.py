@@ -38,6 +38,11 @@ def with_changes(model: Model, pairs) -> Model:
     return model
 
 
+def rigid_tendons(model: Model) -> Model:
+    """``model`` with every compliant tendon rigid (Moco's ModOpIgnoreTendonCompliance)."""
+    return replace(model, muscles=tuple(replace(m, tendon="rigid") for m in model.muscles))
+
+
 def _float(value, label: str) -> float:
     if isinstance(value, bool):
         raise ModelError(label, "", "must be a number")

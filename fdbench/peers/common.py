@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import run_inputs
-from ..collocation import rigid_tendons
+from ..multibody.model_changes import rigid_tendons
 from ..controllers.base import muscle_columns, per_joint
 from ..files import read_input_bytes
 from ..integrate import steps

@@ -13,8 +13,8 @@ import math
 from dataclasses import dataclass, field
 
 from .. import __version__
-from .methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, EVERY, FLOATING_BASE_PENALTY, LQR, OPEN_LOOP, PD,
-                      SLOWEST_FIRST, Dataset, Options, methods, rows, select)
+from .methods import (BFGS, CMAES, CMC, COLLOCATION, COMPUTED_TORQUE, EVERY, FLOATING_BASE_PENALTY, LQR, MUSCLE_COLLOCATION,
+                      MUSCLE_DRIVEN, OPEN_LOOP, PD, SLOWEST_FIRST, Dataset, Options, methods, muscles_markdown, rows, select)
 from .paper import Row, figure_lines, provenance_section, render, settings_lines
 from .paper import significant as number
 
@@ -89,8 +89,11 @@ def make_plan(studied_common: dict, forearm_common: dict, options: Options | Non
     forearm = Dataset("forearm", forearm_common, 1.0)
     wanted = [key for key in EVERY if (collocation or key != COLLOCATION) and (control or key != PD)]
     kept, skipped = select(wanted, [studied], options)
-    return ComparisonPlan([studied, forearm], methods(kept, studied, options), methods(kept, forearm, options),
-                          skipped, options)
+    muscle_driven, left_out = select(MUSCLE_DRIVEN if collocation else (), [studied], options)
+    if muscle_driven:  # the studied model has muscles: the forearm has none
+        skipped += left_out
+    return ComparisonPlan([studied, forearm], methods(kept + muscle_driven, studied, options),
+                          methods(kept, forearm, options), skipped, options)
 
 
 def inverse_residuals(spec, inverse) -> dict:
@@ -123,7 +126,8 @@ MAIN_LABELS = {"rmse_rot_deg": "RMSE_rot (deg)", "rmse_trans_cm": "RMSE_trans (c
                "residual_moment_rms_nm": "residual moment RMS (N m)", "runtime_s": "runtime (s)"}
 MAIN_FIELDS = tuple(MAIN_LABELS)
 CSV_COLUMNS = ("model", "method", "key", "command", "controller", "status", "t_end", *MAIN_FIELDS,
-               "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm", "evaluations", "budget", "n_params",
+               "residual_fx_mean_n", "residual_fy_mean_n", "residual_mz_mean_nm", "reserve_rms_nm", "effort",
+               "evaluations", "budget", "n_params",
                "spec_hash", "run_id")
 RESIDUAL_MEANS = (("residual_fx_mean_n", "FX (N)"), ("residual_fy_mean_n", "FY (N)"), ("residual_mz_mean_nm", "MZ (N m)"))
 
@@ -197,7 +201,7 @@ def residual_means_table(inverse_fields: dict, rows: list[Row]) -> list[str]:
 # ---- the claim tested -----------------------------------------------------------------------------
 
 SHORT = {OPEN_LOOP: "open loop", PD: "PD", COMPUTED_TORQUE: "computed torque", LQR: "LQR",
-         COLLOCATION: "collocation", CMAES: "CMA-ES", BFGS: "BFGS"}
+         COLLOCATION: "collocation", CMAES: "CMA-ES", BFGS: "BFGS", CMC: "CMC", MUSCLE_COLLOCATION: "muscle collocation"}
 TIE_FACTOR = 1.25  # two methods that both reach the end (or both stop) within this factor of RMSE_rot: a tie
 SAME_RESIDUALS = 0.01  # residual force RMS within 1 % of each other: the same
 
@@ -553,6 +557,7 @@ SECTIONS = (
     (_methods, lambda p: True),
     (_indicators, lambda p: True),
     (_per_coordinate, lambda p: len(p.names) > 1),
+    (lambda p: ["", "### The muscles"] + muscles_markdown(p.walk), lambda p: bool(muscles_markdown(p.walk))),
     (lambda p: _cells_lines(p.cells, p.extra), lambda p: bool(p.cells or p.extra)),
     (_forearm, lambda p: bool(p.forearm)),
     (_claim, lambda p: bool(p.forearm)),

@@ -40,7 +40,8 @@ MUSCLE_DRIVEN = (CMC, MUSCLE_COLLOCATION, EXCITATIONS_CMAES, EXCITATIONS_BFGS)
 # every registered method, in the report's order
 EVERY = (OPEN_LOOP, PD, COMPUTED_TORQUE, LQR, COLLOCATION, CMAES, BFGS)
 # the order in which their runs are handed out, the slowest first (so that workers share the work evenly)
-SLOWEST_FIRST = (COLLOCATION, COMPUTED_TORQUE, BFGS, CMAES, LQR, PD, OPEN_LOOP)
+SLOWEST_FIRST = (COLLOCATION, MUSCLE_COLLOCATION, EXCITATIONS_BFGS, EXCITATIONS_CMAES, COMPUTED_TORQUE, BFGS, CMAES,
+                 CMC, LQR, PD, OPEN_LOOP)
 
 # the shooting methods' defaults on a model with a floating base: the paper's budget of 200
 # simulations, in generations of 8
@@ -179,7 +180,37 @@ def _compliant_step(spec: RunSpec) -> tuple[str, float] | None:
 
 
 def _cmc_spec(dataset: Dataset, options: Options) -> RunSpec:
-    return control_spec(controller="cmc", **dataset.common)
+    """CMC with the model's tendons, or with rigid ones where a compliant tendon needs RK4 steps
+    below CMC's (``_cmc_rigid``)."""
+    rigid = _cmc_rigid(dataset) is not None
+    return control_spec(controller="cmc", controller_options={"tendons": "rigid"} if rigid else None,
+                        **dataset.common)
+
+
+def _cmc_rigid(dataset: Dataset) -> tuple[str, float] | None:
+    """(muscle, its stable step (s)) where the stiffest compliant tendon at the motion's start, every
+    muscle at its least activation, needs RK4 steps below CMC's with compliant tendons: CMC then
+    takes every tendon as rigid, as muscle-driven collocation does; None otherwise."""
+    from ..controllers.cmc import COMPLIANT_MAX_STEP
+
+    spec = control_spec(controller="cmc", **dataset.common)
+    try:
+        spec.validate()
+    except ValueError:
+        return None
+    limit = _compliant_step(spec)
+    return limit if limit is not None and limit[1] < COMPLIANT_MAX_STEP else None
+
+
+def _cmc_description(dataset: Dataset, options: Options) -> str:
+    from ..controllers.cmc import COMPLIANT_MAX_STEP
+
+    rigid = _cmc_rigid(dataset)
+    if rigid is None:
+        return _summary("cmc")
+    return (_summary("cmc") + f"; tendons taken as rigid (--tendons rigid), as collocation takes them: the model's "
+            f"compliant tendons would need RK4 steps below {rigid[1]:.2g} s ({rigid[0]}'s near slack, at the least "
+            f"activation), CMC's with compliant tendons is {COMPLIANT_MAX_STEP:g} s")
 
 
 def _muscle_collocation_spec(dataset: Dataset, options: Options) -> RunSpec:
@@ -234,7 +265,7 @@ REGISTRY = {registered.key: registered for registered in (
     Registered(BFGS, lambda o: f"CS + BFGS + ff, exact gradient (budget {o.budget})",
                lambda d, o: "the same splines tuned by BFGS with gradients by forward sensitivities",
                lambda d, o: _shooting("bfgs", d, o, gradient="exact"), _bfgs_skip),
-    Registered(CMC, lambda o: _cmc_label(), lambda d, o: _summary("cmc"), _cmc_spec,
+    Registered(CMC, lambda o: _cmc_label(), _cmc_description, _cmc_spec,
                _muscles_skip(_cmc_spec, "computed muscle control")),
     Registered(MUSCLE_COLLOCATION, lambda o: f"Direct collocation of the muscles ({_nodes()} intervals) + forward replay",
                lambda d, o: MUSCLE_COLLOCATION_SUMMARY, _muscle_collocation_spec,

@@ -276,3 +276,24 @@ def test_a_window_simulated_from_its_own_start_time_takes_the_loads_of_that_time
     assert whole.status == tail.status == 0
     np.testing.assert_allclose(tail.states, whole.states[n:], rtol=0, atol=1e-9)
     assert np.abs(restarted.states[-1] - whole.states[-1]).max() > 1e-6
+
+
+def test_cmc_with_rigid_tendons_is_cmc_on_the_model_with_its_tendons_rigid(tmp_path):
+    """``--tendons rigid`` on arm26 (compliant tendons) runs as CMC on arm26's file with every tendon
+    rigid: the same record to the bit, stepped at --dt (1 ms), and it says which tendons it took
+    as rigid; a bad value is one line, exit 2."""
+    compliant, rigid = tmp_path / "arm.toml", tmp_path / "rigid.toml"
+    compliant.write_text(to_toml(find_model("arm26")))
+    rigid.write_text(to_toml(model_from_dict(rigid_arm26([]), "arm.toml")))
+    common = ["control", "--controller", "cmc", "--motion", "mid_range", "-f", "json", "--quiet", "--db"]
+    taken = runner.invoke(app, [*common, str(tmp_path / "a.sqlite"), "--model", str(compliant), "--tendons", "rigid"])
+    made = runner.invoke(app, [*common, str(tmp_path / "b.sqlite"), "--model", str(rigid)])
+    assert taken.exit_code == 0 and made.exit_code == 0, taken.output + made.output
+    taken, made = json.loads(taken.stdout), json.loads(made.stdout)
+    assert taken["status"] == "success" and taken["cmc_step_s"] == 1e-3
+    assert taken["tendons"] == "rigid (compliant taken as rigid: " + ", ".join(
+        m.name for m in find_model("arm26").muscles) + ")"
+    assert made["tendons"] == "model"
+    for name in ("rmse_rot_deg", "rmse_torque_nm", "reserve_rms_nm", "effort", "BIClong_activation_mean"):
+        assert taken[name] == made[name]
+    bad_input(["control", "--model", compliant, "--controller", "cmc", "--tendons", "elastic"], "--tendons", "rigid")

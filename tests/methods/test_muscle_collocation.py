@@ -17,7 +17,8 @@ from helpers.models import LEG
 
 from fdbench.casadi_loader import casadi
 from fdbench.cli import app
-from fdbench.collocation import collocate_muscles, rigid_tendons
+from fdbench.collocation import collocate_muscles
+from fdbench.multibody.model_changes import rigid_tendons
 from fdbench.models import find_model
 from fdbench.multibody import simulation as sim
 from fdbench.multibody.engine import Engine

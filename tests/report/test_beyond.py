@@ -7,11 +7,21 @@ import io
 import json
 import sqlite3
 
+import numpy as np
 import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
 from fdbench.cli import app
+from fdbench.controllers.cmc import COMPLIANT_MAX_STEP
+from fdbench.models import find_model
+from fdbench.multibody.engine import Engine
+from fdbench.multibody.model import model_from_dict, to_dict
+from fdbench.multibody.model_files import to_toml
+from fdbench.multibody.motions.named import MinimumJerk
+from fdbench.multibody.muscle import MIN_ACTIVATION
+from fdbench.multibody.simulation import compliant_step_limits
+from fdbench.report.methods import CMC, beyond_methods
 
 runner = CliRunner()
 SMALL = ["report", "--no-control", "--torque", "cs", "--opt", "bfgs", "--no-feedforward", "--seeds", "1",
@@ -86,3 +96,27 @@ def test_on_a_model_with_muscles_cmc_joins_the_section_with_the_muscles_table_an
     assert "flexor mean a" in report and "extensor mean a" in report
     assert (figures / "activations.png").stat().st_size > 0 and "activations.png" in report
     assert text == ""  # the report went to --output
+
+
+def test_cmc_takes_rigid_tendons_where_compliant_ones_need_steps_below_its_own(tmp_path):
+    """The report's CMC keeps arm26's compliant tendons (their stable RK4 step at the least
+    activation, 9.8e-5 s, is above CMC's 5e-5 s) and takes them as rigid, saying why, once stiffer
+    tendons (strain 0.01 at one normalised force) would need steps below CMC's."""
+    def cmc_of(data, name):
+        path = tmp_path / name
+        path.write_text(to_toml(model_from_dict(data, name)))
+        body = Engine(model_from_dict(data, name))
+        z, zd, _ = MinimumJerk(body.model.motions[0], body.joints)(np.zeros(1))
+        stiffest = min(compliant_step_limits(body, z[0], zd[0], np.full(body.n_muscles, MIN_ACTIVATION)),
+                       key=lambda pair: pair[1])
+        found = next(m for m in beyond_methods(**{"model_name": str(path)})[0] if m.key == CMC)
+        return found, stiffest
+
+    as_filed, stiff = to_dict(find_model("arm26")), to_dict(find_model("arm26"))
+    for entry in stiff["muscles"]:
+        entry["tendon_strain"] = 0.01
+    kept, limit = cmc_of(as_filed, "arm.toml")
+    assert limit[1] > COMPLIANT_MAX_STEP and dict(kept.spec.method_options).get("tendons") is None
+    rigid, limit = cmc_of(stiff, "stiff.toml")
+    assert limit[1] < COMPLIANT_MAX_STEP and dict(rigid.spec.method_options)["tendons"] == "rigid"
+    assert "tendons taken as rigid" in rigid.description and limit[0] in rigid.description

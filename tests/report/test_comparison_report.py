@@ -27,8 +27,11 @@ from helpers.paths import ROOT
 from fdbench.cli import app
 from fdbench.problem import DEFAULT_RESIDUAL_WEIGHT
 from fdbench.report import Row
-from fdbench.report.comparison import claim_facts, claim_lines, ranking
-from fdbench.report.methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, FLOATING_BASE_PENALTY, LQR, OPEN_LOOP,
+from fdbench.multibody.model import model_from_dict, to_dict
+from fdbench.multibody.model_files import to_toml
+from fdbench.report.comparison import claim_facts, claim_lines, make_plan, ranking
+from fdbench.report.methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, FLOATING_BASE_PENALTY, LQR, MUSCLE_DRIVEN,
+                                    OPEN_LOOP, Options,
                                     PD)
 
 EXAMPLES = ROOT / "examples" / "opensim"
@@ -577,3 +580,29 @@ def test_an_imported_models_warnings_are_said_once_before_the_work(tmp_path):
     assert len(warnings) == 1 and "dropped 1 marker" in lines[warnings[0]], lines
     (wrote,) = [i for i, line in enumerate(lines) if line.startswith(f"wrote {out}")]
     assert warnings[0] < wrote, lines
+
+
+def test_a_floating_base_with_muscles_gets_the_muscle_driven_methods_the_forearm_does_not(tmp_path):
+    """The hopper with a hip flexor and extensor (rigid tendons): the report plans every
+    muscle-driven method on it and none on the forearm (which has no muscles), the forearm keeping
+    every other method of the hopper's; --no-beyond leaves them out with collocation."""
+    from helpers.models import hopper_model
+
+    data = to_dict(hopper_model())
+    data["motions"] = [{"name": "still", "type": "minimum-jerk", "duration": 0.2,
+                        "start": {name: 0.0 for name in hopper_model().coordinates},
+                        "goal": {name: 0.0 for name in hopper_model().coordinates}}]
+    data["muscles"] = [{"name": name, "max_isometric_force": 800.0, "optimal_fiber_length": 0.1,
+                        "tendon_slack_length": 0.15, "tendon": "rigid",
+                        "path": {"points": [{"body": "pelvis", "at": [x, 0.0]}, {"body": "thigh", "at": [x, -0.2]}]}}
+                       for name, x in (("flexor", 0.05), ("extensor", -0.05))]
+    path = tmp_path / "hopper.toml"
+    path.write_text(to_toml(model_from_dict(data, "hopper.toml")))
+    plan = make_plan({"model_name": str(path), "motion": "still"}, {}, Options(budget=4, popsize=2))
+    studied, forearm = [m.key for m in plan.walk], [m.key for m in plan.forearm]
+    assert set(MUSCLE_DRIVEN) <= set(studied) and not set(MUSCLE_DRIVEN) & set(forearm)
+    assert forearm == [key for key in studied if key not in MUSCLE_DRIVEN]
+    assert all(m.spec.model_name == str(path) for m in plan.walk if m.key in MUSCLE_DRIVEN)
+    without = make_plan({"model_name": str(path), "motion": "still"}, {}, Options(budget=4, popsize=2),
+                        collocation=False)
+    assert not set(MUSCLE_DRIVEN) & {m.key for m in without.walk}
