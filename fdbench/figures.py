@@ -385,7 +385,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
 
 # every file the figures of a model's coordinates write (--figures on a model with a floating base),
 # checked before the work starts
-MODEL_FIGURE_FILES = ("coordinates.png", "residuals.png", "stick_figure.png", "animation.gif")
+MODEL_FIGURE_FILES = ("coordinates.png", "residuals.png", "stick_figure.png", "animation.gif", ACTIVATIONS_FILE)
 COLLOCATION = "collocation"  # the registered method's key (``report.methods``)
 STICK_INSTANTS = 6  # stick figures per method, evenly spread over the motion
 ANIMATION_FPS = 20
@@ -787,6 +787,12 @@ def write_model_figures(spec, inverse, rows, runs: dict, directory: Path, base: 
         animation(animation_frames(plant, inverse.angles, shown, inverse.t), _short_labels(labels, short or {}), inverse.t, stops,
                   directory / MODEL_FIGURE_FILES[3])
         link("Animation: the recorded walk and every method's", MODEL_FIGURE_FILES[3])
+    driven = {key: (sims[key].t, sims[key].activation) for key in labels
+              if getattr(sims[key], "activation", None) is not None}
+    if driven:  # the methods that drove the model's muscles
+        activations_figure(driven, [m.name for m in model.muscles], {key: labels[key] for key in driven},
+                           directory / ACTIVATIONS_FILE)
+        link("Each muscle's activation", ACTIVATIONS_FILE)
     return written
 
 

@@ -44,7 +44,8 @@ def residual_fields(model, forces: np.ndarray) -> dict:
 def muscle_fields(muscles, t: np.ndarray, activation: np.ndarray) -> dict:
     """A muscle-driven run's indicators over the samples t (s, (n,)) reached, activations (n, M):
     ``effort``, the mean of sum_m a_m^2; ``<muscle>_activation_mean``; ``saturation``, each muscle
-    at full activation (a >= ``FULL_ACTIVATION``) and when, e.g. "BIClong from 0.62 to 1 s", or None."""
+    at full activation (a >= ``FULL_ACTIVATION``) and when, e.g. "BIClong from 0.62 to 1 s" ("at 0 s" for a
+    single sample), or None."""
     if not len(t):
         return {"effort": math.nan, **{m + ACTIVATION_MEAN: math.nan for m in muscles}, "saturation": None}
     said = []
@@ -52,7 +53,8 @@ def muscle_fields(muscles, t: np.ndarray, activation: np.ndarray) -> dict:
         full = np.concatenate([[False], activation[:, m] >= FULL_ACTIVATION, [False]])
         starts, ends = np.flatnonzero(full[1:] & ~full[:-1]), np.flatnonzero(~full[1:] & full[:-1]) - 1
         if len(starts):
-            spans = [f"from {t[a]:.3g} to {t[b]:.3g} s" for a, b in zip(starts[:MAX_SPANS], ends[:MAX_SPANS])]
+            spans = [f"from {t[a]:.3g} to {t[b]:.3g} s" if f"{t[a]:.3g}" != f"{t[b]:.3g}" else f"at {t[a]:.3g} s"
+                     for a, b in zip(starts[:MAX_SPANS], ends[:MAX_SPANS])]
             more = f" and {len(starts) - MAX_SPANS} more times" if len(starts) > MAX_SPANS else ""
             said.append(f"{name} {', '.join(spans)}{more}")
     return {"effort": float(np.mean(np.sum(activation**2, axis=1))),

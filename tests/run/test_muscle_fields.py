@@ -18,7 +18,7 @@ def test_effort_and_means_are_the_sums_over_the_samples():
     assert math.isclose(fields["effort"], (0.05 + 0.25 + 0.25 + 0.08 + 1.0) / 5)
     assert math.isclose(fields["flexor_activation_mean"], 0.22)
     assert math.isclose(fields["extensor_activation_mean"], 0.36)
-    assert fields["saturation"] == "extensor from 1 to 1 s"
+    assert fields["saturation"] == "extensor at 1 s"  # a single sample
 
 
 def test_no_sample_reached_gives_no_number():
@@ -42,6 +42,6 @@ def test_the_spans_named_are_the_runs_of_full_activation(full):
     if not runs:
         assert said is None
         return
-    spans = [f"from {t[a]:.3g} to {t[b]:.3g} s" for a, b in runs[:MAX_SPANS]]
+    spans = [f"from {t[a]:.3g} to {t[b]:.3g} s" if a != b else f"at {t[a]:.3g} s" for a, b in runs[:MAX_SPANS]]
     more = f" and {len(runs) - MAX_SPANS} more times" if len(runs) > MAX_SPANS else ""
     assert said == "m " + ", ".join(spans) + more
