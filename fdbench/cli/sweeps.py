@@ -22,7 +22,9 @@ from .options import (
     with_groups,
 )
 
-SWEEP_METHODS = ("torques", "optimizers", "controllers:pd")  # the method options of a report or a study
+SWEEP_METHODS = ("torques", "optimizers", "controllers:pd")  # the method options of a study
+REPORT_METHODS = SWEEP_METHODS[:2] + ("controllers:pd,cmc",)  # and of a report: computed muscle control's too
+CMC_OPTIONS = ("window", "reserve_optimal_force", "tendons")  # the report's options of computed muscle control
 MAX_SEEDS = 1000  # runs per cell of a report
 MAX_JOBS = 256  # worker processes
 
@@ -108,7 +110,7 @@ class Batch:
             return store.provenance(runs)
 
 
-@app.command(cls=methods_command(*SWEEP_METHODS))
+@app.command(cls=methods_command(*REPORT_METHODS))
 @with_conditions
 @with_groups
 def report(
@@ -149,7 +151,9 @@ def report(
         validated(spec)
     from ..report.methods import Options, beyond_methods, exact_gradient_methods
 
-    methods, skipped = beyond_methods(Options(budget=optim.budget), **fields) if beyond else (None, [])
+    cmc = _cmc_options(flags)
+    methods, skipped = beyond_methods(Options(budget=optim.budget, cmc=cmc), **fields) if beyond else (None, [])
+    _check_cmc_options(cmc, methods or [])
     if optim.gradient == "exact":
         methods = (methods or []) + exact_gradient_methods(plan.cells, optim.budget, torque_options,
                                                            optimizer_options, optim.penalty_weight, **fields)
@@ -259,7 +263,7 @@ def _comparison_report(ctx, conditions: dict, batch: Batch, flags: MethodValues,
     optim, (kp, kd), popsize = batch.optim, _gains(flags), flags["optimizers"].get("popsize")
     weight = optim.penalty_weight if given(ctx, "penalty_weight") else FLOATING_BASE_PENALTY
     options = Options(optim.budget, SHOOTING_POPSIZE if popsize is None else popsize, flags["optimizers"].get("sigma0"),
-                      flags["torques"].get("knots"), kp, kd)
+                      flags["torques"].get("knots"), kp, kd, _cmc_options(flags))
     studied, forearm = batch.fields(conditions), batch.sim.spec_fields("paper", None)
     with bad_input(wording=with_option):
         plan = comparison.make_plan(studied, forearm, options, collocation=beyond, control=batch.selection.control,
@@ -271,6 +275,7 @@ def _comparison_report(ctx, conditions: dict, batch: Batch, flags: MethodValues,
             if optim.gradient == "exact":
                 plan.extra = exact_gradient_methods(cells, optim.budget, torque_options, optimizer_options, weight,
                                                     **common)
+    _check_cmc_options(options.cmc, plan.walk)
     for spec in plan.all_specs():
         validated(spec)
     peer_methods = _peer_methods(peers, kp, kd, plan.datasets[0].common)
@@ -284,6 +289,28 @@ def _comparison_report(ctx, conditions: dict, batch: Batch, flags: MethodValues,
         say(batch.quiet, f"wrote {written} figures to {figures}")
     emit(text, batch.output)
     batch.wrote(len(runs))
+
+
+def _cmc_options(flags: MethodValues) -> tuple:
+    """Computed muscle control's options given (--window, --reserve-optimal-force, --tendons), as
+    sorted (name, value) pairs, checked: a bad value is bad input."""
+    from ..controllers import make_controller
+
+    given = tuple(sorted((name, value) for name, value in flags["controllers"].items()
+                         if name in CMC_OPTIONS and value is not None))
+    with bad_input(wording=with_option):
+        make_controller("cmc", **dict(given))
+    return given
+
+
+def _check_cmc_options(given: tuple, methods) -> None:
+    """Refuse computed muscle control's options where the report runs no CMC (a model without muscles)."""
+    from ..report.methods import CMC
+
+    if given and not any(method.key == CMC for method in methods):
+        names = ", ".join("--" + name.replace("_", "-") for name, _ in given)
+        raise BadInput(f"{names}: computed muscle control's options, and this report runs no computed muscle control "
+                       "(a model without muscles, or --no-beyond)")
 
 
 def _peer_methods(text: Optional[str], kp, kd, common: dict) -> list:

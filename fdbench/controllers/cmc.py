@@ -87,6 +87,9 @@ class CMC(Controller):
         done = cmc.computed_muscle_control(plant, motion, self.kp, self.kd, self.window, self.reserve_optimal_force,
                                            step, nominal=nominal, grid=grid if step == dt else None)
         result = done.simulation
+        if not result.success and not taken and any(m.tendon == "compliant" for m in plan.model.muscles):
+            result.detail = "; ".join(filter(None, [result.detail, "with the model's compliant tendons (--tendons "
+                                                                   "rigid takes them as rigid)"]))
         per_reserve, rho = done.reserve_rms(), cmc.reserve_strengths(plan.model, self.reserve_optimal_force)
         muscles, joints = [m.name for m in plant.model.muscles], plan.joints
         reserved = rho > 0

@@ -156,16 +156,19 @@ def main_table(rows: list[Row], duration: float, fields=MAIN_FIELDS) -> list[str
 def collocation_own_lines(rows: list[Row]) -> list[str]:
     """A sentence on the collocation's own solution at its points (the table gives its torque's
     forward replay), or nothing when no collocation row ran."""
+    out = []
     for row in rows:
         own = row.record.get("collocation_rmse_rot_deg")
-        if row.key == COLLOCATION and own is not None:
+        if row.key in (COLLOCATION, MUSCLE_COLLOCATION) and own is not None:
             get = row.record.get
-            return ["", f"Collocation's own solution, at its points (the row above is its torque replayed open loop "
+            name, replayed = (("Collocation", "its torque") if row.key == COLLOCATION
+                              else ("Muscle-driven collocation", "its excitations and reserves"))
+            out += ["", f"{name}'s own solution, at its points (its row above is {replayed} replayed open loop "
                         f"through fdbench's simulation): RMSE_rot {number(own)} deg, RMSE_trans "
                         f"{number(get('collocation_rmse_trans_cm'))} cm, residual force RMS "
                         f"{number(get('collocation_residual_force_rms_n'))} N, moment RMS "
                         f"{number(get('collocation_residual_moment_rms_nm'))} N m."]
-    return []
+    return out
 
 
 def coordinate_table(rows: list[Row], names: tuple, kinds: tuple) -> list[str]:
@@ -520,7 +523,7 @@ def _residuals(p: Parts) -> list[str]:
 
 def _methods(p: Parts) -> list[str]:
     return (["", "## Methods", ""] + [f"- **{m.name}**: {m.description}." for m in p.plan.walk]
-            + [f"- {reason}" for _, reason in p.plan.skipped])
+            + [f"- {reason}" for reason in dict.fromkeys(reason for _, reason in p.plan.skipped)])
 
 
 def _indicators(p: Parts) -> list[str]:

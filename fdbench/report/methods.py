@@ -69,7 +69,8 @@ class Dataset:
 @dataclass(frozen=True)
 class Options:
     """The report's options that shape the methods' runs: the shooting's budget, population, CMA-ES
-    step, spline knots; PD's gains (None: the model's defaults)."""
+    step, spline knots; PD's gains (None: the model's defaults); CMC's options (window, reserves'
+    optimal force, tendons)."""
 
     budget: int = 200
     popsize: int = SHOOTING_POPSIZE
@@ -77,6 +78,7 @@ class Options:
     knots: int | None = None
     kp: float | None = None
     kd: float | None = None
+    cmc: tuple = ()  # computed muscle control's options given, sorted (name, value) pairs
 
 
 @dataclass(frozen=True)
@@ -185,9 +187,10 @@ def _compliant_step(spec: RunSpec) -> tuple[str, float] | None:
 def _cmc_spec(dataset: Dataset, options: Options) -> RunSpec:
     """CMC with the model's tendons, or with rigid ones where a compliant tendon needs RK4 steps
     below CMC's (``_cmc_rigid``)."""
-    rigid = _cmc_rigid(dataset) is not None
-    return control_spec(controller="cmc", controller_options={"tendons": "rigid"} if rigid else None,
-                        **dataset.common)
+    given = dict(options.cmc)
+    if "tendons" not in given and _cmc_rigid(dataset) is not None:
+        given["tendons"] = "rigid"
+    return control_spec(controller="cmc", controller_options=given or None, **dataset.common)
 
 
 def _cmc_rigid(dataset: Dataset) -> tuple[str, float] | None:
@@ -208,7 +211,9 @@ def _cmc_rigid(dataset: Dataset) -> tuple[str, float] | None:
 def _cmc_description(dataset: Dataset, options: Options) -> str:
     from ..controllers.cmc import COMPLIANT_MAX_STEP
 
-    rigid = _cmc_rigid(dataset)
+    rigid = None if "tendons" in dict(options.cmc) else _cmc_rigid(dataset)
+    if dict(options.cmc).get("tendons") == "rigid":
+        return _summary("cmc") + "; tendons taken as rigid (--tendons rigid), as collocation takes them"
     if rigid is None:
         return _summary("cmc")
     return (_summary("cmc") + f"; tendons taken as rigid (--tendons rigid), as collocation takes them: the model's "

@@ -30,9 +30,8 @@ from fdbench.report import Row
 from fdbench.multibody.model import model_from_dict, to_dict
 from fdbench.multibody.model_files import to_toml
 from fdbench.report.comparison import claim_facts, claim_lines, make_plan, ranking
-from fdbench.report.methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, FLOATING_BASE_PENALTY, LQR, MUSCLE_DRIVEN,
-                                    OPEN_LOOP, Options,
-                                    PD)
+from fdbench.report.methods import (BFGS, CMAES, COLLOCATION, COMPUTED_TORQUE, FLOATING_BASE_PENALTY, LQR,
+                                    MUSCLE_COLLOCATION, MUSCLE_DRIVEN, OPEN_LOOP, PD, Options)
 
 EXAMPLES = ROOT / "examples" / "opensim"
 DURATION = 0.3  # s: the small model's recorded motion
@@ -549,6 +548,9 @@ def test_collocations_own_solution_is_named_beside_its_replay():
     (text,) = [line for line in collocation_own_lines([_row(COLLOCATION, "collocation", record)]) if line]
     assert all(f"{value:.3g}" in text for key, value in record.items() if key.startswith("collocation_"))
     assert collocation_own_lines([_row(PD, "PD", {"status": "success"})]) == []
+    both = [line for line in collocation_own_lines([_row(COLLOCATION, "collocation", record),
+                                                    _row(MUSCLE_COLLOCATION, "muscles", record)]) if line]
+    assert len(both) == 2 and "its torque replayed" in both[0] and "its excitations and reserves replayed" in both[1]
 
 
 # ---- the import's warnings: once, before the work ---------------------------------------------------
