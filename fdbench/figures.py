@@ -385,6 +385,7 @@ def write_report_figures(plan, runs: dict, rows, inverse, directory: Path, base:
 
 # every file the figures of a model's coordinates write (--figures on a model with a floating base),
 # checked before the work starts
+OWN_SUFFIX = ":own"  # a collocation's own solution beside its replay, in a figure's curves
 MODEL_FIGURE_FILES = ("coordinates.png", "residuals.png", "stick_figure.png", "animation.gif", ACTIVATIONS_FILE)
 COLLOCATION = "collocation"  # the registered method's key (``report.methods``)
 STICK_INSTANTS = 6  # stick figures per method, evenly spread over the motion
@@ -789,9 +790,13 @@ def write_model_figures(spec, inverse, rows, runs: dict, directory: Path, base: 
         link("Animation: the recorded walk and every method's", MODEL_FIGURE_FILES[3])
     driven = {key: (sims[key].t, sims[key].activation) for key in labels
               if getattr(sims[key], "activation", None) is not None}
+    names = {key: labels[key] for key in driven}
+    for key, solution in solutions.items():  # muscle-driven collocation's own activations, at its nodes
+        if key in driven and getattr(solution, "activation", None) is not None:
+            driven[key + OWN_SUFFIX], names[key + OWN_SUFFIX] = (solution.t, solution.activation), \
+                f"{labels[key]} (own solution)"
     if driven:  # the methods that drove the model's muscles
-        activations_figure(driven, [m.name for m in model.muscles], {key: labels[key] for key in driven},
-                           directory / ACTIVATIONS_FILE)
+        activations_figure(driven, [m.name for m in model.muscles], names, directory / ACTIVATIONS_FILE)
         link("Each muscle's activation", ACTIVATIONS_FILE)
     return written
 
