@@ -120,3 +120,17 @@ def test_cmc_takes_rigid_tendons_where_compliant_ones_need_steps_below_its_own(t
     rigid, limit = cmc_of(stiff, "stiff.toml")
     assert limit[1] < COMPLIANT_MAX_STEP and dict(rigid.spec.method_options)["tendons"] == "rigid"
     assert "tendons taken as rigid" in rigid.description and limit[0] in rigid.description
+
+
+@pytest.mark.parametrize("args, words", [(["--tendons", "rigid"], ["--tendons", "no computed muscle control"]),
+                                         (["--model", "arm26", "--tendons", "soft"], ["--tendons", "model, rigid"]),
+                                         (["--model", "arm26", "--window", "-1"], ["--window"])])
+def test_cmc_s_options_in_a_report_are_checked_before_any_work(tmp_path, args, words):
+    """CMC's options are refused in one line, before the database is made: a bad value, or a report
+    that runs no CMC (the forearm has no muscles)."""
+    db = tmp_path / "runs.sqlite"
+    done = runner.invoke(app, ["report", *args, "--db", str(db)])
+    assert done.exit_code == 2, done.output
+    lines = done.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("fdbench: error:") and all(w in lines[0] for w in words), lines
+    assert not db.exists()
