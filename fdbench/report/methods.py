@@ -51,8 +51,8 @@ SHOOTING_POPSIZE = 8
 # so an optimiser would buy a smaller RMSE by falling sooner; at 1000 deg, 0.1 s more of a 2.5-s
 # walk (40 deg) outweighs such errors: reaching further counts first, as in the report's ranking
 FLOATING_BASE_PENALTY = 1000.0
-# IPOPT's CPU time (s) for the report's muscle-driven collocation: the walk's 18 muscles need about 150
-# iterations, 4 minutes, where collocate's default of 60 s stops it after about 35 (arm26 converges in 7 s)
+# IPOPT's CPU time (s) for the report's muscle-driven collocation: the walk's 18 muscles need about 160
+# iterations, 5 to 6 minutes, where collocate's default of 60 s stops it after about 35 (arm26: 5 s)
 MUSCLE_COLLOCATION_MAX_TIME = 600.0
 
 
