@@ -167,10 +167,13 @@ def test_the_method_flags_are_those_the_registered_methods_declare():
         return set(declared)
 
     assert flags("control", CONTROLLERS) == {"kp", "kd", "bandwidth", "damping", "q_angle", "q_rate", "r_torque",
-                                            "window", "reserve_optimal_force"}
+                                            "window", "reserve_optimal_force", "tendons"}
     assert flags("optimize", TORQUES, OPTIMIZERS) >= {"hidden", "knots", "terms", "sigma0", "popsize"}
     for command in ("report", "study"):
         assert flags(command, TORQUES, OPTIMIZERS) >= {"hidden", "knots", "terms", "sigma0", "popsize"}
         assert flags(command, CONTROLLERS, only=["pd"]) == {"kp", "kd"}
         names = {p.name for p in root.commands[command].get_params(ctx)}
         assert not names & {"bandwidth", "q_angle"}, command  # the report's control is the paper's PD
+    # the report's computed muscle control (on a model with muscles) takes its options; a study runs none
+    assert flags("report", CONTROLLERS, only=["cmc"]) == {"window", "reserve_optimal_force", "tendons"}
+    assert not {p.name for p in root.commands["study"].get_params(ctx)} & {"window", "tendons"}
