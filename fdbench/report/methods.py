@@ -211,9 +211,10 @@ def _cmc_rigid(dataset: Dataset) -> tuple[str, float] | None:
 def _cmc_description(dataset: Dataset, options: Options) -> str:
     from ..controllers.cmc import COMPLIANT_MAX_STEP
 
-    rigid = None if "tendons" in dict(options.cmc) else _cmc_rigid(dataset)
-    if dict(options.cmc).get("tendons") == "rigid":
+    given = dict(options.cmc).get("tendons")
+    if given == "rigid":
         return _summary("cmc") + "; tendons taken as rigid (--tendons rigid), as collocation takes them"
+    rigid = None if given else _cmc_rigid(dataset)
     if rigid is None:
         return _summary("cmc")
     return (_summary("cmc") + f"; tendons taken as rigid (--tendons rigid), as collocation takes them: the model's "
