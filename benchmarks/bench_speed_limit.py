@@ -19,9 +19,11 @@ fdbench, in this process, on one thread (``population.set_threads(1)``), each af
                   beside it (b') ``run(control_spec())``'s runtime_s in this process after a warm-up
                   run (what a report's warm worker pays; its CPU time that of the whole ``run``
                   call, an upper bound). Both are the run's own work: the
-                  reference, the inverse dynamics, the controller's design, the simulation and its
-                  samples; the process's start-up (imports, loading the kernels) is excluded, as
-                  README's runtime_s says. The part beyond the kernel (a) is printed beside them
+                  controller's design, the simulation and its samples; what the C loop also
+                  prepares beforehand (the reference and feedforward on the half-step grid) and
+                  the start state are made before the clock, and the process's start-up (imports,
+                  loading the kernels and a warm-up on a still model) is excluded, as README's
+                  runtime_s says. The part beyond the kernel (a) is printed beside them
   (c) CMA-ES      runtime_s / evaluations of ``run(optimize_spec(torque, "cmaes", ...))``, budget
                   BUDGET, for cs and ann without and pf with feedforward: the path ``fdbench
                   optimize`` takes. Beside it, where the time goes, per evaluation: the

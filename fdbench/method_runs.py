@@ -151,11 +151,12 @@ def _method_run(spec, on_evaluation=None, on_start=None):
         return _self_simulated(spec, law, known, body, desired, inverse, grid)
     if grid is not None:  # the plan's feedforward (eq. 3) on the half-step grid, kept by it
         known.feedforward()(grid.t)
+    start = sim.start_state(body, desired)
     began = time.perf_counter()
     design = law.design(known)
     result = sim.simulate(design.feedforward, body, desired, kp=design.kp, kd=design.kd, gains=design.gains,
                           computed=design.computed, nominal=known.engine if design.computed else None, grid=grid,
-                          **integration(spec))
+                          start=start, **integration(spec))
     runtime = time.perf_counter() - began
     record = base_record(spec)
     name = spec.controller or "pd"  # the name it is registered under
@@ -191,7 +192,8 @@ def _set_up(spec):
     """What a run prepares before its clock starts, as the C loop precomputes its references and
     feedforward: the plant's engine, the desired motion, the indicators' reference (eq. 3 on the
     true motion's samples, ``run_inputs.reference``; measured after the run, not part of it) and,
-    with RK4, the desired motion on the half-step grid (``simulation.HalfSteps``; else None)."""
+    with RK4, the desired motion on the half-step grid (``simulation.HalfSteps``; else None). The
+    start state (``simulation.start_state``) is prepared beside it by the caller."""
     desired = motions(spec)[0]
     grid = sim.half_steps(desired, spec.dt) if spec.integrator == "rk4" else None
     return engine(spec), desired, reference(spec), grid
@@ -235,8 +237,9 @@ def run_simulation(spec, torque_file=None, params_file=None, torque=None, excita
         _check_tendon_step(body, desired, excitation, spec.dt, warn)
     if grid is not None:
         drive = sim.on_half_steps(drive, grid, body.n_joints)
+    start = sim.start_state(body, desired)
     began = time.perf_counter()
-    result = sim.simulate(drive, body, desired, grid=grid, **integration(spec),
+    result = sim.simulate(drive, body, desired, grid=grid, start=start, **integration(spec),
                           **({} if excitation is None else {"excitation": excitation}))
     runtime = time.perf_counter() - began
     record = base_record(spec)

@@ -275,7 +275,7 @@ def _comparison_report(ctx, conditions: dict, batch: Batch, flags: MethodValues,
             if optim.gradient == "exact":
                 plan.extra = exact_gradient_methods(cells, optim.budget, torque_options, optimizer_options, weight,
                                                     **common)
-    _check_cmc_options(options.cmc, plan.walk)
+    _check_cmc_options(options.cmc, plan.studied)
     for spec in plan.all_specs():
         validated(spec)
     peer_methods = _peer_methods(peers, kp, kd, plan.datasets[0].common)

@@ -66,7 +66,9 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable
 
 import numpy as np
 
@@ -92,19 +94,31 @@ CHUNK_S = 0.1  # s: the calls after it, by the time the first took
 @dataclass
 class SimResult:
     """The outcome of ``Engine.simulate``: status (the kernels' codes: 0 ok, 1 nonfinite,
-    2 singular, 3 constraint), the steps done, the joint angles z (rad) and velocities zd (rad/s)
-    at the steps, shape (n_steps + 1, J), the largest constraint violation reached (m^2 or m), the
-    mixed-coordinate states and their derivatives ``rates`` (n_steps + 1, n_state) and the total
-    applied joint torques ``applied`` (n_steps + 1, J) (N m); NaN after ``steps_done``."""
+    2 singular, 3 constraint), the steps done, the largest constraint violation reached (m^2 or m),
+    the mixed-coordinate states and their derivatives ``rates`` (n_steps + 1, n_state) and the total
+    applied joint torques ``applied`` (n_steps + 1, J) (N m); NaN after ``steps_done``. The joint
+    angles z (rad) and velocities zd (rad/s) at the steps, shape (n_steps + 1, J), are computed from
+    the states when first read (``joints``: the engine's ``joints_from_state``)."""
 
     status: int
     steps_done: int
-    z: np.ndarray
-    zd: np.ndarray
     max_violation: float
     states: np.ndarray
     rates: np.ndarray
     applied: np.ndarray
+    joints: Callable = field(repr=False)
+
+    @cached_property
+    def _coordinates(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.joints(self.states)
+
+    @property
+    def z(self) -> np.ndarray:
+        return self._coordinates[0]
+
+    @property
+    def zd(self) -> np.ndarray:
+        return self._coordinates[1]
 
 
 def _rotate(angle, local):
@@ -338,11 +352,6 @@ class Engine:
         external loads (``kernels``' module docstring); any other model takes the dense one."""
         return self.paths is None and self.free is None and self.loads is None
 
-    @property
-    def compiled(self) -> bool:
-        """``banded`` under its former name (every model runs on the compiled kernels)."""
-        return self.banded
-
     def load_values(self, times) -> np.ndarray:
         """The external loads' values at the times (s, shape (n,)) as the kernels take them
         (``layout.Loads.values``): shape (n, L, N_LOAD), force (N) and point (m) in their frames,
@@ -473,10 +482,13 @@ class Engine:
 
     def believed_args(self, nominal: "Engine | None", times) -> tuple:
         """(loads, believed, believed_paths, believed_loads): the kernels' plant loads and the model
-        computed-torque control believes (``nominal``; None: this one) on the grid of the times (s),
-        the loads interpolated once when both carry the same."""
+        computed-torque control believes (``nominal``; None: this one) on the grid of the times (s;
+        or a function that makes them, called only where there are loads), the loads interpolated
+        once when both carry the same."""
         self.check_nominal(nominal)
         believed = self if nominal is None else nominal
+        if callable(times):
+            times = times() if self.loads is not None or believed.loads is not None else None
         own = self.loads_at(times)
         theirs = own if believed.loads is self.loads else believed.loads_at(times)
         return own, believed.layout, believed.paths, theirs
@@ -740,7 +752,7 @@ class Engine:
         states, rates = np.empty((n_steps + 1, width)), np.empty((n_steps + 1, width))
         applied = np.empty((n_steps + 1, self.n_joints))
         law = Law(tau, ref, refd, refdd, kp, kd, mode, gains)
-        loads, *believed = self.believed_args(nominal, t0 + np.arange(2 * n_steps + 1) * (0.5 * dt))
+        loads, *believed = self.believed_args(nominal, lambda: t0 + np.arange(2 * n_steps + 1) * (0.5 * dt))
 
         def run(y, n, rows, out):
             if muscles is not None:
@@ -751,8 +763,8 @@ class Engine:
         code, done, max_viol = self._in_chunks(run, y0, int(n_steps), (states, rates, applied))
         for array in (states, rates, applied):  # the kernel filled the rows up to step ``done``
             array[done + 1:] = np.nan
-        z, zd = self.joints_from_state(states[:, :self.n_state])
-        return SimResult(int(code), int(done), z, zd, float(max_viol), states, rates, applied)
+        return SimResult(int(code), int(done), float(max_viol), states, rates, applied,
+                         lambda y: self.joints_from_state(y[:, :self.n_state]))
 
     def _in_chunks(self, run, y0, n_steps: int, out: tuple) -> tuple[int, int, float]:
         """``run(y, n, rows, out)`` (a compiled RK4 of n steps from y on the half-step rows ``rows``,
@@ -862,7 +874,7 @@ class Engine:
         """kp, kd (J,), the mode and the gain matrices as the kernels take them."""
         if mode not in MODES:
             raise ValueError(f"mode must be one of PD={PD}, COMPUTED={COMPUTED}, GAINS={GAINS}, got {mode!r}")
-        kp, kd = (np.array(np.broadcast_to(np.asarray(g, dtype=float), (self.n_joints,))) if np.ndim(g) == 0
+        kp, kd = (np.full(self.n_joints, float(g)) if np.ndim(g) == 0
                   else self._vector(g, self.n_joints, name) for g, name in ((kp, "kp"), (kd, "kd")))
         shape = (rows, self.n_joints, 2 * self.n_joints)
         if mode == GAINS:
@@ -877,4 +889,7 @@ class Engine:
 def _writeable(array) -> np.ndarray:
     """array as a contiguous, writeable float array (a copy only where it is not one already): the
     kernels compile once for writeable arguments, not once more for read-only ones."""
+    if (type(array) is np.ndarray and array.dtype == np.float64 and array.flags.c_contiguous
+            and array.flags.writeable):  # the common case, without np.require's cost (microseconds)
+        return array
     return np.require(array, dtype=float, requirements=["C", "W"])

@@ -233,11 +233,6 @@ class Model:
         return len(self.coordinates)
 
     @property
-    def has_path_or_free_joints(self) -> bool:
-        """Whether a joint has a path or is free (such models run on the engine's dense kernels)."""
-        return any(joint.path is not None or joint.type == "free" for joint in self.joints)
-
-    @property
     def floating_base(self) -> "Joint | None":
         """The free joint between ground and a body (the model's floating base), or None."""
         return next((joint for joint in self.joints if joint.type == "free" and joint.parent == GROUND), None)

@@ -172,11 +172,7 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     if tuple(motion.joints) != engine.joints:
         raise ValueError(f"the motion's joints {tuple(motion.joints)} are not the model's {engine.joints}")
     began = time.perf_counter()
-    if start is None:
-        z0, zd0, _ = motion(np.zeros(1))
-        y0 = engine.state_from_joints(z0[0], zd0[0])
-    else:
-        y0 = np.array(start, dtype=float)
+    y0 = start_state(engine, motion) if start is None else np.array(start, dtype=float)
     muscled = excitation is not None and y0.shape == (engine.n_state + engine.n_muscle_states,)
     if (y0.shape != (engine.n_state,) and not muscled) or not np.all(np.isfinite(y0)):
         raise ValueError(f"the initial state must be {engine.n_state} finite numbers [q, q'], got shape {y0.shape}")
@@ -191,11 +187,25 @@ def simulate(torque, engine: Engine, motion, kp=0.0, kd=0.0, *, dt: float = 1e-3
     return result
 
 
+def start_state(engine: Engine, motion) -> np.ndarray:
+    """The state (n_state,) [q, q'] on the constraint manifold at the motion's start (t = 0)."""
+    z0, zd0, _ = motion(np.zeros(1))
+    return engine.state_from_joints(z0[0], zd0[0])
+
+
 def _law(engine: Engine, kp, kd, computed: bool, nominal: Engine | None, gains) -> FeedbackLaw:
     """The feedback law of ``simulate``'s arguments."""
-    kp, kd = (np.array(np.broadcast_to(np.asarray(g, dtype=float), (engine.n_joints,))) for g in (kp, kd))
+    kp, kd = (_per_joint(g, engine.n_joints) for g in (kp, kd))
     engine.check_nominal(nominal)  # ValueError for other joints
     return FeedbackLaw(kp, kd, GAINS if gains is not None else COMPUTED if computed else PD, gains, nominal)
+
+
+def _per_joint(gain, n_joints: int) -> np.ndarray:
+    """A gain (one number, or one per joint) as a new array of shape (J,)."""
+    gain = np.asarray(gain, dtype=float)
+    if gain.ndim == 0:
+        return np.full(n_joints, float(gain))
+    return np.array(gain if gain.shape == (n_joints,) else np.broadcast_to(gain, (n_joints,)))
 
 
 def _torques(torque, t: np.ndarray, n_joints: int) -> np.ndarray:
@@ -490,6 +500,9 @@ class _Still:
         return zero, zero, zero
 
 
+WARM_CALLS = 10  # simulations of the warm-up per kind of model, each about 0.1 ms
+
+
 def warm_up(adaptive: bool = False, engines=()) -> list:
     """Load (or compile) the engine's kernels on the forearm and each kind of ``engines``, the
     muscles' kernel for those with muscles (and with ``adaptive`` the adaptive right-hand side and
@@ -520,7 +533,8 @@ def _warm_up(adaptive: bool, others) -> list:
         warmed[kind(engine)] = engine
         motion = _Still(engine.joints)
         J = engine.n_joints
-        simulate(None, engine, motion, dt=0.05)
+        for _ in range(WARM_CALLS):  # also lets Python specialise the calls' bytecode (after 8 runs)
+            simulate(None, engine, motion, dt=0.05, start=start_state(engine, motion))
         engine.inverse_torques(np.zeros(J), np.zeros(J), np.zeros(J), 0.0)
         if adaptive:
             import scipy.integrate  # noqa: F401

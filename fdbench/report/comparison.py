@@ -34,7 +34,7 @@ class ComparisonPlan:
     dataset (``paper_methods.Plan`` or None) and the exact-gradient rows of those cells."""
 
     datasets: list
-    walk: list
+    studied: list
     forearm: list
     skipped: list = field(default_factory=list)
     options: Options = field(default_factory=Options)
@@ -57,7 +57,7 @@ class ComparisonPlan:
         """Every run's spec, the slowest first (so that two workers share the work evenly): on the
         studied dataset collocation, computed torque (inverse dynamics at every stage), LQR, the
         shooting optimisation, then the others; the forearm's, then the paper's cells."""
-        return ([m.spec for m in sorted(self.walk, key=lambda m: SLOWEST_FIRST.index(m.key))]
+        return ([m.spec for m in sorted(self.studied, key=lambda m: SLOWEST_FIRST.index(m.key))]
                 + [m.spec for m in self.forearm] + (self.cells.all_specs() if self.cells is not None else [])
                 + [m.spec for m in self.extra])
 
@@ -249,16 +249,16 @@ def _order_text(rows: list[Row]) -> str:
                      for row in sorted(rows, key=_rank_key))
 
 
-def claim_lines(walk: list[Row], forearm: list[Row], walk_duration: float, forearm_duration: float,
+def claim_lines(studied: list[Row], forearm: list[Row], studied_duration: float, forearm_duration: float,
                 floating_base: bool = True, inverse_fields: dict | None = None) -> list[str]:
     """The paper's claim ("the forearm generates the same problems as more complex models") tested
     on these runs: where the walk's ranking of the methods (reaching the end, then RMSE_rot) agrees
     with the forearm's, where not, and why; every sentence from the rows' numbers (and the inverse
     dynamics' residual fields, ``inverse_fields``)."""
-    pairs = _pairs(walk, forearm)
+    pairs = _pairs(studied, forearm)
     if not pairs:
         return ["No method ran on both models; nothing to compare."]
-    out = _reaching_lines(pairs, walk_duration, forearm_duration, floating_base)
+    out = _reaching_lines(pairs, studied_duration, forearm_duration, floating_base)
     out += _ranking_lines(pairs)
     out += _open_loop_lines(pairs)
     out += _residual_lines([w for w, _ in pairs], floating_base, inverse_fields or {})
@@ -266,29 +266,29 @@ def claim_lines(walk: list[Row], forearm: list[Row], walk_duration: float, forea
     return out
 
 
-def _reaching_lines(pairs, walk_duration, forearm_duration, floating_base) -> list[str]:
+def _reaching_lines(pairs, studied_duration, forearm_duration, floating_base) -> list[str]:
     both = [w for w, f in pairs if w.reached_end and f.reached_end]
     neither = [(w, f) for w, f in pairs if not w.reached_end and not f.reached_end]
-    walk_only = [(w, f) for w, f in pairs if not w.reached_end and f.reached_end]
+    studied_only = [(w, f) for w, f in pairs if not w.reached_end and f.reached_end]
     forearm_only = [(w, f) for w, f in pairs if w.reached_end and not f.reached_end]
     agree = len(both) + len(neither)
     out = [f"- **Reaching the end**: {agree} of {len(pairs)} methods behave alike on both models."
            + (f" {_names(both)} reach the end of both motions." if both else "")]
     for w, f in neither:
         out.append(f"- {short(w)} stops on both: the forearm at t = {number(f.get('t_end'))} s of {forearm_duration:g} s "
-                   f"({f.get('status')}), the walk at t = {number(w.get('t_end'))} s of {walk_duration:g} s "
+                   f"({f.get('status')}), the walk at t = {number(w.get('t_end'))} s of {studied_duration:g} s "
                    f"({w.get('status')}).")
-    for w, f in walk_only:
+    for w, f in studied_only:
         why = ""
         if w.key == OPEN_LOOP and floating_base:
             why = (" Without feedback nothing holds the walk's floating base: the pelvis's three coordinates are "
                    "driven by the inverse-dynamics residuals alone, so the error that open loop accumulates is never "
                    "corrected and the model falls, whereas the forearm's elbow is pinned to the ground.")
         out.append(f"- **Disagrees**: {short(w)} reaches the end of the forearm's motion ({forearm_duration:g} s) but "
-                   f"stops on the walk at t = {number(w.get('t_end'))} s of {walk_duration:g} s ({w.get('status')})."
+                   f"stops on the walk at t = {number(w.get('t_end'))} s of {studied_duration:g} s ({w.get('status')})."
                    + why + _shooting_start(w))
     for w, f in forearm_only:
-        out.append(f"- **Disagrees**: {short(w)} reaches the end of the walk ({walk_duration:g} s) but stops on the "
+        out.append(f"- **Disagrees**: {short(w)} reaches the end of the walk ({studied_duration:g} s) but stops on the "
                    f"forearm at t = {number(f.get('t_end'))} s of {forearm_duration:g} s ({f.get('status')}).")
     return out
 
@@ -310,10 +310,10 @@ def _classify(pairs) -> tuple[list, list, list, list]:
     both = [(pairs[i], pairs[k]) for i in range(len(pairs)) for k in range(i + 1, len(pairs))]
     agree, ties, by_end, by_error = [], [], [], []
     for (wa, fa), (wb, fb) in both:
-        on_walk, on_forearm = order(wa, wb), order(fa, fb)
-        if 0 in (on_walk, on_forearm):
+        on_studied, on_forearm = order(wa, wb), order(fa, fb)
+        if 0 in (on_studied, on_forearm):
             ties.append((wa, wb))
-        elif on_walk == on_forearm:
+        elif on_studied == on_forearm:
             agree.append((wa, wb))
         elif wa.reached_end != wb.reached_end or fa.reached_end != fb.reached_end:
             by_end.append((wa, wb))
@@ -322,40 +322,40 @@ def _classify(pairs) -> tuple[list, list, list, list]:
     return agree, ties, by_end, by_error
 
 
-def _pairs(walk: list[Row], forearm: list[Row]) -> list[tuple[Row, Row]]:
+def _pairs(studied: list[Row], forearm: list[Row]) -> list[tuple[Row, Row]]:
     """(walk row, forearm row) of each method run on both."""
     on_forearm = {row.key: row for row in forearm}
-    return [(w, on_forearm[w.key]) for w in walk if w.key and w.key in on_forearm]
+    return [(w, on_forearm[w.key]) for w in studied if w.key and w.key in on_forearm]
 
 
-def claim_facts(walk: list[Row], forearm: list[Row], inverse_fields: dict | None = None) -> dict:
+def claim_facts(studied: list[Row], forearm: list[Row], inverse_fields: dict | None = None) -> dict:
     """The facts behind the claim's sentences (``claim_lines``), by method key, for the JSON
     report: which methods reach the end on which model, the rankings and how many pairs of
     methods they order alike, open loop's rank and its error over PD's, the residual force RMS of
     the methods that reach the walk's end, and the runtimes' ratio walk / forearm."""
-    pairs = _pairs(walk, forearm)
+    pairs = _pairs(studied, forearm)
     if not pairs:
         return {}
     agree, ties, by_end, by_error = _classify(pairs)
-    walk_rows, forearm_rows = [w for w, _ in pairs], [f for _, f in pairs]
+    studied_rows, forearm_rows = [w for w, _ in pairs], [f for _, f in pairs]
     facts = {
-        "methods": [w.key for w in walk_rows],
+        "methods": [w.key for w in studied_rows],
         "reach_the_end": {"both": [w.key for w, f in pairs if w.reached_end and f.reached_end],
                           "neither": [w.key for w, f in pairs if not w.reached_end and not f.reached_end],
                           "forearm_only": [w.key for w, f in pairs if not w.reached_end and f.reached_end],
                           "walk_only": [w.key for w, f in pairs if w.reached_end and not f.reached_end]},
-        "ranking": {"forearm": ranking(forearm_rows), "walk": ranking(walk_rows),
+        "ranking": {"forearm": ranking(forearm_rows), "walk": ranking(studied_rows),
                     "pairs": len(agree) + len(ties) + len(by_end) + len(by_error), "alike": len(agree),
                     "ties": len(ties), "other_way_by_reaching_the_end": len(by_end),
                     "other_way_by_rmse_rot": [[a.key, b.key] if on_forearm < 0 else [b.key, a.key]
                                               for a, b, on_forearm in by_error]},
-        "worse_than_start": [w.key for w in walk_rows if _shooting_start(w)],
+        "worse_than_start": [w.key for w in studied_rows if _shooting_start(w)],
     }
     if OPEN_LOOP in facts["methods"] and PD in facts["methods"]:
         (w, f), (pw, pf) = (next(p for p in pairs if p[0].key == key) for key in (OPEN_LOOP, PD))
         facts["open_loop_over_pd"] = {"forearm": _quotient(f.get("rmse_rot_deg"), pf.get("rmse_rot_deg")),
                                       "walk": _quotient(w.get("rmse_rot_deg"), pw.get("rmse_rot_deg"))}
-    reached = sorted((row.get("residual_force_rms_n"), row.key) for row in walk_rows if row.reached_end
+    reached = sorted((row.get("residual_force_rms_n"), row.key) for row in studied_rows if row.reached_end
                      and row.get("residual_force_rms_n") is not None and math.isfinite(row.get("residual_force_rms_n")))
     facts["residual_force_rms_n"] = {key: value for value, key in reached}
     facts["residual_force_rms_n_inverse"] = (inverse_fields or {}).get("residual_force_rms_n")
@@ -371,12 +371,12 @@ def _quotient(a, b):
 
 
 def _ranking_lines(pairs) -> list[str]:
-    walk_rows, forearm_rows = [w for w, _ in pairs], [f for _, f in pairs]
+    studied_rows, forearm_rows = [w for w, _ in pairs], [f for _, f in pairs]
     agree, ties, by_end, by_error = _classify(pairs)
     both = agree + ties + by_end + by_error
     out = [f"- **Ranking** (reaching the end first, then RMSE_rot; best first): forearm {_order_text(forearm_rows)}; "
-           f"walk {_order_text(walk_rows)}."]
-    best_w, best_f = (min(rows, key=_rank_key) for rows in (walk_rows, forearm_rows))
+           f"walk {_order_text(studied_rows)}."]
+    best_w, best_f = (min(rows, key=_rank_key) for rows in (studied_rows, forearm_rows))
     best = (f"{short(best_w)} is the best on both" if best_w.key == best_f.key
             else f"the best is {short(best_f)} on the forearm and {short(best_w)} on the walk")
     text = f"- Of the {len(both)} pairs of methods, {len(agree)} {_are(len(agree))} ordered alike on both models"
@@ -426,10 +426,10 @@ def _open_loop_lines(pairs) -> list[str]:
     return [text + "."]
 
 
-def _residual_lines(walk_rows: list[Row], floating_base: bool, inverse_fields: dict) -> list[str]:
+def _residual_lines(studied_rows: list[Row], floating_base: bool, inverse_fields: dict) -> list[str]:
     if not floating_base:
         return []
-    found = sorted(((row.get("residual_force_rms_n"), row) for row in walk_rows if row.reached_end
+    found = sorted(((row.get("residual_force_rms_n"), row) for row in studied_rows if row.reached_end
                     and row.record.get("residual_force_rms_n") is not None
                     and math.isfinite(row.record["residual_force_rms_n"])), key=lambda x: x[0])
     if not found:
@@ -479,12 +479,12 @@ def _times(ratio: float) -> str:
 
 @dataclass
 class Parts:
-    """What the report's sections are written from: the plan, the rows per dataset (``walk``: the
+    """What the report's sections are written from: the plan, the rows per dataset (``studied``: the
     studied one), the inverse dynamics and its residual fields, the coordinates' names and kinds,
     the settings, every row (for the provenance), the figures' links, the peers' lines, the paper's cells."""
 
     plan: ComparisonPlan
-    walk: list
+    studied: list
     forearm: list
     inverse: object
     inverse_fields: dict
@@ -518,11 +518,11 @@ def _residuals(p: Parts) -> list[str]:
             "OpenSim's example walk (subject01, the trial in examples/opensim: a reference point for another "
             "recording, not its own); RRA's come after it adjusted the model's masses and the kinematics to shrink "
             "them, which fdbench does not do, so larger means here are expected:", ""] \
-        + residual_means_table(p.inverse_fields, p.walk)
+        + residual_means_table(p.inverse_fields, p.studied)
 
 
 def _methods(p: Parts) -> list[str]:
-    return (["", "## Methods", ""] + [f"- **{m.name}**: {m.description}." for m in p.plan.walk]
+    return (["", "## Methods", ""] + [f"- **{m.name}**: {m.description}." for m in p.plan.studied]
             + [f"- {reason}" for reason in dict.fromkeys(reason for _, reason in p.plan.skipped)])
 
 
@@ -532,11 +532,11 @@ def _indicators(p: Parts) -> list[str]:
             "RMSE_torque (N m) and RMSE_force (N) of the applied generalised forces against the inverse dynamics'; "
             "the residual force's and moment's RMS on the floating base (the fourth indicator: the smaller, the more "
             "dynamically consistent the tracked walk); all over the samples reached, one run each.", ""] \
-        + main_table(p.walk, p.duration) + collocation_own_lines(p.walk)
+        + main_table(p.studied, p.duration) + collocation_own_lines(p.studied)
 
 
 def _per_coordinate(p: Parts) -> list[str]:
-    return ["", "### Error per coordinate", ""] + coordinate_table(p.walk, p.names, p.kinds)
+    return ["", "### Error per coordinate", ""] + coordinate_table(p.studied, p.names, p.kinds)
 
 
 def _forearm(p: Parts) -> list[str]:
@@ -549,7 +549,7 @@ def _claim(p: Parts) -> list[str]:
     return ["", "## The paper's claim tested", "",
             "The paper offers the forearm as a stand-in that \"generates the same problems as more complex models\". "
             "From the runs above:", ""] \
-        + claim_lines(p.walk, p.forearm, p.duration, _duration(p.forearm), True, p.inverse_fields)
+        + claim_lines(p.studied, p.forearm, p.duration, _duration(p.forearm), True, p.inverse_fields)
 
 
 # the report's sections in order, each with when it applies
@@ -560,7 +560,7 @@ SECTIONS = (
     (_methods, lambda p: True),
     (_indicators, lambda p: True),
     (_per_coordinate, lambda p: len(p.names) > 1),
-    (lambda p: ["", "### The muscles"] + muscles_markdown(p.walk), lambda p: bool(muscles_markdown(p.walk))),
+    (lambda p: ["", "### The muscles"] + muscles_markdown(p.studied), lambda p: bool(muscles_markdown(p.studied))),
     (lambda p: _cells_lines(p.cells, p.extra), lambda p: bool(p.cells or p.extra)),
     (_forearm, lambda p: bool(p.forearm)),
     (_claim, lambda p: bool(p.forearm)),
@@ -570,13 +570,13 @@ SECTIONS = (
 )
 
 
-def markdown(plan, walk: list[Row], forearm: list[Row], inverse, inverse_fields: dict, names: tuple,
+def markdown(plan, studied: list[Row], forearm: list[Row], inverse, inverse_fields: dict, names: tuple,
              kinds: tuple, settings: dict, provenance: list[Row], figures: dict | None = None,
              peers: list[str] | None = None, cells: list[Row] | None = None, extra: list[Row] | None = None) -> str:
     """The report as Markdown: every section of ``SECTIONS`` that applies. ``peers``: the lines of
     its section "Peers" (``--peers``); ``cells`` and ``extra``: the rows of the paper's cells
     selected on the studied dataset and of their exact gradients."""
-    return render(SECTIONS, Parts(plan, walk, forearm, inverse, inverse_fields, names, kinds, settings, provenance,
+    return render(SECTIONS, Parts(plan, studied, forearm, inverse, inverse_fields, names, kinds, settings, provenance,
                                   figures, peers, list(cells or []), list(extra or [])))
 
 
@@ -612,11 +612,11 @@ def _duration(rows: list[Row]) -> float:
     return 1.0
 
 
-def csv_rows(walk: list[Row], forearm: list[Row], cells: list[Row] = ()) -> list[list]:
+def csv_rows(studied: list[Row], forearm: list[Row], cells: list[Row] = ()) -> list[list]:
     """One row per method and model (the columns of ``CSV_COLUMNS``), then one per run of the
     paper's cells on the studied dataset."""
     return [[("" if value is None else value) for value in _flat(row, model, k).values()]
-            for model, found in (("walk", walk), ("forearm", forearm), ("walk", cells)) for row in found
+            for model, found in (("walk", studied), ("forearm", forearm), ("walk", cells)) for row in found
             for k in range(len(row.records))]
 
 
@@ -631,7 +631,7 @@ def _flat(row: Row, model: str, index: int = 0) -> dict:
     return {name: values.get(name) for name in CSV_COLUMNS}
 
 
-def json_report(plan, walk: list[Row], forearm: list[Row], inverse_fields: dict, settings: dict,
+def json_report(plan, studied: list[Row], forearm: list[Row], inverse_fields: dict, settings: dict,
                 claim: list[str], cells: list[Row] = ()) -> dict:
     """The report as one JSON-ready object: settings, the inverse dynamics' residuals beside RRA's,
     every run's record per model, the methods left out and why (``skipped``; ``bfgs``: BFGS's
@@ -647,9 +647,9 @@ def json_report(plan, walk: list[Row], forearm: list[Row], inverse_fields: dict,
            "inverse_residuals": {k: finite_or_none(v) for k, v in inverse_fields.items()},
            "rra_published_means": dict(RRA_MEANS), "bfgs": plan.bfgs_note,
            "skipped": [{"key": key, "reason": reason} for key, reason in plan.skipped],
-           "walk": [entry(row) for row in walk], "forearm": [entry(row) for row in forearm],
+           "walk": [entry(row) for row in studied], "forearm": [entry(row) for row in forearm],
            "claim": [line.removeprefix("- ").replace("**", "") for line in claim],
-           "claim_facts": claim_facts(walk, forearm, inverse_fields)}
+           "claim_facts": claim_facts(studied, forearm, inverse_fields)}
     if cells:
         from .paper import json_report as cell_report
 
@@ -704,7 +704,7 @@ def settings_table(plan: ComparisonPlan, spec, jobs: str, seeds: int = 1) -> dic
 
     loads = dict(spec.inputs).get("--loads")
     conditions = {key: value.replace("Figure 2", "the coordinates figure")
-                  for key, value in condition_settings(spec, [m.spec for m in plan.walk]).items()}
+                  for key, value in condition_settings(spec, [m.spec for m in plan.studied]).items()}
     options = plan.options
     cmaes = f"CMA-ES, budget {options.budget} simulations, population {options.popsize}" + (
         f", sigma0 {options.sigma0:g}" if options.sigma0 is not None else "") + (
@@ -719,7 +719,7 @@ def settings_table(plan: ComparisonPlan, spec, jobs: str, seeds: int = 1) -> dic
     if options.kp is not None or options.kd is not None:
         table["PD gains"] = (f"Kp = {options.kp if options.kp is not None else 'default'}, "
                              f"Kd = {options.kd if options.kd is not None else 'default'} (on both models)")
-    if plan.walk and plan.datasets[0].penalty_weight != FLOATING_BASE_PENALTY:
+    if plan.studied and plan.datasets[0].penalty_weight != FLOATING_BASE_PENALTY:
         table["penalty weight"] = f"{plan.datasets[0].penalty_weight:g} deg on the walk (eq. 18)"
     if plan.cells is not None and plan.cells.cells:
         table["paper's cells"] = (f"{len(plan.cells.cells)} on the walk, {seeds} seed(s) each, budget "
@@ -742,7 +742,7 @@ def report_rows(plan: ComparisonPlan, runs: dict, made: dict, peer_methods=()) -
 
     cells = [row for row in build_rows(plan.cells, runs, made) if row.table != "control"] \
         if plan.cells is not None else []
-    return {"walk": rows(plan.walk, runs, made, "walk"), "forearm": rows(plan.forearm, runs, made, "forearm"),
+    return {"walk": rows(plan.studied, runs, made, "walk"), "forearm": rows(plan.forearm, runs, made, "forearm"),
             "cells": cells, "extra": rows(plan.extra, runs, made), "peers": rows(list(peer_methods), runs, made, "peers")}
 
 
@@ -750,21 +750,21 @@ def text(fmt: str, plan: ComparisonPlan, found: dict, runs: dict, jobs: str, fig
          processes: int = 1, peer_methods=(), seeds: int = 1) -> tuple[str, int]:
     """The report in ``fmt`` (md, csv or json) from its rows ``found`` (``report_rows``), and the
     count of figures written into ``figures`` (linked relative to ``base``)."""
-    spec = plan.walk[0].spec if plan.walk else plan.cells.all_specs()[0]
+    spec = plan.studied[0].spec if plan.studied else plan.cells.all_specs()[0]
     inverse = spec.reference()
-    walk, forearm, cells, extra, peer_rows = (found[k] for k in ("walk", "forearm", "cells", "extra", "peers"))
+    studied, forearm, cells, extra, peer_rows = (found[k] for k in ("walk", "forearm", "cells", "extra", "peers"))
     fields = inverse_residuals(spec, inverse)
     settings = settings_table(plan, spec, jobs, seeds)
     if fmt == "csv":
         from ..files import csv_text
 
-        return csv_text(list(CSV_COLUMNS), csv_rows(walk + _peer_keyed(peer_rows) + extra, forearm, cells)), 0
+        return csv_text(list(CSV_COLUMNS), csv_rows(studied + _peer_keyed(peer_rows) + extra, forearm, cells)), 0
     duration, forearm_duration = float(inverse.t[-1]), _duration(forearm)
-    claim = claim_lines(walk, forearm, duration, forearm_duration, True, fields)
+    claim = claim_lines(studied, forearm, duration, forearm_duration, True, fields)
     if fmt == "json":
-        report = json_report(plan, walk + extra, forearm, fields, settings, claim, cells)
+        report = json_report(plan, studied + extra, forearm, fields, settings, claim, cells)
         if peer_rows:
-            report["peers"] = peers_json(peer_rows, walk)
+            report["peers"] = peers_json(peer_rows, studied)
         return json.dumps(report, indent=2) + "\n", 0
     links = None
     if figures is not None:
@@ -772,13 +772,13 @@ def text(fmt: str, plan: ComparisonPlan, found: dict, runs: dict, jobs: str, fig
         from ..files import new_folder
 
         with new_folder(figures):  # removed again if a figure cannot be written
-            links = write_model_figures(spec, inverse, walk, runs, figures, base, processes, SHORT)
+            links = write_model_figures(spec, inverse, studied, runs, figures, base, processes, SHORT)
     names, kinds = coordinates(spec)
     section = None
     if peer_rows:
         from ..report.peers import peers_markdown
 
-        section = peers_markdown(peer_rows, list(peer_methods), beside(walk))
-    return markdown(plan, walk, forearm, inverse, fields, names, kinds, settings,
-                    walk + forearm + cells + extra + _peer_keyed(peer_rows), links, section, cells,
+        section = peers_markdown(peer_rows, list(peer_methods), beside(studied))
+    return markdown(plan, studied, forearm, inverse, fields, names, kinds, settings,
+                    studied + forearm + cells + extra + _peer_keyed(peer_rows), links, section, cells,
                     extra), len(links or {})

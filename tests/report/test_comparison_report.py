@@ -603,10 +603,10 @@ def test_a_floating_base_with_muscles_gets_the_muscle_driven_methods_the_forearm
     path = tmp_path / "hopper.toml"
     path.write_text(to_toml(model_from_dict(data, "hopper.toml")))
     plan = make_plan({"model_name": str(path), "motion": "still"}, {}, Options(budget=4, popsize=2))
-    studied, forearm = [m.key for m in plan.walk], [m.key for m in plan.forearm]
+    studied, forearm = [m.key for m in plan.studied], [m.key for m in plan.forearm]
     assert set(MUSCLE_DRIVEN) <= set(studied) and not set(MUSCLE_DRIVEN) & set(forearm)
     assert forearm == [key for key in studied if key not in MUSCLE_DRIVEN]
-    assert all(m.spec.model_name == str(path) for m in plan.walk if m.key in MUSCLE_DRIVEN)
+    assert all(m.spec.model_name == str(path) for m in plan.studied if m.key in MUSCLE_DRIVEN)
     without = make_plan({"model_name": str(path), "motion": "still"}, {}, Options(budget=4, popsize=2),
                         collocation=False)
-    assert not set(MUSCLE_DRIVEN) & {m.key for m in without.walk}
+    assert not set(MUSCLE_DRIVEN) & {m.key for m in without.studied}
