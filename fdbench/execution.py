@@ -235,7 +235,7 @@ class LocalBackend(Backend):
         return f"this machine, {self.workers} worker processes at a time"
 
     def outcomes(self, specs):
-        _prepare_parent(specs)
+        _prepare_parent(specs, self.workers)
         if self.workers == 1 or len(specs) == 1:
             for index, spec in enumerate(specs):
                 yield index, run_spec(spec)
@@ -243,22 +243,83 @@ class LocalBackend(Backend):
         yield from _pool_outcomes(specs, self.workers)
 
 
-def _prepare_parent(specs) -> None:
+def _prepare_parent(specs, workers: int = 1) -> None:
     """Compile/load the kernels (and import cma) once, before worker processes fork: those of
     every kind of model the runs use (pin joints; paths, free joints, loads: the kernels compile
     one variant per kind), the population kernel for optimisations, scipy's integrators, so that
     the workers inherit them instead of each
     compiling the same kernels at the same time (a first walk report compiled its dense RK4 and
-    population kernels in both workers: about 140 s of CPU twice)."""
-    from .multibody.simulation import warm_up
+    population kernels in both workers: about 140 s of CPU twice). With several workers, RK4 of
+    each kind is first compiled side by side in as many processes (``compile_side_by_side``). What
+    only some runs need (the sensitivities of exact gradients) the workers compile, beside the other
+    runs."""
+    from .multibody.simulation import compile_tasks, warm_up
     from .tracking import warm_up as warm_up_population
 
-    engines = warm_up(any(getattr(s, "integrator", "rk4") != "rk4" for s in specs),
-                      [e for e in map(_engine, specs) if e is not None])
+    engines = [e for e in map(_engine, specs) if e is not None]
+    if workers > 1:
+        compile_side_by_side(compile_tasks(engines), workers)
+    engines = warm_up(any(getattr(s, "integrator", "rk4") != "rk4" for s in specs), engines)
     if any(getattr(s, "command", None) == "optimize" for s in specs):
         warm_up_population(engines)
     if any(getattr(s, "optimizer", None) == "cmaes" for s in specs):
         import cma  # noqa: F401
+
+
+NOTICE_AFTER_S = 1.0  # kernels loaded from the cache take less: no notice of compiling
+
+
+def compile_side_by_side(tasks, processes: int) -> None:
+    """Run ``tasks`` ((seconds, function) pairs: ``simulation.compile_tasks``) in up to
+    ``processes`` forked processes at once, the longest first each to the least loaded process,
+    so that numba's cache holds their kernels when this process loads them. A task that fails is
+    left to this process (which compiles what is not in the cache); the processes die with this
+    one (Ctrl-C included)."""
+    import multiprocessing
+    import time
+
+    shares = [[] for _ in range(min(processes, len(tasks)))]
+    loads = [0.0] * len(shares)
+    for seconds, task in sorted(tasks, key=lambda t: -t[0]):
+        least = loads.index(min(loads))
+        shares[least].append(task)
+        loads[least] += seconds
+    if len(shares) < 2 or not hasattr(os, "fork"):
+        return
+    context = multiprocessing.get_context("fork")
+    children = [context.Process(target=_compile_share, args=(share, os.getpid()), daemon=True) for share in shares]
+    try:
+        with compiling():  # Ctrl-C ends this process, and the children with it
+            for child in children:
+                child.start()
+            deadline = time.monotonic() + NOTICE_AFTER_S
+            for child in children:
+                child.join(max(0.0, deadline - time.monotonic()))
+            if any(child.is_alive() for child in children):
+                from .jit import compile_notice
+
+                with compile_notice():
+                    for child in children:
+                        child.join()
+    finally:
+        for child in children:
+            if child.is_alive():
+                child.kill()
+                child.join()
+
+
+def _compile_share(tasks, parent_pid: int) -> None:
+    """A compiling process's work (``compile_side_by_side``): its tasks, quietly, errors ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with_parent(parent_pid)
+    from .jit import quiet
+
+    quiet()
+    for task in tasks:
+        try:
+            task()
+        except Exception:  # noqa: BLE001 - the parent compiles it again and reports what fails
+            pass
 
 
 def _engine(spec):

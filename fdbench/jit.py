@@ -12,6 +12,7 @@ import os
 import stat
 import sys
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 CACHE_VARIABLE = "FDBENCH_CACHE_DIR"
@@ -170,6 +171,17 @@ class _CompileNotice:  # state of the process, on the class
         import time
 
         return f"compiling kernel {self.compiled + 1}: {time.monotonic() - self.started:.0f} s since the first"
+
+
+@contextmanager
+def compile_notice():
+    """The notice of compilation (its line, once, and the spinner) over a block in which other
+    processes compile kernels for this one."""
+    _CompileNotice.on_start()
+    try:
+        yield
+    finally:
+        _CompileNotice.on_end()
 
 
 def quiet() -> None:

@@ -1,15 +1,18 @@
 """Eq. 18 of the shooting problem (``fdbench.problem``), compiled: the tracking objective of a
 simulation's states and the population of open-loop candidates that ``fdbench.population.Population``
-spreads over threads. The simulations are the engine's (``fdbench.multibody.kernels.rk4``)."""
+spreads over threads. The simulations are the engine's (``fdbench.multibody.kernels.rk4_muscles``,
+which is ``rk4`` without muscles)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 from .jit import njit
-from .multibody.kernels import rk4, rk4_muscles
+from .multibody.kernels import rk4_muscles
 from .multibody.layout import AT_PARENT_X, COLUMN, FREE, KI, OFFSET, OK, PARENT, PD, Law, Muscles
 from .population import DEGREES_PER_RADIAN, Population
 
@@ -51,6 +54,21 @@ def tracking_objective(states, done, every, angles_ref, n_steps, penalty_weight,
     return rmse + penalty_weight * (1.0 - done / n_steps)
 
 
+def _candidate_muscles(muscles, candidate):
+    """The muscles of one candidate: None without muscles, else a ``layout.Muscles`` with the
+    candidate's excitations (rows, M)."""
+
+
+@overload(_candidate_muscles)
+def _candidate_muscles_typed(muscles, candidate):
+    # chosen by type when compiling: a branch on ``muscles is None`` would compile both calls, and
+    # RK4 without muscles once more for a model with muscles (about a minute on the gait model)
+    if isinstance(muscles, types.NoneType):
+        return lambda muscles, candidate: None
+    return lambda muscles, candidate: Muscles(muscles.paths, muscles.params, muscles.tendon_row,
+                                              muscles.excitation[candidate])
+
+
 @njit(nogil=True)
 def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_weight, model, paths, free, loads,
                    muscles, states, rates, applied, objective, candidate, stride, step, budget):
@@ -73,14 +91,9 @@ def rk4_candidates(y0, dt, n_steps, tau, ref, refd, every, angles_ref, penalty_w
         n = min(budget, n_steps - step)
         y = y0 if step == 0 else states[step].copy()
         law = Law(tau[candidate], ref, refd, ref, zero, zero, PD, no_gains)
-        if muscles is None:
-            code, done, _ = rk4(y, dt, n, 2 * step, law, model, paths, free, loads, model, paths, loads,
-                                states[step:step + n + 1], rates[step:step + n + 1], applied[step:step + n + 1])
-        else:
-            own = Muscles(muscles.paths, muscles.params, muscles.tendon_row, muscles.excitation[candidate])
-            code, done, _ = rk4_muscles(y, dt, n, 2 * step, law, model, paths, free, loads, model, paths, loads, own,
-                                        states[step:step + n + 1], rates[step:step + n + 1],
-                                        applied[step:step + n + 1])
+        code, done, _ = rk4_muscles(y, dt, n, 2 * step, law, model, paths, free, loads, model, paths, loads,
+                                    _candidate_muscles(muscles, candidate), states[step:step + n + 1],
+                                    rates[step:step + n + 1], applied[step:step + n + 1])
         step, budget = step + done, budget - max(done, 1)  # steps run: a failing candidate costs few
         if code != OK or step == n_steps:
             objective[candidate] = tracking_objective(states, step, every, angles_ref, n_steps, penalty_weight,

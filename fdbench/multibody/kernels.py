@@ -869,7 +869,8 @@ def rk4_muscles(y0, dt, n_steps, start, law, model, paths, free, loads, believed
                 muscles, states, rates, applied):
     """``rk4`` of a model with muscles (``layout.Muscles``, its excitations on the law's grid): the
     state (n_state,) is [q, q'] followed by the activations (M,) and the compliant tendons' normalised
-    forces, and the muscles' generalised forces add to the law's torque (``applied`` holds their sum)."""
+    forces, and the muscles' generalised forces add to the law's torque (``applied`` holds their sum).
+    With muscles None, ``rk4`` itself (the same compiled driver)."""
     return _drive(y0, dt, n_steps, start, law, model, paths, free, loads, believed, believed_paths, believed_loads,
                   (states, rates, applied), None, None, None, 1, None, muscles)
 

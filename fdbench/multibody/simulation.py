@@ -519,27 +519,69 @@ def kind(engine: Engine) -> tuple:
 
 
 def _warm_up(adaptive: bool, others) -> list:
-    from ..models import find_model
-
     warmed = {}
     muscled = set()
-    for engine in (Engine(find_model("forearm")), *others):  # the banded kernels, then the others
+    for engine in (forearm_engine(), *others):  # the banded kernels, then the others
         if engine.n_muscles and kind(engine) not in muscled:  # the muscles' kernel (``rk4_muscles``)
             muscled.add(kind(engine))
-            simulate(None, engine, _Still(engine.joints), dt=0.05,
-                     excitation=lambda t, m=engine.n_muscles: np.full((len(t), m), 0.1))
+            warm_muscles(engine)
         if kind(engine) in warmed:
             continue
         warmed[kind(engine)] = engine
-        motion = _Still(engine.joints)
-        J = engine.n_joints
-        for _ in range(WARM_CALLS):  # also lets Python specialise the calls' bytecode (after 8 runs)
-            simulate(None, engine, motion, dt=0.05, start=start_state(engine, motion))
-        engine.inverse_torques(np.zeros(J), np.zeros(J), np.zeros(J), 0.0)
+        warm_simulation(engine)
         if adaptive:
             import scipy.integrate  # noqa: F401
             import scipy.optimize  # noqa: F401
 
+            J = engine.n_joints
             y0 = engine.state_from_joints(np.zeros(J), np.zeros(J))
-            _rates(None, engine, motion, _law(engine, 0.0, 0.0, False, None, None), np.zeros(1), y0[None])
+            _rates(None, engine, _Still(engine.joints), _law(engine, 0.0, 0.0, False, None, None), np.zeros(1),
+                   y0[None])
     return list(warmed.values())
+
+
+def forearm_engine() -> Engine:
+    """The library's forearm's engine (the pin-joint kernels every command warms)."""
+    from ..models import find_model
+
+    return Engine(find_model("forearm"))
+
+
+def warm_simulation(engine: Engine) -> None:
+    """Load (or compile) ``rk4`` and eq. 3 for the engine's kind of model: ``WARM_CALLS`` simulations
+    of a still model (which also let Python specialise the calls' bytecode, after 8 runs)."""
+    motion = _Still(engine.joints)
+    J = engine.n_joints
+    for _ in range(WARM_CALLS):
+        simulate(None, engine, motion, dt=0.05, start=start_state(engine, motion))
+    engine.inverse_torques(np.zeros(J), np.zeros(J), np.zeros(J), 0.0)
+
+
+def warm_muscles(engine: Engine) -> None:
+    """Load (or compile) the muscles' RK4 (``rk4_muscles``) for the engine's kind of model."""
+    simulate(None, engine, _Still(engine.joints), dt=0.05,
+             excitation=lambda t, m=engine.n_muscles: np.full((len(t), m), 0.1))
+
+
+# seconds a kernel took to compile on one core of a 2-core machine, by (kernel, dense): RK4 without
+# or with muscles, for pin joints only (banded) or with any of paths, free joints or loads (dense)
+COMPILE_S = {("rk4", False): 27.0, ("rk4", True): 62.0, ("muscles", False): 45.0, ("muscles", True): 66.0}
+
+
+def compile_tasks(engines) -> list[tuple[float, object]]:
+    """What ``warm_up`` on ``engines`` compiles or loads, one task per kernel variant: RK4 (with eq.
+    3) per kind of model (``kind``), and the muscles' RK4 per kind of model with muscles, each as
+    (its compile time in s, a function of no arguments that loads or compiles it). The tasks compile
+    different kernels, so they can run in separate processes at once; numba's cache then holds
+    every kernel for the processes that follow."""
+    tasks = {}
+
+    def add(job: str, engine: Engine, warm) -> None:
+        if (job, kind(engine)) not in tasks:
+            tasks[job, kind(engine)] = (COMPILE_S[job, not all(kind(engine))], lambda: warm(engine))
+
+    for engine in (forearm_engine(), *engines):
+        add("rk4", engine, warm_simulation)
+        if engine.n_muscles:
+            add("muscles", engine, warm_muscles)
+    return list(tasks.values())

@@ -81,7 +81,7 @@ def test_on_the_constraints_eq_12_converges_to_the_minimal_forward_dynamics(mode
     z, zd, tau = random_joint_state(Engine(model), seed)
     expected = t.forward_dynamics(z, zd, tau)
     errors = []
-    for alpha in (1e5, 1e7):  # low enough that the penalty's error stays above the solve's rounding
+    for alpha in (1e5, 1e6, 1e7):  # low enough that the penalty's error stays above the solve's rounding
         engine = Engine(model, alpha=alpha)
         y = engine.state_from_joints(z, zd)
         worst, _, jv = residuals(engine, y)
@@ -90,9 +90,10 @@ def test_on_the_constraints_eq_12_converges_to_the_minimal_forward_dynamics(mode
         zdd = engine.joints_from_state(rate[0])[1]  # [q', q''] read as a state: its second half gives z''
         errors.append(np.abs(zdd - expected).max() / max(1.0, np.abs(expected).max()))
         rounding = 1e-14 * np.linalg.cond(leading_matrix(engine, y))
-    # the penalty's error shrinks as 1/alpha, down to the solve's rounding (its size at 1e7 depends on
-    # the model: a 6 cm body of inertia 1 kg m^2 on a path leaves 2 %)
-    assert errors[1] < errors[0] / 30 or errors[1] < rounding, (errors, rounding)
+    # the penalty's error shrinks as 1/alpha (ten times a decade), down to the solve's rounding, once
+    # alpha is large beside the model's stiffness: a 6 cm body of inertia 2 kg m^2 on a path is still
+    # on its way at 1e5 (0.59, 0.43, 0.12 at 1e4, 1e5, 1e6), and leaves 1.4 % at 1e7, 0.15 % at 1e8
+    assert errors[2] < errors[1] / 5 or errors[2] < rounding, (errors, rounding)
 
 
 @pytest.mark.parametrize("seed", [0, 1])

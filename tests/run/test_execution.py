@@ -395,3 +395,37 @@ def test_the_parent_warms_the_kernels_of_every_family_its_runs_use(tmp_path, mon
     execution._prepare_parent([control_spec(integrator="rk45")])
     pins, free = (True, True, True), (True, False, True)  # (no paths, no free joints, no loads)
     assert asked == [(False, {pins}), (False, {pins, free}), (True, {pins})]
+
+
+def test_compile_tasks_give_one_task_per_kernel_variant(tmp_path):
+    """The kernels compiled side by side: RK4 once per kind of model (the forearm's pin joints
+    always, arm2 and arm26 share them; a free joint is another kind), and the muscles' RK4 once per
+    kind of model with muscles (arm26's)."""
+    from fdbench.models import find_model
+    from fdbench.multibody.engine import Engine
+    from fdbench.multibody.simulation import COMPILE_S, compile_tasks
+
+    model = tmp_path / "floating.toml"
+    model.write_text(FLOATING)
+    arm2, floating, arm26 = (Engine(find_model(name)) for name in ("arm2", str(model), "arm26"))
+    seconds = sorted(s for s, _ in compile_tasks([arm2, floating, arm2, arm26, floating, arm26]))
+    assert seconds == sorted([COMPILE_S["rk4", False], COMPILE_S["rk4", True], COMPILE_S["muscles", False]])
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs fork")
+def test_compiling_side_by_side_runs_every_task_once_in_other_processes(tmp_path):
+    """Each task runs once, in one of at most ``processes`` child processes, never in the caller;
+    a failing task does not stop the others."""
+    from fdbench.execution import compile_side_by_side
+
+    def task(name):
+        def run():
+            (tmp_path / name).write_text(str(os.getpid()))
+            if name == "c":
+                raise RuntimeError("a kernel that fails to compile")
+        return run
+
+    names = ["a", "b", "c", "d", "e"]
+    compile_side_by_side([(float(k), task(n)) for k, n in enumerate(names)], processes=2)
+    pids = {(tmp_path / name).read_text() for name in names}
+    assert len(pids) == 2 and str(os.getpid()) not in pids
