@@ -519,20 +519,16 @@ def kind(engine: Engine) -> tuple:
 
 
 def _warm_up(adaptive: bool, others) -> list:
+    for _, task in compile_tasks(others):  # the banded kernels, then the others
+        task()
     warmed = {}
-    muscled = set()
-    for engine in (forearm_engine(), *others):  # the banded kernels, then the others
-        if engine.n_muscles and kind(engine) not in muscled:  # the muscles' kernel (``rk4_muscles``)
-            muscled.add(kind(engine))
-            warm_muscles(engine)
-        if kind(engine) in warmed:
-            continue
-        warmed[kind(engine)] = engine
-        warm_simulation(engine)
-        if adaptive:
-            import scipy.integrate  # noqa: F401
-            import scipy.optimize  # noqa: F401
+    for engine in (forearm_engine(), *others):
+        warmed.setdefault(kind(engine), engine)
+    if adaptive:
+        import scipy.integrate  # noqa: F401
+        import scipy.optimize  # noqa: F401
 
+        for engine in warmed.values():
             J = engine.n_joints
             y0 = engine.state_from_joints(np.zeros(J), np.zeros(J))
             _rates(None, engine, _Still(engine.joints), _law(engine, 0.0, 0.0, False, None, None), np.zeros(1),
@@ -569,11 +565,12 @@ COMPILE_S = {("rk4", False): 27.0, ("rk4", True): 62.0, ("muscles", False): 45.0
 
 
 def compile_tasks(engines) -> list[tuple[float, object]]:
-    """What ``warm_up`` on ``engines`` compiles or loads, one task per kernel variant: RK4 (with eq.
-    3) per kind of model (``kind``), and the muscles' RK4 per kind of model with muscles, each as
-    (its compile time in s, a function of no arguments that loads or compiles it). The tasks compile
-    different kernels, so they can run in separate processes at once; numba's cache then holds
-    every kernel for the processes that follow."""
+    """What ``warm_up`` on ``engines`` compiles or loads (the forearm's kernels first), one task per
+    kernel variant: RK4 (with eq. 3) per kind of model (``kind``), and the muscles' RK4 per kind of
+    model with muscles, each as (its compile time in s, a function of no arguments that loads or
+    compiles it). The tasks compile different kernels, so they can run in separate processes at
+    once (``execution.compile_side_by_side``); numba's cache then holds every kernel for the
+    processes that follow."""
     tasks = {}
 
     def add(job: str, engine: Engine, warm) -> None:
