@@ -193,7 +193,8 @@ def write_atomic(path: str | os.PathLike, data: str | bytes, option: str = "--ou
     atomically by a rename (mode and owner kept), a symlink written through, devices, FIFOs, files
     with other hard links or in an append-only folder written in place. BadFile naming ``option``."""
     path = check_writable(path, option)  # checked again: a link may have been planted since the first check
-    payload = data.encode() if isinstance(data, str) else bytes(data)
+    # a name from the file system that is not UTF-8 (its bytes kept as surrogates) written back as those bytes
+    payload = data.encode("utf-8", "surrogateescape") if isinstance(data, str) else bytes(data)
     try:
         st = _stat(path)
         target = Path(os.path.realpath(path))
@@ -311,8 +312,13 @@ def check_distinct(outputs: dict, inputs: dict | None = None, database=None) -> 
         protected += [("--db", Path(f"{database}{suffix}")) for suffix in ("-wal", "-shm", "-journal")]
     for i, (option, path) in enumerate(named):
         st = _stat(path, option)
+        if st is not None and stat.S_ISFIFO(st.st_mode):  # a pipe read as an input would take back the output
+            for other, guarded in protected:
+                if other != "--db" and same_file(path, guarded):
+                    raise BadFile(f"{option}: {path} is the pipe the input of {other} is read from; "
+                                  "choose another output")
         if st is not None and not stat.S_ISREG(st.st_mode):
-            continue  # a device or FIFO: writing it destroys nothing
+            continue  # a device or another FIFO: writing it destroys nothing
         for other, guarded in protected:
             if same_file(path, guarded):
                 what = "the results database" if other == "--db" else f"the input of {other}"

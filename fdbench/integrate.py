@@ -44,7 +44,7 @@ class Status(str, Enum):
 def check_tolerances(rtol: float, atol: float) -> None:
     """ValueError (one line) for a relative or absolute tolerance of the adaptive integrators out of range."""
     if not (math.isfinite(rtol) and MIN_RTOL <= rtol < 1):
-        raise ValueError(f"rtol must be in [{MIN_RTOL:.2g}, 1), got {rtol}")
+        raise ValueError(f"rtol must be in [100 eps, 1) = [{float(MIN_RTOL)!r}, 1), got {rtol}")
     if not (math.isfinite(atol) and MIN_ATOL <= atol <= MAX_ATOL):
         raise ValueError(f"atol must be in [{MIN_ATOL:g}, {MAX_ATOL:g}], got {atol}")
 

@@ -18,7 +18,7 @@ from . import __version__
 from .casadi_loader import casadi
 from .collocation import collocate, collocate_muscles, own_fields, record_fields
 from .multibody.model_changes import rigid_tendons
-from .controllers.base import muscle_columns
+from .controllers.base import failing_on_options, muscle_columns
 from .excitation_problem import DEFAULT_EFFORT_WEIGHT, ExcitationProblem
 from .excitation_problem import warm_up as warm_up_excitations
 from .files import BadFile, read_history_csv, read_input_text
@@ -97,8 +97,12 @@ def muscles_run(spec, exponent: float = 2.0, reserve_optimal_force: float | None
     desired, _ = motions(spec)
     body = engine(spec, model)
     inv = sim.inverse_dynamics(None, body, desired)
-    so = static_optimization(model, body.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque, exponent,
-                             reserve_optimal_force, passive, along_tendon=along_tendon)
+    given = options_text((name, value) for name, value in (("activation_exponent", exponent),
+                                                           ("reserve_optimal_force", reserve_optimal_force))
+                         if value is not None)
+    with failing_on_options("--muscles (static optimisation)", given):
+        so = static_optimization(model, body.muscle_params, inv.t, inv.angles, inv.velocities, inv.torque, exponent,
+                                 reserve_optimal_force, passive, along_tendon=along_tendon)
     reserved = so.optimal_force > 0
     peak_torque = np.abs(so.torque).max(axis=0)
     peak_reserve = np.abs(so.reserve).max(axis=0)
@@ -153,7 +157,8 @@ def _method_run(spec, on_evaluation=None, on_start=None):
         known.feedforward()(grid.t)
     start = sim.start_state(body, desired)
     began = time.perf_counter()
-    design = law.design(known)
+    with failing_on_options(f"--controller {spec.controller or 'pd'}", options_text(spec.method_options)):
+        design = law.design(known)
     result = sim.simulate(design.feedforward, body, desired, kp=design.kp, kd=design.kd, gains=design.gains,
                           computed=design.computed, nominal=known.engine if design.computed else None, grid=grid,
                           start=start, **integration(spec))
@@ -177,7 +182,8 @@ def _self_simulated(spec, law, known, body, desired, inverse, grid):
         raise ValueError(f"--controller {spec.controller}: muscles run on the compiled RK4 only, not "
                          f"--integrator {spec.integrator}")
     began = time.perf_counter()
-    result, fields, (columns, values) = law.run(known, body, desired, grid, spec.dt)
+    with failing_on_options(f"--controller {spec.controller}", options_text(spec.method_options)):
+        result, fields, (columns, values) = law.run(known, body, desired, grid, spec.dt)
     runtime = time.perf_counter() - began
     record = base_record(spec)
     record.update(torque="reserves+muscles", evaluations=1, runtime_s=runtime, controller=spec.controller,

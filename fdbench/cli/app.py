@@ -36,7 +36,7 @@ def bad_input(errors=ValueError, wording=str):
 
 # the library's errors that are bad input wherever a command lets them out (by name: none is imported
 # before a command needs it), with the words put before their message
-LIBRARY_BAD_INPUT = {"StoreError": "--db: ", "BadFile": "", "BackendError": "", "BadQuery": ""}
+LIBRARY_BAD_INPUT = {"StoreError": "--db: ", "BadFile": "", "BackendError": "", "BadQuery": "", "DesignError": ""}
 
 
 class HelpGroup(TyperGroup):

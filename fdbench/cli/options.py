@@ -147,7 +147,7 @@ class Simulation:
 
     integrator: Annotated[str, typer.Option("--integrator", help=INTEGRATOR_HELP)] = "rk4"
     dt: Dt = 1e-3
-    rtol: Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [2.2e-14, 1).")] = 1e-6
+    rtol: Annotated[float, typer.Option("--rtol", help="Relative tolerance (solve_ivp integrators), in [100 eps, 1) (100 eps = 2.220446e-14).")] = 1e-6
     atol: Annotated[float, typer.Option("--atol", help="Absolute tolerance (solve_ivp integrators), in [1e-30, 1].")] = 1e-9
     alpha: Alpha = 1e7
     xi: Xi = 1.0

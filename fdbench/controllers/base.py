@@ -16,6 +16,7 @@ from __future__ import annotations
 import inspect
 import math
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -101,6 +102,25 @@ class Controller(ABC):
 
 
 CONTROLLERS: Registry[type[Controller]] = Registry("controller")
+
+
+class DesignError(ValueError):
+    """A method that cannot be carried out with the options given (no finite Riccati solution for
+    extreme weights, a gain that overflows, a static optimisation that does not converge): bad input."""
+
+
+NUMERICAL_FAILURES = (ArithmeticError, np.linalg.LinAlgError)  # what such options make numpy and scipy raise
+
+
+@contextmanager
+def failing_on_options(method: str, options: str):
+    """Within the block, a numerical failure (``NUMERICAL_FAILURES``) is raised as DesignError
+    naming ``method`` and its ``options`` (text)."""
+    try:
+        yield
+    except NUMERICAL_FAILURES as exc:
+        raise DesignError(f"{method} fails with {options or 'its default options'}: {type(exc).__name__}: "
+                          f"{str(exc).rstrip('.')}; choose less extreme values") from None
 
 
 def make_controller(name: str, **options) -> Controller:

@@ -169,7 +169,7 @@ def box_qp(hessian: np.ndarray, linear: np.ndarray, start: np.ndarray | None = N
         x = x + room[blocking] * step
         x[blocking] = 0.0 if step[blocking] < 0 else 1.0
         free[blocking] = False
-    raise RuntimeError("the active-set method did not converge")
+    raise ArithmeticError("the active-set method did not converge")  # a numerical failure, as LinAlgError
 
 
 def static_optimization(model, params: np.ndarray, t: np.ndarray, z: np.ndarray, zd: np.ndarray, torque: np.ndarray,

@@ -287,3 +287,39 @@ def test_a_mass_the_inertia_about_the_elbow_cannot_hold_is_refused():
 def test_plausible_constants_and_quiet_runs_have_no_warning():
     assert "warning" not in invoke(["inverse", "--plant", "L12=0.3", "-f", "json"]).stderr
     assert invoke(["inverse", "--plant", "L12=30", "-f", "json", "-q"]).stderr == ""
+
+
+# ---- options within their bounds that the method cannot be carried out with -------------------------
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--controller", "computed-torque", "--bandwidth", "1e308"], ("--controller computed-torque", "bandwidth")),
+    (["--controller", "lqr", "--q-rate", "1e300"], ("--controller lqr", "q_rate")),
+    (["--model", "arm26", "--controller", "cmc", "--reserve-optimal-force", "1e-300"],
+     ("--controller cmc", "reserve_optimal_force")),
+])
+def test_a_design_that_fails_on_extreme_options_is_bad_input_naming_them(args, words):
+    """Finite, positive options whose design has no finite solution (an overflowing gain, a Riccati
+    equation without one, a static optimisation that cannot converge) are one line and exit 2."""
+    assert_one_line_error(invoke(["control", *args, "-q"]), *words, "choose less extreme values")
+
+
+def test_static_optimisation_that_fails_on_extreme_options_is_bad_input():
+    assert_one_line_error(invoke(["inverse", "--model", "arm26", "--muscles", "--activation-exponent", "1e308"]),
+                          "--muscles", "activation_exponent")
+
+
+def test_a_mismatch_study_refuses_a_plant_change_of_its_own_constant(tmp_path):
+    """The study sets the swept constant itself: the same key in --plant would be dropped silently."""
+    line = assert_one_line_error(invoke(["study", "mismatch", "--param", "I1", "--levels", "0", "--plant", "I1=0.05",
+                                         "--seeds", "1", "--db", tmp_path / "r.sqlite"]), "--plant", "I1")
+    assert not (tmp_path / "r.sqlite").exists(), line
+
+
+def test_the_rtol_bound_said_is_the_bound_kept():
+    from fdbench.integrate import MIN_RTOL, check_tolerances
+
+    shown = assert_one_line_error(invoke(["control", "--integrator", "radau", "--rtol", "2.2e-14"]), "--rtol")
+    said = float(shown.split("= [", 1)[1].split(",", 1)[0])
+    assert said == MIN_RTOL
+    check_tolerances(said, 1e-9)  # accepted

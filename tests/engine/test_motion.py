@@ -256,6 +256,20 @@ def test_bad_motion_file_is_one_line_exit_2(tmp_path, name):
         assert len(lines) == 1 and lines[0].startswith("fdbench: error: --motion") and word in lines[0], lines
 
 
+@pytest.mark.parametrize("cutoff", [1e-300, 1e-10, 0.01])
+def test_a_cutoff_too_low_to_settle_is_refused_with_the_lowest_that_does(cutoff):
+    """A cutoff whose filter would not forget its start within the padding (or is not even stable
+    in double precision) is refused, not filtered into nonsense; the lowest cutoff it names works
+    and keeps a ramp a ramp (the odd reflection and a unit DC gain preserve a straight line)."""
+    rate, n = 100.0, 12
+    ramp = np.linspace(-1.0, 1.0, n)
+    with pytest.raises(ValueError, match="too low") as refused:
+        zero_lag_lowpass(ramp, rate, cutoff)
+    lowest = float(str(refused.value).rsplit("at least ", 1)[1].split()[0])
+    assert cutoff < lowest < rate / 2
+    assert np.allclose(zero_lag_lowpass(ramp, rate, lowest), ramp, atol=1e-6)
+
+
 def test_unknown_motion_name_lists_the_valid_ones():
     result = invoke("control", "--motion", "papr")
     assert result.exit_code == 2 and "paper" in result.stderr and "did you mean" in result.stderr
@@ -268,7 +282,8 @@ def test_bad_condition_options_are_one_line_exit_2(tmp_path):
                        (["--plant", "I1"], "KEY=VALUE"), (["--plant", "mass=2"], "mass"),
                        (["--model", "I1=-1"], "I1"), (["--model", "L1G=0.5"], "L1G"),
                        (["--sample-dt", "5"], "--sample-dt must be in"), (["--capture-hz", "0", "--noise-deg", "1"], "--capture-hz"),
-                       (["--noise-deg", "1", "--cutoff", "80"], "cutoff")):
+                       (["--noise-deg", "1", "--cutoff", "80"], "cutoff"),
+                       (["--noise-deg", "1", "--cutoff", "1e-20"], "too low")):
         result = invoke("control", *args)
         assert result.exit_code == 2, (args, result.stderr)
         lines = result.stderr.splitlines()

@@ -67,6 +67,44 @@ def test_figure_name_that_is_an_input_is_refused_before_work(tmp_path, monkeypat
     assert not (tmp_path / "r.sqlite").exists()
 
 
+@pytest.mark.parametrize("command", ["report", "study"])
+@pytest.mark.parametrize("kind", ["symlink", "hard link", "fifo"])
+def test_figure_name_that_is_not_a_file_of_its_own_is_refused_before_work(tmp_path, monkeypatch, command, kind):
+    """The user names the folder, not what a figure's name in it leads to: a link to another file,
+    a file with another name, a FIFO (which would block the report) are refused, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    other = tmp_path / "notes.txt"
+    other.write_text("keep")
+    (tmp_path / "figs").mkdir()
+    figure = tmp_path / "figs" / FIGURE_OF[command]
+    {"symlink": lambda: os.symlink(other, figure), "hard link": lambda: os.link(other, figure),
+     "fifo": lambda: os.mkfifo(figure)}[kind]()
+    result = invoke(COMMAND[command] + SMALL_REPORT + ["--db", "r.sqlite", "--figures", "figs"])
+    line = one_line_error(result)
+    assert "--figures" in line and FIGURE_OF[command] in line, line
+    assert other.read_text() == "keep"
+    assert not (tmp_path / "r.sqlite").exists()
+
+
+def test_an_output_that_is_the_pipe_of_an_input_is_refused(tmp_path):
+    """Writing into the FIFO an input is read from would hand the output back to the reader (or
+    block): refused; another FIFO as output is written in place as before."""
+    fifo, other = tmp_path / "in.fifo", tmp_path / "out.fifo"
+    os.mkfifo(fifo)
+    os.mkfifo(other)
+    with pytest.raises(files.BadFile, match="--output: .*in.fifo is the pipe the input of --motion is read from"):
+        files.check_distinct({"--output": fifo}, {"--motion": fifo})
+    files.check_distinct({"--output": other}, {"--motion": fifo})
+
+
+def test_a_name_that_is_not_utf8_is_written_back_as_its_bytes(tmp_path):
+    """A file name read from the file system with bytes that are not UTF-8 (kept as surrogates)
+    goes into an output as those bytes, as the shell's '>' would write it."""
+    name = os.fsdecode(b"bad\xff.csv")
+    files.write_atomic(tmp_path / "out.txt", f"motion {name}\n")
+    assert (tmp_path / "out.txt").read_bytes() == b"motion bad\xff.csv\n"
+
+
 def test_figures_as_a_link_to_a_missing_folder_is_refused_before_work(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     os.symlink("not-yet", tmp_path / "figs")
@@ -131,7 +169,8 @@ def test_write_error_after_the_work_is_one_line_and_keeps_the_stored_run(tmp_pat
     def disk_full(*args):
         raise OSError(28, "No space left on device")
 
-    monkeypatch.setattr(files.os, "replace", disk_full)
+    # the output's own write fails (not os.replace for everyone: numba saves a kernel it compiles with it)
+    monkeypatch.setattr(files, "_replace", disk_full)
     line = one_line_error(invoke(["control", "--db", "r.sqlite", "-o", "out.json", "-q"]))
     assert "--output" in line and "No space left" in line, line
     with open_store(tmp_path / "r.sqlite") as store:
