@@ -289,6 +289,7 @@ def _ipopt(ca, y, p, objective, constraints, max_iter: int, max_time: float):
         "ipopt.print_level": 0, "ipopt.sb": "yes", "print_time": False, "verbose": False,
         "ipopt.max_iter": max_iter, "ipopt.max_cpu_time": max_time, "ipopt.tol": 1e-10,
         "error_on_fail": False,
+        "show_eval_warnings": False,  # a NaN or Inf met on the way is IPOPT's status in the record, not stderr noise
     }
     return ca.nlpsol("collocation", "ipopt", {"x": ca.vec(y), "p": p, "f": objective, "g": constraints}, options)
 

@@ -129,8 +129,12 @@ def check(spec) -> None:
     motion file that cannot be used. No simulation is run."""
     check_settings(spec.integrator, spec.dt, spec.rtol, spec.atol, spec.alpha, spec.xi, spec.omega)
     engine(spec, nominal(spec)), engine(spec)
-    if spec.residual_weight is not None and engine(spec).model.floating_base is None:
-        raise ValueError(f"--residual-weight needs a model with a floating base (a free joint on ground); "
+    given = ["--residual-weight"] if spec.residual_weight is not None else []
+    if spec.command == "collocate":
+        given += [f"--{key.replace('_', '-')}" for key in ("residual_force_weight", "residual_moment_weight")
+                  if dict(spec.method_options).get(key) is not None]
+    if given and engine(spec).model.floating_base is None:
+        raise ValueError(f"{given[0]} needs a model with a floating base (a free joint on ground); "
                          f"{engine(spec).model.name!r} has none")
     desired, _ = motions(spec)
     if spec.command == "optimize" and spec.gradient == "exact" and spec.integrator == "rk4":

@@ -77,7 +77,33 @@ def parse_stored(text, column: str, kinds: tuple = (dict,)):
         raise DamagedRow(f"{column} is not JSON ({str(exc).split(':')[0]})") from None
     if not isinstance(value, kinds):
         raise DamagedRow(f"{column} holds {type(value).__name__}, not {' or '.join(k.__name__ for k in kinds)}")
+    wrong = _not_a_number(value, column)
+    if wrong:
+        raise DamagedRow(f"{column} holds {wrong} where a number is stored")
     return value
+
+
+# a record's fields that hold numbers (besides every rmse_* and residual_* field)
+NUMBER_FIELDS = {"dt", "seed", "budget", "runtime_s", "evaluations", "best_objective", "initial_objective", "t_end",
+                 "max_violation", "n_params", "alpha", "xi", "omega", "penalty_weight", "noise_deg", "jobs"}
+
+
+def _is_number(value) -> bool:
+    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
+
+
+def _not_a_number(value, column: str) -> str | None:
+    """What, in a stored record's number fields or in a history or parameter list (numbers, or lists
+    of numbers), is not a number (None where all are): read, a report would fail on it midway."""
+    if column == "record_json":
+        for key, item in value.items():
+            if (key in NUMBER_FIELDS or key.startswith(("rmse_", "residual_"))) and not _is_number(item):
+                return f"{json.dumps(item)[:40]} in {key}"
+    elif column in ("history_json", "params_json") and isinstance(value, list):
+        for item in value:
+            if not (_is_number(item) or (isinstance(item, list) and all(map(_is_number, item)))):
+                return json.dumps(item)[:40]
+    return None
 
 
 def default_path() -> Path:

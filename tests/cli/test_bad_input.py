@@ -323,3 +323,9 @@ def test_the_rtol_bound_said_is_the_bound_kept():
     said = float(shown.split("= [", 1)[1].split(",", 1)[0])
     assert said == MIN_RTOL
     check_tolerances(said, 1e-9)  # accepted
+
+
+@pytest.mark.parametrize("option", ["--residual-force-weight", "--residual-moment-weight"])
+def test_collocation_s_residual_weights_need_a_floating_base(option):
+    """Without a floating base there are no residuals to weigh: the option is refused, not dropped."""
+    assert_one_line_error(invoke(["collocate", "--nodes", "20", option, "1", "-q"]), option, "floating base")

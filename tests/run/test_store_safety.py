@@ -197,7 +197,8 @@ def test_an_empty_file_of_ours_becomes_a_database_without_a_creating_line(tmp_pa
 
 DAMAGES = [("record_json", "{not json", "record_json is not JSON"),
            ("spec_json", "[" * 100_000, "spec_json is nested too deeply"),
-           ("record_json", "[1, 2]", "record_json holds list")]
+           ("record_json", "[1, 2]", "record_json holds list"),
+           ("record_json", '{"status": "success", "rmse_rot_deg": "abc"}', 'record_json holds "abc" in rmse_rot_deg')]
 
 
 @pytest.mark.parametrize("column, text, says", DAMAGES)
@@ -229,6 +230,17 @@ def test_a_report_reading_a_damaged_run_is_refused_naming_the_database_and_the_r
             message = str(caught.value)
             assert str(db) in message and "run id 2" in message and "--rerun" in message
         assert store.runs_by_id([1, 3]).keys() == {1, 3}  # the other rows read as before
+
+
+@pytest.mark.parametrize("column, text", [("history_json", '["x"]'), ("params_json", '[0.5, {"a": 1}]')])
+def test_a_run_whose_history_or_parameters_are_not_numbers_is_refused(tmp_path, column, text):
+    db = tmp_path / "a.sqlite"
+    specs = filled(db)
+    damage(db, 2, column, text)
+    with open_store(db) as store:
+        with pytest.raises(StoreError, match=f"run id 2 is damaged \\({column} holds .* where a number is stored"):
+            store.get(specs[1].hash())
+        assert store.get(specs[0].hash())["id"] == 1
 
 
 # ---- 3. a full disk ----------------------------------------------------------------------------
