@@ -32,8 +32,8 @@ from helpers.paths import ROOT
 PREFIX = "fdbench: error: "
 OTHER = 12345  # a uid that is not ours
 FDBENCH = [sys.executable, "-m", "fdbench.cli"]
-ROOT = os.geteuid() == 0
-needs_root = pytest.mark.skipif(not ROOT, reason="files of another user are made with chown, which needs root")
+IS_ROOT = os.geteuid() == 0
+needs_root = pytest.mark.skipif(not IS_ROOT, reason="files of another user are made with chown, which needs root")
 runner = CliRunner()
 
 
