@@ -66,9 +66,9 @@ def _choose_cache_dir() -> Path | None:
     fallback = Path(tempfile.gettempdir()) / f"fdbench-cache-{os.getuid() if hasattr(os, 'getuid') else 'user'}"
     again = _unusable(fallback, follow_links=False)
     if again is None:
-        _warn(f"cannot use a kernel cache in {problem}; using {fallback} (set ${CACHE_VARIABLE} to choose)")
+        _warn(f"cannot use the kernel cache: {problem}; using {fallback} (set ${CACHE_VARIABLE} to choose)")
         return fallback
-    _warn(f"cannot use a kernel cache ({problem}; {again}); kernels are compiled on every run")
+    _warn(f"cannot use the kernel cache: {problem}; nor {again}; kernels are compiled on every run")
     return None
 
 
