@@ -88,50 +88,6 @@ class ExternalLoads:
         return ExternalLoads(self.loads, self.t - t0, self.force, self.point, self.moment, self.source)
 
 
-# ---------------------------------------------------------------------- generalised forces
-def _rotate(angle, v):
-    """R(angle) v for angles (n,) and vectors v (n, 2)."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.stack([c * v[:, 0] - s * v[:, 1], s * v[:, 0] + c * v[:, 1]], axis=-1)
-
-
-def _cross(a, b):
-    """z of a x b for vectors (n, 2)."""
-    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-
-
-def world_loads(engine, loads: ExternalLoads, phi, origins, t):
-    """Forces and points in ground's axes (each (n, L, 2)) and moments (n, L) at times t (n,), for
-    body angles phi (n, B) (rad) and body frame origins (n, B, 2) (m)."""
-    force, point, moment = loads.at(t)
-    body = {name: b for b, name in enumerate(engine.body_names)}
-    for k, load in enumerate(loads.loads):
-        if load.force_frame != GROUND:
-            force[:, k] = _rotate(phi[:, body[load.force_frame]], force[:, k])
-        if load.point_frame != GROUND:
-            b = body[load.point_frame]
-            point[:, k] = origins[:, b] + _rotate(phi[:, b], point[:, k])
-    return force, point, moment
-
-
-def generalized_forces(engine, loads: ExternalLoads, z, t) -> np.ndarray:
-    """The loads' generalised forces (n, J) on the coordinates z (n, J) at times t (s, (n,)): N m on
-    angles, N on a free joint's x and y."""
-    z = np.atleast_2d(np.asarray(z, dtype=float))
-    zero = np.zeros_like(z)
-    phi, _, _, origins, _, _, joint_at, path_dir = engine._kinematics(z, zero, zero)
-    force, point, moment = world_loads(engine, loads, phi, origins, np.asarray(t, dtype=float).reshape(-1))
-    Q = np.zeros_like(z)
-    for k, load in enumerate(loads.loads):
-        f = force[:, k]
-        for m in engine.model.path(load.body):
-            c = engine.joint_column[m]
-            Q[:, c] += _cross(point[:, k] - joint_at[:, m], f) + np.sum(path_dir[:, m] * f, axis=1) + moment[:, k]
-            if engine.model.joints[m].type == "free":
-                Q[:, c + 1:c + 3] += f
-    return Q
-
-
 # ---------------------------------------------------------------------- reading OpenSim's ExternalLoads
 def _fail(option: str, path, problem: str):
     raise BadFile(f"{option}: {path}: {problem}")

@@ -387,13 +387,6 @@ class MinimalDynamics:
         tau = ID(z, z', z'') - J_P(z)^T F - J_phi(z)^T M, as ``Engine.inverse_dynamics`` with loads."""
         return _actuation(self.model, tuple(loads))
 
-    def riccati_rate(self, z, zd, zdd, p, q, r_inv) -> np.ndarray:
-        """The Riccati right-hand side P' flattened row-wise (4 J^2,) about the desired z, z', z''
-        (J,) each, for P flattened row-wise p (4 J^2,), q (2J,) the diagonal of Q and r_inv (J,)
-        that of R^-1 ((N m)^2)."""
-        packed = np.concatenate([z, zd, zdd, p, q, r_inv])
-        return np.asarray(self.functions["riccati_rate"](packed), dtype=float).ravel()
-
     def _vector(self, value, like):
         """Numeric columns (J, 1) or (k, J, 1) as (J,) or (k, J); symbolic results unchanged."""
         if _is_symbolic([value, like]):
