@@ -509,3 +509,19 @@ def test_where_casadi_s_own_library_cannot_be_loaded_first_the_clash_is_one_line
         assert done.returncode == 2 and len(lines) == 1 and "LD_LIBRARY_PATH" in lines[0], done.stderr
         assert folder[:60] in lines[0] and done.stdout == ""
         assert list(tmp_path.iterdir()) == []
+
+
+def test_a_solve_that_meets_infinities_is_quiet_on_stderr(tmp_path):
+    """CasADi writes its evaluation warnings (NaN or Inf met on the way) to the process's own stderr,
+    past Python: under -q nothing reaches it; the record says how IPOPT ended."""
+    import os
+    import subprocess
+    import sys
+
+    from helpers.processes import python_path
+
+    done = subprocess.run([sys.executable, "-m", "fdbench.cli", "collocate", "--nodes", "20", "--regularization",
+                           "1e308", "--format", "json", "-q"], capture_output=True, text=True, cwd=tmp_path,
+                          env=dict(os.environ, PYTHONPATH=python_path(ROOT)), timeout=600)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    assert json.loads(done.stdout)["status"]
