@@ -143,6 +143,28 @@ def check_writable(path: str | os.PathLike, option: str) -> Path:
     return path
 
 
+def check_own_file(path: Path, option: str) -> None:
+    """Refuse a name that fdbench chooses inside a folder the user named (a figure in --figures)
+    where it is not a file of its own: a symbolic link, a FIFO or device, a file with other hard
+    links. The user named the folder, not what such a name leads to, and writing it would write over that."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise BadFile(f"{option}: cannot inspect {path}: {exc.strerror or exc}") from None
+    if stat.S_ISLNK(st.st_mode):
+        what = f"a symbolic link to {os.readlink(path)}"
+    elif stat.S_ISDIR(st.st_mode) or (stat.S_ISREG(st.st_mode) and st.st_nlink == 1):
+        return  # a directory: check_writable names it
+    elif not stat.S_ISREG(st.st_mode):
+        what = "not a regular file (a FIFO, socket or device)"
+    else:
+        what = f"a file with {st.st_nlink - 1} other hard link(s)"
+    raise BadFile(f"{option}: {path} is {what}; fdbench writes its figures as files of their own: "
+                  "remove it or choose another folder")
+
+
 def _probe_writable(path: Path, option: str) -> None:
     """Open a regular file for writing, changing nothing: sees append-only and immutable files."""
     try:

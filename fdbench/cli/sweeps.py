@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import stat
 import time
 from pathlib import Path
 from typing import Annotated, Optional
@@ -387,37 +386,13 @@ def _report_text(fmt, plan, runs, rows, extra_rows, methods, inverse, inverse_ru
                     extra_rows=extra_rows + peer_rows)
 
 
-def _check_own_file(path: Path, option: str) -> None:
-    """Refuse a figure's name in the --figures folder that is not a file of its own (a symbolic
-    link, a FIFO or device, a file with other hard links): the user named the folder, not what
-    such a name leads to, and writing it would write over that."""
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
-        return
-    except OSError as exc:
-        raise BadInput(f"{option}: cannot inspect {path}: {exc.strerror or exc}") from None
-    if stat.S_ISLNK(st.st_mode):
-        what = f"a symbolic link to {os.readlink(path)}"
-    elif stat.S_ISDIR(st.st_mode):
-        return  # check_writable names it
-    elif not stat.S_ISREG(st.st_mode):
-        what = "not a regular file (a FIFO, socket or device)"
-    elif st.st_nlink > 1:
-        what = f"a file with {st.st_nlink - 1} other hard link(s)"
-    else:
-        return
-    raise BadInput(f"{option}: {path} is {what}; fdbench writes its figures as files of their own: "
-                   "remove it or choose another folder")
-
-
 def _check_figures_dir(directory: Path, batch: Batch, inputs: dict, names=None) -> None:
     """Refuse, before the work, a --figures folder that cannot take the figures: a file, a link
     to a missing folder, the report's own output, the database's journal, a missing parent, an
     unwritable folder, or a figure file in it that would be refused (read-only, a directory, the
     database, an input of the command, by any name)."""
     from ..figures import REPORT_FIGURE_FILES
-    from ..files import check_distinct, check_writable, same_file
+    from ..files import check_distinct, check_own_file, check_writable, same_file
 
     output, db = batch.output, batch.run.db_path
     if directory.exists() and not directory.is_dir():
@@ -441,4 +416,4 @@ def _check_figures_dir(directory: Path, batch: Batch, inputs: dict, names=None) 
         check_writable(path, option)
     check_distinct({"--output": output, **paths}, inputs, db)
     for option, path in paths.items():  # after the refusals that name an input or the database
-        _check_own_file(path, option)
+        check_own_file(path, option)

@@ -143,16 +143,11 @@ def zero_lag_lowpass(values: np.ndarray, rate_hz: float, cutoff_hz: float) -> np
     if not 0 < cutoff_hz < rate_hz / 2:
         raise ValueError(f"the cutoff {cutoff_hz:g} Hz must be below half the sampling rate ({rate_hz / 2:.4g} Hz)")
     values = np.asarray(values, dtype=float)
-    if not _settles(cutoff_hz, rate_hz, len(values)):
-        low, high = math.log(cutoff_hz), math.log(0.49 * rate_hz)  # the lowest cutoff that settles, by bisection
-        for _ in range(40):
-            middle = 0.5 * (low + high)
-            low, high = (low, middle) if _settles(math.exp(middle), rate_hz, len(values)) else (middle, high)
-        unit = 10.0 ** (math.floor(math.log10(math.exp(high))) - 2)
-        lowest = math.ceil(math.exp(high) / unit) * unit  # rounded up to 3 digits: the value shown settles
+    b, a = butter(FILTER_ORDER, butterworth_design_hz(cutoff_hz, rate_hz), fs=rate_hz)
+    if not _settles(a, len(values)):
+        lowest = _lowest_settling_cutoff(rate_hz, len(values), cutoff_hz)
         raise ValueError(f"the cutoff {cutoff_hz:g} Hz is too low for {len(values)} samples at {rate_hz:.4g} Hz: the "
                          f"filter would not forget its start within the recording; choose at least {lowest:.3g} Hz")
-    b, a = butter(FILTER_ORDER, butterworth_design_hz(cutoff_hz, rate_hz), fs=rate_hz)
     pad = min(settling_samples(a), PAD_RECORDINGS * len(values))
     out = filtfilt(b, a, np.pad(values, pad, mode="reflect", reflect_type="odd"), padtype=None)
     return out[pad:pad + len(values)]
@@ -162,13 +157,24 @@ SETTLED = 1e-6  # the filter's start transient is forgotten when it has decayed 
 PAD_RECORDINGS = 20  # at most this many times the recording's length of padding at each end
 
 
-def _settles(cutoff_hz: float, rate_hz: float, count: int) -> bool:
-    """True if the filter of ``cutoff_hz`` at ``rate_hz`` is stable in double precision and forgets its
-    start (``settling_samples``) within the padding of a recording of ``count`` samples."""
+def _settles(a, count: int) -> bool:
+    """True if the filter of denominator ``a`` is stable in double precision and forgets its start
+    (``settling_samples``) within the padding of a recording of ``count`` samples."""
+    return float(np.max(np.abs(np.roots(a)))) < 1.0 and settling_samples(a) <= PAD_RECORDINGS * count
+
+
+def _lowest_settling_cutoff(rate_hz: float, count: int, below: float) -> float:
+    """The lowest cutoff (Hz, above ``below``, rounded up to 3 digits) whose filter settles for a
+    recording of ``count`` samples at ``rate_hz`` (``_settles``), by bisection on its logarithm."""
     from scipy.signal import butter
 
-    _, a = butter(FILTER_ORDER, butterworth_design_hz(cutoff_hz, rate_hz), fs=rate_hz)
-    return float(np.max(np.abs(np.roots(a)))) < 1.0 and settling_samples(a) <= PAD_RECORDINGS * count
+    low, high = math.log(below), math.log(0.49 * rate_hz)
+    for _ in range(40):
+        middle = 0.5 * (low + high)
+        _, a = butter(FILTER_ORDER, butterworth_design_hz(math.exp(middle), rate_hz), fs=rate_hz)
+        low, high = (low, middle) if _settles(a, count) else (middle, high)
+    unit = 10.0 ** (math.floor(math.log10(math.exp(high))) - 2)
+    return math.ceil(math.exp(high) / unit) * unit  # rounded up: the value shown settles
 
 
 def settling_samples(a) -> int:
